@@ -1,0 +1,301 @@
+"""The one engine: the exact discrete-time model of a sampled-data loop.
+
+A loop is a set of *ports* (a device with the impedance rigidly attached to it)
+and one discrete controller per port acting on a signed sum of delayed position
+samples (``e_i = sum_j s_ij z^-n_ij x_j``).  The continuous part of each port is
+discretised exactly for a zero-order hold (matrix exponential), the delays are
+shift registers and each controller is realised in state space.  The closed loop
+at the sampling instants is then ``s[k+1] = A_cl s[k] + B_ext f_ext[k]``.
+
+For spring-damper controllers the stiffness enters only the controller's direct
+feed-through, so ``A_cl(K) = A0 + K * B1 @ C1`` with ``rank(B1 @ C1)`` equal to the
+number of ports; the analyses rely on this affine structure.
+
+Everything is batched over sampling periods: arrays carry a leading axis P.
+
+References
+----------
+The paper, Fig. 2a (HVE) and Fig. 3 / eq. (19)-(21) (PEB); H(z) of eq. (23).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Sequence
+
+import numpy as np
+from scipy.linalg import expm
+
+from .models import (Device, DiscreteController, HapticLoop, Impedance, SpringDamper,
+                     TeleoperationLoop)
+
+__all__ = ["Port", "Channel", "LoopStructure", "SampledSystem", "structure_of", "discretize",
+           "port_matrices", "build"]
+
+
+@dataclass(frozen=True)
+class Port:
+    """A device and the impedance rigidly attached to it."""
+
+    device: Device
+    termination: Impedance
+    name: str
+
+
+@dataclass(frozen=True)
+class Channel:
+    """The controller acting on one port: ``u_port = H(z) * sum_j sign_j z^-delay_j x_j``."""
+
+    port: int
+    controller: SpringDamper | DiscreteController
+    terms: tuple[tuple[int, float, int], ...]  # (measured port j, sign, delay in samples)
+
+
+@dataclass(frozen=True)
+class LoopStructure:
+    ports: tuple[Port, ...]
+    channels: tuple[Channel, ...]
+
+
+def structure_of(loop: HapticLoop | TeleoperationLoop) -> LoopStructure:
+    """The HVE and PEB builders: both are a :class:`LoopStructure` for one engine."""
+    n = loop.delay_samples
+    if isinstance(loop, HapticLoop):
+        return LoopStructure(
+            (Port(loop.device, loop.operator, "device"),),
+            (Channel(0, loop.controller, ((0, 1.0, n),)),))
+    if isinstance(loop, TeleoperationLoop):
+        return LoopStructure(
+            (Port(loop.master, loop.operator, "master"), Port(loop.slave, loop.environment, "slave")),
+            (Channel(0, loop.master_controller, ((0, 1.0, 0), (1, -1.0, n))),   # eq. (20)
+             Channel(1, loop.slave_controller, ((1, 1.0, 0), (0, -1.0, n)))))
+    raise TypeError(f"not a loop: {loop!r}")
+
+
+def port_matrices(port: Port) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Continuous (A, B, Cf) of one port, state ``[x, v, xi_r...]``.
+
+    ``B`` is the input of the net applied force (exogenous minus actuator);
+    ``Cf`` gives the termination's force from the state (without its mass term).
+    The termination ``Z = m_z s + d_z + k_z/s + Z_r(s)`` acts on the device's own
+    position and velocity, so no redundant integrator appears.
+    """
+    dev, z = port.device, port.termination
+    M = dev.mass + z.mass
+    Ar, Br, Cr = z.state_space()
+    nr = Ar.shape[0]
+    A = np.zeros((2 + nr, 2 + nr))
+    A[0, 1] = 1.0
+    A[1, 0] = -z.stiffness / M
+    A[1, 1] = -(dev.damping + z.damping) / M
+    A[1, 2:] = -Cr[0] / M
+    A[2:, 2:] = Ar
+    A[2:, 1] = Br[:, 0]
+    B = np.zeros((2 + nr, 1))
+    B[1, 0] = 1.0 / M
+    Cf = np.zeros((1, 2 + nr))
+    Cf[0, 0], Cf[0, 1], Cf[0, 2:] = z.stiffness, z.damping, Cr[0]
+    return A, B, Cf
+
+
+def discretize(A: np.ndarray, B: np.ndarray, periods: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Exact zero-order-hold discretisation for each period (batched matrix exponential).
+
+    Returns Ad (P, n, n) and Bd (P, n, m): ``Ad = e^{AT}``, ``Bd = int_0^T e^{At} dt B``.
+    """
+    n, m = B.shape
+    M = np.zeros((n + m, n + m))
+    M[:n, :n], M[:n, n:] = A, B
+    E = expm(np.asarray(periods, float)[:, None, None] * M[None])
+    return E[:, :n, :n], E[:, :n, n:]
+
+
+def _controller_parts(c: SpringDamper | DiscreteController, periods: np.ndarray
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Batched state-space (Ah, Bh, Ch, D_fixed, D_per_K) of H(z) = D_per_K*K + rest.
+
+    For a spring-damper, H = K + B/T - (B/T) z^-1: one state, and K only in the
+    direct feed-through. A state with zero output (B = 0) is dropped.
+    """
+    P = periods.size
+    if isinstance(c, SpringDamper):
+        if c.damping == 0:
+            return (np.zeros((P, 0, 0)), np.zeros((P, 0, 1)), np.zeros((P, 1, 0)),
+                    np.zeros(P), np.ones(P))
+        BT = c.damping / periods
+        return (np.zeros((P, 1, 1)), np.ones((P, 1, 1)), -BT[:, None, None],
+                BT.copy(), np.ones(P))
+    num, den = np.array(c.num), np.array(c.den)
+    num = np.concatenate([np.zeros(den.size - num.size), num]) / den[0]
+    den = den / den[0]
+    q = den.size - 1
+    d = num[0]
+    r = num[1:] - d * den[1:]
+    Ah = np.zeros((q, q))
+    if q:
+        Ah[0, :] = -den[1:]
+        Ah[1:, :-1] = np.eye(q - 1)
+    Bh = np.zeros((q, 1))
+    if q:
+        Bh[0, 0] = 1.0
+    Ch = r[None, :]
+    rep = lambda a: np.broadcast_to(a, (P,) + a.shape).copy()  # noqa: E731
+    return rep(Ah), rep(Bh), rep(Ch), np.full(P, d), np.zeros(P)
+
+
+@dataclass
+class SampledSystem:
+    """The exact sampled-data closed loop, batched over P sampling periods.
+
+    Attributes
+    ----------
+    periods : (P,) array
+    A0, B1, C1 : arrays
+        ``A_cl(K) = A0 + K * B1 @ C1`` with K the common stiffness of the
+        spring-damper controllers (zero columns for controllers without one).
+    stiffness : (P,) array
+        The loops' own K; ``A_cl = A0 + stiffness * B1 @ C1``.
+    B_ext : (P, N, p)
+        Exogenous force on each port, held over the sample.
+    F_u : (P, p, N)
+        Controller force of each port from the state (``u = F_u s``).
+    pos, vel : (p, N)
+        Selectors of each port's position and velocity.
+    Ac, Bc : (np, np), (np, p)
+        Continuous plant (all ports), state = the first ``np`` closed-loop states.
+    """
+
+    periods: np.ndarray
+    A0: np.ndarray
+    B1: np.ndarray
+    C1: np.ndarray
+    stiffness: np.ndarray
+    B_ext: np.ndarray
+    F_u0: np.ndarray
+    F_u1: np.ndarray
+    pos: np.ndarray
+    vel: np.ndarray
+    Ac: np.ndarray
+    Bc: np.ndarray
+    Cf: np.ndarray
+    n_plant: int
+    labels: list[str] = field(default_factory=list)
+    varies_with_K: bool = True
+
+    @property
+    def order(self) -> int:
+        return self.A0.shape[-1]
+
+    @property
+    def n_ports(self) -> int:
+        return self.pos.shape[0]
+
+    def A1(self) -> np.ndarray:
+        return self.B1 @ self.C1
+
+    def closed_loop(self, K: np.ndarray | float | None = None) -> np.ndarray:
+        """A_cl at stiffness K (default: the loop's own), shape (P, N, N)."""
+        K = self.stiffness if K is None else np.broadcast_to(np.asarray(K, float), self.periods.shape)
+        return self.A0 + K[:, None, None] * (self.B1 @ self.C1)
+
+    def force_matrix(self, K: np.ndarray | float | None = None) -> np.ndarray:
+        """F_u at stiffness K: the controller force of each port, ``u = F_u s``."""
+        K = self.stiffness if K is None else np.broadcast_to(np.asarray(K, float), self.periods.shape)
+        return self.F_u0 + K[:, None, None] * self.F_u1
+
+
+def build(loop: HapticLoop | TeleoperationLoop,
+          periods: Sequence[float] | np.ndarray | None = None) -> SampledSystem:
+    """Assemble the exact closed loop of ``loop`` for each sampling period.
+
+    Parameters
+    ----------
+    loop : HapticLoop or TeleoperationLoop
+    periods : array of float, optional
+        Sampling periods (s); defaults to ``[loop.period]``. Everything else
+        (devices, impedances, controllers, delays in samples) is the loop's.
+
+    Returns
+    -------
+    SampledSystem
+    """
+    st = structure_of(loop)
+    T = np.atleast_1d(np.asarray(loop.period if periods is None else periods, float))
+    P, p = T.size, len(st.ports)
+
+    # --- plant: exact ZOH per port
+    cont = [port_matrices(pt) for pt in st.ports]
+    sizes = [a.shape[0] for a, _, _ in cont]
+    off_p = np.concatenate([[0], np.cumsum(sizes)])
+    n_plant = int(off_p[-1])
+    Ac = np.zeros((n_plant, n_plant))
+    Bc = np.zeros((n_plant, p))
+    Cf = np.zeros((p, n_plant))
+    for i, (a, b, cf) in enumerate(cont):
+        sl = slice(off_p[i], off_p[i + 1])
+        Ac[sl, sl], Bc[sl, i], Cf[i, sl] = a, b[:, 0], cf[0]
+    Ad, Bd = discretize(Ac, Bc, T)
+
+    # --- delay registers: register l of port j holds x_j[k-1-l]
+    depth = [0] * p
+    for ch in st.channels:
+        for j, _, n in ch.terms:
+            depth[j] = max(depth[j], n)
+    off_r = n_plant + np.concatenate([[0], np.cumsum(depth)]).astype(int)
+
+    # --- controller states
+    parts = [_controller_parts(ch.controller, T) for ch in st.channels]
+    qs = [pa[0].shape[1] for pa in parts]
+    off_c = int(off_r[-1]) + np.concatenate([[0], np.cumsum(qs)]).astype(int)
+    N = int(off_c[-1])
+
+    pos = np.zeros((p, N))
+    vel = np.zeros((p, N))
+    for i in range(p):
+        pos[i, off_p[i]], vel[i, off_p[i] + 1] = 1.0, 1.0
+
+    # error selectors E (p, N): e_i = E_i s
+    E = np.zeros((p, N))
+    for ch in st.channels:
+        for j, sgn, n in ch.terms:
+            if n == 0:
+                E[ch.port] += sgn * pos[j]
+            else:
+                E[ch.port, off_r[j] + n - 1] += sgn
+    # u = F_u0 s + K F_u1 s
+    Fu0 = np.zeros((P, p, N))
+    Fu1 = np.zeros((P, p, N))
+    A0 = np.zeros((P, N, N))
+    for ch, (Ah, Bh, Ch, Dfix, Dk) in zip(st.channels, parts):
+        i = ch.port
+        cs = slice(off_c[i], off_c[i + 1])
+        Fu0[:, i, cs] = Ch[:, 0, :]
+        Fu0[:, i, :] += Dfix[:, None] * E[i]
+        Fu1[:, i, :] = Dk[:, None] * E[i]
+        A0[:, cs, cs] = Ah
+        A0[:, cs, :] += Bh[:, :, :1] * E[i][None, None, :]
+    A0[:, :n_plant, :n_plant] = Ad
+    A0[:, :n_plant, :] -= Bd @ Fu0
+    for j in range(p):
+        if depth[j]:
+            A0[:, off_r[j], :] = pos[j]
+            for l in range(1, depth[j]):
+                A0[:, off_r[j] + l, off_r[j] + l - 1] = 1.0
+    B_ext = np.zeros((P, N, p))
+    B_ext[:, :n_plant, :] = Bd
+    B1 = np.zeros((P, N, p))
+    B1[:, :n_plant, :] = -Bd
+    # C1 rows: the K-part of each port's force; same for every period
+    C1 = Fu1.copy()
+    ks = [ch.controller.stiffness if isinstance(ch.controller, SpringDamper) else 0.0
+          for ch in st.channels]
+    varies = all(isinstance(ch.controller, SpringDamper) for ch in st.channels)
+    K_own = np.full(P, ks[0] if varies else 0.0)
+    if varies and len(set(ks)) > 1:
+        # unequal K_m, K_s: K is the master's stiffness, K_s/K_m is kept fixed
+        scale = np.array(ks) / ks[0] if ks[0] else np.ones(p)
+        C1 = C1 * scale[None, :, None]
+        Fu1 = Fu1 * scale[None, :, None]
+    labels = [pt.name for pt in st.ports]
+    return SampledSystem(T, A0, B1, C1, K_own, B_ext, Fu0, Fu1, pos, vel, Ac, Bc, Cf,
+                         n_plant, labels, varies)

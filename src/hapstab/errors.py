@@ -1,0 +1,78 @@
+"""Error family and the validators every model uses.
+
+Every message names the parameter, the value received and what is allowed, so
+that the CLI can print it as one line and a Python user can act on it.
+"""
+
+from __future__ import annotations
+
+import math
+from numbers import Integral, Real
+from typing import Any
+
+
+class HapstabError(ValueError):
+    """Base class of every error hapstab raises for a user's input."""
+
+
+class ModelError(HapstabError):
+    """A model (device, impedance, controller, loop) was given invalid parameters."""
+
+
+class AnalysisError(HapstabError):
+    """An analysis was asked for something it cannot answer for this model."""
+
+
+def _fmt(value: Any) -> str:
+    return repr(value) if isinstance(value, str) else str(value)
+
+
+def check_real(name: str, value: Any, *, positive: bool = False,
+               nonnegative: bool = False) -> float:
+    """Return ``value`` as a finite float, or raise :class:`ModelError`.
+
+    Parameters
+    ----------
+    name : str
+        Parameter name used in the message.
+    value : Any
+        The value received.
+    positive, nonnegative : bool
+        Require ``value > 0`` or ``value >= 0``.
+    """
+    if isinstance(value, bool) or not isinstance(value, Real):
+        try:
+            import numpy as np  # numpy scalars are Real already; arrays are not
+
+            if isinstance(value, np.ndarray) and value.shape == ():
+                value = value.item()
+            else:
+                raise TypeError
+        except TypeError:
+            raise ModelError(f"{name} = {_fmt(value)}: must be a real number") from None
+    v = float(value)
+    if not math.isfinite(v):
+        raise ModelError(f"{name} = {_fmt(value)}: must be finite (not NaN or inf)")
+    if positive and not v > 0:
+        raise ModelError(f"{name} = {_fmt(value)}: must be > 0")
+    if nonnegative and not v >= 0:
+        raise ModelError(f"{name} = {_fmt(value)}: must be >= 0")
+    return v
+
+
+def check_delay(name: str, value: Any) -> int:
+    """Return a whole, non-negative number of samples, or raise :class:`ModelError`."""
+    if isinstance(value, bool):
+        raise ModelError(f"{name} = {value}: must be a whole number of samples >= 0")
+    if isinstance(value, Integral):
+        v = int(value)
+    elif isinstance(value, Real) and math.isfinite(float(value)) and float(value).is_integer():
+        v = int(value)
+    else:
+        raise ModelError(
+            f"{name} = {_fmt(value)}: must be a whole number of samples >= 0 "
+            "(the delay is n*T with integer n)"
+        )
+    if v < 0:
+        raise ModelError(f"{name} = {v}: must be a whole number of samples >= 0")
+    return v
