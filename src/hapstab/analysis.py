@@ -1,0 +1,118 @@
+"""Front door of the analyses: ``critical_stiffness(loop, method=...)`` and ``boundary``.
+
+A method is a function ``f(loop, **options) -> CriticalStiffnessResult`` over the
+same models; new methods register here by module path (imported on first use).
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import Any, Callable, Sequence
+
+import numpy as np
+
+from .closed_forms import CLOSED_FORMS
+from .engine import build
+from .errors import AnalysisError, check_delay, check_real
+from .exact import _to_result, exact_critical_stiffness, exact_kmax_batch
+from .models import HapticLoop, TeleoperationLoop
+from .results import BoundaryResult, CriticalStiffnessResult
+
+__all__ = ["critical_stiffness", "boundary", "METHODS", "methods_for"]
+
+#: method name -> callable or "module:function" (imported lazily)
+METHODS: dict[str, Callable[..., CriticalStiffnessResult] | str] = {
+    "exact": exact_critical_stiffness,
+    **CLOSED_FORMS,
+}
+
+_HVE_ONLY = {"colgate", "gil", "eq18", "gil2004"}
+_PEB_ONLY = {"eq29", "eq34"}
+
+
+def methods_for(kind: str) -> list[str]:
+    """Method names that apply to ``kind`` ("hve" or "peb")."""
+    other = _PEB_ONLY if kind == "hve" else _HVE_ONLY
+    return [m for m in METHODS if m not in other]
+
+
+def _resolve(method: str) -> Callable[..., CriticalStiffnessResult]:
+    if method not in METHODS:
+        raise AnalysisError(f"method = {method!r}: unknown; allowed: {', '.join(METHODS)}")
+    f = METHODS[method]
+    if isinstance(f, str):
+        mod, _, name = f.partition(":")
+        f = getattr(importlib.import_module(mod), name)
+        METHODS[method] = f
+    return f
+
+
+def critical_stiffness(loop: HapticLoop | TeleoperationLoop, method: str = "exact",
+                       **options: Any) -> CriticalStiffnessResult:
+    """Largest K such that the loop is stable for every K in (0, K_max].
+
+    Parameters
+    ----------
+    loop : HapticLoop or TeleoperationLoop
+        Everything but K is held fixed (B, T, n, impedances). For teleoperation
+        K is the master's stiffness and K_s/K_m is kept (equal in the paper).
+    method : str
+        ``"exact"`` (default): the exact sampled-data loop, see
+        :mod:`hapstab.exact`; or a closed form: ``"colgate"`` (eq. 1/13),
+        ``"gil"`` (eq. 2), ``"eq18"``, ``"gil2004"`` for the HVE and ``"eq29"``,
+        ``"eq34"`` for PEB.
+    **options
+        Passed to the method.
+
+    Returns
+    -------
+    CriticalStiffnessResult
+
+    Raises
+    ------
+    AnalysisError
+        Unknown method, or a method that does not apply to this loop.
+    """
+    return _resolve(method)(loop, **options)
+
+
+def boundary(loop: HapticLoop | TeleoperationLoop, periods: Sequence[float] | np.ndarray,
+             delays: Sequence[int] | np.ndarray = (0,), method: str = "exact",
+             **options: Any) -> BoundaryResult:
+    """K_max over a grid of sampling periods and delays (the curves of Fig. 5 / 6).
+
+    Parameters
+    ----------
+    loop : HapticLoop or TeleoperationLoop
+        Template: its own period and delay are replaced by the grid's.
+    periods : array of float
+        Sampling periods T in s (> 0).
+    delays : array of int
+        Delays n in samples (t_d = n T at each T).
+    method : str
+        As for :func:`critical_stiffness`; ``"exact"`` is vectorised over T.
+
+    Returns
+    -------
+    BoundaryResult
+        ``critical_stiffness[i, j]`` for ``delays[i]``, ``periods[j]``.
+    """
+    T = np.atleast_1d(np.asarray(periods, dtype=float))
+    if T.size == 0:
+        raise AnalysisError("periods: the range is empty; give at least one period")
+    for t in T:
+        check_real("period", t, positive=True)
+    ns = [check_delay("delay", n) for n in np.atleast_1d(delays)]
+    if not ns:
+        raise AnalysisError("delays: the list is empty; give at least one delay")
+    out = np.empty((len(ns), T.size))
+    for i, n in enumerate(ns):
+        tmpl = loop.replace(delay_samples=n, period=float(T[0]))
+        if method == "exact":
+            res = exact_kmax_batch(build(tmpl, T))
+            out[i] = [r["kmax"] for r in res]
+        else:
+            f = _resolve(method)
+            out[i] = [f(tmpl.replace(period=float(t)), **options).critical_stiffness for t in T]
+    kind = "hve" if isinstance(loop, HapticLoop) else "peb"
+    return BoundaryResult(T, np.array(ns), out, method, kind)

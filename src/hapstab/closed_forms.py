@@ -1,0 +1,152 @@
+"""The closed-form stability conditions of the paper and of the works it cites.
+
+Each function returns a :class:`~hapstab.results.CriticalStiffnessResult` whose
+``critical_stiffness`` is the K at which the condition stops holding. They are
+sufficient conditions (or approximations) with stated assumptions; the docstrings
+say where each is known to fail. :func:`hapstab.audit` compares them with the
+exact analysis.
+"""
+
+from __future__ import annotations
+
+import math
+
+from .errors import AnalysisError
+from .models import HapticLoop, SpringDamper, TeleoperationLoop
+from .results import CriticalStiffnessResult
+
+__all__ = ["colgate", "gil", "eq18", "eq29", "eq34", "gil2004", "CLOSED_FORMS"]
+
+
+def _hve(loop, name: str) -> tuple[float, float, float, int]:
+    if not isinstance(loop, HapticLoop):
+        raise AnalysisError(f"method = {name!r}: applies to a HapticLoop (hve), not {type(loop).__name__}")
+    if not isinstance(loop.controller, SpringDamper):
+        raise AnalysisError(f"method = {name!r}: needs a SpringDamper virtual environment")
+    return loop.device.damping, loop.controller.damping, loop.period, loop.delay_samples
+
+
+def _peb(loop, name: str) -> tuple[float, float, float, int]:
+    if not isinstance(loop, TeleoperationLoop):
+        raise AnalysisError(f"method = {name!r}: applies to a TeleoperationLoop (peb), not {type(loop).__name__}")
+    cm, cs = loop.master_controller, loop.slave_controller
+    if not (isinstance(cm, SpringDamper) and isinstance(cs, SpringDamper)):
+        raise AnalysisError(f"method = {name!r}: needs SpringDamper controllers")
+    if cm.damping != cs.damping or cm.stiffness != cs.stiffness:
+        raise AnalysisError(f"method = {name!r}: derived for C_m = C_s (equal K and B)")
+    b = min(loop.master.damping, loop.slave.damping)
+    return b, cm.damping, loop.period, loop.delay_samples
+
+
+def _result(K: float, method: str, reason: str, loop) -> CriticalStiffnessResult:
+    K = max(0.0, K)
+    return CriticalStiffnessResult(K, method, ((0.0, K),) if K > 0 else (), reason,
+                                   loop.period, loop.delay_samples)
+
+
+def colgate(loop: HapticLoop) -> CriticalStiffnessResult:
+    """Colgate-Schenkel passivity condition, eq. (1) / (13): ``b > KT/2 + |B|``.
+
+    Necessary and sufficient for passivity of the non-delayed sampled-data HVE
+    (device damping b only; the operator is only assumed passive). The paper
+    re-derives it as (13) with the forward-difference approximation. With delay
+    (n >= 1) it is not a stability condition at all: it ignores the delay and
+    over-promises; see :func:`eq18`.
+
+    References
+    ----------
+    Colgate & Schenkel 1997; the paper, eq. (1) and (13).
+    """
+    b, B, T, n = _hve(loop, "colgate")
+    K = 2 * (b - abs(B)) / T
+    note = "" if n == 0 else f"; derived without delay, here n = {n} (not valid)"
+    return _result(K, "colgate", f"eq. (1)/(13) Colgate-Schenkel: b > KT/2 + |B|{note}", loop)
+
+
+def gil(loop: HapticLoop) -> CriticalStiffnessResult:
+    """Gil et al.'s delayed condition, eq. (2): ``K < (B + b) / (T/2 + t_d)``.
+
+    From a Routh-Hurwitz analysis of the delayed HVE; valid only for small
+    virtual damping B (for large B the true boundary bends away from this line).
+    Identical in form to the paper's eq. (18).
+
+    References
+    ----------
+    Gil, Sanchez, Hulin, Preusche, Hirzinger 2013 (the paper's [6]); the paper, eq. (2).
+    """
+    b, B, T, n = _hve(loop, "gil")
+    K = (B + b) / (T / 2 + n * T)
+    return _result(K, "gil", "eq. (2) Gil et al.: K < (B + b)/(T/2 + t_d), valid for small B", loop)
+
+
+def eq18(loop: HapticLoop) -> CriticalStiffnessResult:
+    """The paper's delayed HVE condition, eq. (18): ``b + B > KT/2 + K t_d``.
+
+    From the forward-difference circle criterion, eq. (15)-(17), assuming the
+    worst case occurs at cos(wT) = 1 — true for B small; for larger B with delay
+    it is not the worst case, and the line can promise unstable stiffnesses.
+    At n = 0 it reduces to (13).
+    """
+    b, B, T, n = _hve(loop, "eq18")
+    K = (b + B) / (T / 2 + n * T)
+    return _result(K, "eq18", "eq. (18): b + B > KT/2 + K t_d (forward difference, B small)", loop)
+
+
+def eq29(loop: TeleoperationLoop) -> CriticalStiffnessResult:
+    """The paper's non-delayed PEB condition, eq. (29): ``b > KT + 2B``, b = min(b_m, b_s).
+
+    Sufficient condition for C_m = C_s from the circle criterion on eq. (24),
+    taking the worst case of cos(wT) in (26) and (28). Derived for n = 0.
+    """
+    b, B, T, n = _peb(loop, "eq29")
+    K = (b - 2 * B) / T
+    note = "" if n == 0 else f"; derived without delay, here n = {n} (not valid)"
+    return _result(K, "eq29", f"eq. (29): b > KT + 2B, b = min(b_m, b_s){note}", loop)
+
+
+def eq34(loop: TeleoperationLoop) -> CriticalStiffnessResult:
+    """The paper's delayed PEB condition, eq. (34): ``b + 2B > KT + K t_d``.
+
+    From (32)-(33) assuming the worst case at cos(wT) = 1 — derived for B small.
+    Note that at n = 0 with B > 0 it does *not* reduce to (29) (it allows more
+    stiffness as B grows, where (29) allows less).
+    """
+    b, B, T, n = _peb(loop, "eq34")
+    K = (b + 2 * B) / (T + n * T)
+    return _result(K, "eq34", "eq. (34): b + 2B > KT + K t_d, b = min(b_m, b_s) (B small)", loop)
+
+
+def gil2004(loop: HapticLoop) -> CriticalStiffnessResult:
+    """Gil et al. 2004's exact critical stiffness of the operator-free 1-DOF device
+    with no delay and B = 0:
+
+    ``K_cr = (b^2/m) (1 - d) / (1 - d - (bT/m) d)``, ``d = exp(-bT/m)``.
+
+    Holds while bT/m is below about 3.72; past that a second Jury condition binds
+    and this expression is no longer the boundary.
+
+    Raises
+    ------
+    AnalysisError
+        If the loop has an operator, a delay or a virtual damping.
+
+    References
+    ----------
+    Gil, Avello, Rubio, Florez, IEEE TCST 12(4):583-588, 2004 (the paper's [5]).
+    """
+    b, B, T, n = _hve(loop, "gil2004")
+    m = loop.device.mass
+    if not loop.operator.is_none or n != 0 or B != 0:
+        raise AnalysisError("method = 'gil2004': needs no operator, delay_samples = 0 and "
+                            "virtual damping B = 0")
+    if b == 0:
+        return _result(0.0, "gil2004", "b = 0: no stiffness is stable", loop)
+    a = b * T / m
+    d = math.exp(-a)
+    K = (b * b / m) * (1 - d) / (1 - d - a * d)
+    note = "" if a < 3.72 else f"; bT/m = {a:.3g} > 3.72: outside its range"
+    return _result(K, "gil2004", f"Gil et al. 2004 exact K_cr (no operator, n = 0, B = 0){note}", loop)
+
+
+CLOSED_FORMS = {"colgate": colgate, "gil": gil, "eq18": eq18, "eq29": eq29, "eq34": eq34,
+                "gil2004": gil2004}

@@ -1,0 +1,161 @@
+"""Small frozen result objects: every analysis returns one. ``to_dict()`` gives a
+JSON-ready dict; ``.plot()`` hands off to :mod:`hapstab.plotting`."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+__all__ = ["StabilityResult", "CriticalStiffnessResult", "BoundaryResult", "jsonable"]
+
+
+def jsonable(x: Any) -> Any:
+    """Convert numpy scalars/arrays, tuples and non-finite floats for JSON."""
+    if isinstance(x, dict):
+        return {k: jsonable(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [jsonable(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return jsonable(x.tolist())
+    if isinstance(x, (np.floating, float)):
+        v = float(x)
+        if math.isnan(v):
+            return None
+        if math.isinf(v):
+            return "inf" if v > 0 else "-inf"
+        return v
+    if isinstance(x, np.integer):
+        return int(x)
+    if isinstance(x, complex):
+        return {"re": x.real, "im": x.imag}
+    return x
+
+
+@dataclass(frozen=True)
+class StabilityResult:
+    """Stability of a loop at its own parameters.
+
+    Attributes
+    ----------
+    verdict : {"stable", "unstable", "marginal"}
+    spectral_radius : float
+        Largest |z| over the closed-loop poles (rigid-body modes excluded, see
+        ``reason``).
+    dominant_pole : complex
+        The pole of largest modulus.
+    frequency_hz : float
+        |arg(dominant_pole)| / (2 pi T).
+    reason : str
+        Why, in words.
+    poles : tuple of complex
+        All closed-loop poles at the sampling instants.
+    rigid_body_modes : int
+        Poles at z = 1 that no stiffness can move (nothing ties a mass to ground).
+    """
+
+    verdict: str
+    spectral_radius: float
+    dominant_pole: complex
+    frequency_hz: float
+    reason: str
+    period: float
+    poles: tuple[complex, ...] = field(repr=False, default=())
+    rigid_body_modes: int = 0
+
+    @property
+    def stable(self) -> bool:
+        return self.verdict == "stable"
+
+    def to_dict(self) -> dict[str, Any]:
+        return jsonable({
+            "verdict": self.verdict, "spectral_radius": self.spectral_radius,
+            "dominant_pole": {"re": self.dominant_pole.real, "im": self.dominant_pole.imag},
+            "frequency_hz": self.frequency_hz, "reason": self.reason, "period_s": self.period,
+            "rigid_body_modes": self.rigid_body_modes,
+        })
+
+    def plot(self, ax: Any = None) -> Any:
+        from .plotting import plot_poles
+        return plot_poles(self, ax=ax)
+
+
+@dataclass(frozen=True)
+class CriticalStiffnessResult:
+    """The largest K such that the loop is stable for every K in (0, K_max].
+
+    Attributes
+    ----------
+    critical_stiffness : float
+        K_max in N/m (``inf`` if stable for every K > 0, 0 if for none).
+    method : str
+        ``exact``, a closed form (``colgate``, ``gil``, ``eq18``, ...), ``circle``,
+        ``passivity`` or ``simulation``.
+    stable_intervals : tuple of (float, float)
+        The stable set in K (``exact`` only lists more than one when it is not
+        one interval).
+    reason : str
+        Which condition says so.
+    crossing_frequency_hz : float
+        Frequency of the closed-loop pole that reaches |z| = 1 at K_max (nan if
+        not applicable).
+    """
+
+    critical_stiffness: float
+    method: str
+    stable_intervals: tuple[tuple[float, float], ...]
+    reason: str
+    period: float
+    delay_samples: int | float
+    crossing_frequency_hz: float = float("nan")
+    details: dict[str, Any] = field(default_factory=dict, compare=False)
+
+    def to_dict(self) -> dict[str, Any]:
+        return jsonable({
+            "critical_stiffness": self.critical_stiffness, "method": self.method,
+            "stable_intervals": [list(iv) for iv in self.stable_intervals],
+            "reason": self.reason, "period_s": self.period, "delay_samples": self.delay_samples,
+            "crossing_frequency_hz": self.crossing_frequency_hz, **self.details,
+        })
+
+
+@dataclass(frozen=True)
+class BoundaryResult:
+    """K_max over a grid of sampling periods and delays (Fig. 5 / Fig. 6).
+
+    Attributes
+    ----------
+    periods : (nT,) array, seconds
+    delays : (nd,) array, samples
+    critical_stiffness : (nd, nT) array, N/m
+    method : str
+    """
+
+    periods: np.ndarray
+    delays: np.ndarray
+    critical_stiffness: np.ndarray
+    method: str
+    loop_kind: str = "hve"
+
+    def to_dict(self) -> dict[str, Any]:
+        return jsonable({"method": self.method, "loop": self.loop_kind,
+                         "period_s": self.periods, "delay_samples": self.delays,
+                         "critical_stiffness": self.critical_stiffness})
+
+    def rows(self) -> list[dict[str, Any]]:
+        return [{"period_s": float(T), "delay_samples": int(n),
+                 "critical_stiffness": float(self.critical_stiffness[i, j])}
+                for i, n in enumerate(self.delays) for j, T in enumerate(self.periods)]
+
+    def to_csv(self, path: str) -> None:
+        import csv
+        with open(path, "w", newline="") as fh:
+            w = csv.DictWriter(fh, ["period_s", "delay_samples", "critical_stiffness"])
+            w.writeheader()
+            w.writerows(self.rows())
+
+    def plot(self, ax: Any = None) -> Any:
+        from .plotting import plot_boundary
+        return plot_boundary(self, ax=ax)
