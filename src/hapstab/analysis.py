@@ -109,7 +109,7 @@ def boundary(loop: HapticLoop | TeleoperationLoop, periods: Sequence[float] | np
     for i, n in enumerate(ns):
         tmpl = loop.replace(delay_samples=n, period=float(T[0]))
         if method == "exact":
-            res = exact_kmax_batch(build(tmpl, T))
+            res = exact_kmax_batch(build(tmpl, T), intervals=False)
             out[i] = [r["kmax"] for r in res]
         else:
             f = _resolve(method)

@@ -43,6 +43,10 @@ __all__ = ["stability", "exact_critical_stiffness", "exact_kmax_batch", "rigid_b
 #: |z| - 1 below this (relative to rounding of the eigenvalue solver) is "on the circle".
 MARGINAL_TOL = 1e-9
 
+#: The analysed range of K is (0, K_CAP * K_scale], K_scale = ||A0|| / ||A1|| (about
+#: 2m/T^2, the stiffness whose force moves the mass by its own sample-scale motion).
+K_CAP = 1e4
+
 
 def rigid_body_modes(A0: np.ndarray, A1: np.ndarray) -> int:
     """Number of independent modes at z = 1 that no K moves: dim null([I - A0; A1])."""
@@ -169,64 +173,122 @@ def _crossing_poly(c: np.ndarray) -> np.ndarray:
         else 0.5 * (q - q[::-1])
 
 
-def _unit_roots(q: np.ndarray, tol: float = 2e-3) -> np.ndarray:
-    """Angles in (0, pi) of the roots of q (ascending coefficients) near |z| = 1."""
-    scale = np.abs(q).max()
-    if scale == 0:
-        return np.zeros(0)
-    nz = np.flatnonzero(np.abs(q) > 1e-13 * scale)
-    q = q[nz[0]:nz[-1] + 1]
-    if q.size < 2:
-        return np.zeros(0)
-    z = np.roots(q[::-1])
-    th = np.angle(z)
-    keep = (np.abs(np.abs(z) - 1) < tol) & (th > 1e-9) & (th < np.pi - 1e-9)
-    return np.sort(th[keep])
-
-
-def _mu(A0: np.ndarray, B1: np.ndarray, C1: np.ndarray, theta: np.ndarray) -> np.ndarray:
-    """Eigenvalues of G(e^{j theta}) = C1 (zI - A0)^-1 B1, shape (n, r)."""
+def _mu_and_slope(A0: np.ndarray, B1: np.ndarray, C1: np.ndarray, theta: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """The eigenvalue mu of ``G(e^{j theta}) = C1 (zI - A0)^-1 B1`` nearest the real
+    axis (K = 1/mu) and d mu / d theta, by one batched inverse."""
     N = A0.shape[-1]
     z = np.exp(1j * theta)
-    X = np.linalg.solve(z[:, None, None] * np.eye(N) - A0, B1.astype(complex))
+    R = np.linalg.inv(z[:, None, None] * np.eye(N) - A0)
+    X = R @ B1
     G = C1 @ X
+    dG = -1j * z[:, None, None] * (C1 @ (R @ X))          # dG/dtheta = -j z C1 R^2 B1
     if G.shape[-1] == 1:
-        return G[:, :, 0]
+        return G[:, 0, 0], dG[:, 0, 0]
     t = G[:, 0, 0] + G[:, 1, 1]
     d = G[:, 0, 0] * G[:, 1, 1] - G[:, 0, 1] * G[:, 1, 0]
-    s = np.sqrt(t * t / 4 - d)
-    return np.stack([t / 2 + s, t / 2 - s], axis=-1)
+    sq = np.sqrt(t * t / 4 - d)
+    mus = np.stack([t / 2 + sq, t / 2 - sq], axis=-1)
+    rel = np.abs(mus.imag) / np.maximum(np.abs(mus), 1e-300)
+    mu = np.take_along_axis(mus, np.argmin(rel, axis=-1)[:, None], axis=-1)[:, 0]
+    dt = dG[:, 0, 0] + dG[:, 1, 1]
+    dd = dG[:, 0, 0] * G[:, 1, 1] + G[:, 0, 0] * dG[:, 1, 1] - dG[:, 0, 1] * G[:, 1, 0] \
+        - G[:, 0, 1] * dG[:, 1, 0]
+    den = 2 * mu - t
+    dmu = (dt * mu - dd) / np.where(den != 0, den, 1e-300)   # from mu^2 - t mu + d = 0
+    return mu, dmu
 
 
-def _pick(mu: np.ndarray) -> np.ndarray:
-    """The branch closest to the real axis (relative)."""
-    rel = np.abs(mu.imag) / np.maximum(np.abs(mu), 1e-300)
-    return np.take_along_axis(mu, np.argmin(rel, axis=-1)[:, None], axis=-1)[:, 0]
-
-
-def _polish(A0, B1, C1, theta, iters: int = 14):
-    """Newton on Im mu(theta) = 0 (derivative by central difference)."""
+def _polish(A0, B1, C1, theta, iters: int = 30):
+    """Newton on Im mu(theta) = 0, damped, each candidate until its step is at rounding."""
     th = theta.copy()
+    mu = np.empty(th.size, complex)
+    active = np.ones(th.size, bool)
     for _ in range(iters):
-        h = 1e-7 * np.maximum(th, 1e-3)
-        f0 = _pick(_mu(A0, B1, C1, th))
-        fp = _pick(_mu(A0, B1, C1, th + h))
-        fm = _pick(_mu(A0, B1, C1, th - h))
-        # follow the branch picked at th: compare the nearer of each
-        d = (fp.imag - fm.imag) / (2 * h)
-        step = np.where(d != 0, f0.imag / np.where(d != 0, d, 1.0), 0.0)
-        lim = 0.2 * np.maximum(np.minimum(th, np.pi - th), 1e-3)   # damped: stay near the candidate
+        idx = np.flatnonzero(active)
+        if idx.size == 0:
+            break
+        m, dm = _mu_and_slope(A0[idx], B1[idx], C1[idx], th[idx])
+        mu[idx] = m
+        slope = dm.imag
+        step = m.imag / np.where(slope != 0, slope, np.inf)
+        lim = 0.2 * np.maximum(np.minimum(th[idx], np.pi - th[idx]), 1e-3)  # stay near the candidate
         step = np.clip(step, -lim, lim)
-        th = np.clip(th - step, 1e-12, np.pi - 1e-12)
-    mu = _pick(_mu(A0, B1, C1, th))
+        th[idx] = np.clip(th[idx] - step, 1e-12, np.pi - 1e-12)
+        active[idx] = np.abs(step) > 4e-16 * np.maximum(th[idx], 1e-3)
+    idx = np.flatnonzero(~active)
+    if idx.size:  # value at the converged angle
+        mu[idx] = _mu_and_slope(A0[idx], B1[idx], C1[idx], th[idx])[0]
     return th, mu
 
 
-def exact_kmax_batch(sysm: SampledSystem) -> list[dict[str, Any]]:
+def _unit_roots_batch(polys: list[np.ndarray], tol: float = 2e-3) -> list[np.ndarray]:
+    """Angles in (0, pi) of the roots near |z| = 1 of each polynomial (ascending
+    coefficients), by companion-matrix eigenvalues batched over equal degrees."""
+    trimmed = []
+    for q in polys:
+        scale = np.abs(q).max() if q.size else 0.0
+        if scale == 0:
+            trimmed.append(np.zeros(1))
+            continue
+        nz = np.flatnonzero(np.abs(q) > 1e-13 * scale)
+        trimmed.append(q[nz[0]:nz[-1] + 1])
+    out: list[np.ndarray] = [np.zeros(0)] * len(polys)
+    by_deg: dict[int, list[int]] = {}
+    for i, q in enumerate(trimmed):
+        if q.size >= 2:
+            by_deg.setdefault(q.size - 1, []).append(i)
+    for deg, idx in by_deg.items():
+        Q = np.array([trimmed[i] for i in idx])             # ascending, Q[:, -1] != 0
+        comp = np.zeros((len(idx), deg, deg))
+        comp[:, 0, :] = -Q[:, -2::-1] / Q[:, -1:]            # first row: -q_{d-1..0}/q_d
+        if deg > 1:
+            comp[:, np.arange(1, deg), np.arange(deg - 1)] = 1.0
+        z = np.linalg.eigvals(comp)
+        th = np.angle(z)
+        keep = (np.abs(np.abs(z) - 1) < tol) & (th > 1e-9) & (th < np.pi - 1e-9)
+        for j, i in enumerate(idx):
+            out[i] = np.sort(th[j][keep[j]])
+    return out
+
+
+def _real_roots_pos(vals: np.ndarray) -> list[np.ndarray]:
+    """Positive real roots in K' of each row's polynomial sum_l vals[l] K'^l, degree <= 2,
+    vectorised (the cancellation-free form of the quadratic formula)."""
+    v = np.zeros((vals.shape[0], 3))
+    v[:, :vals.shape[1]] = vals
+    c0, c1, c2 = v[:, 0], v[:, 1], v[:, 2]
+    with np.errstate(all="ignore"):
+        scale = np.abs(v).max(axis=1)
+        quad = np.abs(c2) > 1e-13 * scale
+        disc = c1 * c1 - 4 * c2 * c0
+        sq = np.sqrt(np.where(disc >= 0, disc, np.nan))
+        qq = -0.5 * (c1 + np.copysign(sq, c1))
+        r1 = np.where(quad, qq / c2, -c0 / c1)
+        r2 = np.where(quad, c0 / qq, np.nan)
+    out = []
+    for a, b in zip(r1, r2):
+        out.append(np.array([x for x in (a, b) if np.isfinite(x) and x > 0]))
+    return out
+
+
+def exact_kmax_batch(sysm: SampledSystem, intervals: bool = True) -> list[dict[str, Any]]:
     """Exact K_max and the stable intervals in K for every period of ``sysm``.
 
-    Returns one dict per period with ``kmax``, ``intervals``, ``theta`` (angle of
-    the crossing at K_max, nan if none), ``rigid`` and ``reason``.
+    Parameters
+    ----------
+    sysm : SampledSystem
+    intervals : bool
+        If False, only K_max is wanted (``boundary``): only the crossings near
+        the lowest one are polished and only the first two gaps are classified;
+        a point whose first gaps do not settle K_max falls back to the full path.
+        ``intervals`` is then ``((0, K_max),)`` only.
+
+    Returns
+    -------
+    list of dict
+        One per period: ``kmax``, ``intervals``, ``theta`` (angle of the crossing
+        at K_max, nan if none), ``rigid``, ``rho_small_K``.
     """
     if not sysm.varies_with_K:
         raise AnalysisError("controller: critical stiffness needs SpringDamper controllers "
@@ -243,37 +305,42 @@ def exact_kmax_batch(sysm: SampledSystem) -> list[dict[str, Any]]:
             raise AnalysisError(f"stiffness enters the loop with rank {r}; only 1 or 2 is supported")
         B1 = U[idx, :, :r] * S[idx, None, :r]
         C1 = Vt[idx, :r, :]
-        for i, res in zip(idx, _kmax_core(sysm.A0[idx], B1, C1)):
+        for i, res in zip(idx, _kmax_core(sysm.A0[idx], B1, C1, intervals)):
             out[i] = res
     return out  # type: ignore[return-value]
 
 
-def _kmax_core(A0: np.ndarray, B1: np.ndarray, C1: np.ndarray) -> list[dict[str, Any]]:
+def _kmax_core(A0: np.ndarray, B1: np.ndarray, C1: np.ndarray, full: bool = True
+               ) -> list[dict[str, Any]]:
     A1 = B1 @ C1
     P, N, _ = A0.shape
     r = B1.shape[-1]
     Ks = np.linalg.norm(A0, axis=(1, 2)) / np.maximum(np.linalg.norm(A1, axis=(1, 2)), 1e-300)
     Ks = 2.0 ** np.round(np.log2(Ks))   # a power of two keeps K/Ks exact
-    rigid = np.array([rigid_body_modes(A0[p], A1[p]) for p in range(P)])
+    Sv = np.linalg.svd(np.concatenate([np.eye(N) - A0, A1], axis=1), compute_uv=False)
+    rigid = np.sum(Sv < 1e-10 * np.maximum(1.0, Sv[:, :1]), axis=1)   # as rigid_body_modes()
 
     coef = np.concatenate([_chi_coefficients(A0[s:s + 256], A1[s:s + 256], Ks[s:s + 256], r)
                            for s in range(0, P, 256)])
 
     # --- complex crossings: candidates, then polish on the exact frequency response
-    cand_p, cand_th = [], []
-    for p in range(P):
-        c = coef[p]
-        if rigid[p]:
-            c = np.array([_deflate(ci, rigid[p]) for ci in c])
-        th = _unit_roots(_crossing_poly(c))
-        cand_p.extend([p] * th.size)
-        cand_th.extend(th.tolist())
-    cand_p = np.array(cand_p, dtype=int)
+    cs = [np.array([_deflate(ci, rigid[p]) for ci in coef[p]]) if rigid[p] else coef[p]
+          for p in range(P)]
+    ths = _unit_roots_batch([_crossing_poly(c) for c in cs])
+    cand_p = np.repeat(np.arange(P), [t.size for t in ths])
     crossings: list[list[tuple[float, float]]] = [[] for _ in range(P)]  # (K, theta)
     if cand_p.size:
-        th0 = np.array(cand_th)
-        mu0 = _pick(_mu(A0[cand_p], B1[cand_p], C1[cand_p], th0))
-        ok0 = np.abs(mu0.imag) < 0.5 * np.abs(mu0)   # rough candidates near z = 1: be generous
+        th0 = np.concatenate(ths)
+        mu0, _ = _mu_and_slope(A0[cand_p], B1[cand_p], C1[cand_p], th0)
+        # K = 1/mu must be positive; the rough angle (resultant near z = 1) can be
+        # a few % off, so the test on Im is generous and the polish decides
+        ok0 = (np.abs(mu0.imag) < (0.5 if r == 2 else 0.05) * np.abs(mu0)) & (mu0.real > 0)
+        if not full and ok0.any():
+            # only the lowest crossings can decide K_max: keep rough K within 4x of the lowest
+            Krough = np.where(ok0, 1.0 / np.where(ok0, mu0.real, 1.0), np.inf)
+            lowest = np.full(P, np.inf)
+            np.minimum.at(lowest, cand_p, Krough)
+            ok0 &= Krough <= 4.0 * lowest[cand_p]
         if ok0.any():
             ps, th1 = cand_p[ok0], th0[ok0]
             th, mu = _polish(A0[ps], B1[ps], C1[ps], th1)
@@ -281,112 +348,209 @@ def _kmax_core(A0: np.ndarray, B1: np.ndarray, C1: np.ndarray) -> list[dict[str,
             for p, t, m in zip(ps[good], th[good], mu[good]):
                 crossings[p].append((1.0 / m.real, float(t)))
 
-    # --- real crossings at z = +1 and z = -1: real roots of chi(+-1, K)
+    # --- real crossings at z = +1 and z = -1: K = 1/mu for the real eigenvalues mu of
+    # the real r x r matrix G(+-1), by linear solves (det(I - A) itself is tiny and
+    # inaccurate at small T); where +-1 is a pole of A0 (a free mass) use chi(+-1, K)
     for zsign, theta in ((1.0, 0.0), (-1.0, math.pi)):
-        zpow = zsign ** np.arange(N + 1)
-        for p in range(P):
-            c = coef[p]
-            if zsign > 0 and rigid[p]:
-                c = np.array([_deflate(ci, rigid[p]) for ci in c])
-                vals = c[:, :].sum(axis=1)
-            else:
-                vals = c @ zpow
-            if not np.any(vals[1:]):
-                continue
-            for k in np.roots(vals[::-1]):
-                if abs(k.imag) <= 1e-9 * abs(k) and k.real > 0:
-                    crossings[p].append((_refine_real(A0[p], A1[p], zsign, k.real * Ks[p],
-                                                      rigid[p]), theta))
+        M = zsign * np.eye(N) - A0
+        rc = 1.0 / np.linalg.cond(M)
+        direct = rc > 1e-12
+        if direct.any():
+            idx = np.flatnonzero(direct)
+            G = C1[idx] @ np.linalg.solve(M[idx], B1[idx])
+            for p, mus in zip(idx, np.linalg.eigvals(G)):
+                crossings[p].extend((1.0 / m.real, theta) for m in mus
+                                    if abs(m.imag) <= 1e-12 * abs(m) and m.real > 0)
+        if (~direct).any():
+            zpow = zsign ** np.arange(N + 1)
+            idx = np.flatnonzero(~direct)
+            vals = np.array([cs[p] @ zpow for p in idx])
+            for p, roots in zip(idx, _real_roots_pos(vals)):
+                crossings[p].extend((k * Ks[p], theta) for k in roots)
 
-    # --- classify the gaps between crossings (batched), with a consistency net
+    # crossings beyond K_CAP x the loop's stiffness scale are out of the analysed range:
+    # there the closed loop's entries are so large that its eigenvalues are noise
     for p in range(P):
-        Kc: list[tuple[float, float]] = []
-        for K, th in sorted(crossings[p]):
-            if K > 1e-12 * Ks[p] and np.isfinite(K) and (not Kc or K > Kc[-1][0] * (1 + 1e-10)):
-                Kc.append((K, th))
-        crossings[p] = Kc
-    mids = [_midpoints([k for k, _ in crossings[p]], Ks[p]) for p in range(P)]
-    mp = np.repeat(np.arange(P), [len(m) for m in mids])
-    mK = np.concatenate(mids)
+        crossings[p] = [(k, th) for k, th in crossings[p] if k <= K_CAP * Ks[p]]
+
+    probes = [_probes([k for k, _ in crossings[p]], Ks[p]) for p in range(P)]
+    if not full:
+        probes = [m[:3] for m in probes]   # K -> 0+, then gaps (0, K1) and (K1, K2)
+    mp = np.repeat(np.arange(P), [len(m) for m in probes])
+    mK = np.concatenate(probes)
     outside = np.empty(mK.size, dtype=int)
+    on = np.empty(mK.size, dtype=int)
     rho = np.empty(mK.size)
     for s in range(0, mK.size, 2048):
         sl = slice(s, s + 2048)
         eig = np.linalg.eigvals(A0[mp[sl]] + mK[sl, None, None] * A1[mp[sl]])
-        for i, p in enumerate(mp[sl]):
-            outside[s + i], rho[s + i] = _count_outside(eig[i], rigid[p])
-    out = []
+        outside[sl], rho[sl], on[sl] = _count_outside_batch(eig, rigid[mp[sl]])
+    # away from K = 0 a pole on the circle (within 1e-9) counts as outside: not stable
+    outside = np.where(mK > 0, outside + on, outside)
+    out: list[dict[str, Any] | None] = []
+    redo = []
     pos = 0
     for p in range(P):
-        cnt = len(mids[p])
-        u, rh = outside[pos:pos + cnt], rho[pos:pos + cnt]
+        cnt = len(probes[p])
+        u, rh, on0 = outside[pos:pos + cnt], rho[pos:pos + cnt], int(on[pos])
         pos += cnt
-        if not _consistent(crossings[p], u):
-            crossings[p], u, rh = _repair(A0[p], A1[p], rigid[p], crossings[p], Ks[p])
-        out.append(_intervals(crossings[p], u, rh, int(rigid[p])))
-    return out
+        cr = crossings[p]
+        if not full:
+            settled = u[1] > 0 or not cr or (cnt == 3 and u[2] > 0)
+            if settled and _consistent(cr[:cnt - 2], u, on0):
+                if u[1] > 0 or rh[1] >= 1.0:
+                    res = {"kmax": 0.0, "intervals": (), "theta": math.nan}
+                elif not cr:
+                    res = {"kmax": math.inf, "intervals": ((0.0, math.inf),), "theta": math.nan}
+                else:
+                    K1, th1 = cr[0]
+                    if th1 in (0.0, math.pi):
+                        K1 = _refine_endpoints({"kmax": K1, "intervals": ()}, A0[p], A1[p],
+                                               int(rigid[p]), {K1})["kmax"]
+                    res = {"kmax": K1, "intervals": ((0.0, K1),), "theta": th1}
+                out.append({**res, "rigid": int(rigid[p]), "rho_small_K": float(rh[1])})
+            else:
+                out.append(None)
+                redo.append(p)
+            continue
+        if not _consistent(cr, u, on0):
+            cr, u, rh = _repair(A0[p], A1[p], B1[p], C1[p], int(rigid[p]), cr, Ks[p], on0)
+            crossings[p] = cr
+        res = _intervals(cr, u[1:], rh[1:], int(rigid[p]))
+        real_K = {k for k, th in cr if th in (0.0, math.pi)}
+        ends = {e for iv in res["intervals"] for e in iv}
+        if real_K & ends:
+            res = _refine_endpoints(res, A0[p], A1[p], int(rigid[p]), real_K)
+        out.append(res)
+    if redo:
+        for p, res in zip(redo, _kmax_core(A0[redo], B1[redo], C1[redo], True)):
+            out[p] = res
+    return out  # type: ignore[return-value]
 
 
-def _midpoints(Kv: list[float], Ks: float) -> list[float]:
+def _count_outside_batch(eig: np.ndarray, n_rigid: np.ndarray
+                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Vectorised :func:`_count_outside` over rows (rigid modes excluded per row),
+    plus the number of poles on the circle (within 1e-9)."""
+    a = np.abs(eig)
+    if np.any(n_rigid):
+        order = np.argsort(np.abs(eig - 1.0), axis=-1)
+        mask = np.ones_like(a, bool)
+        for m in np.unique(n_rigid[n_rigid > 0]):
+            rows = np.flatnonzero(n_rigid == m)
+            np.put_along_axis(mask[rows], order[rows, :m], False, axis=-1)
+            sub = mask[rows]
+            np.put_along_axis(sub, order[rows, :m], False, axis=-1)
+            mask[rows] = sub
+        a = np.where(mask, a, 0.0)
+    on = np.abs(a - 1.0) <= 1e-9
+    return np.sum((a >= 1.0) & ~on, axis=-1), a.max(axis=-1), np.sum(on, axis=-1)
+
+
+def _probes(Kv: list[float], Ks: float) -> list[float]:
+    """Where to count poles outside the circle: K = 0 (anchors the count; poles on
+    the circle there may go either way), then one point inside each gap between
+    consecutive crossings."""
     if not Kv:
-        return [Ks]
-    return [Kv[0] / 2] + [(a + b) / 2 for a, b in zip(Kv, Kv[1:])] + [2 * Kv[-1]]
+        return [0.0, Ks]
+    return [0.0, Kv[0] / 2] + [(a + b) / 2 for a, b in zip(Kv, Kv[1:])] + [2 * Kv[-1]]
 
 
-def _count_outside(eig: np.ndarray, n_rigid: int) -> tuple[int, float]:
-    """(number of poles with |z| > 1, spectral radius), rigid-body modes excluded."""
+def _count_outside(eig: np.ndarray, n_rigid: int) -> tuple[int, float, int]:
+    """(poles strictly outside, spectral radius, poles on the circle within 1e-9),
+    rigid-body modes excluded."""
     if n_rigid:
         eig = eig[np.argsort(np.abs(eig - 1.0))[n_rigid:]]
     a = np.abs(eig)
-    return int(np.sum(a >= 1.0)), float(a.max())
+    on = np.abs(a - 1.0) <= 1e-9
+    return int(np.sum((a >= 1.0) & ~on)), float(a.max()), int(on.sum())
 
 
-def _consistent(cr: list[tuple[float, float]], u: np.ndarray) -> bool:
-    """Each crossing moves 2 poles (complex pair) or 1 (real, at z = +-1) across
-    the circle; a larger jump in the outside count means a crossing was missed."""
-    for g, (_, th) in enumerate(cr):
-        mult = 1 if th in (0.0, math.pi) else 2
-        if abs(int(u[g + 1]) - int(u[g])) > mult:
-            return False
-    return True
+def _mult(th: float) -> int:
+    return 1 if th in (0.0, math.pi) else 2
 
 
-def _repair(A0, A1, rigid, cr, Ks, rounds: int = 4):
-    """Fallback: locate missed crossings by bisection on the outside count."""
-    def count(K: float) -> tuple[int, float, complex]:
-        eig = np.linalg.eigvals(A0 + K * A1)
-        if rigid:
-            eig = eig[np.argsort(np.abs(eig - 1.0))[rigid:]]
-        i = int(np.argmin(np.abs(np.abs(eig) - 1.0)))
-        return int(np.sum(np.abs(eig) >= 1.0)), float(np.abs(eig).max()), complex(eig[i])
+def _consistent(cr: list[tuple[float, float]], u: np.ndarray, on0: int = 0) -> bool:
+    """Counts at the probes agree with the crossings found: between K = 0 (count
+    u[0] strictly outside, on0 on the circle) and the first gap only the poles on
+    the circle may leave; each crossing moves 2 poles (complex pair) or 1 (real,
+    z = +-1) across the circle, so a larger jump means a crossing was missed."""
+    if not u[0] <= u[1] <= u[0] + on0:
+        return False
+    return all(abs(int(u[g + 2]) - int(u[g + 1])) <= _mult(th) for g, (_, th) in enumerate(cr))
+
+
+def _repair(A0, A1, B1, C1, rigid, cr, Ks, on0: int, rounds: int = 8):
+    """Fallback when a crossing was missed: bisect on the outside count where it
+    disagrees with the crossings found, then polish the new crossing exactly."""
+    def count(K: float) -> int:   # on the circle counts as outside (K > 0: not stable)
+        c = _count_outside(np.linalg.eigvals(A0 + K * A1), rigid)
+        return c[0] + c[2]
+
+    def bisect(lo: float, hi: float, ulo: int) -> float:
+        for _ in range(200):   # to rounding of K
+            mid = 0.5 * (lo + hi)
+            if hi - lo <= 4e-16 * hi:
+                break
+            if count(mid) == ulo:
+                lo = mid
+            else:
+                hi = mid
+        return hi
 
     for _ in range(rounds):
-        Kv = [k for k, _ in cr]
-        mids = _midpoints(Kv, Ks)
-        res = [count(k) for k in mids]
-        u = np.array([r[0] for r in res])
-        if _consistent(cr, u):
-            return cr, u, np.array([r[1] for r in res])
-        for g, (_, th) in enumerate(cr):
-            mult = 1 if th in (0.0, math.pi) else 2
-            if abs(int(u[g + 1]) - int(u[g])) > mult:
-                lo, hi, ulo = mids[g], mids[g + 1], u[g]
-                # bisect for the change of count away from the known crossing
-                for _ in range(200):
-                    mid = 0.5 * (lo + hi)
-                    if hi - lo <= 1e-15 * hi:
-                        break
-                    if count(mid)[0] == ulo:
-                        lo = mid
-                    else:
-                        hi = mid
-                if abs(hi / cr[g][0] - 1) > 1e-9:
-                    z = count(hi)[2]
-                    cr = sorted(cr + [(hi, abs(math.atan2(z.imag, z.real)))])
-                break
-    Kv = [k for k, _ in cr]
-    res = [count(k) for k in _midpoints(Kv, Ks)]
-    return cr, np.array([r[0] for r in res]), np.array([r[1] for r in res])
+        pr = _probes([k for k, _ in cr], Ks)
+        u = np.array([count(k) for k in pr])
+        u[0] = _count_outside(np.linalg.eigvals(A0), rigid)[0]
+        if _consistent(cr, u, on0):
+            break
+        if not u[0] <= u[1] <= u[0] + on0:
+            segs = [(pr[0], pr[1], u[0] + on0)]
+        else:
+            segs = []
+            for g, (K, th) in enumerate(cr):
+                if abs(int(u[g + 2]) - int(u[g + 1])) > _mult(th):
+                    # counts are noisy right at a crossing when poles crowd z = 1
+                    # (small T): look 1e-3 away from the known one
+                    lo_k, hi_k = K * (1 - 1e-3), K * (1 + 1e-3)
+                    below, above = count(lo_k), count(hi_k)
+                    if below != u[g + 1] and pr[g + 1] < lo_k:
+                        segs.append((pr[g + 1], lo_k, u[g + 1]))
+                    if above != u[g + 2] and hi_k < pr[g + 2]:
+                        segs.append((hi_k, pr[g + 2], above))
+                    break
+        if not segs:
+            break
+        added = False
+        for lo, hi, ulo in segs:
+            new = _polish_at(A0, A1, B1, C1, bisect(lo, hi, ulo))
+            if all(abs(new[0] / k - 1) > 1e-9 for k, _ in cr):
+                cr = sorted(cr + [new])
+                added = True
+        if not added:
+            break
+    pr = _probes([k for k, _ in cr], Ks)
+    res = [_count_outside(np.linalg.eigvals(A0 + k * A1), rigid) for k in pr]
+    u = np.array([r[0] + (r[2] if k > 0 else 0) for r, k in zip(res, pr)])
+    return cr, u, np.array([r[1] for r in res])
+
+
+def _polish_at(A0, A1, B1, C1, K: float) -> tuple[float, float]:
+    """(K, theta) of the crossing found by bisection at K, polished on the exact
+    frequency response when it is a complex pair."""
+    eig = np.linalg.eigvals(A0 + K * A1)
+    z = eig[np.argmin(np.abs(np.abs(eig) - 1.0))]
+    th = abs(math.atan2(z.imag, z.real))
+    if th < 1e-9:
+        return K, 0.0
+    if th > math.pi - 1e-9:
+        return K, math.pi
+    t, mu = _polish(A0[None], B1[None], C1[None], np.array([th]))
+    # the bisection's K is only as good as the eigenvalues near z = 1; the polished
+    # crossing is exact, and must be the same crossing (within a few %)
+    if abs(mu[0].imag) <= 1e-9 * abs(mu[0]) and mu[0].real > 0 and abs(1 / mu[0].real / K - 1) < 3e-2:
+        return 1.0 / mu[0].real, float(t[0])
+    return K, th
 
 
 def _intervals(cr, u, rho, rigid) -> dict[str, Any]:
@@ -418,6 +582,23 @@ def _deflate(c: np.ndarray, m: int) -> np.ndarray:
     asc = np.atleast_1d(desc)[::-1]
     out[:asc.size] = asc
     return out
+
+
+def _refine_endpoints(res: dict[str, Any], A0: np.ndarray, A1: np.ndarray, rigid: int,
+                      real_K: set[float]) -> dict[str, Any]:
+    """Polish interval endpoints that are real crossings (z = +-1)."""
+    def fix(K: float) -> float:
+        if K not in real_K:
+            return K
+        for z in (1.0, -1.0):
+            k = _refine_real(A0, A1, z, K, rigid)
+            if k != K:
+                return k
+        return K
+    iv = tuple((fix(a) if a > 0 else a, fix(b) if math.isfinite(b) else b)
+               for a, b in res["intervals"])
+    kmax = fix(res["kmax"]) if 0 < res["kmax"] < math.inf else res["kmax"]
+    return {**res, "intervals": iv, "kmax": kmax}
 
 
 def _refine_real(A0: np.ndarray, A1: np.ndarray, z: float, K0: float, m: int) -> float:
