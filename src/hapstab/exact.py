@@ -133,22 +133,28 @@ def _describe(z: complex, T: float) -> str:
 
 
 # --------------------------------------------------------------- exact K_max core
-def _chi_coefficients(A0: np.ndarray, A1: np.ndarray, Ks: np.ndarray, r: int) -> np.ndarray:
+def _chi_coefficients(A0: np.ndarray, A1: np.ndarray, Ks: np.ndarray, r: int,
+                      eig0: np.ndarray) -> np.ndarray:
     """Coefficients (ascending in z) of chi's K'-polynomial, K' = K/Ks.
+
+    chi(z, K) is a polynomial of degree r in K; its z-coefficients at K = l Ks,
+    l = 0..r, are the elementary symmetric functions of the eigenvalues of
+    A(l Ks) (backward stable: exact for a matrix within rounding of A), and
+    Lagrange interpolation in K' = l gives the K'-coefficients.
 
     Returns (P, r+1, N+1) real: chi(z, K) = sum_l (K/Ks)^l sum_m c[l, m] z^m.
     """
     P, N, _ = A0.shape
-    M = N + 1
-    zk = np.exp(2j * np.pi * np.arange(M) / M)
-    Kl = np.arange(r + 1)[None, :] * Ks[:, None]                     # (P, r+1)
-    A = A0[:, None] + Kl[:, :, None, None] * A1[:, None]               # (P, r+1, N, N)
-    mats = zk[None, None, :, None, None] * np.eye(N) - A[:, :, None]   # (P, r+1, M, N, N)
-    vals = np.linalg.det(mats)                                         # (P, r+1, M)
-    cz = np.fft.fft(vals, axis=-1) / M                                 # coefficients in z
+    eigs = [eig0] + [np.linalg.eigvals(A0 + (l * Ks)[:, None, None] * A1) for l in range(1, r + 1)]
+    vals = np.empty((P, r + 1, N + 1))
+    for l, ev in enumerate(eigs):
+        d = np.zeros((P, N + 1), complex)
+        d[:, 0] = 1.0
+        for i in range(N):                             # descending: times (z - lambda_i)
+            d[:, 1:i + 2] = d[:, 1:i + 2] - ev[:, i:i + 1] * d[:, 0:i + 1]
+        vals[:, l, :] = d[:, ::-1].real
     V = np.vander(np.arange(r + 1, dtype=float), r + 1, increasing=True)  # rows: l^0..l^r
-    coef = np.einsum("kl,plm->pkm", np.linalg.inv(V), cz)              # in K'
-    return coef.real
+    return np.einsum("kl,plm->pkm", np.linalg.inv(V), vals)
 
 
 def _rev(x: np.ndarray) -> np.ndarray:
@@ -215,7 +221,9 @@ def _polish(A0, B1, C1, theta, iters: int = 30):
         lim = 0.2 * np.maximum(np.minimum(th[idx], np.pi - th[idx]), 1e-3)  # stay near the candidate
         step = np.clip(step, -lim, lim)
         th[idx] = np.clip(th[idx] - step, 1e-12, np.pi - 1e-12)
-        active[idx] = np.abs(step) > 4e-16 * np.maximum(th[idx], 1e-3)
+        # 1e-12 relative in theta is below the noise of Im mu near the root and
+        # gives K to ~1e-12; quadratic convergence has done its work by then
+        active[idx] = np.abs(step) > 1e-12 * np.maximum(th[idx], 1e-3)
     idx = np.flatnonzero(~active)
     if idx.size:  # value at the converged angle
         mu[idx] = _mu_and_slope(A0[idx], B1[idx], C1[idx], th[idx])[0]
@@ -223,33 +231,74 @@ def _polish(A0, B1, C1, theta, iters: int = 30):
 
 
 def _unit_roots_batch(polys: list[np.ndarray], tol: float = 2e-3) -> list[np.ndarray]:
-    """Angles in (0, pi) of the roots near |z| = 1 of each polynomial (ascending
-    coefficients), by companion-matrix eigenvalues batched over equal degrees."""
-    trimmed = []
+    """Angles in (0, pi) of the unit-circle roots of (anti-)palindromic polynomials.
+
+    With x = cos(theta), ``z^-M q(z)`` is ``q_M + 2 sum_k q_{M+k} T_k(x)``
+    (palindromic) or ``2j sin(theta) sum_k q_{M+k} U_{k-1}(x)`` (anti-palindromic),
+    a Chebyshev series of half the degree whose real roots in (-1, 1) are the
+    wanted angles; roots come from colleague matrices, batched over equal degrees.
+    """
+    series = []
     for q in polys:
-        scale = np.abs(q).max() if q.size else 0.0
-        if scale == 0:
-            trimmed.append(np.zeros(1))
-            continue
-        nz = np.flatnonzero(np.abs(q) > 1e-13 * scale)
-        trimmed.append(q[nz[0]:nz[-1] + 1])
+        M = (q.size - 1) // 2
+        hi = q[M + 1:]
+        if np.abs(q + q[::-1]).sum() <= np.abs(q - q[::-1]).sum():   # anti-palindromic
+            u = hi                                                   # U_{k-1} coefficients
+            t = np.zeros(max(u.size, 1))
+            # U_n = 2 (T_n + T_{n-2} + ...) (- T_0 if n even): reverse cumulative sums
+            for par in (0, 1):
+                t[par::2] = 2 * np.cumsum(u[par::2][::-1])[::-1]
+            t[0] -= u[0::2].sum()
+        else:
+            t = np.concatenate([[q[M]], 2 * hi])
+        scale = np.abs(t).max() if t.size else 0.0
+        nz = np.flatnonzero(np.abs(t) > 1e-13 * scale) if scale > 0 else np.zeros(0, int)
+        series.append(t[:nz[-1] + 1] if nz.size else np.zeros(1))
     out: list[np.ndarray] = [np.zeros(0)] * len(polys)
     by_deg: dict[int, list[int]] = {}
-    for i, q in enumerate(trimmed):
-        if q.size >= 2:
-            by_deg.setdefault(q.size - 1, []).append(i)
-    for deg, idx in by_deg.items():
-        Q = np.array([trimmed[i] for i in idx])             # ascending, Q[:, -1] != 0
-        comp = np.zeros((len(idx), deg, deg))
-        comp[:, 0, :] = -Q[:, -2::-1] / Q[:, -1:]            # first row: -q_{d-1..0}/q_d
-        if deg > 1:
-            comp[:, np.arange(1, deg), np.arange(deg - 1)] = 1.0
-        z = np.linalg.eigvals(comp)
-        th = np.angle(z)
-        keep = (np.abs(np.abs(z) - 1) < tol) & (th > 1e-9) & (th < np.pi - 1e-9)
+    for i, t in enumerate(series):
+        if t.size >= 2:
+            by_deg.setdefault(t.size - 1, []).append(i)
+    for n, idx in by_deg.items():
+        c = np.array([series[i] for i in idx])
+        if n == 1:
+            x = (-c[:, 0] / c[:, 1])[:, None].astype(complex)
+        else:   # colleague matrix, as numpy.polynomial.chebyshev.chebcompanion
+            mat = np.zeros((len(idx), n, n))
+            scl = np.array([1.0] + [np.sqrt(0.5)] * (n - 1))
+            off = np.full(n - 1, 0.5)
+            off[0] = np.sqrt(0.5)
+            mat[:, np.arange(n - 1), np.arange(1, n)] = off
+            mat[:, np.arange(1, n), np.arange(n - 1)] = off
+            mat[:, :, -1] -= (c[:, :-1] / c[:, -1:]) * (scl / scl[-1]) * 0.5
+            x = np.linalg.eigvals(mat)
+        xr = np.clip(x.real, -1.0, 1.0)
+        th = np.arccos(xr)
+        # a root at |z| = e^{-eps} maps to Im x ~ eps sin(theta)
+        keep = (np.abs(x.imag) <= tol * np.maximum(np.sin(th), 1e-6)) & (np.abs(x.real) < 1.0)
+        keep &= (th > 1e-9) & (th < np.pi - 1e-9)
         for j, i in enumerate(idx):
             out[i] = np.sort(th[j][keep[j]])
     return out
+
+
+def _rough_mu(c: np.ndarray, Ks: np.ndarray, theta: np.ndarray) -> np.ndarray:
+    """1/K at candidate angles from chi's coefficients (cheap, for filtering only):
+    the root K' of sum_l c[l](z) K'^l = 0 nearest the real axis."""
+    z = np.exp(1j * theta)
+    zp = z[:, None] ** np.arange(c.shape[-1])[None, :]
+    v = np.einsum("plm,pm->pl", c, zp)                     # (n, r+1)
+    with np.errstate(all="ignore"):
+        if v.shape[1] == 2:
+            k = -v[:, 0] / v[:, 1]
+        else:
+            a, b, cc = v[:, 0], v[:, 1], v[:, 2]
+            sq = np.sqrt(b * b - 4 * a * cc)
+            k1, k2 = (-b + sq) / (2 * cc), (-b - sq) / (2 * cc)
+            rel = lambda k: np.abs(k.imag) / np.abs(k)  # noqa: E731
+            k = np.where(rel(k1) <= rel(k2), k1, k2)
+        mu = 1.0 / (k * Ks)
+    return np.where(np.isfinite(mu), mu, 0.0)
 
 
 def _real_roots_pos(vals: np.ndarray) -> list[np.ndarray]:
@@ -320,8 +369,8 @@ def _kmax_core(A0: np.ndarray, B1: np.ndarray, C1: np.ndarray, full: bool = True
     Sv = np.linalg.svd(np.concatenate([np.eye(N) - A0, A1], axis=1), compute_uv=False)
     rigid = np.sum(Sv < 1e-10 * np.maximum(1.0, Sv[:, :1]), axis=1)   # as rigid_body_modes()
 
-    coef = np.concatenate([_chi_coefficients(A0[s:s + 256], A1[s:s + 256], Ks[s:s + 256], r)
-                           for s in range(0, P, 256)])
+    eig0 = np.linalg.eigvals(A0)
+    coef = _chi_coefficients(A0, A1, Ks, r, eig0)
 
     # --- complex crossings: candidates, then polish on the exact frequency response
     cs = [np.array([_deflate(ci, rigid[p]) for ci in coef[p]]) if rigid[p] else coef[p]
@@ -331,16 +380,17 @@ def _kmax_core(A0: np.ndarray, B1: np.ndarray, C1: np.ndarray, full: bool = True
     crossings: list[list[tuple[float, float]]] = [[] for _ in range(P)]  # (K, theta)
     if cand_p.size:
         th0 = np.concatenate(ths)
-        mu0, _ = _mu_and_slope(A0[cand_p], B1[cand_p], C1[cand_p], th0)
+        mu0 = _rough_mu(np.array(cs)[cand_p], Ks[cand_p], th0)
         # K = 1/mu must be positive; the rough angle (resultant near z = 1) can be
         # a few % off, so the test on Im is generous and the polish decides
         ok0 = (np.abs(mu0.imag) < (0.5 if r == 2 else 0.05) * np.abs(mu0)) & (mu0.real > 0)
         if not full and ok0.any():
-            # only the lowest crossings can decide K_max: keep rough K within 4x of the lowest
+            # only the lowest crossings can decide K_max; rough K is accurate for r = 1
+            # (a crossing polynomial of moderate degree) but can be a few % off for r = 2
             Krough = np.where(ok0, 1.0 / np.where(ok0, mu0.real, 1.0), np.inf)
             lowest = np.full(P, np.inf)
             np.minimum.at(lowest, cand_p, Krough)
-            ok0 &= Krough <= 4.0 * lowest[cand_p]
+            ok0 &= Krough <= (1.01 if r == 1 else 4.0) * lowest[cand_p]
         if ok0.any():
             ps, th1 = cand_p[ok0], th0[ok0]
             th, mu = _polish(A0[ps], B1[ps], C1[ps], th1)
@@ -353,8 +403,7 @@ def _kmax_core(A0: np.ndarray, B1: np.ndarray, C1: np.ndarray, full: bool = True
     # inaccurate at small T); where +-1 is a pole of A0 (a free mass) use chi(+-1, K)
     for zsign, theta in ((1.0, 0.0), (-1.0, math.pi)):
         M = zsign * np.eye(N) - A0
-        rc = 1.0 / np.linalg.cond(M)
-        direct = rc > 1e-12
+        direct = np.abs(eig0 - zsign).min(axis=1) > 1e-7
         if direct.any():
             idx = np.flatnonzero(direct)
             G = C1[idx] @ np.linalg.solve(M[idx], B1[idx])
@@ -383,7 +432,12 @@ def _kmax_core(A0: np.ndarray, B1: np.ndarray, C1: np.ndarray, full: bool = True
     rho = np.empty(mK.size)
     for s in range(0, mK.size, 2048):
         sl = slice(s, s + 2048)
-        eig = np.linalg.eigvals(A0[mp[sl]] + mK[sl, None, None] * A1[mp[sl]])
+        k0 = mK[sl] == 0.0
+        eig = np.empty((k0.size, N), complex)
+        eig[k0] = eig0[mp[sl][k0]]                 # K = 0: already known
+        if (~k0).any():
+            pp = mp[sl][~k0]
+            eig[~k0] = np.linalg.eigvals(A0[pp] + mK[sl][~k0, None, None] * A1[pp])
         outside[sl], rho[sl], on[sl] = _count_outside_batch(eig, rigid[mp[sl]])
     # away from K = 0 a pole on the circle (within 1e-9) counts as outside: not stable
     outside = np.where(mK > 0, outside + on, outside)
