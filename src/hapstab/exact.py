@@ -47,6 +47,10 @@ MARGINAL_TOL = 1e-9
 #: 2m/T^2, the stiffness whose force moves the mass by its own sample-scale motion).
 K_CAP = 1e4
 
+#: ... and K below K_MIN * K_scale is not resolved: a free mass's pole leaves z = 1
+#: at a rate proportional to K, and rounding blurs the first 1e-9 of |z| - 1.
+K_MIN = 1e-6
+
 
 def rigid_body_modes(A0: np.ndarray, A1: np.ndarray) -> int:
     """Number of independent modes at z = 1 that no K moves: dim null([I - A0; A1])."""
@@ -414,13 +418,24 @@ def _kmax_core(A0: np.ndarray, B1: np.ndarray, C1: np.ndarray, full: bool = True
             zpow = zsign ** np.arange(N + 1)
             idx = np.flatnonzero(~direct)
             vals = np.array([cs[p] @ zpow for p in idx])
+            # chi(+-1, K) has a root at K = 0 for each pole of A0 at +-1 (rigid modes
+            # already divided out): remove it exactly rather than let rounding move it
+            n0 = np.sum(np.abs(eig0[idx] - zsign) <= 1e-7, axis=1) - (rigid[idx] if zsign > 0 else 0)
+            for j, k in enumerate(n0):
+                if k > 0:
+                    vals[j] = np.concatenate([vals[j, k:], np.zeros(k)])
             for p, roots in zip(idx, _real_roots_pos(vals)):
                 crossings[p].extend((k * Ks[p], theta) for k in roots)
 
     # crossings beyond K_CAP x the loop's stiffness scale are out of the analysed range:
     # there the closed loop's entries are so large that its eigenvalues are noise
+    # crossings below K_MIN x the scale are K = 0 roots blurred by rounding
     for p in range(P):
-        crossings[p] = [(k, th) for k, th in crossings[p] if k <= K_CAP * Ks[p]]
+        kept: list[tuple[float, float]] = []
+        for K, th in sorted(crossings[p]):
+            if K_MIN * Ks[p] < K <= K_CAP * Ks[p] and (not kept or K > kept[-1][0] * (1 + 1e-10)):
+                kept.append((K, th))
+        crossings[p] = kept
 
     probes = [_probes([k for k, _ in crossings[p]], Ks[p]) for p in range(P)]
     if not full:
@@ -439,8 +454,9 @@ def _kmax_core(A0: np.ndarray, B1: np.ndarray, C1: np.ndarray, full: bool = True
             pp = mp[sl][~k0]
             eig[~k0] = np.linalg.eigvals(A0[pp] + mK[sl][~k0, None, None] * A1[pp])
         outside[sl], rho[sl], on[sl] = _count_outside_batch(eig, rigid[mp[sl]])
-    # away from K = 0 a pole on the circle (within 1e-9) counts as outside: not stable
-    outside = np.where(mK > 0, outside + on, outside)
+    # away from the anchor a pole on the circle (within 1e-9) counts as outside: not stable
+    anchor = np.concatenate([[True] + [False] * (len(m) - 1) for m in probes])
+    outside = np.where(anchor, outside, outside + on)
     out: list[dict[str, Any] | None] = []
     redo = []
     pos = 0
@@ -502,12 +518,12 @@ def _count_outside_batch(eig: np.ndarray, n_rigid: np.ndarray
 
 
 def _probes(Kv: list[float], Ks: float) -> list[float]:
-    """Where to count poles outside the circle: K = 0 (anchors the count; poles on
-    the circle there may go either way), then one point inside each gap between
-    consecutive crossings."""
+    """Where to count poles outside the circle: K_MIN * Ks (anchors the count; a
+    pole still on the circle there may go either way), then one point inside each
+    gap between consecutive crossings."""
     if not Kv:
-        return [0.0, Ks]
-    return [0.0, Kv[0] / 2] + [(a + b) / 2 for a, b in zip(Kv, Kv[1:])] + [2 * Kv[-1]]
+        return [K_MIN * Ks, Ks]
+    return [K_MIN * Ks, Kv[0] / 2] + [(a + b) / 2 for a, b in zip(Kv, Kv[1:])] + [2 * Kv[-1]]
 
 
 def _count_outside(eig: np.ndarray, n_rigid: int) -> tuple[int, float, int]:
@@ -555,7 +571,7 @@ def _repair(A0, A1, B1, C1, rigid, cr, Ks, on0: int, rounds: int = 8):
     for _ in range(rounds):
         pr = _probes([k for k, _ in cr], Ks)
         u = np.array([count(k) for k in pr])
-        u[0] = _count_outside(np.linalg.eigvals(A0), rigid)[0]
+        u[0] = _count_outside(np.linalg.eigvals(A0 + pr[0] * A1), rigid)[0]
         if _consistent(cr, u, on0):
             break
         if not u[0] <= u[1] <= u[0] + on0:
@@ -585,7 +601,7 @@ def _repair(A0, A1, B1, C1, rigid, cr, Ks, on0: int, rounds: int = 8):
             break
     pr = _probes([k for k, _ in cr], Ks)
     res = [_count_outside(np.linalg.eigvals(A0 + k * A1), rigid) for k in pr]
-    u = np.array([r[0] + (r[2] if k > 0 else 0) for r, k in zip(res, pr)])
+    u = np.array([r[0] + (r[2] if i > 0 else 0) for i, r in enumerate(res)])
     return cr, u, np.array([r[1] for r in res])
 
 
