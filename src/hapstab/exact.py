@@ -43,9 +43,10 @@ __all__ = ["stability", "exact_critical_stiffness", "exact_kmax_batch", "rigid_b
 #: |z| - 1 below this (relative to rounding of the eigenvalue solver) is "on the circle".
 MARGINAL_TOL = 1e-9
 
-#: The analysed range of K is (0, K_CAP * K_scale], K_scale = ||A0|| / ||A1|| (about
-#: 2m/T^2, the stiffness whose force moves the mass by its own sample-scale motion).
-K_CAP = 1e4
+#: The analysed range of K is (K_MIN, K_CAP] * K_scale, K_scale = ||A0|| / ||A1|| (about
+#: 2m/T^2 for a light damper, less for a heavy one): beyond it the closed loop's
+#: entries dwarf rounding and its eigenvalues carry no information.
+K_CAP = 1e12
 
 #: ... and K below K_MIN * K_scale is not resolved: a free mass's pole leaves z = 1
 #: at a rate proportional to K, and rounding blurs the first 1e-9 of |z| - 1.
@@ -107,11 +108,28 @@ def stability(loop: HapticLoop | TeleoperationLoop) -> StabilityResult:
     rho = abs(dom)
     T = loop.period
     freq = abs(math.atan2(dom.imag, dom.real)) / (2 * math.pi * T)
-    if rho > 1 + MARGINAL_TOL:
+    K = float(sysm.stiffness[0])
+    if sysm.varies_with_K and K > 0 and abs(rho - 1) < 1e-6:
+        # closer to the circle than eigenvalues of poles crowding z = 1 resolve:
+        # let the exact crossing analysis place K (consistent with K_max by design)
+        ex = exact_kmax_batch(sysm)[0]
+        ends = [e for iv in ex["intervals"] for e in iv if 0 < e < math.inf]
+        note = (f"; |z| = {rho:.12g} is within 1e-6 of the circle, so the verdict comes from "
+                "the exact crossing analysis")
+        if any(abs(K - e) <= 1e-12 * e for e in ends):
+            return StabilityResult("marginal", rho, dom, freq, "K is at a stability boundary: a pole "
+                                   f"is on the unit circle ({_describe(dom, T)}){note}", T,
+                                   tuple(complex(e) for e in eigs), m)
+        inside = any(a < K < b for a, b in ex["intervals"])
+        rho_verdict = min(rho, 1 - 1e-16) if inside else max(rho, 1 + 1e-16)
+        reason_extra = note
+    else:
+        reason_extra, rho_verdict = "", rho
+    if rho_verdict > 1 + MARGINAL_TOL or (reason_extra and rho_verdict > 1):
         verdict = "unstable"
-        reason = (f"closed-loop pole at |z| = {rho:.6g} > 1 ({_describe(dom, T)}): "
+        reason = (f"closed-loop pole at |z| = {rho:.10g} ({_describe(dom, T)}): "
                   "the response grows")
-    elif rho >= 1 - MARGINAL_TOL:
+    elif rho_verdict >= 1 - MARGINAL_TOL and not reason_extra:
         verdict = "marginal"
         reason = f"closed-loop pole on the unit circle ({_describe(dom, T)}): sustained oscillation or drift"
     elif m:
@@ -121,9 +139,10 @@ def stability(loop: HapticLoop | TeleoperationLoop) -> StabilityResult:
                   f"{rho:.6g} < 1")
     else:
         verdict = "stable"
-        reason = f"all closed-loop poles inside the unit circle (largest |z| = {rho:.6g})"
+        reason = f"all closed-loop poles inside the unit circle (largest |z| = {rho:.10g})"
     if m and verdict != "marginal":
         reason += f"; {m} rigid-body mode(s) at z = 1 excluded"
+    reason += reason_extra
     return StabilityResult(verdict, rho, dom, freq, reason, T, tuple(complex(e) for e in eigs), m)
 
 

@@ -1,0 +1,109 @@
+"""Models: validation at construction, impedance decomposition, spec parsing."""
+
+import math
+
+import numpy as np
+import pytest
+
+import hapstab as h
+from hapstab.errors import HapstabError, ModelError
+
+
+@pytest.mark.parametrize("mass", [0.0, -1.0, math.nan, math.inf])
+def test_device_rejects_bad_mass(mass):
+    with pytest.raises(ModelError, match="mass"):
+        h.Device(mass, 0.1)
+
+
+def test_device_rejects_negative_damping_and_names_value():
+    with pytest.raises(ModelError, match=r"damping = -0.5: must be >= 0"):
+        h.Device(1.0, -0.5)
+
+
+def test_errors_are_value_errors():
+    assert issubclass(HapstabError, ValueError)
+    with pytest.raises(ValueError):
+        h.Device("heavy", 1.0)
+
+
+@pytest.mark.parametrize("period", [0.0, -1e-3, math.nan, math.inf])
+def test_loop_rejects_bad_period(period):
+    with pytest.raises(ModelError, match="period"):
+        h.paper_hve(period=period)
+
+
+@pytest.mark.parametrize("delay", [1.5, -1, math.nan, "2"])
+def test_loop_rejects_non_integer_delay(delay):
+    with pytest.raises(ModelError, match="delay_samples"):
+        h.paper_hve(delay_samples=delay)
+
+
+def test_integral_float_delay_is_accepted():
+    assert h.paper_hve(delay_samples=3.0).delay_samples == 3
+
+
+def test_loops_are_frozen():
+    loop = h.paper_hve()
+    with pytest.raises(Exception):
+        loop.period = 2e-3  # type: ignore[misc]
+
+
+@pytest.mark.parametrize("spec,mass,damping,stiffness", [
+    ("none", 0, 0, 0), ("spring:1", 0, 0, 1), ("msd:0.2,3,400", 0.2, 3, 400),
+    (" Spring:2.5 ", 0, 0, 2.5)])
+def test_parse_impedance(spec, mass, damping, stiffness):
+    z = h.parse_impedance(spec)
+    assert (z.mass, z.damping, z.stiffness) == pytest.approx((mass, damping, stiffness))
+
+
+@pytest.mark.parametrize("spec", ["spring", "spring:abc", "msd:1,2", "msd:1,2,3,4", "tf:1", "spring:-1",
+                                  "spring:nan"])
+def test_parse_impedance_rejects_malformed(spec):
+    with pytest.raises(ModelError, match=r"--operator = .*allowed: none, spring:k, msd:m,b,k"):
+        h.parse_impedance(spec, "--operator")
+
+
+def test_general_impedance_decomposes_exactly():
+    # Z(s) = 0.3 s + 2 + 50/s + 4/(s + 7): a mass, a damper, a spring and a lag
+    num = np.polyadd(np.polymul([0.3, 2.0, 50.0], [1.0, 7.0]), [4.0, 0.0])
+    den = np.polymul([1.0, 0.0], [1.0, 7.0])
+    z = h.Impedance(tuple(num), tuple(den))
+    assert (z.mass, z.damping, z.stiffness) == pytest.approx((0.3, 2.0, 50.0), rel=1e-12)
+    A, B, C = z.state_space()
+    for s in (0.5j, 3.0 + 1j, 40j):
+        rest = (C @ np.linalg.solve(s * np.eye(A.shape[0]) - A, B))[0, 0]
+        assert z.mass * s + z.damping + z.stiffness / s + rest == pytest.approx(z(s), rel=1e-12)
+
+
+@pytest.mark.parametrize("num,den", [((1.0, 0, 0, 0), (1.0,)), ((1.0,), (1.0, 0, 0))])
+def test_impedance_rejects_improper_or_double_integrator(num, den):
+    with pytest.raises(ModelError):
+        h.Impedance(num, den)
+
+
+def test_python_control_transfer_function_is_accepted():
+    control = pytest.importorskip("control")
+    tf = control.tf([0.2, 3.0, 400.0], [1.0, 0.0])
+    z = h.Impedance.from_any(tf)
+    assert (z.mass, z.damping, z.stiffness) == pytest.approx((0.2, 3.0, 400.0))
+    with pytest.raises(ModelError, match="continuous"):
+        h.Impedance.from_any(control.tf([1.0], [1.0, 0.5], 1e-3))
+
+
+def test_spring_damper_transfer_is_eq_23():
+    T, K, B = 1e-3, 120.0, 0.4
+    num, den = h.SpringDamper(K, B).transfer(T)
+    z = 0.3 + 0.9j
+    assert np.polyval(num, z) / np.polyval(den, z) == pytest.approx(K + B * (z - 1) / (T * z))
+
+
+def test_discrete_controller_must_be_proper():
+    with pytest.raises(ModelError, match="proper"):
+        h.DiscreteController((1.0, 0.0, 1.0), (1.0, 0.5))
+
+
+def test_with_stiffness_keeps_ratio_for_teleoperation():
+    loop = h.paper_peb().replace(slave_controller=h.SpringDamper(20.0))
+    new = loop.with_stiffness(5.0)
+    assert new.master_controller.stiffness == 5.0
+    assert new.slave_controller.stiffness == pytest.approx(10.0)
