@@ -1,0 +1,87 @@
+"""The CLI through its runner: exit codes, JSON on stdout, one-line errors on stderr."""
+
+import json
+
+import pytest
+from click.testing import CliRunner
+
+from hapstab.cli import cli
+
+
+def run(*args):
+    return CliRunner().invoke(cli, list(args))
+
+
+def test_kmax_hve_json_keys_and_value():
+    r = run("kmax", "hve", "--mass", "0.15", "--damping", "0.1", "--period", "0.001", "--delay", "10",
+            "--json")
+    assert r.exit_code == 0, r.stderr
+    d = json.loads(r.stdout)
+    assert {"critical_stiffness", "method", "stable_intervals"} <= d.keys()
+    assert d["critical_stiffness"] == pytest.approx(9.5361, rel=1e-4) and d["method"] == "exact"
+
+
+def test_kmax_peb_with_closed_form():
+    r = run("kmax", "peb", "--delay", "4", "--method", "eq34", "--json")
+    assert r.exit_code == 0
+    assert json.loads(r.stdout)["critical_stiffness"] == pytest.approx(4.0)
+
+
+def test_kmax_table_without_json():
+    r = run("kmax", "hve")
+    assert r.exit_code == 0 and "critical stiffness" in r.stdout and "200.022" in r.stdout
+
+
+def test_check_json_verdicts():
+    r = run("check", "hve", "--stiffness", "250", "--json")
+    d = json.loads(r.stdout)
+    assert r.exit_code == 0 and d["verdict"] == "unstable" and d["spectral_radius"] > 1
+    d = json.loads(run("check", "peb", "-K", "3", "--delay", "4", "--json").stdout)
+    assert d["verdict"] == "stable"
+    d = json.loads(run("check", "peb", "-K", "3", "--operator", "none", "--environment", "none",
+                       "--json").stdout)
+    assert d["verdict"] == "marginal" and d["rigid_body_modes"] == 1
+
+
+def test_boundary_json_and_csv(tmp_path):
+    csv = tmp_path / "b.csv"
+    r = run("boundary", "hve", "--period", "0.001:0.003:3", "--delay", "0,10", "--csv", str(csv),
+            "--json")
+    assert r.exit_code == 0
+    d = json.loads(r.stdout)
+    assert len(d["critical_stiffness"]) == 2 and len(d["critical_stiffness"][0]) == 3
+    assert csv.read_text().count("\n") == 7
+
+
+def test_demo_prints_both_figures():
+    r = run("demo", "--json")
+    d = json.loads(r.stdout)
+    assert set(d) == {"Fig. 5 (HVE)", "Fig. 6 (PEB)"} and len(d["Fig. 5 (HVE)"]) == 20
+
+
+@pytest.mark.parametrize("args,needle", [
+    (("kmax", "hve", "--mass", "-1"), "'--mass'"),
+    (("kmax", "hve", "--mass", "0"), "must be > 0"),
+    (("kmax", "hve", "--period", "nan"), "must be finite"),
+    (("kmax", "hve", "--damping", "inf"), "must be finite"),
+    (("kmax", "hve", "--delay", "2.5"), "whole number of samples"),
+    (("kmax", "hve", "--method", "eq34"), "--method = 'eq34': unknown for hve; allowed:"),
+    (("kmax", "peb", "--environment", "msd:1,2"), "--environment = 'msd:1,2'"),
+    (("kmax", "hve", "--operator", "spring:abc"), "malformed number"),
+    (("kmax", "hve", "--mass", "abc"), "'abc' is not a number"),
+    (("boundary", "hve", "--period", "0.003:0.001:3"), "the range is empty"),
+    (("boundary", "hve", "--delay", ""), "the list is empty"),
+    (("check", "hve"), "Missing option '--stiffness'"),
+    (("kmax", "hve", "--frobnicate"), "No such option"),
+])
+def test_bad_input_is_one_line_and_exit_2(args, needle):
+    r = run(*args)
+    assert r.exit_code == 2
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("hapstab: error: ") and needle in lines[0]
+    assert "Traceback" not in r.stderr and r.stdout == ""
+
+
+def test_help_exits_zero():
+    r = run("kmax", "hve", "--help")
+    assert r.exit_code == 0 and "--virtual-damping" in r.stdout
