@@ -458,7 +458,11 @@ def _kmax_core(A0: np.ndarray, B1: np.ndarray, C1: np.ndarray, full: bool = True
 
     probes = [_probes([k for k, _ in crossings[p]], Ks[p]) for p in range(P)]
     if not full:
-        probes = [m[:3] for m in probes]   # K -> 0+, then gaps (0, K1) and (K1, K2)
+        # anchor, gap (0, K1), and just above K1: inside the window of rough K in
+        # which no candidate was dropped (1 % for r = 1, 4x for r = 2)
+        win = 1.005 if r == 1 else 1.5
+        probes = [m[:2] + ([min(m[2], win * crossings[p][0][0])] if len(m) > 2 else [])
+                  for p, m in enumerate(probes)]
     mp = np.repeat(np.arange(P), [len(m) for m in probes])
     mK = np.concatenate(probes)
     outside = np.empty(mK.size, dtype=int)
