@@ -24,6 +24,9 @@ __all__ = ["critical_stiffness", "boundary", "METHODS", "methods_for"]
 METHODS: dict[str, Callable[..., CriticalStiffnessResult] | str] = {
     "exact": exact_critical_stiffness,
     **CLOSED_FORMS,
+    "circle": "hapstab.circle:critical_stiffness_circle",
+    "passivity": "hapstab.passivity:critical_stiffness_passivity",
+    "simulation": "hapstab.simulate:critical_stiffness_simulation",
 }
 
 _HVE_ONLY = {"colgate", "gil", "eq18", "gil2004"}
