@@ -52,3 +52,101 @@ def plot_poles(res: Any, ax: Any = None) -> Any:
     ax.set_ylabel("Im z")
     ax.set_title(f"{res.verdict}: spectral radius {res.spectral_radius:.6g}")
     return ax
+
+
+# ------------------------------------------------ simulation and reproduction (issue 4)
+def _figure(nrows: int = 1, figsize: tuple[float, float] = (7, 4.5)) -> tuple[Any, Any]:
+    """A new figure on a non-interactive backend when there is no display."""
+    import matplotlib
+
+    if matplotlib.get_backend().lower() not in ("agg", "svg", "pdf") and not _has_display():
+        matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt.subplots(nrows, 1, figsize=figsize, sharex=nrows > 1, squeeze=False)
+
+
+def plot_simulation(res: Any, path: str | None = None) -> Any:
+    """Position, controller force and port energy (passivity observer) against time.
+
+    Parameters
+    ----------
+    res : SimulationResult
+    path : str, optional
+        Save the figure there (format from the extension) and close it.
+
+    Returns
+    -------
+    matplotlib Figure (None once saved to ``path``).
+    """
+    fig, axs = _figure(3, (7, 7))
+    ax1, ax2, ax3 = axs[:, 0]
+    for j, lab in enumerate(res.labels):
+        if res.dense_time is not None:
+            ax1.plot(res.dense_time, res.dense_position[:, j], "-", lw=0.8, label=f"x {lab}")
+        else:
+            ax1.plot(res.time, res.position[:, j], "-", lw=0.8, label=f"x {lab}")
+        ax2.step(res.time, res.controller_force[:, j], where="post", lw=0.8, label=f"u {lab}")
+        ax3.plot(res.time, res.port_energy[:, j], "-", lw=0.8, label=f"into controller from {lab}")
+    ax1.set_ylabel("position (m)")
+    ax2.set_ylabel("controller force (N)")
+    ax3.set_ylabel("port energy (J)")
+    ax3.set_xlabel("time (s)")
+    v = res.verdict
+    ax1.set_title(f"K = {res.stiffness:g} N/m, T = {res.period * 1e3:g} ms, n = {res.delay_samples}: "
+                  f"{v.verdict} ({v.confidence} confidence, rate {v.growth_rate:.3g} 1/s)", fontsize=9)
+    for ax in (ax1, ax2, ax3):
+        ax.grid(True, alpha=0.3)
+        ax.legend(fontsize=8, loc="best")
+    fig.tight_layout()
+    if path:
+        fig.savefig(path)
+        import matplotlib.pyplot as plt
+
+        plt.close(fig)
+        return None
+    return fig
+
+
+def plot_reproduction(rows: list[dict[str, Any]], title: str, equations: tuple[str, str],
+                      paths: list[str]) -> None:
+    """K_max against T like the paper's Fig. 5 / Fig. 6: theoretical lines (solid),
+    simulation stars, exact boundary (dashed) and circle criterion (dotted) if present;
+    non-delayed blue, delayed red.
+
+    Parameters
+    ----------
+    rows : list of dict
+        ``period_s, delay_samples, theory, exact, simulation`` (and ``circle``).
+    title : str
+    equations : (str, str)
+        Labels of the theory for the non-delayed and delayed loop, e.g. ("(13)", "(18)").
+    paths : list of str
+        Files to write (PNG, SVG, ...).
+    """
+    import matplotlib.pyplot as plt
+
+    fig, axs = _figure(1, (7, 4.8))
+    ax = axs[0, 0]
+    delays = sorted({r["delay_samples"] for r in rows})
+    colors = ["tab:blue", "tab:red", "tab:green", "tab:purple"]
+    for i, n in enumerate(delays):
+        c = colors[i % len(colors)]
+        sel = sorted((r for r in rows if r["delay_samples"] == n), key=lambda r: r["period_s"])
+        T = np.array([r["period_s"] for r in sel]) * 1e3
+        eq = equations[min(i, 1)]
+        ax.plot(T, [r["theory"] for r in sel], "-", color=c, lw=1.5, label=f"n = {n}: eq. {eq}")
+        ax.plot(T, [r["exact"] for r in sel], "--", color=c, lw=1.0, label=f"n = {n}: exact")
+        if "circle" in sel[0]:
+            ax.plot(T, [r["circle"] for r in sel], ":", color=c, lw=1.2, label=f"n = {n}: circle")
+        ax.plot(T, [r["simulation"] for r in sel], "*", color=c, ms=9, label=f"n = {n}: simulation")
+    ax.set_xlabel("sampling period T (ms)")
+    ax.set_ylabel("K_max (N/m)")
+    ax.set_yscale("log")
+    ax.set_title(title, fontsize=10)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=7, ncol=2)
+    fig.tight_layout()
+    for p in paths:
+        fig.savefig(p)
+    plt.close(fig)
