@@ -158,6 +158,7 @@ class RationalMatrix:
                         continue
                     phi, w = abs(np.angle(r)), max(abs(rad - 1.0), 1e-6)
                     off = w * np.geomspace(0.05, 200.0, 24)
+                    off = off[off >= 1e-6]  # closer to a unit-circle pole G + G^H is all rounding
                     pts.append(np.concatenate([phi - off, phi + off, [phi]]))
         return np.concatenate(pts) if pts else np.zeros(0)
 
