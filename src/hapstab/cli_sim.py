@@ -1,0 +1,171 @@
+"""CLI commands of the simulation feature: ``hapstab simulate hve|peb`` and
+``hapstab reproduce fig5|fig6|all`` (the main job). Parse, call the library, print."""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+from contextlib import contextmanager
+from typing import Any, Callable, Iterator
+
+import click
+
+from .cli import LOOP_KINDS, NONNEG, POS, Number, cli, emit, loop_options, parse_periods, rich_table
+
+
+# ------------------------------------------------------------------ simulate
+@cli.group("simulate")
+def simulate_cmd() -> None:
+    """Time-domain simulation of the sampled-data loop (exact between samples)."""
+
+
+def _simulate_command(kind: str) -> None:
+    make = LOOP_KINDS[kind]
+    extra = [click.option("--environment-force", default=None,
+                          help="Exogenous environment force on the slave (same forms as --force).")
+             ] if kind == "peb" else [
+        click.option("--wall", type=Number(), default=None,
+                     help="Unilateral virtual wall at x = WALL m: force only while x > WALL.")]
+
+    @simulate_cmd.command(kind)
+    @loop_options(kind)
+    @click.option("--stiffness", "-K", type=NONNEG, required=True, help="K in N/m.")
+    @click.option("--duration", "-t", type=POS, default=5.0, show_default=True, help="Seconds.")
+    @click.option("--force", default="step:1", show_default=True,
+                  help="Operator force: none | step:F[,t0] | pulse:F,width[,t0] | sine:F,Hz (N, s, Hz).")
+    @click.option("--x0", type=Number(), default=0.0, show_default=True,
+                  help="Initial position of the device / master in m (history at rest there).")
+    @click.option("--saturation", type=POS, default=None, help="Actuator force limit in N.")
+    @click.option("--resolution", type=POS, default=None, help="Encoder resolution in m.")
+    @click.option("--dense", type=click.IntRange(0, 1000), default=0, show_default=True,
+                  help="Also compute the exact trajectory at this many points per sample (plot).")
+    @click.option("--csv", "csv_path", type=click.Path(dir_okay=False), default=None,
+                  help="Write the sampled time series as CSV.")
+    @click.option("--plot", "plot_path", type=click.Path(dir_okay=False), default=None,
+                  help="Write a plot of position, force and port energy (PNG, SVG, PDF).")
+    def _cmd(stiffness: float, duration: float, force: str, x0: float, saturation: float | None,
+             resolution: float | None, dense: int, csv_path: str | None, plot_path: str | None,
+             as_json: bool, environment_force: str | None = None, wall: float | None = None,
+             **kw: Any) -> None:
+        from .exact import stability
+        from .simulate import simulate
+
+        loop = make(kw, stiffness)
+        opts: dict[str, Any] = {}
+        if kind == "peb":
+            opts["environment_force"] = None if environment_force in (None, "none") else environment_force
+            x_init: Any = [x0, 0.0]
+        else:
+            opts["wall"] = wall
+            x_init = x0
+        res = simulate(loop, duration, force=None if force == "none" else force,
+                       initial_position=x_init, saturation=saturation, resolution=resolution,
+                       dense=dense, **opts)
+        ex = stability(loop)
+        files = []
+        if csv_path:
+            res.to_csv(csv_path)
+            files.append(csv_path)
+        if plot_path:
+            res.plot(plot_path)
+            files.append(plot_path)
+        d = res.summary()
+        d.update(exact_verdict=ex.verdict, exact_spectral_radius=ex.spectral_radius,
+                 exact_growth_rate_per_s=(math.log(ex.spectral_radius) / loop.period
+                                          if ex.spectral_radius > 0 else -math.inf),
+                 files=files)
+        v = res.verdict
+        rows = [("simulated", f"{v.verdict} ({v.confidence} confidence, {v.basis})"),
+                ("growth rate", f"{v.growth_rate:.6g} 1/s (+- {v.growth_rate_uncertainty:.2g})"),
+                ("exact analysis", f"{ex.verdict} (rate {d['exact_growth_rate_per_s']:.6g} 1/s)"),
+                ("samples", f"{d['samples']} x {loop.period:g} s")]
+        for lab in res.labels:
+            rows.append((f"max |x| {lab}", f"{d[f'max_abs_position_{lab}']:.6g} m"))
+            rows.append((f"max |u| {lab}", f"{d[f'max_abs_force_{lab}']:.6g} N"))
+            rows.append((f"energy into controller from {lab}",
+                         f"{d[f'final_port_energy_{lab}']:.6g} J"))
+        rows += [("why", v.reason)] + [("wrote", f) for f in files]
+        emit(d, as_json, lambda: rich_table(f"simulation, {kind}, K = {stiffness:g} N/m", rows))
+
+    for deco in reversed(extra):
+        _cmd = deco(_cmd)
+    _cmd.__doc__ = (f"Simulate the {kind.upper()} loop at stiffness K: verdict, growth rate, "
+                    "CSV and plot of position, force and port energy.")
+
+
+for _kind in LOOP_KINDS:
+    _simulate_command(_kind)
+
+
+# ------------------------------------------------------------------ reproduce
+@contextmanager
+def _progress(total: int, quiet: bool) -> Iterator[Callable[[int], None] | None]:
+    """A rich progress bar on a terminal; nothing with --json or when piped."""
+    if quiet or not sys.stdout.isatty():
+        yield None
+        return
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn
+
+    with Progress("[progress.description]{task.description}", BarColumn(), MofNCompleteColumn(),
+                  TimeElapsedColumn(), transient=True) as prog:
+        task = prog.add_task("K_max by simulation", total=total)
+        yield lambda k: prog.advance(task, k)
+
+
+@cli.command("reproduce")
+@click.argument("figure", type=click.Choice(["fig5", "fig6", "all"]))
+@click.option("--out", "out_dir", default="out", show_default=True, type=click.Path(file_okay=False),
+              help="Directory for figN.png, figN.svg and figN.csv.")
+@click.option("--periods", default=None,
+              help="Sampling periods in s (start:stop:count or a comma list); default the "
+                   "paper's 1..10 ms.")
+@click.option("--json", "as_json", is_flag=True, help="Print one JSON object on stdout.")
+def reproduce_cmd(figure: str, out_dir: str, periods: str | None, as_json: bool) -> None:
+    """Reproduce the paper's Fig. 5 (HVE) and/or Fig. 6 (PEB): theory lines, simulation
+    stars, exact and circle-criterion boundaries; PNG, SVG and CSV files."""
+    from .reproduce import FIGURES, PAPER_PERIODS, reproduce_figure, write_figure
+
+    T = parse_periods(periods) if periods else list(PAPER_PERIODS)
+    names = list(FIGURES) if figure == "all" else [figure]
+    total = sum(len(FIGURES[n].delays) for n in names) * len(T)
+    reps, files = [], []
+    with _progress(total, as_json) as tick:
+        for n in names:
+            rep = reproduce_figure(n, T, progress=tick)
+            files += write_figure(rep, out_dir)
+            reps.append(rep)
+    if as_json:
+        click.echo(json.dumps({"figures": [r.to_dict() for r in reps], "files": files,
+                               "worst_simulation_error": max(r.worst_simulation_error()
+                                                             for r in reps)}))
+        return
+    _reproduce_table(reps)
+    click.echo("wrote:")
+    for f in files:
+        click.echo(f"  {f}")
+
+
+def _reproduce_table(reps: list[Any]) -> None:
+    from rich.console import Console
+    from rich.table import Table
+
+    con = Console(width=None if sys.stdout.isatty() else 110)   # piped: do not truncate to 80
+    for rep in reps:
+        has_circle = "circle" in rep.columns
+        t = Table(title=f"{rep.figure.title}\nK_max (N/m): paper's condition vs exact vs simulation")
+        cols = ["T (ms)", "n", "eq.", "paper", "exact", "simulation", "sim vs exact", "exact/paper"]
+        if has_circle:
+            cols.insert(6, "circle")
+        for c in cols:
+            t.add_column(c, justify="right")
+        for r in rep.rows:
+            cells = [f"{r['period_s'] * 1e3:.4g}", str(r["delay_samples"]), r["equation"],
+                     f"{r['theory']:.6g}", f"{r['exact']:.6g}", f"{r['simulation']:.6g}",
+                     f"{100 * (r['simulation'] / r['exact'] - 1):+.4f} %" if r["exact"] else "-",
+                     f"{r['exact'] / r['theory']:.4f}" if r["theory"] else "-"]
+            if has_circle:
+                cells.insert(6, f"{r['circle']:.6g}" if math.isfinite(r["circle"]) else "n/a")
+            t.add_row(*cells)
+        con.print(t)
+        con.print(f"worst |simulation/exact - 1| = {rep.worst_simulation_error():.2e}")
