@@ -19,7 +19,7 @@ from .errors import HapstabError
 from .models import (Device, HapticLoop, SpringDamper, TeleoperationLoop, parse_impedance)
 
 #: modules that add commands to ``cli`` (imported at the end of this module)
-_PLUGINS: tuple[str, ...] = ("hapstab.cli_sim",)
+_PLUGINS: tuple[str, ...] = ("hapstab.cli_sim", "hapstab.cli_paper")
 
 
 # ------------------------------------------------------------------ error handling

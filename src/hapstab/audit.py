@@ -1,0 +1,181 @@
+"""Audit of the closed-form conditions: each applicable closed form beside the
+numerical circle / passivity results and the exact stability limit, flagging any
+condition that promises a stiffness the exact analysis calls unstable (or, for a
+condition that claims passivity, one at which the positive-real test fails).
+
+The paper's closed forms are approximations with limits: (18) and (34) assume B
+small (the worst case is then at cos wT = 1); (34) at n = 0 with B > 0 does not
+reduce to (29); (1)/(13) and (29) ignore delay. The audit shows where this
+matters for a given design.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+from .circle import critical_stiffness_circle
+from .closed_forms import colgate, eq18, eq29, eq34, gil, gil2004
+from .errors import AnalysisError
+from .exact import exact_critical_stiffness, stability
+from .models import HapticLoop, TeleoperationLoop
+from .passivity import critical_stiffness_passivity
+from .results import jsonable
+
+__all__ = ["AuditRow", "AuditResult", "audit"]
+
+_REL = 1e-6  # K_max values agree to ~1e-9; a promise counts as broken beyond 1e-6 relative
+
+#: closed form -> (label, what it claims)
+_CLOSED = {
+    "hve": [("colgate", colgate, "eq. (1)/(13) Colgate-Schenkel", "passivity"),
+            ("gil", gil, "eq. (2) Gil et al.", "stability"),
+            ("eq18", eq18, "eq. (18)", "passivity"),
+            ("gil2004", gil2004, "Gil et al. 2004 (no operator)", "stability")],
+    "peb": [("eq29", eq29, "eq. (29)", "passivity"),
+            ("eq34", eq34, "eq. (34)", "passivity")],
+}
+
+
+@dataclass(frozen=True)
+class AuditRow:
+    """One condition of the audit.
+
+    Attributes
+    ----------
+    key : str
+        ``colgate``, ``eq18``, ..., ``circle-forward``, ``passivity``, ``exact``.
+    label : str
+    critical_stiffness : float
+        The K_max the condition promises (N/m).
+    claims : str
+        ``"passivity"`` (derived from positive realness / passivity),
+        ``"stability"`` or ``"exact"``.
+    exact_verdict : str
+        Exact stability verdict of the loop just below that stiffness (K (1 - 1e-6);
+        ``"-"`` if K is 0 or inf).
+    flag : str or None
+        Why the promise is broken, or None.
+    note : str
+        The condition's own statement of its assumptions.
+    """
+
+    key: str
+    label: str
+    critical_stiffness: float
+    claims: str
+    exact_verdict: str
+    flag: str | None
+    note: str
+
+    def to_dict(self) -> dict[str, Any]:
+        return jsonable(dict(self.__dict__))
+
+
+@dataclass(frozen=True)
+class AuditResult:
+    """All rows for one set of parameters.
+
+    Attributes
+    ----------
+    kind : {"hve", "peb"}
+    rows : tuple of AuditRow
+    exact_kmax : float
+    passivity_kmax : float
+        Exact sampled-data passivity limit (= forward circle limit).
+    flagged : tuple of str
+        Keys of the flagged rows.
+    """
+
+    kind: str
+    period: float
+    delay_samples: int
+    virtual_damping: float
+    rows: tuple[AuditRow, ...]
+    exact_kmax: float
+    passivity_kmax: float
+
+    @property
+    def flagged(self) -> tuple[str, ...]:
+        return tuple(r.key for r in self.rows if r.flag)
+
+    def to_dict(self) -> dict[str, Any]:
+        return jsonable({"loop": self.kind, "period_s": self.period,
+                         "delay_samples": self.delay_samples,
+                         "virtual_damping": self.virtual_damping,
+                         "exact_kmax": self.exact_kmax, "passivity_kmax": self.passivity_kmax,
+                         "flagged": list(self.flagged), "rows": [r.to_dict() for r in self.rows]})
+
+
+_NO_DELAY_ONLY = {"colgate", "eq29"}
+
+
+def _verdict(loop: Any, K: float) -> str:
+    """Exact verdict just below K (at K itself a boundary is marginal by definition)."""
+    if not math.isfinite(K) or K <= 0:
+        return "-"
+    return stability(loop.with_stiffness(K * (1 - _REL))).verdict
+
+
+def audit(loop: HapticLoop | TeleoperationLoop) -> AuditResult:
+    """Closed forms vs circle / passivity vs exact, for the loop's parameters.
+
+    Parameters
+    ----------
+    loop : HapticLoop or TeleoperationLoop
+        SpringDamper controller(s); its own stiffness is ignored (every row is a
+        K_max). PEB closed forms are listed only for C_m = C_s (as derived);
+        (1)/(13) and (29) only for n = 0, Gil et al. 2004 only without operator,
+        delay and B.
+
+    Returns
+    -------
+    AuditResult
+
+    Raises
+    ------
+    AnalysisError
+        If the loop has no stiffness to vary.
+
+    References
+    ----------
+    The paper, eq. (1), (2), (13), (18), (29), (34); Colgate and Schenkel 1997.
+    """
+    if not isinstance(loop, (HapticLoop, TeleoperationLoop)):
+        raise AnalysisError(f"loop = {loop!r}: must be a HapticLoop or a TeleoperationLoop")
+    kind = "hve" if isinstance(loop, HapticLoop) else "peb"
+    passive = critical_stiffness_passivity(loop).critical_stiffness  # raises for non-SpringDamper
+    exact_res = exact_critical_stiffness(loop)
+    exact = exact_res.critical_stiffness
+    rows: list[AuditRow] = []
+
+    def add(key: str, label: str, K: float, claims: str, note: str) -> None:
+        flags = []
+        if claims != "exact" and K > exact * (1 + _REL) + 1e-12:
+            flags.append(f"over-promises: exact loop unstable beyond {exact:.6g} N/m")
+        if claims == "passivity" and K > passive * (1 + _REL) + 1e-12:
+            flags.append(f"not passive: PR test fails beyond {passive:.6g} N/m")
+        rows.append(AuditRow(key, label, float(K), claims, _verdict(loop, K),
+                             "; ".join(flags) or None, note))
+
+    for key, f, label, claims in _CLOSED[kind]:
+        if key in _NO_DELAY_ONLY and loop.delay_samples != 0:
+            continue  # derived without delay: not a candidate condition here
+        try:
+            r = f(loop)
+        except AnalysisError:
+            continue  # not applicable to these parameters (e.g. C_m != C_s, operator attached)
+        add(key, label, r.critical_stiffness, claims, r.reason)
+    for a in ("forward", "backward", "tustin"):
+        r = critical_stiffness_circle(loop, a)
+        note = r.reason
+        add(f"circle-{a}", f"circle criterion, {a}", r.critical_stiffness, "passivity", note)
+    add("passivity", "sampled-data passivity (Colgate-Schenkel)", passive, "passivity",
+        "exact passivity of device + sampled controller; sufficient for stability with "
+        "passive terminations")
+    rows.append(AuditRow("exact", "exact sampled-data stability", float(exact), "exact",
+                         _verdict(loop, exact), None, exact_res.reason))
+    B = loop.controller.damping if kind == "hve" else loop.master_controller.damping
+    return AuditResult(kind, loop.period, loop.delay_samples, B, tuple(rows), float(exact),
+                       float(passive))

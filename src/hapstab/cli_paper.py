@@ -1,0 +1,109 @@
+"""CLI commands of the paper's method: ``hapstab passivity hve|peb`` (positive-real
+or sampled-data passivity verdict at a stiffness) and ``hapstab audit hve|peb``
+(closed forms vs circle / passivity vs exact). ``hapstab kmax ... --method
+circle|passivity`` comes from the registration in :mod:`hapstab.analysis`.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import click
+
+from .cli import LOOP_KINDS, NONNEG, POS, cli, emit, fmt, loop_options, rich_table
+from .errors import HapstabError
+
+_APPROX = ("forward", "backward", "tustin")
+
+
+@cli.group("passivity")
+def passivity_cmd() -> None:
+    """Positive-real (circle criterion) or sampled-data passivity verdict at a stiffness."""
+
+
+@cli.group("audit")
+def audit_cmd() -> None:
+    """The paper's closed forms beside the circle, passivity and exact results."""
+
+
+def _passivity_command(kind: str) -> None:
+    make = LOOP_KINDS[kind]
+
+    @passivity_cmd.command(kind)
+    @loop_options(kind)
+    @click.option("--stiffness", "-K", type=NONNEG, required=True, help="K in N/m.")
+    @click.option("--method", default="circle", show_default=True,
+                  help="circle (G^-1 positive real, Definition 1) | passivity (Colgate-Schenkel).")
+    @click.option("--approximation", default=None,
+                  help="For --method circle: forward (default) | backward | tustin.")
+    @click.option("--sector", type=POS, default=None,
+                  help="For --method circle: finite sector bound k of the termination(s) "
+                       "(Theorem 2.1); default: passive limit.")
+    def _cmd(stiffness: float, method: str, approximation: str | None, sector: float | None,
+             as_json: bool, **kw: Any) -> None:
+        loop = make(kw, stiffness)
+        if method == "circle":
+            from .circle import circle_test
+
+            approx = approximation or "forward"
+            if approx not in _APPROX:
+                raise HapstabError(f"--approximation = {approximation!r}: allowed: {', '.join(_APPROX)}")
+            res = circle_test(loop, approx, sector)
+            d = res.to_dict()
+        elif method == "passivity":
+            from .passivity import sampled_passivity
+
+            if approximation is not None or sector is not None:
+                raise HapstabError("--approximation/--sector: apply to --method circle only; "
+                                   "'passivity' is exact")
+            res, approx = sampled_passivity(loop), None
+            d = res.to_dict()
+        else:
+            raise HapstabError(f"--method = {method!r}: allowed: circle, passivity")
+        d.update(stiffness=stiffness, method=method, approximation=approx, sector=sector)
+        rows = [("verdict", d["verdict"]),
+                ("margin", f"{d['margin']:.6g}" + (" N*s/m" if method == "passivity" else "")),
+                ("worst frequency", f"{d['worst_frequency_hz']:.6g} Hz "
+                                    f"({d['worst_frequency_rad_s']:.6g} rad/s)"),
+                ("failing condition", d["failed_condition"] or "none"),
+                ("why", d["reason"])]
+        title = f"{method}{', ' + approx if approx else ''}, {kind}, K = {stiffness:g} N/m"
+        emit(d, as_json, lambda: rich_table(title, rows))
+
+    _cmd.__doc__ = (f"Is the {kind.upper()} loop's G^-1(z) positive real (circle criterion) or its "
+                    "sampled-data side passive, at stiffness K? Verdict, margin, worst frequency.")
+
+
+def _audit_command(kind: str) -> None:
+    make = LOOP_KINDS[kind]
+
+    @audit_cmd.command(kind)
+    @loop_options(kind)
+    def _cmd(as_json: bool, **kw: Any) -> None:
+        from .audit import audit
+
+        res = audit(make(kw, 1.0))
+        emit(res.to_dict(), as_json, lambda: _audit_table(res))
+
+    _cmd.__doc__ = (f"Closed-form K_max conditions for the {kind.upper()} loop beside the circle, "
+                    "passivity and exact results; flags promises the exact analysis breaks.")
+
+
+def _audit_table(res: Any) -> None:
+    from rich.console import Console
+    from rich.table import Table
+
+    t = Table(title=f"audit, {res.kind}: T = {res.period * 1e3:.4g} ms, n = {res.delay_samples}, "
+                    f"B = {res.virtual_damping:g} N*s/m")
+    for c, j in (("condition", "left"), ("K_max (N/m)", "right"), ("claims", "left"),
+                 ("exact just below", "left"), ("flag", "left")):
+        t.add_column(c, justify=j)
+    for r in res.rows:
+        t.add_row(r.label, fmt(r.critical_stiffness), r.claims, r.exact_verdict,
+                  f"[red]{r.flag}[/red]" if r.flag else "ok")
+    Console().print(t)
+
+
+for _kind in LOOP_KINDS:
+    _passivity_command(_kind)
+    _audit_command(_kind)
