@@ -1,0 +1,77 @@
+"""The audit flags exactly the promises the exact analysis (or the PR test) breaks:
+checked against stability() at the promised stiffness, written out here."""
+
+import math
+
+import pytest
+
+import hapstab as h
+from hapstab.audit import audit
+from hapstab.errors import AnalysisError
+from hapstab.models import Device, DiscreteController, HapticLoop, SpringDamper, TeleoperationLoop
+
+
+def rows(a):
+    return {r.key: r for r in a.rows}
+
+
+def test_paper_case_nothing_wrong_with_forward_and_eq18():
+    a = audit(h.paper_hve(delay_samples=10))
+    r = rows(a)
+    assert "colgate" not in r  # derived without delay: not listed for n = 10
+    assert r["eq18"].flag is None and r["circle-forward"].flag is None and r["passivity"].flag is None
+    # backward and Tustin promise more than the exact limit (9.536): flagged
+    assert {"circle-backward", "circle-tustin"} <= set(a.flagged)
+    assert r["eq18"].critical_stiffness == pytest.approx(9.5238095, rel=1e-7)
+    assert a.exact_kmax > r["eq18"].critical_stiffness
+
+
+def test_eq34_without_delay_over_promises_with_virtual_damping():
+    # (34) at n = 0, B > 0 allows (b + 2B)/T, where (29) allows (b - 2B)/T
+    loop = h.paper_peb(damping=0.005)
+    a = audit(loop)
+    r = rows(a)
+    assert r["eq29"].flag is None
+    assert r["eq34"].critical_stiffness == pytest.approx(30.0, rel=1e-12)
+    assert "eq34" in a.flagged and "over-promises" in r["eq34"].flag
+    # independent of the audit's bookkeeping: the exact loop is unstable just below 30 N/m
+    assert not h.stability(loop.with_stiffness(30.0 * (1 - 1e-6))).stable
+
+
+def test_eq18_with_large_virtual_damping_over_promises():
+    loop = h.paper_hve(delay_samples=4, damping=0.08)
+    a = audit(loop)
+    r = rows(a)
+    assert "eq18" in a.flagged and "gil" in a.flagged
+    assert "not passive" in r["eq18"].flag
+    assert not h.stability(loop.with_stiffness(r["eq18"].critical_stiffness * (1 - 1e-6))).stable
+    # the forward circle and passivity limits are honoured by the exact analysis
+    assert h.stability(loop.with_stiffness(r["circle-forward"].critical_stiffness * 0.999)).stable
+
+
+def test_flags_agree_with_stability_checks():
+    for loop in (h.paper_hve(period=5e-3, delay_samples=2, damping=0.03), h.paper_peb(delay_samples=4, damping=0.01)):
+        a = audit(loop)
+        for r in a.rows:
+            K = r.critical_stiffness
+            if r.key == "exact" or not math.isfinite(K) or K <= 0:
+                continue
+            unstable_below = not h.stability(loop.with_stiffness(K * (1 - 1e-6))).stable
+            if unstable_below:  # a broken promise must be flagged
+                assert r.flag and "over-promises" in r.flag, r.key
+
+
+def test_unequal_controllers_skip_peb_closed_forms():
+    loop = TeleoperationLoop(Device(0.015, 0.02), Device(0.015, 0.02), SpringDamper(1.0),
+                             SpringDamper(2.0), "spring:1", "spring:1", 1e-3, 0)
+    keys = set(rows(audit(loop)))
+    assert "eq29" not in keys and "eq34" not in keys and "passivity" in keys
+
+
+def test_to_dict_and_errors():
+    d = audit(h.paper_hve()).to_dict()
+    assert d["loop"] == "hve" and isinstance(d["rows"], list) and "flagged" in d
+    with pytest.raises(AnalysisError):
+        audit(HapticLoop(Device(0.1, 0.1), DiscreteController((1.0,), (1.0,)), None, 1e-3, 0))
+    with pytest.raises(AnalysisError):
+        audit("not a loop")
