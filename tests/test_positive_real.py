@@ -136,3 +136,14 @@ def test_bad_input():
         circle_criterion(scalar([1.0], [1.0]), -1.0)
     with pytest.raises(AnalysisError, match="singular"):
         RationalMatrix([[[1.0], [1.0]], [[1.0], [1.0]]], [[[1.0], [1.0]], [[1.0], [1.0]]]).inverse()
+
+
+def test_plot_of_the_hermitian_part():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    r = positive_real(scalar([0.2, 1.0], [1.0, 0.0]), period=1e-3)
+    ax = r.plot()
+    # the curve drawn is the swept smallest eigenvalue, reaching the reported margin
+    y = ax.lines[0].get_ydata()
+    assert min(y) == pytest.approx(r.margin, abs=1e-6)

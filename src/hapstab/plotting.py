@@ -150,3 +150,22 @@ def plot_reproduction(rows: list[dict[str, Any]], title: str, equations: tuple[s
     for p in paths:
         fig.savefig(p)
     plt.close(fig)
+
+
+def plot_positive_real(res: Any, ax: Any = None) -> Any:
+    """Smallest eigenvalue of G(e^{jw}) + G^H(e^{jw}) against frequency (Definition 1,
+    condition iii), with the worst frequency marked."""
+    ax = _axes(ax)
+    f = np.asarray(res.frequencies_rad_s) / (2 * np.pi)
+    lam = np.asarray(res.min_eigenvalues, dtype=float)
+    ok = np.isfinite(lam)
+    ax.plot(f[ok], lam[ok], "-", color="tab:blue" if res.positive_real else "tab:red", lw=1.2)
+    ax.axhline(0.0, color="k", lw=0.8)
+    ax.plot([res.worst_frequency_hz], [res.margin], "o", color="k",
+            label=f"margin {res.margin:.4g} at {res.worst_frequency_hz:.4g} Hz")
+    ax.set_xlabel("frequency (Hz)")
+    ax.set_ylabel("min eig of G + G^H")
+    ax.set_title(res.verdict + (f" (fails: {res.failed_condition})" if res.failed_condition else ""))
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=8)
+    return ax
