@@ -150,6 +150,19 @@ def test_forward_circle_equals_sampled_passivity(b, B, T, n):
     assert c == pytest.approx(p, rel=1e-7, abs=1e-9)
 
 
+@settings(max_examples=15, deadline=None)
+@given(bm=st.floats(0.005, 0.5), bs=st.floats(0.005, 0.5), Bm=st.floats(0.0, 0.05),
+       Bs=st.floats(0.0, 0.05), ratio=st.floats(0.25, 4.0), T=st.floats(1e-4, 1e-2),
+       n=st.integers(0, 6))
+def test_forward_circle_equals_multiport_passivity(bm, bs, Bm, Bs, ratio, T, n):
+    loop = TeleoperationLoop(Device(0.1, bm), Device(0.1, bs), SpringDamper(1.0, Bm),
+                             SpringDamper(ratio, Bs), None, None, T, n)
+    c = kmax(loop)
+    p = h.critical_stiffness(loop, method="passivity").critical_stiffness
+    # 2x2 determinant roots on both sides: agreement to 1e-7 relative
+    assert c == pytest.approx(p, rel=1e-7, abs=1e-9)
+
+
 def test_bad_input():
     with pytest.raises(AnalysisError, match="approximation"):
         kmax(h.paper_hve(), approximation="euler")
@@ -157,3 +170,6 @@ def test_bad_input():
         kmax(HapticLoop(Device(0.1, 0.1), DiscreteController((1.0,), (1.0,)), None, 1e-3, 0))
     with pytest.raises(AnalysisError, match="scaling"):
         kmax(h.paper_peb(), scaling="magic")
+    for bad in (0.0, -1.0, "x", float("nan")):
+        with pytest.raises(AnalysisError, match="sector"):
+            kmax(h.paper_hve(), sector=bad)

@@ -32,7 +32,7 @@ from typing import Any
 
 import numpy as np
 
-from .errors import AnalysisError, check_real
+from .errors import AnalysisError
 from .frequency import psd_limit, refine_minimum, theta_grid
 from .models import HapticLoop, SpringDamper, TeleoperationLoop
 from .positive_real import PositiveRealResult, RationalMatrix, circle_criterion, positive_real
@@ -226,8 +226,8 @@ def _check_stiffness_loop(loop: Any) -> None:
 
 
 def critical_stiffness_circle(loop: HapticLoop | TeleoperationLoop, approximation: str = "forward",
-                              sector: Any = None, scaling: str | None = "auto",
-                              rtol: float = 1e-9) -> CriticalStiffnessResult:
+                              sector: Any = None, scaling: str | None = "auto"
+                              ) -> CriticalStiffnessResult:
     """Largest K for which the circle criterion proves stability (G^{-1} PR).
 
     G^{-1} is affine in K, and the set of K where an affine Hermitian matrix is
@@ -247,12 +247,12 @@ def critical_stiffness_circle(loop: HapticLoop | TeleoperationLoop, approximatio
         stability bound (see the module notes).
     sector : float, sequence of float or None
         Finite sector bound(s) k_i of Theorem 2.1: K_max of ``K^{-1} + G`` PR,
-        found by bracketing and bisection of :func:`circle_test` (relative
-        accuracy ``1e-6``). ``None``: passive limit.
+        found by bracketing and bisection of :func:`circle_test` (bisection to
+        1e-6 relative; the PR test of G = (G^{-1})^{-1} itself resolves about
+        1e-4 relative, because Re G vanishes like w^2 as w -> 0). Never below
+        the passive limit. ``None``: passive limit (fast, exact up to rounding).
     scaling : {"auto", None}
         PEB port weighting, see :func:`port_scaling`.
-    rtol : float
-        Unused by the fast path (it is exact up to rounding); kept for symmetry.
 
     Returns
     -------
@@ -292,9 +292,13 @@ def critical_stiffness_circle(loop: HapticLoop | TeleoperationLoop, approximatio
 
 def _sector_kmax(loop: Any, a: str, sector: Any, scaling: str | None) -> CriticalStiffnessResult:
     """K_max of K^{-1} + G(z) PR by bracketing then bisection (relative 1e-6)."""
-    ks = np.atleast_1d(np.asarray(sector, dtype=float))
+    try:
+        ks = np.atleast_1d(np.asarray(sector, dtype=float))
+    except (TypeError, ValueError):
+        raise AnalysisError(f"sector = {sector!r}: must be a number k > 0 or one per port") from None
     for k in ks:
-        check_real("sector", float(k) if math.isfinite(k) else 1.0, positive=True)
+        if not k > 0:  # NaN fails too
+            raise AnalysisError(f"sector = {sector!r}: every k_i must be > 0 (inf: passive limit)")
     base = critical_stiffness_circle(loop, a, None, scaling).critical_stiffness
     if math.isinf(base):
         lo, hi = base, base
