@@ -18,15 +18,16 @@ from .results import CriticalStiffnessResult
 __all__ = ["colgate", "gil", "eq18", "eq29", "eq34", "gil2004", "CLOSED_FORMS"]
 
 
-def _hve(loop, name: str) -> tuple[float, float, float, int]:
+def _hve(loop, name: str) -> tuple[float, float, float, float]:
+    """(b, B, T, t_d/T); t_d may be any delay, the formulas only use t_d."""
     if not isinstance(loop, HapticLoop):
         raise AnalysisError(f"method = {name!r}: applies to a HapticLoop (hve), not {type(loop).__name__}")
     if not isinstance(loop.controller, SpringDamper):
         raise AnalysisError(f"method = {name!r}: needs a SpringDamper virtual environment")
-    return loop.device.damping, loop.controller.damping, loop.period, loop.delay_samples
+    return loop.device.damping, loop.controller.damping, loop.period, loop.delay_in_samples
 
 
-def _peb(loop, name: str) -> tuple[float, float, float, int]:
+def _peb(loop, name: str) -> tuple[float, float, float, float]:
     if not isinstance(loop, TeleoperationLoop):
         raise AnalysisError(f"method = {name!r}: applies to a TeleoperationLoop (peb), not {type(loop).__name__}")
     cm, cs = loop.master_controller, loop.slave_controller
@@ -34,14 +35,16 @@ def _peb(loop, name: str) -> tuple[float, float, float, int]:
         raise AnalysisError(f"method = {name!r}: needs SpringDamper controllers")
     if cm.damping != cs.damping or cm.stiffness != cs.stiffness:
         raise AnalysisError(f"method = {name!r}: derived for C_m = C_s (equal K and B)")
+    if not loop.symmetric_delay:
+        raise AnalysisError(f"method = {name!r}: derived for equal delays in both directions")
     b = min(loop.master.damping, loop.slave.damping)
-    return b, cm.damping, loop.period, loop.delay_samples
+    return b, cm.damping, loop.period, loop.delay_in_samples
 
 
 def _result(K: float, method: str, reason: str, loop) -> CriticalStiffnessResult:
     K = max(0.0, K)
     return CriticalStiffnessResult(K, method, ((0.0, K),) if K > 0 else (), reason,
-                                   loop.period, loop.delay_samples)
+                                   loop.period, loop.delay_in_samples)
 
 
 def colgate(loop: HapticLoop) -> CriticalStiffnessResult:

@@ -30,7 +30,7 @@ from .models import (Device, DiscreteController, HapticLoop, Impedance, SpringDa
                      TeleoperationLoop)
 
 __all__ = ["Port", "Channel", "LoopStructure", "SampledSystem", "structure_of", "discretize",
-           "port_matrices", "build"]
+           "port_matrices", "build", "split_delay"]
 
 
 @dataclass(frozen=True)
@@ -48,7 +48,7 @@ class Channel:
 
     port: int
     controller: SpringDamper | DiscreteController
-    terms: tuple[tuple[int, float, int], ...]  # (measured port j, sign, delay in samples)
+    terms: tuple[tuple[int, float, float], ...]  # (measured port j, sign, delay in samples)
 
 
 @dataclass(frozen=True)
@@ -59,17 +59,27 @@ class LoopStructure:
 
 def structure_of(loop: HapticLoop | TeleoperationLoop) -> LoopStructure:
     """The HVE and PEB builders: both are a :class:`LoopStructure` for one engine."""
-    n = loop.delay_samples
     if isinstance(loop, HapticLoop):
         return LoopStructure(
             (Port(loop.device, loop.operator, "device"),),
-            (Channel(0, loop.controller, ((0, 1.0, n),)),))
+            (Channel(0, loop.controller, ((0, 1.0, loop.delay_in_samples),)),))
     if isinstance(loop, TeleoperationLoop):
+        fwd, bwd = loop.forward_delay_in_samples, loop.backward_delay_in_samples
         return LoopStructure(
             (Port(loop.master, loop.operator, "master"), Port(loop.slave, loop.environment, "slave")),
-            (Channel(0, loop.master_controller, ((0, 1.0, 0), (1, -1.0, n))),   # eq. (20)
-             Channel(1, loop.slave_controller, ((1, 1.0, 0), (0, -1.0, n)))))
+            (Channel(0, loop.master_controller, ((0, 1.0, 0.0), (1, -1.0, bwd))),   # eq. (20)
+             Channel(1, loop.slave_controller, ((1, 1.0, 0.0), (0, -1.0, fwd)))))
     raise TypeError(f"not a loop: {loop!r}")
+
+
+def split_delay(d: float) -> tuple[int, float]:
+    """Whole and fractional part of a delay in samples; a fraction within 1e-9 of a
+    whole sample snaps to it, so t_d = nT gives exactly the integer-delay model."""
+    n = int(round(d))
+    if abs(d - n) <= 1e-9:
+        return n, 0.0
+    n = int(np.floor(d))
+    return n, float(d - n)
 
 
 def port_matrices(port: Port) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -161,6 +171,8 @@ class SampledSystem:
         Controller force of each port from the state (``u = F_u s``).
     pos, vel : (p, N)
         Selectors of each port's position and velocity.
+    E : (p, N)
+        The controller input of each port, ``e_i = E_i s`` (delays included).
     Ac, Bc : (np, np), (np, p)
         Continuous plant (all ports), state = the first ``np`` closed-loop states.
     """
@@ -181,6 +193,7 @@ class SampledSystem:
     n_plant: int
     labels: list[str] = field(default_factory=list)
     varies_with_K: bool = True
+    E: np.ndarray | None = None
 
     @property
     def order(self) -> int:
@@ -236,18 +249,31 @@ def build(loop: HapticLoop | TeleoperationLoop,
         Ac[sl, sl], Bc[sl, i], Cf[i, sl] = a, b[:, 0], cf[0]
     Ad, Bd = discretize(Ac, Bc, T)
 
-    # --- delay registers: register l of port j holds x_j[k-1-l]
+    # --- delays: a term's delay is d = n + f samples. The whole part is shift
+    # registers of x_j (register l of port j holds x_j[k-1-l]). A fractional part
+    # f > 0 is a state r = x_j(kT - fT), exact from the previous sample and the
+    # force held over it (ZOH), with its own registers (after the controller states,
+    # so the layout of integer-delay loops is unchanged).
     depth = [0] * p
+    frac: dict[tuple[int, float], int] = {}
     for ch in st.channels:
-        for j, _, n in ch.terms:
-            depth[j] = max(depth[j], n)
+        for j, _, d in ch.terms:
+            n, f = split_delay(d)
+            if f == 0.0:
+                depth[j] = max(depth[j], n)
+            else:
+                frac[(j, f)] = max(frac.get((j, f), 0), n)
     off_r = n_plant + np.concatenate([[0], np.cumsum(depth)]).astype(int)
 
     # --- controller states
     parts = [_controller_parts(ch.controller, T) for ch in st.channels]
     qs = [pa[0].shape[1] for pa in parts]
     off_c = int(off_r[-1]) + np.concatenate([[0], np.cumsum(qs)]).astype(int)
+    off_f: dict[tuple[int, float], int] = {}
     N = int(off_c[-1])
+    for key in sorted(frac):
+        off_f[key] = N
+        N += 1 + frac[key]
 
     pos = np.zeros((p, N))
     vel = np.zeros((p, N))
@@ -257,8 +283,11 @@ def build(loop: HapticLoop | TeleoperationLoop,
     # error selectors E (p, N): e_i = E_i s
     E = np.zeros((p, N))
     for ch in st.channels:
-        for j, sgn, n in ch.terms:
-            if n == 0:
+        for j, sgn, d in ch.terms:
+            n, f = split_delay(d)
+            if f:
+                E[ch.port, off_f[(j, f)] + n] += sgn     # r itself (n = 0) or its register n-1
+            elif n == 0:
                 E[ch.port] += sgn * pos[j]
             else:
                 E[ch.port, off_r[j] + n - 1] += sgn
@@ -285,6 +314,16 @@ def build(loop: HapticLoop | TeleoperationLoop,
     B_ext[:, :n_plant, :] = Bd
     B1 = np.zeros((P, N, p))
     B1[:, :n_plant, :] = -Bd
+    for (j, f), r0 in off_f.items():
+        # r[k+1] = x_j((k+1)T - fT) = C (Phi x_j[k] + Gamma (f_ext - u)[k]) over (1 - f)T
+        pl = slice(off_p[j], off_p[j + 1])
+        Phi, Gam = discretize(Ac[pl, pl], Bc[pl, j:j + 1], (1.0 - f) * T)
+        A0[:, r0, pl] = Phi[:, 0, :]
+        A0[:, r0, :] -= Gam[:, 0, 0][:, None] * Fu0[:, j, :]
+        B_ext[:, r0, j] = Gam[:, 0, 0]
+        B1[:, r0, j] = -Gam[:, 0, 0]
+        for l in range(1, frac[(j, f)] + 1):
+            A0[:, r0 + l, r0 + l - 1] = 1.0
     # C1 rows: the K-part of each port's force; same for every period
     C1 = Fu1.copy()
     ks = [ch.controller.stiffness if isinstance(ch.controller, SpringDamper) else 0.0
@@ -298,4 +337,16 @@ def build(loop: HapticLoop | TeleoperationLoop,
         Fu1 = Fu1 * scale[None, :, None]
     labels = [pt.name for pt in st.ports]
     return SampledSystem(T, A0, B1, C1, K_own, B_ext, Fu0, Fu1, pos, vel, Ac, Bc, Cf,
-                         n_plant, labels, varies)
+                         n_plant, labels, varies, E)
+
+
+def stack(systems: Sequence[SampledSystem]) -> SampledSystem:
+    """Concatenate systems of the same structure (same order N) along the batch axis,
+    e.g. one loop at many virtual dampings, so one batched analysis covers them all."""
+    s0 = systems[0]
+    if any(s.order != s0.order or s.n_ports != s0.n_ports for s in systems):
+        raise ValueError("stack: systems must have the same order and ports")
+    cat = lambda name: np.concatenate([getattr(s, name) for s in systems])  # noqa: E731
+    return SampledSystem(cat("periods"), cat("A0"), cat("B1"), cat("C1"), cat("stiffness"),
+                         cat("B_ext"), cat("F_u0"), cat("F_u1"), s0.pos, s0.vel, s0.Ac, s0.Bc,
+                         s0.Cf, s0.n_plant, s0.labels, s0.varies_with_K, s0.E)

@@ -731,7 +731,7 @@ def exact_critical_stiffness(loop: HapticLoop | TeleoperationLoop) -> CriticalSt
     """
     sysm = build(loop)
     res = exact_kmax_batch(sysm)[0]
-    return _to_result(res, loop.period, loop.delay_samples)
+    return _to_result(res, loop.period, loop.delay_in_samples)
 
 
 def _to_result(res: dict[str, Any], T: float, n: int | float) -> CriticalStiffnessResult:

@@ -21,7 +21,7 @@ from .errors import ModelError, check_delay, check_real
 __all__ = [
     "Device", "Impedance", "NO_IMPEDANCE", "spring", "mass_spring_damper",
     "SpringDamper", "DiscreteController", "Controller", "HapticLoop",
-    "TeleoperationLoop", "parse_impedance", "paper_hve", "paper_peb",
+    "TeleoperationLoop", "parse_impedance", "paper_hve", "paper_peb", "delay_from_seconds",
 ]
 
 
@@ -284,6 +284,25 @@ class DiscreteController:
 Controller = Union[SpringDamper, DiscreteController]
 
 
+def _check_fraction(name: str, value: Any) -> float:
+    v = check_real(name, value, nonnegative=True)
+    if not v < 1.0:
+        raise ModelError(f"{name} = {v}: must be in [0, 1) (the part of t_d/T beyond whole samples)")
+    return v
+
+
+def delay_from_seconds(name: str, seconds: Any, period: float) -> tuple[int, float]:
+    """Split a delay in seconds into whole samples and a fraction in [0, 1); a
+    fraction within 1e-9 of a whole sample snaps to it (t_d = nT is exactly integer)."""
+    t = check_real(name, seconds, nonnegative=True)
+    d = t / period
+    n = int(round(d))
+    if abs(d - n) <= 1e-9 * max(1.0, d):
+        return n, 0.0
+    n = int(np.floor(d))
+    return n, min(d - n, np.nextafter(1.0, 0.0))
+
+
 def _check_controller(name: str, c: Any) -> Controller:
     if not isinstance(c, (SpringDamper, DiscreteController)):
         raise ModelError(f"{name} = {c!r}: must be a SpringDamper or a DiscreteController")
@@ -317,6 +336,7 @@ class HapticLoop:
     operator: Any = None
     period: float = 1e-3
     delay_samples: int = 0
+    fractional_delay: float = 0.0
 
     def __post_init__(self) -> None:
         if not isinstance(self.device, Device):
@@ -325,13 +345,25 @@ class HapticLoop:
         object.__setattr__(self, "operator", Impedance.from_any(self.operator, "operator"))
         object.__setattr__(self, "period", check_real("period", self.period, positive=True))
         object.__setattr__(self, "delay_samples", check_delay("delay_samples", self.delay_samples))
+        object.__setattr__(self, "fractional_delay",
+                           _check_fraction("fractional_delay", self.fractional_delay))
         if self.device.mass + self.operator.mass <= 0:
             raise ModelError("operator mass: device mass plus operator mass must be > 0")
 
     @property
+    def delay_in_samples(self) -> float:
+        """t_d / T = n + fractional_delay."""
+        return self.delay_samples + self.fractional_delay
+
+    @property
     def delay_s(self) -> float:
-        """t_d = n T in seconds."""
-        return self.delay_samples * self.period
+        """t_d = (n + fractional_delay) T in seconds."""
+        return self.delay_in_samples * self.period
+
+    def with_delay_s(self, seconds: float) -> "HapticLoop":
+        """The same loop with a delay of ``seconds`` (any t_d >= 0, not only n T)."""
+        n, f = delay_from_seconds("delay_s", seconds, self.period)
+        return dataclasses.replace(self, delay_samples=n, fractional_delay=f)
 
     def with_stiffness(self, K: float) -> "HapticLoop":
         if not isinstance(self.controller, SpringDamper):
@@ -369,6 +401,9 @@ class TeleoperationLoop:
     environment: Any = None
     period: float = 1e-3
     delay_samples: int = 0
+    delay_backward_samples: int | None = None
+    fractional_delay: float = 0.0
+    fractional_delay_backward: float | None = None
 
     def __post_init__(self) -> None:
         for nm in ("master", "slave"):
@@ -380,14 +415,60 @@ class TeleoperationLoop:
         object.__setattr__(self, "environment", Impedance.from_any(self.environment, "environment"))
         object.__setattr__(self, "period", check_real("period", self.period, positive=True))
         object.__setattr__(self, "delay_samples", check_delay("delay_samples", self.delay_samples))
+        object.__setattr__(self, "fractional_delay",
+                           _check_fraction("fractional_delay", self.fractional_delay))
+        if self.delay_backward_samples is not None:
+            object.__setattr__(self, "delay_backward_samples",
+                               check_delay("delay_backward_samples", self.delay_backward_samples))
+        if self.fractional_delay_backward is not None:
+            object.__setattr__(self, "fractional_delay_backward",
+                               _check_fraction("fractional_delay_backward",
+                                               self.fractional_delay_backward))
         for dev, z, nm in ((self.master, self.operator, "operator"),
                            (self.slave, self.environment, "environment")):
             if dev.mass + z.mass <= 0:
                 raise ModelError(f"{nm} mass: device mass plus {nm} mass must be > 0")
 
     @property
+    def forward_delay_in_samples(self) -> float:
+        """Master -> slave delay / T (the slave's controller sees x_m this late)."""
+        return self.delay_samples + self.fractional_delay
+
+    @property
+    def backward_delay_in_samples(self) -> float:
+        """Slave -> master delay / T (the master's controller sees x_s this late)."""
+        n = self.delay_samples if self.delay_backward_samples is None else self.delay_backward_samples
+        f = self.fractional_delay if self.fractional_delay_backward is None \
+            else self.fractional_delay_backward
+        return n + f
+
+    @property
+    def symmetric_delay(self) -> bool:
+        return self.forward_delay_in_samples == self.backward_delay_in_samples
+
+    @property
+    def delay_in_samples(self) -> float:
+        """The one-way delay / T when both directions are equal (else the forward one)."""
+        return self.forward_delay_in_samples
+
+    @property
     def delay_s(self) -> float:
-        return self.delay_samples * self.period
+        return self.forward_delay_in_samples * self.period
+
+    @property
+    def delay_backward_s(self) -> float:
+        return self.backward_delay_in_samples * self.period
+
+    def with_delays_s(self, forward_s: float, backward_s: float | None = None) -> "TeleoperationLoop":
+        """The same loop with master->slave and slave->master delays in seconds
+        (any values >= 0; ``backward_s`` defaults to ``forward_s``)."""
+        n, f = delay_from_seconds("delay_forward_s", forward_s, self.period)
+        if backward_s is None:
+            return dataclasses.replace(self, delay_samples=n, fractional_delay=f,
+                                       delay_backward_samples=None, fractional_delay_backward=None)
+        nb, fb = delay_from_seconds("delay_backward_s", backward_s, self.period)
+        return dataclasses.replace(self, delay_samples=n, fractional_delay=f,
+                                   delay_backward_samples=nb, fractional_delay_backward=fb)
 
     def with_stiffness(self, K: float) -> "TeleoperationLoop":
         """Master stiffness K; the slave's scales with it, keeping K_s/K_m (equal

@@ -169,3 +169,48 @@ def plot_positive_real(res: Any, ax: Any = None) -> Any:
     ax.grid(True, alpha=0.3)
     ax.legend(fontsize=8)
     return ax
+
+
+def plot_region(res: Any, ax: Any = None) -> Any:
+    """K-B chart: the exact stable region shaded, its D-decomposition boundary, the
+    cross-check grid's disagreements (if any) and the overlays (passivity, circle
+    criterion, the paper's line)."""
+    ax = _axes(ax)
+    K0, K1 = res.K_range
+    B0, B1 = res.B_range
+    ax.pcolormesh(res.K_grid, res.B_rows, res.stable_exact.astype(float), cmap="Greens",
+                  vmin=0, vmax=2.5, shading="nearest", rasterized=True)
+    first = True
+    for c in res.boundary["curves"]:
+        inwin = (c[:, 0] >= K0) & (c[:, 0] <= K1) & (c[:, 1] >= B0) & (c[:, 1] <= B1)
+        if inwin.any():
+            seg = np.where(inwin, 1.0, np.nan)
+            ax.plot(c[:, 0] * seg, c[:, 1] * seg, "k-", lw=1.0,
+                    label="exact boundary (|z| = 1)" if first else None)
+            first = False
+    for K in res.boundary["z1"]:
+        if K0 <= K <= K1:
+            ax.axvline(K, color="k", lw=1.0, ls="-")
+    T = res.period
+    Bl = np.array([B0, B1])
+    for c in res.boundary["zm1"]:
+        ax.plot(c - 2 * Bl / T, Bl, "k-", lw=1.0)
+    styles = {"passivity": ("tab:blue", "--", "passivity (Colgate)"),
+              "circle": ("tab:orange", "-.", "circle criterion (forward)"),
+              "paper": ("tab:red", ":", "paper's condition")}
+    for name, K in res.overlays.items():
+        col, ls, lab = styles.get(name, ("tab:gray", "--", name))
+        ax.plot(K, res.B_rows, color=col, ls=ls, lw=1.5, label=lab)
+    bad = res.disagreement
+    if bad is not None and bad.any():
+        KK, BB = np.meshgrid(res.K_grid, res.B_rows)
+        ax.plot(KK[bad], BB[bad], "r.", ms=2, label="grid check differs")
+    ax.set_xlim(K0, K1)
+    ax.set_ylim(B0, B1)
+    ax.set_xlabel("stiffness K (N/m)")
+    ax.set_ylabel("virtual damping B (N·s/m)")
+    n = res.delay_samples
+    ax.set_title(f"{res.kind.upper()} stable region (shaded), T = {T * 1e3:g} ms, "
+                 f"t_d = {n:g} T")
+    ax.legend(loc="best", fontsize=8)
+    return ax

@@ -1,0 +1,416 @@
+"""K-B stability regions (D-decomposition) and the best virtual damping.
+
+With C = K + B (z - 1)/(T z) on every port (C_m = C_s), the loop depends on (K, B)
+only through the scalar ``h(z) = K + (B/T)(1 - z^-1)``. Its characteristic equation is
+``det(I - h(z) G(z)) = 0`` with ``G(z) = C1 (zI - A0)^-1 B1`` the loop of a unit
+stiffness (:mod:`hapstab.engine`). A pole sits on |z| = 1 exactly where
+``h(e^{j theta}) = 1/mu`` for an eigenvalue mu of ``G(e^{j theta})``, which gives the
+boundary in closed form (D-decomposition):
+
+* complex crossings: ``K = Re h - Im h tan(theta/2)``, ``B = T Im h / sin(theta)``;
+* z = 1: the vertical lines ``K = 1/mu(G(1))`` (B does not act at DC);
+* z = -1: the lines ``K + 2B/T = 1/mu(G(-1))``.
+
+The stable set is then exact along every line B = const (the crossing analysis of
+:mod:`hapstab.exact`, batched over B), and a Schur-Cohn test of the characteristic
+polynomial on a grid cross-checks it independently.
+
+References
+----------
+Gil, Avello, Rubio, Florez 2004; Hulin, Preusche, Hirzinger 2008 (K-B charts);
+the paper, eq. (23) for H(z) and (13), (18), (29), (34) for the overlaid lines.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any, Sequence
+
+import numpy as np
+
+from .engine import SampledSystem, build, stack
+from .errors import AnalysisError, check_real
+from .exact import exact_kmax_batch
+from .models import HapticLoop, SpringDamper, TeleoperationLoop
+from .results import jsonable
+
+__all__ = ["stability_region", "best_damping", "RegionResult", "BestDampingResult",
+           "d_decomposition"]
+
+Loop = HapticLoop | TeleoperationLoop
+
+
+# ------------------------------------------------------------------------ helpers
+def _check(loop: Loop) -> float:
+    """Validate the region's assumptions; return the reference damping b."""
+    if isinstance(loop, HapticLoop):
+        if not isinstance(loop.controller, SpringDamper):
+            raise AnalysisError("controller: a K-B region needs a SpringDamper virtual environment")
+        return loop.device.damping
+    cm, cs = loop.master_controller, loop.slave_controller
+    if not (isinstance(cm, SpringDamper) and isinstance(cs, SpringDamper)):
+        raise AnalysisError("controllers: a K-B region needs SpringDamper controllers")
+    if cm != cs:
+        raise AnalysisError("controllers: a K-B region is drawn for C_m = C_s (equal K and B)")
+    return min(loop.master.damping, loop.slave.damping)
+
+
+def with_gains(loop: Loop, K: float, B: float) -> Loop:
+    """The loop with stiffness K and virtual damping B on every controller."""
+    c = SpringDamper(K, B)
+    if isinstance(loop, HapticLoop):
+        return loop.replace(controller=c)
+    return loop.replace(master_controller=c, slave_controller=c)
+
+
+def _unit_loop(loop: Loop) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(A0, B1, C1) of the loop with no controller and the K-injection of a unit gain."""
+    s = build(with_gains(loop, 0.0, 0.0))
+    return s.A0[0], s.B1[0], s.C1[0]
+
+
+def _mu(A0: np.ndarray, B1: np.ndarray, C1: np.ndarray, z: np.ndarray) -> np.ndarray:
+    """Eigenvalues of G(z) for each z, shape (len(z), p), branches kept continuous."""
+    N = A0.shape[0]
+    X = np.linalg.solve(z[:, None, None] * np.eye(N) - A0, np.broadcast_to(B1, (z.size,) + B1.shape))
+    G = C1 @ X
+    mu = np.linalg.eigvals(G)
+    if mu.shape[1] == 2:   # follow each branch: swap where that is nearer the previous point
+        for i in range(1, mu.shape[0]):
+            a, b = mu[i]
+            if abs(a - mu[i - 1, 0]) + abs(b - mu[i - 1, 1]) > abs(b - mu[i - 1, 0]) + abs(a - mu[i - 1, 1]):
+                mu[i] = b, a
+    return mu
+
+
+def d_decomposition(loop: Loop, n_theta: int = 4000) -> dict[str, Any]:
+    """The exact K-B boundary: every (K, B) at which a closed-loop pole is on |z| = 1.
+
+    Returns
+    -------
+    dict
+        ``curves``: list of (m, 2) arrays of (K, B) for complex crossings (one per
+        eigenvalue branch, theta from ~0 to pi); ``z1``: K of the vertical lines
+        (z = 1); ``zm1``: c of the lines K + 2B/T = c (z = -1).
+    """
+    _check(loop)
+    T = loop.period
+    A0, B1, C1 = _unit_loop(loop)
+    # dense near theta = 0, where the slow (physical) dynamics live
+    th = np.unique(np.concatenate([np.geomspace(1e-6, 0.2, n_theta // 2),
+                                   np.linspace(0.2, np.pi - 1e-9, n_theta // 2)]))
+    mu = _mu(A0, B1, C1, np.exp(1j * th))
+    curves = []
+    with np.errstate(all="ignore"):
+        for i in range(mu.shape[1]):
+            h = 1.0 / mu[:, i]
+            K = h.real - h.imag * np.tan(th / 2)
+            B = T * h.imag / np.sin(th)
+            ok = np.isfinite(K) & np.isfinite(B) & (np.abs(mu[:, i]) > 1e-300)
+            curves.append(np.column_stack([K[ok], B[ok]]))
+    lines = {}
+    for name, z in (("z1", 1.0), ("zm1", -1.0)):
+        vals = []
+        M = z * np.eye(A0.shape[0]) - A0
+        if np.linalg.cond(M) < 1e12:
+            for m in np.linalg.eigvals(C1 @ np.linalg.solve(M, B1)):
+                if abs(m.imag) <= 1e-9 * abs(m) and m.real != 0:
+                    vals.append(1.0 / m.real)
+        else:
+            vals.append(0.0)          # a pole of the open loop at z = 1 (a free mass): K = 0
+        lines[name] = sorted(vals)
+    return {"curves": curves, "z1": lines["z1"], "zm1": lines["zm1"], "period": T}
+
+
+def _systems_over_B(loop: Loop, Bs: np.ndarray, K: float = 1.0) -> list[tuple[np.ndarray, SampledSystem]]:
+    """Batched systems for each B, grouped by state order (B = 0 drops a state)."""
+    built = [build(with_gains(loop, K, float(B))) for B in Bs]
+    groups: dict[int, list[int]] = {}
+    for i, s in enumerate(built):
+        groups.setdefault(s.order, []).append(i)
+    return [(np.array(idx), stack([built[i] for i in idx])) for idx in groups.values()]
+
+
+def kmax_over_B(loop: Loop, Bs: Sequence[float], intervals: bool = False) -> list[dict[str, Any]]:
+    """Exact crossing analysis for each virtual damping in ``Bs`` (batched)."""
+    Bs = np.asarray(Bs, float)
+    out: list[dict[str, Any] | None] = [None] * Bs.size
+    for idx, sysm in _systems_over_B(loop, Bs):
+        for i, r in zip(idx, exact_kmax_batch(sysm, intervals=intervals)):
+            out[i] = r
+    return out  # type: ignore[return-value]
+
+
+# -------------------------------------------------------------- grid cross-check
+def _char_poly_grid(loop: Loop, Kg: np.ndarray, Bg: np.ndarray) -> np.ndarray:
+    """Coefficients (descending, monic) of det(zI - A(K, B)) at every grid point.
+
+    A(K, B) = A00 + K AK + B AB with rank(AK, AB) = p, so the determinant is a
+    polynomial of total degree <= p in (K, B): fitted exactly from its values
+    (eigenvalue products) at the points of a small simplex in scaled units.
+    """
+    s1, s2 = build(with_gains(loop, 0.0, 1.0)), build(with_gains(loop, 0.0, 2.0))
+    AB = s2.A0[0] - s1.A0[0]
+    A00 = s1.A0[0] - AB
+    AK = (s1.B1 @ s1.C1)[0]
+    p = s1.n_ports
+    Ks = max(np.abs(Kg).max(), 1e-12)
+    Bs = max(np.abs(Bg).max(), 1e-12)
+    pts = [(i, j) for i in range(p + 1) for j in range(p + 1 - i)]   # monomials K'^i B'^j
+    V = np.array([[a ** i * b ** j for (i, j) in pts] for (a, b) in pts], float)
+    vals = []
+    for a, b in pts:
+        ev = np.linalg.eigvals(A00 + a * Ks * AK + b * Bs * AB)
+        vals.append(np.poly(ev).real)
+    coef = np.linalg.solve(V, np.array(vals))                          # (monomials, N+1)
+    Kn, Bn = (Kg / Ks).ravel(), (Bg / Bs).ravel()
+    mono = np.stack([Kn ** i * Bn ** j for (i, j) in pts], axis=1)     # (G, monomials)
+    return mono @ coef
+
+
+def _schur_cohn(c: np.ndarray) -> np.ndarray:
+    """True where every root of the polynomial (rows, descending) has |z| < 1."""
+    a = c / c[:, :1]
+    ok = np.ones(a.shape[0], bool)
+    for m in range(a.shape[1] - 1, 0, -1):
+        k = a[:, m] / a[:, 0]
+        ok &= np.abs(k) < 1
+        with np.errstate(all="ignore"):
+            a = (a[:, :m] - k[:, None] * a[:, m:0:-1]) / (1 - k * k)[:, None]
+        a = np.where(ok[:, None], a, 1.0)
+    return ok
+
+
+# --------------------------------------------------------------------- results
+@dataclass(frozen=True)
+class RegionResult:
+    """The exact stable region in the (K, B) plane.
+
+    Attributes
+    ----------
+    K_range, B_range : (float, float)
+    B_rows : array
+        Virtual dampings of the rows.
+    intervals : tuple
+        Exact stable K-intervals on each row (clipped to K_range).
+    boundary : dict
+        The D-decomposition: ``curves``, ``z1``, ``zm1`` (see :func:`d_decomposition`).
+    K_grid : array
+        K values of the cross-check grid; ``stable_grid[i, j]`` is the Schur-Cohn
+        verdict at (K_grid[j], B_rows[i]) and ``stable_exact`` the exact one.
+    agreement : dict
+        Cross-check counts: points compared, disagreements beyond ``margin``.
+    overlays : dict
+        name -> K_max on each row (passivity, circle, the paper's line).
+    """
+
+    kind: str
+    period: float
+    delay_samples: float
+    K_range: tuple[float, float]
+    B_range: tuple[float, float]
+    B_rows: np.ndarray
+    intervals: tuple
+    boundary: dict = field(repr=False)
+    K_grid: np.ndarray = field(repr=False)
+    stable_exact: np.ndarray = field(repr=False)
+    stable_grid: np.ndarray = field(repr=False)
+    agreement: dict = field(default_factory=dict)
+    overlays: dict = field(default_factory=dict, repr=False)
+    disagreement: np.ndarray | None = field(default=None, repr=False)
+
+    def kmax(self) -> np.ndarray:
+        """K_max on each row (end of the stable interval starting at 0)."""
+        return np.array([iv[0][1] if iv and iv[0][0] == 0.0 else 0.0 for iv in self.intervals])
+
+    def to_dict(self) -> dict[str, Any]:
+        return jsonable({
+            "loop": self.kind, "period_s": self.period, "delay_samples": self.delay_samples,
+            "K_range": self.K_range, "B_range": self.B_range,
+            "rows": [{"virtual_damping": b, "stable_intervals": [list(x) for x in iv]}
+                     for b, iv in zip(self.B_rows, self.intervals)],
+            "crossings_z1_K": self.boundary["z1"], "crossings_zm1_K_plus_2B_over_T": self.boundary["zm1"],
+            "agreement": self.agreement,
+            "overlays": {k: v for k, v in self.overlays.items()},
+        })
+
+    def to_csv(self, path: str) -> None:
+        import csv
+        with open(path, "w", newline="") as fh:
+            w = csv.writer(fh)
+            w.writerow(["stiffness", "virtual_damping", "stable_exact", "stable_grid"])
+            for i, B in enumerate(self.B_rows):
+                for j, K in enumerate(self.K_grid):
+                    w.writerow([f"{K:.10g}", f"{B:.10g}", int(self.stable_exact[i, j]),
+                                int(self.stable_grid[i, j])])
+
+    def plot(self, ax: Any = None) -> Any:
+        from .plotting import plot_region
+        return plot_region(self, ax=ax)
+
+
+@dataclass(frozen=True)
+class BestDampingResult:
+    """The virtual damping that maximises K_max: "render at most K* N/m, with B* N*s/m".
+
+    Attributes
+    ----------
+    damping : float
+        B* in N*s/m.
+    critical_stiffness : float
+        K* = K_max(B*) in N/m.
+    critical_stiffness_at_zero_damping : float
+        K_max(0), for comparison.
+    B_curve, K_curve : arrays
+        K_max over the scanned dampings.
+    """
+
+    damping: float
+    critical_stiffness: float
+    critical_stiffness_at_zero_damping: float
+    reason: str
+    B_curve: np.ndarray = field(repr=False)
+    K_curve: np.ndarray = field(repr=False)
+
+    def to_dict(self) -> dict[str, Any]:
+        return jsonable({"virtual_damping": self.damping, "critical_stiffness": self.critical_stiffness,
+                         "critical_stiffness_at_zero_damping": self.critical_stiffness_at_zero_damping,
+                         "reason": self.reason,
+                         "curve": {"virtual_damping": self.B_curve, "critical_stiffness": self.K_curve}})
+
+
+# ------------------------------------------------------------------- the front
+def stability_region(loop: Loop, K: tuple[float, float], B: tuple[float, float],
+                     resolution: int = 200, overlays: Sequence[str] = ()) -> RegionResult:
+    """Exact K-B stability region of ``loop`` (its own K and B are ignored).
+
+    Parameters
+    ----------
+    loop : HapticLoop or TeleoperationLoop
+        Device(s), impedances, T and delay(s); C_m = C_s for teleoperation.
+    K, B : (float, float)
+        Window in N/m and N*s/m.
+    resolution : int
+        Rows (values of B) and grid columns (values of K).
+    overlays : sequence of str
+        Also compute K_max per row by these methods: ``"paper"`` (eq. 13/18 or
+        29/34), ``"passivity"``, ``"circle"`` (when available).
+
+    Returns
+    -------
+    RegionResult
+
+    Raises
+    ------
+    AnalysisError
+        Controllers that are not equal spring-dampers, or an empty window.
+    """
+    _check(loop)
+    K_lo, K_hi = (check_real("K range start", K[0], nonnegative=True), check_real("K range end", K[1]))
+    B_lo, B_hi = (check_real("B range start", B[0], nonnegative=True), check_real("B range end", B[1]))
+    if not (K_hi > K_lo and B_hi >= B_lo):
+        raise AnalysisError(f"K = {K}, B = {B}: the window is empty (need lo < hi)")
+    n = int(resolution)
+    if n < 2:
+        raise AnalysisError(f"resolution = {resolution}: must be >= 2")
+    Brows = np.linspace(B_lo, B_hi, n)
+    rows = kmax_over_B(loop, Brows, intervals=True)
+    intervals = tuple(tuple((max(a, K_lo), min(b, K_hi)) for a, b in r["intervals"]
+                            if b > K_lo and a < K_hi) for r in rows)
+    Kg = np.linspace(K_lo, K_hi, n)
+    KK, BB = np.meshgrid(Kg, Brows)
+    exact = np.zeros(KK.shape, bool)
+    for i, r in enumerate(rows):
+        for a, b in r["intervals"]:
+            exact[i] |= (Kg > a) & (Kg < b)
+    grid = _schur_cohn(_char_poly_grid(loop, KK, BB)).reshape(KK.shape)
+    # near an exact boundary either verdict is within rounding: compare away from it
+    margin = 1e-3 * (K_hi - K_lo)
+    near = np.zeros(KK.shape, bool)
+    for i, r in enumerate(rows):
+        for e in {e for iv in r["intervals"] for e in iv if math.isfinite(e)}:
+            near[i] |= np.abs(Kg - e) <= margin
+    bad = (exact != grid) & ~near
+    agreement = {"compared": int((~near).sum()), "disagree": int(bad.sum()),
+                 "margin_N_per_m": margin}
+    ov: dict[str, np.ndarray] = {}
+    for name in overlays:
+        ov[name] = _overlay(loop, name, Brows)
+    kind = "hve" if isinstance(loop, HapticLoop) else "peb"
+    return RegionResult(kind, loop.period, loop.delay_in_samples, (K_lo, K_hi), (B_lo, B_hi), Brows,
+                        intervals, d_decomposition(loop), Kg, exact, grid, agreement, ov, bad)
+
+
+def _overlay(loop: Loop, name: str, Bs: np.ndarray) -> np.ndarray:
+    from . import closed_forms
+    from .analysis import METHODS, critical_stiffness
+
+    out = np.full(Bs.size, np.nan)
+    if name == "paper":
+        n = loop.delay_in_samples
+        if isinstance(loop, HapticLoop):
+            f = closed_forms.colgate if n == 0 else closed_forms.eq18
+        else:
+            f = closed_forms.eq29 if n == 0 else closed_forms.eq34
+        return np.array([f(with_gains(loop, 1.0, B)).critical_stiffness for B in Bs])
+    if name not in METHODS:
+        raise AnalysisError(f"overlay = {name!r}: unknown; allowed: paper, "
+                            + ", ".join(m for m in ("passivity", "circle") if m in METHODS))
+    for i, B in enumerate(Bs):
+        try:
+            out[i] = critical_stiffness(with_gains(loop, 1.0, float(B)), method=name).critical_stiffness
+        except AnalysisError:
+            pass                      # the method does not apply at this B: leave a gap
+    return out
+
+
+def best_damping(loop: Loop, B_max: float | None = None, resolution: int = 64) -> BestDampingResult:
+    """The virtual damping B* that maximises K_max, and K* = K_max(B*).
+
+    K_max(B) is computed exactly on a grid of B (batched), then refined by bounded
+    Brent iterations around the best grid point. K_max(B) often has a kink at its
+    maximum (two crossing branches meet), which Brent's method handles.
+
+    Parameters
+    ----------
+    loop : HapticLoop or TeleoperationLoop
+    B_max : float, optional
+        Upper end of the search; default: where K_max first falls to 0 (found by
+        doubling from 10 b).
+    resolution : int
+        Grid points before refinement.
+
+    Returns
+    -------
+    BestDampingResult
+    """
+    from scipy.optimize import minimize_scalar
+
+    b = _check(loop)
+
+    def kmax(Bs: np.ndarray) -> np.ndarray:
+        return np.array([r["kmax"] for r in kmax_over_B(loop, Bs)])
+
+    if B_max is None:
+        B_max = max(10 * b, 1e-3)
+        for _ in range(30):
+            if kmax(np.array([B_max]))[0] == 0.0:
+                break
+            B_max *= 2
+    else:
+        B_max = check_real("B_max", B_max, positive=True)
+    Bs = np.linspace(0.0, B_max, int(resolution))
+    Ks = kmax(Bs)
+    i = int(np.argmax(Ks))
+    lo, hi = Bs[max(i - 1, 0)], Bs[min(i + 1, Bs.size - 1)]
+    best_B, best_K = float(Bs[i]), float(Ks[i])
+    if hi > lo and math.isfinite(best_K):
+        res = minimize_scalar(lambda x: -kmax(np.array([x]))[0], bounds=(lo, hi), method="bounded",
+                              options={"xatol": 1e-10 * B_max})
+        if -res.fun > best_K:
+            best_B, best_K = float(res.x), float(-res.fun)
+    K0 = float(Ks[0])
+    reason = (f"render at most K* = {best_K:.6g} N/m with B* = {best_B:.6g} N*s/m "
+              f"(K_max = {K0:.6g} N/m at B = 0)")
+    return BestDampingResult(best_B, best_K, K0, reason, Bs, Ks)
