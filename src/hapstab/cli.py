@@ -19,7 +19,7 @@ from .errors import HapstabError
 from .models import (Device, HapticLoop, SpringDamper, TeleoperationLoop, parse_impedance)
 
 #: modules that add commands to ``cli`` (imported at the end of this module)
-_PLUGINS: tuple[str, ...] = ("hapstab.cli_sim", "hapstab.cli_paper")
+_PLUGINS: tuple[str, ...] = ("hapstab.cli_regions", "hapstab.cli_sim", "hapstab.cli_paper")
 
 
 # ------------------------------------------------------------------ error handling
@@ -120,7 +120,17 @@ def loop_options(kind: str, ranges: bool = False) -> Callable:
                          help="Sampling period T in seconds."),
             click.option("--delay", "-n", "delay", type=Delay(), default=0, show_default=True,
                          help="Delay n in whole samples (t_d = n T)."),
+            click.option("--delay-s", "delay_s", type=NONNEG, default=None,
+                         help="Delay in seconds, any value (fractional samples modelled exactly); "
+                              "instead of --delay."),
         ]
+        if kind == "peb":
+            timing += [
+                click.option("--delay-forward", "delay_forward", type=NONNEG, default=None,
+                             help="Master->slave delay in samples (fractional allowed)."),
+                click.option("--delay-backward", "delay_backward", type=NONNEG, default=None,
+                             help="Slave->master delay in samples (fractional allowed)."),
+            ]
     if kind == "hve":
         devices = [
             click.option("--mass", "-m", type=POS, default=0.15, show_default=True,
@@ -147,21 +157,49 @@ def loop_options(kind: str, ranges: bool = False) -> Callable:
     )
 
 
+def _given(name: str) -> bool:
+    ctx = click.get_current_context(silent=True)
+    if ctx is None:
+        return False
+    try:
+        return ctx.get_parameter_source(name) == click.core.ParameterSource.COMMANDLINE
+    except Exception:
+        return False
+
+
 def hve_loop(kw: dict[str, Any], stiffness: float = 0.0) -> HapticLoop:
     """Build the HVE from parsed options."""
-    return HapticLoop(Device(kw["mass"], kw["damping"]),
+    loop = HapticLoop(Device(kw["mass"], kw["damping"]),
                       SpringDamper(stiffness, kw["virtual_damping"]),
                       parse_impedance(kw["operator"], "--operator"), kw["period"], kw["delay"])
+    if kw.get("delay_s") is not None:
+        if _given("delay"):
+            raise HapstabError("--delay and --delay-s: give one of them, not both")
+        loop = loop.with_delay_s(kw["delay_s"])
+    return loop
 
 
 def peb_loop(kw: dict[str, Any], stiffness: float = 0.0) -> TeleoperationLoop:
     """Build the PEB teleoperator from parsed options (C_m = C_s)."""
     c = SpringDamper(stiffness, kw["virtual_damping"])
-    return TeleoperationLoop(Device(kw["master_mass"], kw["master_damping"]),
+    loop = TeleoperationLoop(Device(kw["master_mass"], kw["master_damping"]),
                              Device(kw["slave_mass"], kw["slave_damping"]), c, c,
                              parse_impedance(kw["operator"], "--operator"),
                              parse_impedance(kw["environment"], "--environment"),
                              kw["period"], kw["delay"])
+    fwd, bwd, ds = kw.get("delay_forward"), kw.get("delay_backward"), kw.get("delay_s")
+    if sum(x is not None for x in (ds,)) + (fwd is not None or bwd is not None) > 1 or \
+            ((ds is not None or fwd is not None or bwd is not None) and _given("delay")):
+        raise HapstabError("--delay, --delay-s and --delay-forward/--delay-backward: give one way "
+                           "of stating the delay")
+    T = loop.period
+    if ds is not None:
+        loop = loop.with_delays_s(ds)
+    elif fwd is not None or bwd is not None:
+        f = (fwd if fwd is not None else loop.delay_samples) * T
+        b = (bwd if bwd is not None else loop.delay_samples) * T
+        loop = loop.with_delays_s(f, b)
+    return loop
 
 
 LOOP_KINDS = {"hve": hve_loop, "peb": peb_loop}

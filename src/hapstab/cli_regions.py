@@ -1,0 +1,106 @@
+"""CLI: ``hapstab region`` (K-B stability region) and ``hapstab best-damping``."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import click
+
+from .cli import LOOP_KINDS, NONNEG, cli, emit, fmt, loop_options, rich_table
+from .errors import HapstabError
+
+
+def _range(spec: str, name: str) -> tuple[float, float]:
+    allowed = "allowed: lo:hi with 0 <= lo < hi (e.g. 0:800)"
+    parts = spec.split(":")
+    try:
+        lo, hi = (float(x) for x in parts)
+    except ValueError:
+        raise HapstabError(f"{name} = {spec!r}: malformed; {allowed}") from None
+    if not (lo >= 0 and hi > lo and hi < float("inf")):
+        raise HapstabError(f"{name} = {spec!r}: {allowed}")
+    return lo, hi
+
+
+def _region_command(kind: str) -> None:
+    make = LOOP_KINDS[kind]
+
+    @region.command(kind)
+    @loop_options(kind)
+    @click.option("--K", "K_spec", required=True, help="Stiffness window lo:hi in N/m.")
+    @click.option("--B", "B_spec", required=True, help="Virtual damping window lo:hi in N*s/m.")
+    @click.option("--resolution", type=click.IntRange(2, 2000), default=200, show_default=True,
+                  help="Rows (B values) and grid columns (K values).")
+    @click.option("--overlay", "overlays", default="paper,passivity,circle", show_default=True,
+                  help="Comma list drawn on the plot: paper, passivity, circle (or none).")
+    @click.option("--plot", "plot_path", type=click.Path(dir_okay=False), default=None,
+                  help="Write the K-B chart (PNG or SVG by extension).")
+    @click.option("--csv", "csv_path", type=click.Path(dir_okay=False), default=None,
+                  help="Write every grid point: stiffness, virtual_damping, stable_exact, stable_grid.")
+    def _cmd(K_spec: str, B_spec: str, resolution: int, overlays: str, plot_path: str | None,
+             csv_path: str | None, as_json: bool, **kw: Any) -> None:
+        from .analysis import METHODS
+        from .regions import stability_region
+
+        K, B = _range(K_spec, "--K"), _range(B_spec, "--B")
+        names = [o.strip() for o in overlays.split(",") if o.strip() and o.strip() != "none"]
+        for o in names:
+            if o != "paper" and o not in METHODS:
+                raise HapstabError(f"--overlay = {o!r}: unknown; allowed: paper, passivity, circle, none")
+        ov = names if plot_path else []
+        res = stability_region(make(kw, 1.0), K, B, resolution, overlays=ov)
+        if csv_path:
+            res.to_csv(csv_path)
+        if plot_path:
+            ax = res.plot()
+            ax.figure.savefig(plot_path, dpi=120, bbox_inches="tight")
+        d = res.to_dict()
+        kmax = res.kmax()
+        rows = [("window", f"K in [{K[0]:g}, {K[1]:g}] N/m, B in [{B[0]:g}, {B[1]:g}] N*s/m"),
+                ("K_max at B = lo", f"{fmt(kmax[0])} N/m"),
+                ("largest K_max in window", f"{fmt(kmax.max())} N/m at B = "
+                                            f"{res.B_rows[int(kmax.argmax())]:.6g} N*s/m"),
+                ("grid cross-check", f"{res.agreement['disagree']} of {res.agreement['compared']} "
+                                     "points differ away from the boundary")]
+        if plot_path:
+            rows.append(("plot", plot_path))
+        if csv_path:
+            rows.append(("csv", csv_path))
+        emit(d, as_json, lambda: rich_table(f"K-B stability region, {kind}", rows))
+
+    _cmd.__doc__ = f"Exact K-B stability region of the {kind.upper()} loop (D-decomposition)."
+
+
+def _best_command(kind: str) -> None:
+    make = LOOP_KINDS[kind]
+
+    @best.command(kind)
+    @loop_options(kind)
+    @click.option("--max-damping", "B_max", type=NONNEG, default=None,
+                  help="Largest B to search (default: where K_max falls to 0).")
+    def _cmd(B_max: float | None, as_json: bool, **kw: Any) -> None:
+        from .regions import best_damping
+
+        res = best_damping(make(kw, 1.0), B_max=B_max or None)
+        rows = [("best virtual damping B*", f"{res.damping:.10g} N*s/m"),
+                ("critical stiffness K*", f"{fmt(res.critical_stiffness)} N/m"),
+                ("K_max at B = 0", f"{fmt(res.critical_stiffness_at_zero_damping)} N/m"),
+                ("design answer", res.reason)]
+        emit(res.to_dict(), as_json, lambda: rich_table(f"best virtual damping, {kind}", rows))
+
+    _cmd.__doc__ = f"The virtual damping B that maximises K_max of the {kind.upper()} loop."
+
+
+@cli.group()
+def region() -> None:
+    """Exact K-B stability region (stable set shaded, boundary by D-decomposition)."""
+
+
+@cli.group("best-damping")
+def best() -> None:
+    """The virtual damping B* that maximises K_max, and K* = K_max(B*)."""
+
+
+for _kind in LOOP_KINDS:
+    _region_command(_kind)
+    _best_command(_kind)

@@ -1,0 +1,53 @@
+"""CLI of regions, best damping and the delay options, through the runner."""
+
+import json
+
+import pytest
+from click.testing import CliRunner
+
+from hapstab.cli import cli
+
+
+def run(*args):
+    return CliRunner().invoke(cli, list(args))
+
+
+def test_region_json_plot_csv(tmp_path):
+    png, csv = tmp_path / "r.png", tmp_path / "r.csv"
+    r = run("region", "hve", "--delay", "10", "--K", "0:900", "--B", "0:20", "--resolution", "20",
+            "--plot", str(png), "--csv", str(csv), "--json")
+    assert r.exit_code == 0, r.stderr
+    d = json.loads(r.stdout)
+    assert d["rows"][0]["stable_intervals"][0][1] == pytest.approx(9.5361, rel=1e-4)
+    assert d["agreement"]["disagree"] == 0
+    assert png.stat().st_size > 5000 and csv.stat().st_size > 0
+
+
+def test_best_damping_json():
+    r = run("best-damping", "hve", "--delay", "10", "--json")
+    d = json.loads(r.stdout)
+    assert r.exit_code == 0 and d["virtual_damping"] == pytest.approx(12.61, rel=1e-3)
+
+
+def test_delay_options():
+    a = json.loads(run("kmax", "hve", "--delay-s", "0.010", "--json").stdout)["critical_stiffness"]
+    b = json.loads(run("kmax", "hve", "--delay", "10", "--json").stdout)["critical_stiffness"]
+    assert a == b
+    c = json.loads(run("kmax", "hve", "--delay-s", "0.0105", "--json").stdout)["critical_stiffness"]
+    assert c < b
+    d = json.loads(run("kmax", "peb", "--delay-forward", "2", "--delay-backward", "6",
+                       "--json").stdout)["critical_stiffness"]
+    assert d == pytest.approx(4.0074008646, rel=1e-9)
+
+
+@pytest.mark.parametrize("args,needle", [
+    (("kmax", "hve", "--delay", "3", "--delay-s", "0.01"), "give one of them"),
+    (("kmax", "peb", "--delay-s", "0.01", "--delay-forward", "2"), "one way"),
+    (("kmax", "hve", "--delay-s", "-1"), "must be >= 0"),
+    (("region", "hve", "--K", "5:1", "--B", "0:1"), "--K = '5:1'"),
+    (("region", "hve", "--K", "0:x", "--B", "0:1"), "malformed"),
+    (("region", "hve", "--K", "0:10", "--B", "0:1", "--overlay", "magic"), "--overlay = 'magic'"),
+])
+def test_errors_one_line_exit_2(args, needle):
+    r = run(*args)
+    assert r.exit_code == 2 and len(r.stderr.strip().splitlines()) == 1 and needle in r.stderr
