@@ -147,7 +147,8 @@ def assess(states: np.ndarray, forces: np.ndarray | None, period: float,
     period : float
         T in s.
     window : int, optional
-        Number of final differences the rate is fitted on (default: the last half).
+        Number of final differences the rate is fitted on (default: the last half,
+        at most 1024: a linear fit needs a few times the state dimension).
 
     Returns
     -------
@@ -169,7 +170,7 @@ def assess(states: np.ndarray, forces: np.ndarray | None, period: float,
     if np.abs(S).max() > EXPLODE * s0:
         return BoundednessVerdict("unbounded", math.inf, 0.0, "high", "observed", obs, 0.0,
                                   f"the state grew beyond {EXPLODE:.0e} times its initial size")
-    W = min(M, window or max(M // 2, 16))
+    W = min(M, window or min(max(M // 2, 16), 1024))
     Dw = D[-W:]
     Uw = None
     if forces is not None and np.size(forces):

@@ -24,16 +24,17 @@ Section 5 (simulation study).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
-from typing import Any, Callable, Sequence
+from typing import Any, Sequence
 
 import numpy as np
 
-from .engine import SampledSystem, build, discretize, structure_of
+from .engine import build, structure_of
 from .errors import AnalysisError, ModelError, check_real
 from .growth import BoundednessVerdict, assess
-from .models import HapticLoop, SpringDamper, TeleoperationLoop
-from .results import CriticalStiffnessResult, jsonable
+from .models import HapticLoop, TeleoperationLoop
+from .results import CriticalStiffnessResult
+from .simresult import SimulationResult
+from .stepper import dense_output, initial_state as make_initial_state, roles_of, step_nonlinear
 
 __all__ = ["simulate", "SimulationResult", "force_samples", "critical_stiffness_simulation",
            "propagate_linear"]
@@ -147,142 +148,23 @@ def propagate_linear(A: np.ndarray, B: np.ndarray, s0: np.ndarray, F: np.ndarray
     S = np.empty((n_samples + 1, N))
     S[0] = s0
     s = np.asarray(s0, float)
-    k = 0
     with np.errstate(over="ignore", invalid="ignore"):
+        # the forced part of every block at once; only the free part is sequential
+        Fc = (Fb @ Toe.T).reshape(-1, m, N) if forced else None
+        k = b = 0
         while k < n_samples:
-            blk = Pw @ s
+            blk = (Pw @ s).reshape(m, N)
             if forced:
-                blk = blk + Toe @ Fb[k // m]
-            blk = blk.reshape(m, N)
+                blk += Fc[b]
             take = min(m, n_samples - k)
             S[k + 1:k + 1 + take] = blk[:take]
             s = blk[take - 1]
             k += take
-            if not np.all(np.isfinite(s)):
+            b += 1
+            if not np.isfinite(s).all():
                 S[k + 1:] = np.inf
                 break
     return S
-
-
-def _error_selectors(loop: HapticLoop | TeleoperationLoop, sysm: SampledSystem) -> np.ndarray:
-    """E (p, N): the controller input of each port, ``e_i = E_i s`` (engine layout:
-    registers after the plant, register l of port j holds x_j[k-1-l])."""
-    st = structure_of(loop)
-    p = len(st.ports)
-    depth = [0] * p
-    for ch in st.channels:
-        for j, _, n in ch.terms:
-            depth[j] = max(depth[j], n)
-    off = sysm.n_plant + np.concatenate([[0], np.cumsum(depth)]).astype(int)
-    E = np.zeros((p, sysm.order))
-    for ch in st.channels:
-        for j, sgn, n in ch.terms:
-            if n == 0:
-                E[ch.port] += sgn * sysm.pos[j]
-            else:
-                E[ch.port, off[j] + n - 1] += sgn
-    return E
-
-
-# ------------------------------------------------------------------ result
-@dataclass(frozen=True)
-class SimulationResult:
-    """A simulated run: time series at the sampling instants (and optionally between).
-
-    Attributes
-    ----------
-    time : (M+1,) s
-    position, velocity : (M+1, p) m, m/s, one column per port (``labels``)
-    controller_force : (M+1, p) N
-        u[k], computed at t_k and held over [t_k, t_k+1); it acts on the device as -u.
-    exogenous_force : (M+1, p) N
-        Operator (port 0) / environment (port 1) force held over each sample.
-    port_energy : (M+1, p) J
-        Energy that has flowed from each device port into the sampled-data
-        controller, ``sum u[i] (x[i+1] - x[i])`` (exact: u is held). A passivity
-        observer: negative means the controller has delivered net energy.
-    exogenous_energy : (M+1, p) J
-        Work done by the exogenous forces on each port.
-    states : (M+1, N)
-        Full closed-loop state (plant, delay registers, controller).
-    verdict : BoundednessVerdict
-    contact : (M+1,) bool or None
-        Wall engaged at each sample (with ``wall``).
-    dense_time, dense_position, dense_velocity : arrays or None
-        Exact output between samples (``dense`` points per sample).
-    """
-
-    time: np.ndarray
-    position: np.ndarray
-    velocity: np.ndarray
-    controller_force: np.ndarray
-    exogenous_force: np.ndarray
-    port_energy: np.ndarray
-    exogenous_energy: np.ndarray
-    states: np.ndarray = field(repr=False)
-    verdict: BoundednessVerdict
-    labels: tuple[str, ...]
-    period: float
-    delay_samples: int
-    stiffness: float
-    nonlinear: dict[str, Any] = field(default_factory=dict)
-    contact: np.ndarray | None = field(default=None, repr=False)
-    dense_time: np.ndarray | None = field(default=None, repr=False)
-    dense_position: np.ndarray | None = field(default=None, repr=False)
-    dense_velocity: np.ndarray | None = field(default=None, repr=False)
-
-    @property
-    def bounded(self) -> bool:
-        return self.verdict.bounded
-
-    def summary(self) -> dict[str, Any]:
-        """Scalars: verdict, peaks and final energies per port."""
-        out: dict[str, Any] = {"samples": self.time.size - 1, "duration_s": float(self.time[-1]),
-                               "period_s": self.period, "delay_samples": self.delay_samples,
-                               "stiffness": self.stiffness, "nonlinear": self.nonlinear,
-                               **self.verdict.to_dict()}
-        for j, lab in enumerate(self.labels):
-            out[f"max_abs_position_{lab}"] = float(np.abs(self.position[:, j]).max())
-            out[f"max_abs_force_{lab}"] = float(np.abs(self.controller_force[:, j]).max())
-            out[f"final_port_energy_{lab}"] = float(self.port_energy[-1, j])
-        return jsonable(out)
-
-    def to_dict(self, series: bool = False) -> dict[str, Any]:
-        d = self.summary()
-        if series:
-            d["series"] = {k: jsonable(v) for k, v in self._columns().items()}
-        return d
-
-    def _columns(self, dense: bool = False) -> dict[str, np.ndarray]:
-        if dense:
-            if self.dense_time is None:
-                raise AnalysisError("dense output was not requested: simulate(..., dense=m)")
-            cols = {"time_s": self.dense_time}
-            for j, lab in enumerate(self.labels):
-                cols[f"x_{lab}_m"] = self.dense_position[:, j]
-                cols[f"v_{lab}_m_per_s"] = self.dense_velocity[:, j]
-            return cols
-        cols = {"time_s": self.time}
-        for j, lab in enumerate(self.labels):
-            cols[f"x_{lab}_m"] = self.position[:, j]
-            cols[f"v_{lab}_m_per_s"] = self.velocity[:, j]
-            cols[f"u_{lab}_N"] = self.controller_force[:, j]
-            cols[f"f_ext_{lab}_N"] = self.exogenous_force[:, j]
-            cols[f"port_energy_{lab}_J"] = self.port_energy[:, j]
-        if self.contact is not None:
-            cols["contact"] = self.contact.astype(int)
-        return cols
-
-    def to_csv(self, path: str, dense: bool = False) -> None:
-        """Write the sampled (or, with ``dense``, the between-sample) series as CSV."""
-        cols = self._columns(dense)
-        data = np.column_stack(list(cols.values()))
-        np.savetxt(path, data, delimiter=",", header=",".join(cols), comments="", fmt="%.17g")
-
-    def plot(self, path: str | None = None) -> Any:
-        """Position, controller force and port energy against time (matplotlib figure)."""
-        from .plotting import plot_simulation
-        return plot_simulation(self, path)
 
 
 # --------------------------------------------------------------- simulate
@@ -353,9 +235,8 @@ def simulate(loop: HapticLoop | TeleoperationLoop, duration: float, *,
     res = None if resolution is None else check_real("resolution", resolution, positive=True)
 
     sysm = build(loop)
-    p, N, npl = sysm.n_ports, sysm.order, sysm.n_plant
-    A = sysm.closed_loop()[0]
-    Fu = sysm.force_matrix()[0]
+    p = sysm.n_ports
+    roles = roles_of(loop, sysm)
     t = np.arange(M + 1) * T
     F = np.zeros((M, p))
     F[:, 0] = force_samples(force, t[:-1], "force")
@@ -365,24 +246,25 @@ def simulate(loop: HapticLoop | TeleoperationLoop, duration: float, *,
     offset = np.zeros(p)
     if wall is not None:
         offset[0] = wall
+    pe_idx, pe_off = roles.pos_entries, offset[roles.pos_port]
 
-    def measured(s: np.ndarray) -> np.ndarray:
+    def measure(s: np.ndarray) -> np.ndarray:
+        """What the controller reads: quantised positions relative to the wall."""
         sm = s.copy()
-        x = s[pos_idx]
-        sm[pos_idx] = (res * np.round(x / res) if res else x) - offset
+        x = s[pe_idx]
+        sm[pe_idx] = (res * np.round(x / res) if res else x) - pe_off
         return sm
 
-    s0 = _initial_state(sysm, A, initial_position, initial_velocity, initial_state, measured)
+    s0 = make_initial_state(sysm, roles, initial_position, initial_velocity, initial_state, measure)
     nonlinear = {k: v for k, v in (("wall", wall), ("saturation", sat), ("resolution", res))
                  if v is not None}
     contact = None
     if not nonlinear:
-        S = propagate_linear(A, sysm.B_ext[0], s0, F, M)
+        S = propagate_linear(roles.A, roles.G, s0, F, M)
         with np.errstate(over="ignore", invalid="ignore"):
-            U = S @ Fu.T
+            U = S @ roles.Fu.T
     else:
-        S, U, contact = _step_nonlinear(sysm, A, Fu, s0, F, M, measured, wall is not None,
-                                        _error_selectors(loop, sysm)[0], sat)
+        S, U, contact = step_nonlinear(roles, s0, F, M, measure, wall is not None, sat)
     X, V = S[:, pos_idx], S[:, pos_idx + 1]
     with np.errstate(over="ignore", invalid="ignore"):
         dX = np.diff(X, axis=0)
@@ -392,97 +274,14 @@ def simulate(loop: HapticLoop | TeleoperationLoop, duration: float, *,
     verdict = assess(S, F, T)
     dt = dx = dv = None
     if dense >= 2 and np.all(np.isfinite(S)):
-        dt, dx, dv = _dense(sysm, S, F - U[:-1], T, dense, pos_idx)
+        dt, dx, dv = dense_output(sysm, S, F - U[:-1], T, dense)
     arrays = [t, X, V, U, Fx, pe, ee, S]
     for a in arrays:
         a.setflags(write=False)
     K = float(sysm.stiffness[0])
-    return SimulationResult(*arrays, verdict, tuple(sysm.labels), T, loop.delay_samples, K,
+    delay = getattr(loop, "delay_in_samples", loop.delay_samples)
+    return SimulationResult(*arrays, verdict, tuple(sysm.labels), T, delay, K,
                             nonlinear, contact, dt, dx, dv)
-
-
-def _initial_state(sysm: SampledSystem, A: np.ndarray, x0: Any, v0: Any, full: Any,
-                   measured: Callable[[np.ndarray], np.ndarray]) -> np.ndarray:
-    p, N, npl = sysm.n_ports, sysm.order, sysm.n_plant
-    if full is not None:
-        s = np.asarray(full, float).ravel()
-        if s.size != N or not np.all(np.isfinite(s)):
-            raise ModelError(f"initial_state: {s.size} values; need {N} finite values "
-                             f"(plant {npl}, then delay registers and controller states)")
-        return s
-    pos_idx = np.argmax(sysm.pos, axis=1)
-    s = np.zeros(N)
-    for nm, val, idx in (("initial_position", x0, pos_idx), ("initial_velocity", v0, pos_idx + 1)):
-        a = np.broadcast_to(np.asarray(val, float).ravel(), (p,)) if np.size(val) in (1, p) else None
-        if a is None or not np.all(np.isfinite(a)):
-            raise ModelError(f"{nm} = {val!r}: must be one finite number or one per port ({p})")
-        s[idx] = a
-    # a history at rest: registers and controller states are the fixed point of their
-    # own update for the measured initial positions
-    sm = measured(s)
-    R = A[npl:]
-    rhs = R[:, :npl] @ sm[:npl]
-    rest = np.linalg.lstsq(np.eye(N - npl) - R[:, npl:], rhs, rcond=None)[0] if N > npl else rhs
-    s[npl:] = rest
-    return s
-
-
-def _step_nonlinear(sysm: SampledSystem, A: np.ndarray, Fu: np.ndarray, s0: np.ndarray,
-                    F: np.ndarray, M: int, measured: Callable[[np.ndarray], np.ndarray],
-                    has_wall: bool, E0: np.ndarray, sat: float | None
-                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-    """Sample-by-sample loop with the nonlinear elements at the sampling instants.
-
-    The plant is stepped with its exact ZOH matrices and the applied force; the
-    delay registers and controller states see the plant only through the measured
-    positions, so they are updated from the measured state."""
-    npl = sysm.n_plant
-    Ad, Bd = discretize(sysm.Ac, sysm.Bc, np.array([sysm.periods[0]]))
-    Ad, Bd = Ad[0], Bd[0]
-    R = A[npl:]
-    S = np.empty((M + 1, s0.size))
-    U = np.empty((M + 1, Fu.shape[0]))
-    C = np.zeros(M + 1, bool) if has_wall else None
-    s = s0.copy()
-    for k in range(M + 1):
-        S[k] = s
-        sm = measured(s)
-        u = Fu @ sm
-        if has_wall:
-            c = (E0 @ sm) > 0
-            C[k] = c
-            if not c:
-                u[0] = 0.0
-        if sat is not None:
-            u = np.clip(u, -sat, sat)
-        U[k] = u
-        if k == M:
-            break
-        nxt = np.empty_like(s)
-        nxt[:npl] = Ad @ s[:npl] + Bd @ (F[k] - u)
-        nxt[npl:] = R @ sm
-        s = nxt
-        if not np.all(np.isfinite(s)):
-            S[k + 1:] = np.inf
-            U[k + 1:] = np.nan
-            break
-    return S, U, C
-
-
-def _dense(sysm: SampledSystem, S: np.ndarray, G: np.ndarray, T: float, m: int,
-           pos_idx: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Exact plant trajectory at m points per sample: the held net force G[k] acts
-    on the plant from its sampled state."""
-    npl = sysm.n_plant
-    taus = T * np.arange(1, m) / m
-    Adt, Bdt = discretize(sysm.Ac, sysm.Bc, taus)
-    Pk = S[:-1, :npl]
-    inner = np.einsum("inj,kj->kin", Adt, Pk) + np.einsum("inj,kj->kin", Bdt, G)
-    M = Pk.shape[0]
-    allp = np.concatenate([Pk[:, None, :], inner], axis=1).reshape(M * m, npl)
-    allp = np.vstack([allp, S[-1:, :npl]])
-    t = np.concatenate([(np.arange(M)[:, None] * T + np.r_[0.0, taus][None, :]).ravel(), [M * T]])
-    return t, allp[:, pos_idx], allp[:, pos_idx + 1]
 
 
 # ------------------------------------------------- the paper's K_max procedure

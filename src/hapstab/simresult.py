@@ -1,0 +1,121 @@
+"""The result of :func:`hapstab.simulate.simulate`: time series at the sampling
+instants (and optionally between them), port energies, the boundedness verdict,
+CSV and plot.
+
+References
+----------
+The paper, Section 5 (simulated outputs watched for boundedness).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from .errors import AnalysisError
+from .growth import BoundednessVerdict
+from .results import jsonable
+
+__all__ = ["SimulationResult"]
+
+
+@dataclass(frozen=True)
+class SimulationResult:
+    """A simulated run: time series at the sampling instants (and optionally between).
+
+    Attributes
+    ----------
+    time : (M+1,) s
+    position, velocity : (M+1, p) m, m/s, one column per port (``labels``)
+    controller_force : (M+1, p) N
+        u[k], computed at t_k and held over [t_k, t_k+1); it acts on the device as -u.
+    exogenous_force : (M+1, p) N
+        Operator (port 0) / environment (port 1) force held over each sample.
+    port_energy : (M+1, p) J
+        Energy that has flowed from each device port into the sampled-data
+        controller, ``sum u[i] (x[i+1] - x[i])`` (exact: u is held). A passivity
+        observer: negative means the controller has delivered net energy.
+    exogenous_energy : (M+1, p) J
+        Work done by the exogenous forces on each port.
+    states : (M+1, N)
+        Full closed-loop state (plant, delay registers, controller).
+    verdict : BoundednessVerdict
+    contact : (M+1,) bool or None
+        Wall engaged at each sample (with ``wall``).
+    dense_time, dense_position, dense_velocity : arrays or None
+        Exact output between samples (``dense`` points per sample).
+    """
+
+    time: np.ndarray
+    position: np.ndarray
+    velocity: np.ndarray
+    controller_force: np.ndarray
+    exogenous_force: np.ndarray
+    port_energy: np.ndarray
+    exogenous_energy: np.ndarray
+    states: np.ndarray = field(repr=False)
+    verdict: BoundednessVerdict
+    labels: tuple[str, ...]
+    period: float
+    delay_samples: float
+    stiffness: float
+    nonlinear: dict[str, Any] = field(default_factory=dict)
+    contact: np.ndarray | None = field(default=None, repr=False)
+    dense_time: np.ndarray | None = field(default=None, repr=False)
+    dense_position: np.ndarray | None = field(default=None, repr=False)
+    dense_velocity: np.ndarray | None = field(default=None, repr=False)
+
+    @property
+    def bounded(self) -> bool:
+        return self.verdict.bounded
+
+    def summary(self) -> dict[str, Any]:
+        """Scalars: verdict, peaks and final energies per port."""
+        out: dict[str, Any] = {"samples": self.time.size - 1, "duration_s": float(self.time[-1]),
+                               "period_s": self.period, "delay_samples": self.delay_samples,
+                               "stiffness": self.stiffness, "nonlinear": self.nonlinear,
+                               **self.verdict.to_dict()}
+        for j, lab in enumerate(self.labels):
+            out[f"max_abs_position_{lab}"] = float(np.abs(self.position[:, j]).max())
+            out[f"max_abs_force_{lab}"] = float(np.abs(self.controller_force[:, j]).max())
+            out[f"final_port_energy_{lab}"] = float(self.port_energy[-1, j])
+        return jsonable(out)
+
+    def to_dict(self, series: bool = False) -> dict[str, Any]:
+        d = self.summary()
+        if series:
+            d["series"] = {k: jsonable(v) for k, v in self._columns().items()}
+        return d
+
+    def _columns(self, dense: bool = False) -> dict[str, np.ndarray]:
+        if dense:
+            if self.dense_time is None:
+                raise AnalysisError("dense output was not requested: simulate(..., dense=m)")
+            cols = {"time_s": self.dense_time}
+            for j, lab in enumerate(self.labels):
+                cols[f"x_{lab}_m"] = self.dense_position[:, j]
+                cols[f"v_{lab}_m_per_s"] = self.dense_velocity[:, j]
+            return cols
+        cols = {"time_s": self.time}
+        for j, lab in enumerate(self.labels):
+            cols[f"x_{lab}_m"] = self.position[:, j]
+            cols[f"v_{lab}_m_per_s"] = self.velocity[:, j]
+            cols[f"u_{lab}_N"] = self.controller_force[:, j]
+            cols[f"f_ext_{lab}_N"] = self.exogenous_force[:, j]
+            cols[f"port_energy_{lab}_J"] = self.port_energy[:, j]
+        if self.contact is not None:
+            cols["contact"] = self.contact.astype(int)
+        return cols
+
+    def to_csv(self, path: str, dense: bool = False) -> None:
+        """Write the sampled (or, with ``dense``, the between-sample) series as CSV."""
+        cols = self._columns(dense)
+        data = np.column_stack(list(cols.values()))
+        np.savetxt(path, data, delimiter=",", header=",".join(cols), comments="", fmt="%.17g")
+
+    def plot(self, path: str | None = None) -> Any:
+        """Position, controller force and port energy against time (matplotlib figure)."""
+        from .plotting import plot_simulation
+        return plot_simulation(self, path)

@@ -1,0 +1,205 @@
+"""Sample-by-sample stepping of the sampled-data loop with nonlinear elements at the
+sampling instants, the consistent initial state, and exact dense output.
+
+The closed-loop state of :func:`hapstab.engine.build` is split by *role*, read off
+the matrices themselves (not from the engine's layout):
+
+* **physical** rows hold true physical quantities: the plant states, sampled
+  positions between samples (fractional delays: rows driven by the held force) and
+  pure copies of position entries (the delay registers). They evolve with the
+  open-loop map and the force actually applied: ``A_free s + G (f - u)`` with
+  ``A_free = A_cl + G F_u``.
+* the **position entries** among them (device positions, registers, fractional
+  samples) are what the controller reads; the measurement (encoder quantisation,
+  wall offset) is applied when they are read. Quantisation is memoryless, so a
+  register that stores the true position and is quantised when read gives exactly
+  what a register of quantised samples gives.
+* the remaining rows (controller states) are updated from the measured state.
+
+Without nonlinear elements this is exactly ``s[k+1] = A_cl s[k] + G f[k]``.
+
+References
+----------
+The paper, Fig. 2a and Fig. 3 (sampler, ZOH, delay, discrete controller).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Callable
+
+import numpy as np
+
+from .engine import SampledSystem, discretize, structure_of
+from .errors import ModelError
+from .models import HapticLoop, TeleoperationLoop
+
+__all__ = ["Roles", "roles_of", "initial_state", "step_nonlinear", "dense_output"]
+
+
+@dataclass(frozen=True)
+class Roles:
+    """Which closed-loop state entries are what (see the module docstring)."""
+
+    A: np.ndarray          # A_cl (N, N)
+    G: np.ndarray          # exogenous input (N, p)
+    Fu: np.ndarray         # controller force u = Fu s (p, N)
+    A_free: np.ndarray     # A_cl + G Fu
+    pos_entries: np.ndarray   # indices of position entries
+    pos_port: np.ndarray      # their port
+    physical: np.ndarray      # bool mask (N,)
+    E: np.ndarray             # controller input selectors (p, N)
+
+
+def _error_selectors(loop: HapticLoop | TeleoperationLoop, sysm: SampledSystem) -> np.ndarray:
+    """E (p, N) from the engine when it provides it, else from its integer-delay layout
+    (registers after the plant; register l of port j holds x_j[k-1-l])."""
+    E = getattr(sysm, "E", None)
+    if E is not None:
+        return np.asarray(E)
+    st = structure_of(loop)
+    p = len(st.ports)
+    depth = [0] * p
+    for ch in st.channels:
+        for j, _, n in ch.terms:
+            depth[j] = max(depth[j], int(n))
+    off = sysm.n_plant + np.concatenate([[0], np.cumsum(depth)]).astype(int)
+    E = np.zeros((p, sysm.order))
+    for ch in st.channels:
+        for j, sgn, n in ch.terms:
+            n = int(n)
+            if n == 0:
+                E[ch.port] += sgn * sysm.pos[j]
+            else:
+                E[ch.port, off[j] + n - 1] += sgn
+    return E
+
+
+def roles_of(loop: HapticLoop | TeleoperationLoop, sysm: SampledSystem) -> Roles:
+    """Classify the state entries of ``sysm`` (at the loop's own stiffness)."""
+    A, G, Fu = sysm.closed_loop()[0], sysm.B_ext[0], sysm.force_matrix()[0]
+    N, npl = sysm.order, sysm.n_plant
+    A_free = A + G @ Fu
+    pos_idx = np.argmax(sysm.pos, axis=1)
+    plant_port = np.searchsorted(pos_idx, np.arange(npl), side="right") - 1
+    port_of = {int(i): j for j, i in enumerate(pos_idx)}
+    changed = True
+    while changed:                       # registers chain: copy of a copy of a position
+        changed = False
+        for i in range(npl, N):
+            if i in port_of:
+                continue
+            if np.any(G[i]):             # a position sampled between samples (fractional delay)
+                cols = np.flatnonzero(A_free[i, :npl])
+                if cols.size:
+                    port_of[i], changed = int(plant_port[cols[0]]), True
+                continue
+            nz = np.flatnonzero(A[i])
+            if nz.size == 1 and A[i, nz[0]] == 1.0 and int(nz[0]) in port_of:
+                port_of[i], changed = port_of[int(nz[0])], True
+    pe = np.array(sorted(port_of), dtype=int)
+    phys = np.zeros(N, bool)
+    phys[:npl] = True
+    phys[pe] = True
+    return Roles(A, G, Fu, A_free, pe, np.array([port_of[i] for i in pe], dtype=int), phys,
+                 _error_selectors(loop, sysm))
+
+
+def initial_state(sysm: SampledSystem, roles: Roles, x0: Any, v0: Any, full: Any,
+                  measure: Callable[[np.ndarray], np.ndarray]) -> np.ndarray:
+    """The initial closed-loop state: given in full, or the plant at (x0, v0) with a
+    history at rest at x0 (every stored position x0 of its port; controller states
+    the fixed point of their own update).
+
+    Raises
+    ------
+    ModelError
+        Wrong sizes or non-finite values.
+    """
+    p, N, npl = sysm.n_ports, sysm.order, sysm.n_plant
+    if full is not None:
+        s = np.asarray(full, float).ravel()
+        if s.size != N or not np.all(np.isfinite(s)):
+            raise ModelError(f"initial_state: {s.size} values; need {N} finite values "
+                             f"(plant {npl}, then delay registers and controller states)")
+        return s
+    pos_idx = np.argmax(sysm.pos, axis=1)
+    s = np.zeros(N)
+    vals = []
+    for nm, val in (("initial_position", x0), ("initial_velocity", v0)):
+        a = np.broadcast_to(np.asarray(val, float).ravel(), (p,)) if np.size(val) in (1, p) else None
+        if a is None or not np.all(np.isfinite(a)):
+            raise ModelError(f"{nm} = {val!r}: must be one finite number or one per port ({p})")
+        vals.append(a)
+    s[roles.pos_entries] = vals[0][roles.pos_port]
+    s[pos_idx + 1] = vals[1]
+    ctrl = ~roles.physical
+    if ctrl.any():
+        sm = measure(s)
+        Acc = roles.A[np.ix_(ctrl, ctrl)]
+        rhs = roles.A[np.ix_(ctrl, ~ctrl)] @ sm[~ctrl]
+        s[ctrl] = np.linalg.lstsq(np.eye(int(ctrl.sum())) - Acc, rhs, rcond=None)[0]
+    return s
+
+
+def step_nonlinear(roles: Roles, s0: np.ndarray, F: np.ndarray, M: int,
+                   measure: Callable[[np.ndarray], np.ndarray], has_wall: bool,
+                   sat: float | None) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """Step M samples with the nonlinear elements at the sampling instants.
+
+    Returns
+    -------
+    S : (M+1, N) states, U : (M+1, p) applied controller forces, C : (M+1,) wall
+    contact flags (None without a wall). Rows after an overflow are inf / nan.
+    """
+    ph, ct = roles.physical, ~roles.physical
+    Af, Gp, Ac = roles.A_free[ph], roles.G[ph], roles.A[ct]
+    Fu, E0 = roles.Fu, roles.E[0]
+    S = np.empty((M + 1, s0.size))
+    U = np.empty((M + 1, Fu.shape[0]))
+    C = np.zeros(M + 1, bool) if has_wall else None
+    s = s0.copy()
+    for k in range(M + 1):
+        S[k] = s
+        sm = measure(s)
+        u = Fu @ sm
+        if has_wall:
+            C[k] = c = bool(E0 @ sm > 0)   # the wall pushes only on penetration it sees
+            if not c:
+                u[0] = 0.0
+        if sat is not None:
+            u = np.clip(u, -sat, sat)
+        U[k] = u
+        if k == M:
+            break
+        nxt = np.empty_like(s)
+        nxt[ph] = Af @ s + Gp @ (F[k] - u)
+        nxt[ct] = Ac @ sm
+        s = nxt
+        if not np.all(np.isfinite(s)):
+            S[k + 1:] = np.inf
+            U[k + 1:] = np.nan
+            break
+    return S, U, C
+
+
+def dense_output(sysm: SampledSystem, S: np.ndarray, G: np.ndarray, T: float, m: int
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Exact plant trajectory at m points per sample: the held net force G[k]
+    (exogenous minus controller) acts on the plant from its sampled state.
+
+    Returns
+    -------
+    t (M m + 1,), positions (M m + 1, p), velocities (M m + 1, p)
+    """
+    npl = sysm.n_plant
+    pos_idx = np.argmax(sysm.pos, axis=1)
+    taus = T * np.arange(1, m) / m
+    Adt, Bdt = discretize(sysm.Ac, sysm.Bc, taus)
+    Pk = S[:-1, :npl]
+    inner = np.einsum("inj,kj->kin", Adt, Pk) + np.einsum("inj,kj->kin", Bdt, G)
+    M = Pk.shape[0]
+    allp = np.concatenate([Pk[:, None, :], inner], axis=1).reshape(M * m, npl)
+    allp = np.vstack([allp, S[-1:, :npl]])
+    t = np.concatenate([(np.arange(M)[:, None] * T + np.r_[0.0, taus][None, :]).ravel(), [M * T]])
+    return t, allp[:, pos_idx], allp[:, pos_idx + 1]
