@@ -283,3 +283,76 @@ def test_simulation_kmax_options_validated():
     with pytest.raises(AnalysisError, match="SpringDamper"):
         critical_stiffness_simulation(h.HapticLoop(h.Device(0.1, 0.1),
                                                    h.DiscreteController((1.0,), (1.0,))))
+
+
+# ------------------------------------------------------------ fractional delay, nonlinear
+def rk4_hve_read_delayed(m, b, k_op, K, B, T, d, x0, f_ext, M, sub, q=None, sat=None, wall=None):
+    """Fig. 2a written out with a delay of d samples (not necessarily whole): the
+    controller reads x(kT - dT) from the fine trajectory, quantises it (q), acts on
+    the penetration beyond ``wall`` only while positive, clips to ``sat``."""
+    h_ = T / sub
+    lag = int(round(d * sub))            # d * sub must be whole: reading on the grid
+    xs, x, v = [x0], x0, 0.0
+    e_prev = None
+    us = []
+    for k in range(M):
+        i = k * sub - lag
+        xd = xs[i] if i >= 0 else x0     # at rest at x0 before t = 0
+        if q:
+            xd = q * round(xd / q)
+        e = xd - (wall or 0.0)
+        if e_prev is None:
+            e_prev = e
+        u = K * e + B * (e - e_prev) / T
+        e_prev = e
+        if wall is not None and e <= 0:
+            u = 0.0
+        if sat is not None:
+            u = min(max(u, -sat), sat)
+        us.append(u)
+        f = f_ext[k]
+
+        def acc(x_, v_):
+            return (f - u - b * v_ - k_op * x_) / m
+        for _ in range(sub):
+            k1x, k1v = v, acc(x, v)
+            k2x, k2v = v + h_ / 2 * k1v, acc(x + h_ / 2 * k1x, v + h_ / 2 * k1v)
+            k3x, k3v = v + h_ / 2 * k2v, acc(x + h_ / 2 * k2x, v + h_ / 2 * k2v)
+            k4x, k4v = v + h_ * k3v, acc(x + h_ * k3x, v + h_ * k3v)
+            x += h_ / 6 * (k1x + 2 * k2x + 2 * k3x + k4x)
+            v += h_ / 6 * (k1v + 2 * k2v + 2 * k3v + k4v)
+            xs.append(x)
+    return np.array(xs[::sub]), np.array(us)
+
+
+def test_fractional_delay_matches_fine_rk4():
+    T, K, B = 1e-3, 5.0, 0.01
+    loop = h.HapticLoop(h.Device(0.15, 0.1), h.SpringDamper(K, B), "spring:1", T, 2,
+                        fractional_delay=0.5)
+    res = simulate(loop, 0.3, force="step:1", initial_position=0.002)
+    M = res.time.size - 1
+    xs, us = rk4_hve_read_delayed(0.15, 0.1, 1.0, K, B, T, 2.5, 0.002, np.ones(M), M, sub=40)
+    # RK4 at T/40 on ~6 rad/s dynamics: truncation far below 1e-9 of the scale
+    np.testing.assert_allclose(res.position[:, 0], xs, rtol=0, atol=1e-9 * np.abs(xs).max())
+    np.testing.assert_allclose(res.controller_force[:-1, 0], us, rtol=0, atol=1e-9)
+
+
+@pytest.mark.parametrize("d", [3.0, 1.5])
+def test_nonlinear_stepping_matches_fine_rk4(d):
+    # quantisation, saturation and a wall together, whole and fractional delay
+    T, K, B = 1e-3, 40.0, 0.02
+    n, f = int(d), d - int(d)
+    loop = h.HapticLoop(h.Device(0.15, 0.5), h.SpringDamper(K, B), "spring:1", T, n,
+                        fractional_delay=f)
+    kw = dict(resolution=2e-4, saturation=0.3, wall=0.004)
+    res = simulate(loop, 0.5, force="sine:2,3", initial_position=0.0, **kw)
+    M = res.time.size - 1
+    fz = force_samples("sine:2,3", res.time[:-1])
+    xs, us = rk4_hve_read_delayed(0.15, 0.5, 1.0, K, B, T, d, 0.0, fz, M, sub=20,
+                                  q=2e-4, sat=0.3, wall=0.004)
+    assert res.contact.any() and not res.contact.all()
+    assert np.abs(res.controller_force).max() == pytest.approx(0.3)
+    # a quantisation step decided differently would show as a jump of K*2e-4 = 8 mN;
+    # RK4 truncation is ~1e-12, so 1e-7 m / 1e-6 N says every decision matched
+    np.testing.assert_allclose(res.position[:, 0], xs, rtol=0, atol=1e-7)
+    np.testing.assert_allclose(res.controller_force[:-1, 0], us, rtol=0, atol=1e-6)
