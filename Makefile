@@ -13,7 +13,8 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 demo: $(STAMP)
-	$(BIN)/hapstab demo
+	$(BIN)/hapstab reproduce all --out out/
+	@echo "Fig. 5 and Fig. 6 written to $(CURDIR)/out/: fig5.png fig5.svg fig5.csv fig6.png fig6.svg fig6.csv"
 
 test: $(STAMP)
 	$(BIN)/python -m pytest
@@ -21,6 +22,7 @@ test: $(STAMP)
 bench: $(STAMP)
 	$(BIN)/python -m pip install --quiet -e '.[test,bench]'
 	$(BIN)/python benchmarks/bench_boundary.py
+	$(BIN)/python benchmarks/bench_simulate.py
 
 clean:
 	rm -rf $(VENV) out .pytest_cache .hypothesis
