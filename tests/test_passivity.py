@@ -35,6 +35,12 @@ def test_issue_number_732():
     K = kmax(loop)
     assert K == pytest.approx(732.05, abs=0.005)  # the issue quotes two decimals
     assert K < h.eq18(loop).critical_stiffness  # (18) promises (b+B)/(1.5T) = 1000
+    # the literal inequality is tight (to rounding) at the reported worst frequency
+    res = h.critical_stiffness(loop, method="passivity")
+    w = res.details["worst_frequency_rad_s"] * 1e-3
+    H = K + 0.5 * (1 - np.exp(-1j * w)) / 1e-3
+    rhs = (1e-3 / 2) * np.real((1 - np.exp(-1j * w)) * H * np.exp(-1j * w)) / (1 - np.cos(w))
+    assert w > 0.1 and rhs == pytest.approx(1.0, abs=1e-9)
 
 
 def _brute_kmax(b, B, T, n):

@@ -47,7 +47,8 @@ def theta_grid(oscillations: int, points_per_oscillation: int = 48, minimum: int
 
 
 def refine_minimum(f: Callable[[np.ndarray], np.ndarray], theta: np.ndarray,
-                   values: np.ndarray, n_best: int = 8, iters: int = 48) -> tuple[float, float]:
+                   values: np.ndarray, n_best: int = 8, iters: int = 48,
+                   zero_rtol: float = 1e-10) -> tuple[float, float]:
     """Global minimum of ``f`` on [theta[0], theta[-1]] from its grid values.
 
     Every grid local minimum among the ``n_best`` lowest is refined by a
@@ -56,9 +57,15 @@ def refine_minimum(f: Callable[[np.ndarray], np.ndarray], theta: np.ndarray,
     what a 1e-6 relative accuracy in the minimum value needs (the error is
     quadratic in the angle at a smooth interior minimum).
 
+    zero_rtol : float
+        How close (relative) the first grid value must be to the minimum for the
+        minimum to be reported as the limit w -> 0.
+
     Returns
     -------
     (theta_min, f_min) : tuple of float
+        ``theta_min = 0`` when the minimum is the limit at the grid's first
+        point (see :func:`theta_grid`).
     """
     v = np.where(np.isnan(values), np.inf, values)
     N = v.size
@@ -90,6 +97,10 @@ def refine_minimum(f: Callable[[np.ndarray], np.ndarray], theta: np.ndarray,
         j = int(np.argmin(val))
         if val[j] < best_v:
             best_t, best_v = float(t[j]), float(val[j])
+    if np.isfinite(v[0]) and v[0] <= best_v + zero_rtol * abs(best_v):
+        # the first grid point stands for the limit w -> 0 (see theta_grid); when it is
+        # as low as the refined minimum (to rounding), the worst case is that limit
+        best_t, best_v = 0.0, min(best_v, float(v[0]))
     return best_t, best_v
 
 

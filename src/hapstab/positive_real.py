@@ -348,10 +348,12 @@ def positive_real(G: RationalMatrix, period: float | None = None, grid: int | No
     vals = lam(th)
     finite = np.isfinite(vals)
     scale = float(np.median(np.abs(vals[finite]))) if finite.any() else 1.0
-    t_min, margin = refine_minimum(lam, th, vals)
+    # next to a pole at z = 1 the eigenvalues carry ~1e-9 relative rounding (see below)
+    t_min, margin = refine_minimum(lam, th, vals, zero_rtol=1e-8)
     # eigenvalues of G + G^H carry an absolute error ~ eps ||G(e^{jw})||, which is
     # large next to a unit-circle pole even where the Hermitian part is small
-    g_norm = float(np.abs(G(t_min)).sum()) if math.isfinite(t_min) else 0.0
+    t_eval = max(t_min, float(th[0]))  # t_min = 0 stands for the limit at th[0]
+    g_norm = float(np.abs(G(t_eval)).sum()) if math.isfinite(t_min) else 0.0
     if margin < -(rtol * scale + 1e-13 * g_norm):  # ~500 eps: a few roundings per element
         fails.append("hermitian part")
         reasons.append(f"(iii) G + G^H has eigenvalue {margin:.6g} < 0 at w = {t_min / T:.6g} rad/s")
