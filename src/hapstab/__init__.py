@@ -14,6 +14,10 @@ from .models import (NO_IMPEDANCE, Device, DiscreteController, HapticLoop, Imped
                      TeleoperationLoop, mass_spring_damper, paper_hve, paper_peb, parse_impedance,
                      spring)
 from .results import BoundaryResult, CriticalStiffnessResult, StabilityResult
+from .positive_real import PositiveRealResult, RationalMatrix, circle_criterion, positive_real
+from .circle import circle_test, loop_inverse
+from .passivity import PassivityResult, sampled_passivity
+from .audit import AuditResult, audit
 
 __version__ = "0.1.0"
 
@@ -23,4 +27,6 @@ __all__ = [
     "paper_peb", "build", "SampledSystem", "stability", "critical_stiffness", "boundary",
     "methods_for", "colgate", "gil", "eq18", "eq29", "eq34", "gil2004", "HapstabError",
     "ModelError", "AnalysisError", "StabilityResult", "CriticalStiffnessResult", "BoundaryResult",
+    "RationalMatrix", "positive_real", "circle_criterion", "PositiveRealResult", "circle_test",
+    "loop_inverse", "sampled_passivity", "PassivityResult", "audit", "AuditResult",
 ]
