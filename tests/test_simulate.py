@@ -356,3 +356,17 @@ def test_nonlinear_stepping_matches_fine_rk4(d):
     # RK4 truncation is ~1e-12, so 1e-7 m / 1e-6 N says every decision matched
     np.testing.assert_allclose(res.position[:, 0], xs, rtol=0, atol=1e-7)
     np.testing.assert_allclose(res.controller_force[:-1, 0], us, rtol=0, atol=1e-6)
+
+
+def test_drift_of_free_masses_is_marginal_like_exact():
+    # no terminations: a rigid-body mode; a constant push makes the pair drift
+    loop = h.paper_peb(1e-3, 2, 5.0).replace(operator=None, environment=None)
+    assert stability(loop).verdict == "marginal"
+    res = simulate(loop, 5.0, force="step:1")
+    assert res.verdict.verdict == "marginal" and not res.bounded
+    # released from an offset instead: the offset persists, the motion decays
+    free = simulate(loop, 5.0, initial_position=[0.01, 0.0])
+    assert free.bounded
+    # equal devices: x_m + x_s obeys m a + b v + K (x - x[k-n]) = 0 on its own, every
+    # constant is an equilibrium and it starts (with its history) at rest at 0.01
+    assert free.position[-1].sum() == pytest.approx(0.01, rel=1e-9)

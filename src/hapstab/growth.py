@@ -47,7 +47,10 @@ class BoundednessVerdict:
 
     Attributes
     ----------
-    verdict : {"bounded", "unbounded"}
+    verdict : {"bounded", "unbounded", "marginal"}
+        ``marginal``: the fitted dominant mode neither grows nor decays within the
+        fit's resolution (a pole on the unit circle: sustained oscillation, or drift
+        such as a constant force pushing masses nothing ties to ground).
     growth_rate : float
         Estimated asymptotic rate sigma in 1/s (amplitude ~ exp(sigma t));
         < 0 decays, > 0 grows; ``-inf`` if nothing moves.
@@ -200,6 +203,8 @@ def assess(states: np.ndarray, forces: np.ndarray | None, period: float,
         conf = "low"
     verdict = "unbounded" if rate > 0 else "bounded"
     what = "grows" if rate > 0 else "decays"
-    reason = (f"fitted dominant mode {what} at {rate:.4g} 1/s (+-{unc:.2g}), linear-fit residual "
-              f"{resid:.1e}; observed change of |ds| over the run x{obs:.3g}")
+    if math.isfinite(rate) and abs(rate) <= unc:
+        verdict, what = "marginal", "neither grows nor decays (a pole on the unit circle)"
+    reason = (f"fitted dominant mode {what}: rate {rate:.4g} 1/s (+-{unc:.2g}), linear-fit "
+              f"residual {resid:.1e}; observed change of |ds| over the run x{obs:.3g}")
     return BoundednessVerdict(verdict, rate, unc, conf, "rate estimate", obs, resid, reason)
