@@ -268,6 +268,11 @@ def test_outputs_csv_dict_plot(tmp_path):
     h.HapticLoop(h.Device(0.15, 0.1), h.SpringDamper(1.0), None, 1e-3, 1),
     h.TeleoperationLoop(h.Device(0.05, 0.1), h.Device(0.02, 0.05), h.SpringDamper(1, 0.002),
                         h.SpringDamper(1, 0.002), "msd:0.2,1,100", None, 1e-3, 3),
+    h.HapticLoop(h.Device(0.15, 0.1), h.SpringDamper(1, 0.01), "spring:1", 1e-3, 2,
+                 fractional_delay=0.5),
+    h.TeleoperationLoop(h.Device(0.015, 0.02), h.Device(0.03, 0.05), h.SpringDamper(1),
+                        h.SpringDamper(1), "spring:1", "msd:0.01,0.1,50", 2e-3, 3,
+                        fractional_delay=0.3, fractional_delay_backward=0.8),
 ])
 def test_simulation_kmax_within_one_percent_of_exact(loop):
     ex = exact_critical_stiffness(loop).critical_stiffness
