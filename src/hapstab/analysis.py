@@ -14,7 +14,7 @@ import numpy as np
 from .closed_forms import CLOSED_FORMS
 from .engine import build
 from .errors import AnalysisError, check_delay, check_real
-from .exact import _to_result, exact_critical_stiffness, exact_kmax_batch
+from .exact import exact_critical_stiffness, exact_kmax_batch
 from .models import HapticLoop, TeleoperationLoop
 from .results import BoundaryResult, CriticalStiffnessResult
 
