@@ -48,6 +48,16 @@ def test_unequal_dampings_follow_eq28(bm, bs):
     assert kmax(loop) == pytest.approx(2 * bm * bs / ((bm + bs) * 1e-3), rel=1e-9)
 
 
+@pytest.mark.parametrize("r", [0.5, 2.0, 3.0])
+def test_unequal_stiffness_with_port_scaling(r):
+    # K_s = r K_m, n = 0, B = 0, master row weighted by r: by hand,
+    # det(diag(2 r b_m, 2 b_s) - K r T [[1, -1], [-1, 1]]) = 0 at K = 2 b_m b_s / (T (r b_m + b_s))
+    bm, bs, T = 0.02, 0.05, 1e-3
+    loop = TeleoperationLoop(Device(0.015, bm), Device(0.015, bs), SpringDamper(1.0),
+                             SpringDamper(r), "spring:1", "spring:1", T, 0)
+    assert kmax(loop) == pytest.approx(2 * bm * bs / (T * (r * bm + bs)), rel=1e-9)
+
+
 def test_eq13_with_virtual_damping():
     # (13) b > KT/2 + B is exact for the forward test at n = 0 for every B
     for B in (0.0, 0.01, 0.05, 0.099):
