@@ -134,6 +134,8 @@ def test_bad_input():
         scalar([float("nan")], [1.0])
     with pytest.raises(ModelError, match="sector"):
         circle_criterion(scalar([1.0], [1.0]), -1.0)
+    with pytest.raises(ModelError, match="sector"):
+        circle_criterion(scalar([1.0], [1.0]), [1.0, 2.0])
     with pytest.raises(AnalysisError, match="singular"):
         RationalMatrix([[[1.0], [1.0]], [[1.0], [1.0]]], [[[1.0], [1.0]], [[1.0], [1.0]]]).inverse()
 

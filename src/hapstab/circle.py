@@ -291,7 +291,9 @@ def critical_stiffness_circle(loop: HapticLoop | TeleoperationLoop, approximatio
 
 
 def _sector_kmax(loop: Any, a: str, sector: Any, scaling: str | None) -> CriticalStiffnessResult:
-    """K_max of K^{-1} + G(z) PR by bracketing then bisection (relative 1e-6)."""
+    """K_max of K^{-1} + G(z) PR by bracketing then bisection (relative 1e-6),
+    starting from the passive limit (PR of G implies PR of K^{-1} + G) and assuming
+    the PR set in K is an interval, as it is for the passive limit."""
     try:
         ks = np.atleast_1d(np.asarray(sector, dtype=float))
     except (TypeError, ValueError):

@@ -392,7 +392,10 @@ def circle_criterion(G: RationalMatrix, sector: Sequence[float] | float | None =
     """
     if sector is None:
         return positive_real(G, period)
-    ks = np.broadcast_to(np.asarray(sector, dtype=float), (G.m,))
+    try:
+        ks = np.broadcast_to(np.asarray(sector, dtype=float), (G.m,))
+    except (TypeError, ValueError):
+        raise ModelError(f"sector = {sector!r}: one bound k > 0, or one per channel ({G.m})") from None
     for k in ks:
         if not k > 0:
             raise ModelError(f"sector = {list(ks)}: every k_i must be > 0 (inf for the passive limit)")
