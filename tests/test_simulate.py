@@ -375,3 +375,11 @@ def test_drift_of_free_masses_is_marginal_like_exact():
     # equal devices: x_m + x_s obeys m a + b v + K (x - x[k-n]) = 0 on its own, every
     # constant is an equilibrium and it starts (with its history) at rest at 0.01
     assert free.position[-1].sum() == pytest.approx(0.01, rel=1e-9)
+
+
+def test_simulation_kmax_zero_when_unstable_for_every_k():
+    # large virtual damping with a long delay: unstable as K -> 0+ (exact says so too)
+    loop = h.paper_hve(1e-3, 30, 1.0, 10.0)
+    assert exact_critical_stiffness(loop).critical_stiffness == 0.0
+    res = critical_stiffness_simulation(loop)
+    assert res.critical_stiffness == 0.0 and "unbounded already" in res.reason
