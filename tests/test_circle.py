@@ -186,3 +186,14 @@ def test_bad_input():
     for bad in (0.0, -1.0, "x", float("nan")):
         with pytest.raises(AnalysisError, match="sector"):
             kmax(h.paper_hve(), sector=bad)
+
+
+def test_discrete_controller_equals_its_spring_damper():
+    # H(z) = K + B(z-1)/(Tz) given as a general DiscreteController: same PR verdict and margin
+    K, B, T, n = 8.0, 0.01, 1e-3, 3
+    sd = HapticLoop(Device(0.15, 0.1), SpringDamper(K, B), None, T, n)
+    dc = sd.replace(controller=DiscreteController(((K * T + B) / T, -B / T), (1.0, 0.0)))
+    for a in APPROXIMATIONS:
+        r1, r2 = circle_test(sd, a), circle_test(dc, a)
+        assert r1.positive_real == r2.positive_real
+        assert r1.margin == pytest.approx(r2.margin, abs=1e-9)  # same G^-1 to rounding
