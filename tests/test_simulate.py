@@ -383,3 +383,17 @@ def test_simulation_kmax_zero_when_unstable_for_every_k():
     assert exact_critical_stiffness(loop).critical_stiffness == 0.0
     res = critical_stiffness_simulation(loop)
     assert res.critical_stiffness == 0.0 and "unbounded already" in res.reason
+
+
+def test_simulation_kmax_finds_the_first_boundary_of_a_split_stable_set():
+    # the exact stable set is (0, 36.14] U (91.15, 125.49] (tests/test_exact.py); the
+    # paper's procedure must stop at the first boundary, not the island's end
+    loop = h.TeleoperationLoop(h.Device(0.19928093469739114, 0.05458898739705752),
+                               h.Device(0.13333897384215598, 0.6481864867733761),
+                               h.SpringDamper(1, 0.04703274312655707),
+                               h.SpringDamper(1, 0.04703274312655707),
+                               "spring:1", "msd:0.5,1,500", 0.00697194123846404, 0)
+    ex = exact_critical_stiffness(loop)
+    assert len(ex.stable_intervals) == 2
+    sim = critical_stiffness_simulation(loop)
+    assert abs(sim.critical_stiffness / ex.critical_stiffness - 1) < 0.01
