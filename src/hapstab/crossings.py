@@ -50,25 +50,38 @@ K_MIN = 1e-6
 
 # --------------------------------------------------------------- exact K_max core
 def _chi_coefficients(A0: np.ndarray, A1: np.ndarray, Ks: np.ndarray, r: int,
-                      eig0: np.ndarray) -> np.ndarray:
+                      eig0: np.ndarray, B1: np.ndarray, C1: np.ndarray) -> np.ndarray:
     """Coefficients (ascending in z) of chi's K'-polynomial, K' = K/Ks.
 
-    chi(z, K) is a polynomial of degree r in K; its z-coefficients at K = l Ks,
-    l = 0..r, are the elementary symmetric functions of the eigenvalues of
-    A(l Ks) (backward stable: exact for a matrix within rounding of A), and
-    Lagrange interpolation in K' = l gives the K'-coefficients.
+    a(z) = chi(z, 0) is the product of (z - lambda) over the eigenvalues of A0
+    (backward stable: exact for a matrix within rounding of A0). For r = 1,
+    chi = a(z) - K C1 adj(zI - A0) B1, and adj(zI - A0) = sum_k z^(N-1-k) B_k with
+    B_0 = I, B_k = A0 B_(k-1) + a_k I (Faddeev-LeVerrier), applied to B1: N mat-vecs.
+    For r = 2 the z-coefficients at K = Ks, 2 Ks come from eigenvalues likewise and
+    Lagrange interpolation in K' = 0, 1, 2 gives the K'-coefficients.
 
     Returns (P, r+1, N+1) real: chi(z, K) = sum_l (K/Ks)^l sum_m c[l, m] z^m.
     """
     P, N, _ = A0.shape
-    eigs = [eig0] + [np.linalg.eigvals(A0 + (l * Ks)[:, None, None] * A1) for l in range(1, r + 1)]
-    vals = np.empty((P, r + 1, N + 1))
-    for l, ev in enumerate(eigs):
+
+    def poly(ev: np.ndarray) -> np.ndarray:            # descending coefficients of prod (z - ev)
         d = np.zeros((P, N + 1), complex)
         d[:, 0] = 1.0
-        for i in range(N):                             # descending: times (z - lambda_i)
+        for i in range(N):
             d[:, 1:i + 2] = d[:, 1:i + 2] - ev[:, i:i + 1] * d[:, 0:i + 1]
-        vals[:, l, :] = d[:, ::-1].real
+        return d.real
+
+    a = poly(eig0)
+    if r == 1:
+        b = np.zeros((P, N + 1))
+        v = B1[:, :, 0].copy()
+        c = C1[:, 0, :]
+        for k in range(N):
+            b[:, 1 + k] = -np.einsum("pn,pn->p", c, v)
+            v = np.einsum("pij,pj->pi", A0, v) + a[:, k + 1:k + 2] * B1[:, :, 0]
+        return np.stack([a[:, ::-1], (Ks[:, None] * b)[:, ::-1]], axis=1)
+    vals = np.stack([a] + [poly(np.linalg.eigvals(A0 + (l * Ks)[:, None, None] * A1))
+                           for l in range(1, r + 1)], axis=1)[:, :, ::-1]
     V = np.vander(np.arange(r + 1, dtype=float), r + 1, increasing=True)  # rows: l^0..l^r
     return np.einsum("kl,plm->pkm", np.linalg.inv(V), vals)
 
@@ -77,22 +90,34 @@ def _rev(x: np.ndarray) -> np.ndarray:
     return x[::-1]
 
 
-def _crossing_poly(c: np.ndarray) -> np.ndarray:
-    """Ascending coefficients of the polynomial whose unit-circle roots are all
-    frequencies where chi(e^{j theta}, K) = 0 for some real K."""
-    mul = np.convolve  # (polymul would trim zeros and misalign the reversal)
-    if c.shape[0] == 2:
-        a, b = c
-        q = mul(a, _rev(b))
-        return q - q[::-1]   # exactly anti-palindromic
-    a, b, cc = c
-    x1 = mul(cc, _rev(a)) - mul(_rev(cc), a)
-    x2 = mul(cc, _rev(b)) - mul(_rev(cc), b)
-    x3 = mul(b, _rev(a)) - mul(_rev(b), a)
-    q = mul(x1, x1) - mul(x2, x3)
-    # exact (anti-)palindromic symmetry keeps simple unit-circle roots on the circle
-    return 0.5 * (q + q[::-1]) if np.abs(q + q[::-1]).sum() > np.abs(q - q[::-1]).sum() \
-        else 0.5 * (q - q[::-1])
+def _bconv(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Row-wise polynomial product (ascending coefficients), batched."""
+    out = np.zeros((x.shape[0], x.shape[1] + y.shape[1] - 1))
+    for i in range(x.shape[1]):
+        out[:, i:i + y.shape[1]] += x[:, i:i + 1] * y
+    return out
+
+
+def _crossing_polys(c: np.ndarray) -> np.ndarray:
+    """Rows of ascending coefficients of the polynomials whose unit-circle roots are
+    all frequencies where chi(e^{j theta}, K) = 0 for some real K; c is (P, r+1, N+1).
+
+    r = 1: a b~ - a~ b (x~ the reversal): exactly anti-palindromic by construction.
+    r = 2: the resultant in K of chi(z, K) and its reversal; made exactly
+    (anti-)palindromic, which keeps simple unit-circle roots on the circle.
+    """
+    rev = lambda x: x[:, ::-1]  # noqa: E731
+    if c.shape[1] == 2:
+        a, b = c[:, 0], c[:, 1]
+        q = _bconv(a, rev(b))
+        return q - rev(q)
+    a, b, cc = c[:, 0], c[:, 1], c[:, 2]
+    x1 = _bconv(cc, rev(a)) - _bconv(rev(cc), a)
+    x2 = _bconv(cc, rev(b)) - _bconv(rev(cc), b)
+    x3 = _bconv(b, rev(a)) - _bconv(rev(b), a)
+    q = _bconv(x1, x1) - _bconv(x2, x3)
+    pal = np.abs(q + rev(q)).sum(axis=1) > np.abs(q - rev(q)).sum(axis=1)
+    return np.where(pal[:, None], 0.5 * (q + rev(q)), 0.5 * (q - rev(q)))
 
 
 def _mu_and_slope(A0: np.ndarray, B1: np.ndarray, C1: np.ndarray, theta: np.ndarray
@@ -146,37 +171,36 @@ def _polish(A0, B1, C1, theta, iters: int = 30):
     return th, mu
 
 
-def _unit_roots_batch(polys: list[np.ndarray], tol: float = 2e-3) -> list[np.ndarray]:
-    """Angles in (0, pi) of the unit-circle roots of (anti-)palindromic polynomials.
+def _unit_roots_batch(Q: np.ndarray, tol: float = 2e-3) -> list[np.ndarray]:
+    """Angles in (0, pi) of the unit-circle roots of each row of Q, (anti-)palindromic
+    polynomials of degree 2M (ascending coefficients).
 
     With x = cos(theta), ``z^-M q(z)`` is ``q_M + 2 sum_k q_{M+k} T_k(x)``
     (palindromic) or ``2j sin(theta) sum_k q_{M+k} U_{k-1}(x)`` (anti-palindromic),
     a Chebyshev series of half the degree whose real roots in (-1, 1) are the
     wanted angles; roots come from colleague matrices, batched over equal degrees.
     """
-    series = []
-    for q in polys:
-        M = (q.size - 1) // 2
-        hi = q[M + 1:]
-        if np.abs(q + q[::-1]).sum() <= np.abs(q - q[::-1]).sum():   # anti-palindromic
-            u = hi                                                   # U_{k-1} coefficients
-            t = np.zeros(max(u.size, 1))
-            # U_n = 2 (T_n + T_{n-2} + ...) (- T_0 if n even): reverse cumulative sums
-            for par in (0, 1):
-                t[par::2] = 2 * np.cumsum(u[par::2][::-1])[::-1]
-            t[0] -= u[0::2].sum()
-        else:
-            t = np.concatenate([[q[M]], 2 * hi])
-        scale = np.abs(t).max() if t.size else 0.0
-        nz = np.flatnonzero(np.abs(t) > 1e-13 * scale) if scale > 0 else np.zeros(0, int)
-        series.append(t[:nz[-1] + 1] if nz.size else np.zeros(1))
-    out: list[np.ndarray] = [np.zeros(0)] * len(polys)
-    by_deg: dict[int, list[int]] = {}
-    for i, t in enumerate(series):
-        if t.size >= 2:
-            by_deg.setdefault(t.size - 1, []).append(i)
-    for n, idx in by_deg.items():
-        c = np.array([series[i] for i in idx])
+    P, L = Q.shape
+    M = (L - 1) // 2
+    hi = Q[:, M + 1:]
+    anti = np.abs(Q + Q[:, ::-1]).sum(axis=1) <= np.abs(Q - Q[:, ::-1]).sum(axis=1)
+    # U_n = 2 (T_n + T_{n-2} + ...) (- T_0 if n even): reverse cumulative sums
+    tu = np.zeros((P, max(M, 1)))
+    for par in (0, 1):
+        tu[:, par::2] = 2 * np.cumsum(hi[:, par::2][:, ::-1], axis=1)[:, ::-1]
+    tu[:, 0] -= hi[:, 0::2].sum(axis=1)
+    tt = np.concatenate([Q[:, M:M + 1], 2 * hi], axis=1)
+    tu = np.concatenate([tu, np.zeros((P, tt.shape[1] - tu.shape[1]))], axis=1)
+    t = np.where(anti[:, None], tu, tt)
+    scale = np.abs(t).max(axis=1, keepdims=True)
+    big = np.abs(t) > 1e-13 * np.where(scale > 0, scale, 1.0)
+    deg = np.where(big.any(axis=1), t.shape[1] - 1 - np.argmax(big[:, ::-1], axis=1), 0)
+    out: list[np.ndarray] = [np.zeros(0)] * P
+    for n in np.unique(deg):
+        if n < 1:
+            continue
+        idx = np.flatnonzero(deg == n)
+        c = t[idx, :n + 1]
         if n == 1:
             x = (-c[:, 0] / c[:, 1])[:, None].astype(complex)
         else:   # colleague matrix, as numpy.polynomial.chebyshev.chebcompanion
@@ -188,8 +212,7 @@ def _unit_roots_batch(polys: list[np.ndarray], tol: float = 2e-3) -> list[np.nda
             mat[:, np.arange(1, n), np.arange(n - 1)] = off
             mat[:, :, -1] -= (c[:, :-1] / c[:, -1:]) * (scl / scl[-1]) * 0.5
             x = np.linalg.eigvals(mat)
-        xr = np.clip(x.real, -1.0, 1.0)
-        th = np.arccos(xr)
+        th = np.arccos(np.clip(x.real, -1.0, 1.0))
         # a root at |z| = e^{-eps} maps to Im x ~ eps sin(theta)
         keep = (np.abs(x.imag) <= tol * np.maximum(np.sin(th), 1e-6)) & (np.abs(x.real) < 1.0)
         keep &= (th > 1e-9) & (th < np.pi - 1e-9)
@@ -258,17 +281,17 @@ def exact_kmax_batch(sysm: SampledSystem, intervals: bool = True) -> list[dict[s
     if not sysm.varies_with_K:
         raise AnalysisError("controller: critical stiffness needs SpringDamper controllers "
                             "(a general H(z) has no stiffness K to vary)")
-    A1 = sysm.B1 @ sysm.C1
-    # K enters with the numerical rank of A1 (PEB without delay: rank 1, the two
-    # error signals being opposite); factor A1 = B1 C1 at that rank, by groups.
-    U, S, Vt = np.linalg.svd(A1)
+    # K enters with the rank of A1 = B1 C1; B1 has one independent column per port
+    # (its ZOH input), so that is the rank of the small C1 (PEB without delay: 1, the
+    # two error signals being opposite). Factor at that rank, by groups.
+    U, S, Vt = np.linalg.svd(sysm.C1, full_matrices=False)      # (P, p, p), (P, p), (P, p, N)
     ranks = np.sum(S > 1e-12 * S[:, :1], axis=1)
-    out: list[dict[str, Any] | None] = [None] * A1.shape[0]
+    out: list[dict[str, Any] | None] = [None] * sysm.C1.shape[0]
     for r in np.unique(ranks):
         idx = np.flatnonzero(ranks == r)
         if not 1 <= r <= 2:
             raise AnalysisError(f"stiffness enters the loop with rank {r}; only 1 or 2 is supported")
-        B1 = U[idx, :, :r] * S[idx, None, :r]
+        B1 = sysm.B1[idx] @ (U[idx, :, :r] * S[idx, None, :r])
         C1 = Vt[idx, :r, :]
         for i, res in zip(idx, _kmax_core(sysm.A0[idx], B1, C1, intervals)):
             out[i] = res
@@ -282,21 +305,26 @@ def _kmax_core(A0: np.ndarray, B1: np.ndarray, C1: np.ndarray, full: bool = True
     r = B1.shape[-1]
     Ks = np.linalg.norm(A0, axis=(1, 2)) / np.maximum(np.linalg.norm(A1, axis=(1, 2)), 1e-300)
     Ks = 2.0 ** np.round(np.log2(Ks))   # a power of two keeps K/Ks exact
-    Sv = np.linalg.svd(np.concatenate([np.eye(N) - A0, A1], axis=1), compute_uv=False)
-    rigid = np.sum(Sv < 1e-10 * np.maximum(1.0, Sv[:, :1]), axis=1)   # as rigid_body_modes()
-
     eig0 = np.linalg.eigvals(A0)
-    coef = _chi_coefficients(A0, A1, Ks, r, eig0)
+    # rigid-body modes need a pole of A0 at z = 1: look for them only there
+    rigid = np.zeros(P, int)
+    near1 = np.flatnonzero(np.abs(eig0 - 1.0).min(axis=1) < 1e-6)
+    if near1.size:
+        Sv = np.linalg.svd(np.concatenate([np.eye(N) - A0[near1], A1[near1]], axis=1),
+                           compute_uv=False)
+        rigid[near1] = np.sum(Sv < 1e-10 * np.maximum(1.0, Sv[:, :1]), axis=1)  # as rigid_body_modes()
+    coef = _chi_coefficients(A0, A1, Ks, r, eig0, B1, C1)
 
     # --- complex crossings: candidates, then polish on the exact frequency response
-    cs = [np.array([_deflate(ci, rigid[p]) for ci in coef[p]]) if rigid[p] else coef[p]
-          for p in range(P)]
-    ths = _unit_roots_batch([_crossing_poly(c) for c in cs])
+    cs = coef.copy()
+    for p in np.flatnonzero(rigid):
+        cs[p] = [_deflate(ci, rigid[p]) for ci in coef[p]]
+    ths = _unit_roots_batch(_crossing_polys(cs))
     cand_p = np.repeat(np.arange(P), [t.size for t in ths])
     crossings: list[list[tuple[float, float]]] = [[] for _ in range(P)]  # (K, theta)
     if cand_p.size:
         th0 = np.concatenate(ths)
-        mu0 = _rough_mu(np.array(cs)[cand_p], Ks[cand_p], th0)
+        mu0 = _rough_mu(cs[cand_p], Ks[cand_p], th0)
         # K = 1/mu must be positive; the rough angle (resultant near z = 1) can be
         # a few % off, so the test on Im is generous and the polish decides
         ok0 = (np.abs(mu0.imag) < (0.5 if r == 2 else 0.05) * np.abs(mu0)) & (mu0.real > 0)
