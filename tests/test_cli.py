@@ -85,3 +85,15 @@ def test_bad_input_is_one_line_and_exit_2(args, needle):
 def test_help_exits_zero():
     r = run("kmax", "hve", "--help")
     assert r.exit_code == 0 and "--virtual-damping" in r.stdout
+
+
+def test_approximation_only_with_circle():
+    r = run("kmax", "hve", "--method", "exact", "--approximation", "forward")
+    assert r.exit_code == 2 and "applies to --method circle only" in r.stderr
+    assert "Traceback" not in r.stderr
+
+
+def test_paper_methods_refuse_fractional_delay_in_one_line():
+    r = run("kmax", "hve", "--delay-s", "0.0105", "--method", "circle")
+    assert r.exit_code == 2 and "whole number of samples" in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1

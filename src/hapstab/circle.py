@@ -34,7 +34,7 @@ import numpy as np
 
 from .errors import AnalysisError
 from .frequency import psd_limit, refine_minimum, theta_grid
-from .models import HapticLoop, SpringDamper, TeleoperationLoop
+from .models import HapticLoop, SpringDamper, TeleoperationLoop, whole_delay
 from .positive_real import PositiveRealResult, RationalMatrix, circle_criterion, positive_real
 from .results import CriticalStiffnessResult
 
@@ -128,7 +128,7 @@ def loop_inverse(loop: HapticLoop | TeleoperationLoop, approximation: str = "for
     RationalMatrix
     """
     _check_kind(loop)
-    a, T, n = _approx(approximation), loop.period, loop.delay_samples
+    a, T, n = _approx(approximation), loop.period, whole_delay(loop, "the circle criterion")
     xn, xd = _x_poly(a, T)
     zn = np.concatenate([[1.0], np.zeros(n)])  # z^n: the delay z^{-n} moves to the denominator
 
@@ -184,7 +184,7 @@ def circle_test(loop: HapticLoop | TeleoperationLoop, approximation: str = "forw
 def _hermitian_parts(loop: HapticLoop | TeleoperationLoop, a: str, D: tuple[float, ...],
                      theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Hermitian parts of G^{-1} = A + K C at K = 0 (A) and per unit master K (C)."""
-    T, n = loop.period, loop.delay_samples
+    T, n = loop.period, whole_delay(loop, "the circle criterion")
     X, Y = _x_y(a, theta, T)
     d = np.exp(-1j * n * theta)
     if isinstance(loop, HapticLoop):
@@ -265,7 +265,7 @@ def critical_stiffness_circle(loop: HapticLoop | TeleoperationLoop, approximatio
     """
     _check_stiffness_loop(loop)
     a = _approx(approximation)
-    T, n = loop.period, loop.delay_samples
+    T, n = loop.period, whole_delay(loop, "the circle criterion")
     D = port_scaling(loop, scaling)
     if sector is not None:
         return _sector_kmax(loop, a, sector, scaling)
@@ -329,6 +329,6 @@ def _sector_kmax(loop: Any, a: str, sector: Any, scaling: str | None) -> Critica
     f_hz = res.worst_frequency_hz if res is not None else float("nan")
     return CriticalStiffnessResult(
         float(K), "circle", ((0.0, float(K)),) if K > 0 else (), reason, loop.period,
-        loop.delay_samples, f_hz,
+        whole_delay(loop, "the circle criterion"), f_hz,
         {"approximation": a, "worst_frequency_rad_s": f_hz * 2 * math.pi,
          "port_scaling": list(port_scaling(loop, scaling)), "sector": ks.tolist()})

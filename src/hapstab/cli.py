@@ -269,6 +269,9 @@ def _kmax_command(kind: str) -> None:
         if method not in allowed:
             raise HapstabError(f"--method = {method!r}: unknown for {kind}; allowed: {', '.join(allowed)}")
         loop = make(kw, stiffness=1.0)
+        if approximation and method != "circle":
+            raise HapstabError(f"--approximation = {approximation!r}: applies to --method circle only "
+                               f"(got --method {method})")
         opts = {"approximation": approximation} if approximation else {}
         res = critical_stiffness(loop, method=method, **opts)
         rows = [("critical stiffness", f"{fmt(res.critical_stiffness)} N/m"),

@@ -16,12 +16,13 @@ from typing import Any, Union
 
 import numpy as np
 
-from .errors import ModelError, check_delay, check_real
+from .errors import AnalysisError, ModelError, check_delay, check_real
 
 __all__ = [
     "Device", "Impedance", "NO_IMPEDANCE", "spring", "mass_spring_damper",
     "SpringDamper", "DiscreteController", "Controller", "HapticLoop",
     "TeleoperationLoop", "parse_impedance", "paper_hve", "paper_peb", "delay_from_seconds",
+    "whole_delay",
 ]
 
 
@@ -486,6 +487,23 @@ class TeleoperationLoop:
 
 
 Loop = Union[HapticLoop, TeleoperationLoop]
+
+
+def whole_delay(loop: "HapticLoop | TeleoperationLoop", what: str) -> int:
+    """The delay in whole samples (equal both ways for teleoperation), for methods
+    derived for t_d = nT only; otherwise an :class:`AnalysisError` naming ``what``."""
+    if isinstance(loop, TeleoperationLoop):
+        if not loop.symmetric_delay:
+            raise AnalysisError(f"{what}: derived for equal delays in both directions; this loop has "
+                                f"{loop.forward_delay_in_samples:g} and "
+                                f"{loop.backward_delay_in_samples:g} samples")
+        d = loop.forward_delay_in_samples
+    else:
+        d = loop.delay_in_samples
+    if d != int(d):
+        raise AnalysisError(f"{what}: derived for a whole number of samples of delay "
+                            f"(t_d = nT); this loop has t_d = {d:g} T")
+    return int(d)
 
 
 def paper_hve(period: float = 1e-3, delay_samples: int = 0, stiffness: float = 100.0,

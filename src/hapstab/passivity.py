@@ -41,7 +41,7 @@ import numpy as np
 from .circle import port_scaling
 from .errors import AnalysisError
 from .frequency import min_eig, psd_limit, refine_minimum, theta_grid
-from .models import HapticLoop, SpringDamper, TeleoperationLoop
+from .models import HapticLoop, SpringDamper, TeleoperationLoop, whole_delay
 from .results import CriticalStiffnessResult, jsonable
 
 __all__ = ["PassivityResult", "sampled_passivity", "critical_stiffness_passivity"]
@@ -104,7 +104,7 @@ def _parts(loop: HapticLoop | TeleoperationLoop, theta: np.ndarray, scaling: str
            unit: str | None) -> tuple[np.ndarray, np.ndarray]:
     """(damping matrix D diag(b), sampled part W = -(T/2) Herm{...}/(1 - cos)) with the
     controllers' full H (unit None), K-part per unit master K ("K") or B-part ("B")."""
-    T, n = loop.period, loop.delay_samples
+    T, n = loop.period, whole_delay(loop, "sampled-data passivity")
     f = 1j * np.exp(-0.5j * theta) / np.sin(theta / 2)  # (1 - e^{-jw})/(1 - cos w)
     d = np.exp(-1j * n * theta)
     if isinstance(loop, HapticLoop):
@@ -162,7 +162,7 @@ def sampled_passivity(loop: HapticLoop | TeleoperationLoop, scaling: str | None 
         Db, W = _parts(loop, t, scaling, None)
         return min_eig(Db + W)
 
-    th = theta_grid(loop.delay_samples + 2)
+    th = theta_grid(whole_delay(loop, "sampled-data passivity") + 2)
     t_min, m = refine_minimum(margin, th, margin(th))
     scale = float(np.max(np.abs(_parts(loop, th, scaling, None)[1]))) + 1e-300
     ok = m >= -1e-12 * scale  # rounding slack relative to the sampled part's size
@@ -219,14 +219,14 @@ def critical_stiffness_passivity(loop: HapticLoop | TeleoperationLoop,
         tol = 1e-12 * np.abs(A).reshape(t.size, -1).max(axis=1)  # rounding slack on A >= 0
         return psd_limit(A, WK, tol)
 
-    th = theta_grid(loop.delay_samples + 2)
+    th = theta_grid(whole_delay(loop, "sampled-data passivity") + 2)
     t_min, K = refine_minimum(k_of, th, k_of(th))
     fin = math.isfinite(K)
     reason = ("sampled-data passivity (Colgate-Schenkel 1997"
               + (", multiport" if isinstance(loop, TeleoperationLoop) else "") + "): passive for K <= K_max"
               + (f"; binds at w = {t_min / T:.6g} rad/s" if fin else " = inf"))
     return CriticalStiffnessResult(
-        float(K), "passivity", ((0.0, float(K)),) if K > 0 else (), reason, T, loop.delay_samples,
+        float(K), "passivity", ((0.0, float(K)),) if K > 0 else (), reason, T, whole_delay(loop, "sampled-data passivity"),
         t_min / (2 * math.pi * T) if fin else float("nan"),
         {"worst_frequency_rad_s": t_min / T if fin else float("nan"),
          "port_scaling": list(port_scaling(loop, scaling))})
