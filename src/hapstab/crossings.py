@@ -389,11 +389,16 @@ def _kmax_core(A0: np.ndarray, B1: np.ndarray, C1: np.ndarray, full: bool = True
     outside = np.empty(mK.size, dtype=int)
     on = np.empty(mK.size, dtype=int)
     rho = np.empty(mK.size)
+    # the anchor (K_MIN * Ks) counts like K = 0 unless A0 has a pole on the circle
+    off_circle = np.abs(np.abs(eig0) - 1.0).min(axis=1) > 1e-6
+    anchor_idx = np.cumsum([0] + [len(m) for m in probes[:-1]])
+    reuse = np.zeros(mK.size, bool)
+    reuse[anchor_idx] = off_circle
     for s in range(0, mK.size, 2048):
         sl = slice(s, s + 2048)
-        k0 = mK[sl] == 0.0
+        k0 = reuse[sl]
         eig = np.empty((k0.size, N), complex)
-        eig[k0] = eig0[mp[sl][k0]]                 # K = 0: already known
+        eig[k0] = eig0[mp[sl][k0]]                 # already known
         if (~k0).any():
             pp = mp[sl][~k0]
             eig[~k0] = np.linalg.eigvals(A0[pp] + mK[sl][~k0, None, None] * A1[pp])
