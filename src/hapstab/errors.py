@@ -8,7 +8,10 @@ from __future__ import annotations
 
 import math
 from numbers import Integral, Real
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    import numpy as np
 
 
 class HapstabError(ValueError):
@@ -76,3 +79,18 @@ def check_delay(name: str, value: Any) -> int:
     if v < 0:
         raise ModelError(f"{name} = {v}: must be a whole number of samples >= 0")
     return v
+
+
+def check_poly(name: str, coeffs: Any) -> "np.ndarray":
+    """Finite real polynomial coefficients, highest power first, leading zeros
+    dropped (all-zero gives [0.]); else :class:`ModelError` naming ``name``."""
+    import numpy as np
+
+    try:
+        a = np.atleast_1d(np.asarray(coeffs, dtype=float)).ravel()
+    except (TypeError, ValueError):
+        raise ModelError(f"{name} = {coeffs!r}: must be a sequence of real coefficients") from None
+    if a.size == 0 or not np.all(np.isfinite(a)):
+        raise ModelError(f"{name} = {coeffs!r}: must be finite real coefficients, highest power first")
+    nz = np.flatnonzero(a)
+    return a[nz[0]:] if nz.size else np.zeros(1)

@@ -1,28 +1,10 @@
 """Exact stability and exact critical stiffness of the sampled-data loop.
 
-Method (implemented in :mod:`hapstab.crossings`)
-------
-The closed loop at the sampling instants is ``A(K) = A0 + K B1 C1`` (see
-:mod:`hapstab.engine`), with ``r = rank(B1 C1)`` equal to the number of ports
-(1 for the HVE, 2 for PEB).  Its characteristic polynomial
-``chi(z, K) = det(zI - A(K))`` has degree N in z and r in K.
-
-1. Coefficients of chi are recovered *exactly* (to rounding) by evaluating
-   determinants at N+1 roots of unity and r+1 values of K and inverting the DFT,
-   which is perfectly conditioned on the unit circle.
-2. A pole reaches |z| = 1 for real K only where chi(z, K) and its reciprocal
-   ``z^N chi(1/z, K)`` have a common root K: for r = 1 this is the polynomial
-   ``a(z) b~(z) - a~(z) b(z)``; for r = 2 the resultant of two quadratics in K.
-   All its roots on the unit circle are candidates (none can be missed: no grid).
-3. Each candidate frequency is polished by Newton iteration on
-   ``Im mu(theta) = 0``, mu an eigenvalue of ``G(e^{j theta}) = C1 (zI - A0)^-1 B1``
-   (so K = 1/mu), evaluated by linear solves, not polynomials: the result is
-   accurate to rounding.  Crossings at z = +-1 come from real roots of chi(+-1, K).
-4. The stable set in K is the union of the gaps between consecutive crossings
-   whose midpoint has spectral radius < 1.
-
-Modes at z = 1 that exist for every K (a mass nothing ties to ground) are
-rigid-body modes: they are counted, excluded and reported, never called unstable.
+``stability(loop)`` reads the closed-loop poles of the exact model
+(:mod:`hapstab.engine`); ``exact_critical_stiffness(loop)`` finds every K at which a
+pole reaches |z| = 1 (:mod:`hapstab.crossings`: no grid, no bracket, polished to
+rounding) and the stable set in K. Rigid-body modes (poles at z = 1 that no K
+moves) are reported as marginal, never as unstable.
 """
 
 from __future__ import annotations

@@ -16,7 +16,7 @@ from typing import Any, Union
 
 import numpy as np
 
-from .errors import AnalysisError, ModelError, check_delay, check_real
+from .errors import AnalysisError, ModelError, check_delay, check_poly, check_real
 
 __all__ = [
     "Device", "Impedance", "NO_IMPEDANCE", "spring", "mass_spring_damper",
@@ -49,15 +49,7 @@ class Device:
 
 
 # ------------------------------------------------------------------------ impedances
-def _poly(name: str, coeffs: Any) -> np.ndarray:
-    try:
-        a = np.atleast_1d(np.asarray(coeffs, dtype=float)).ravel()
-    except (TypeError, ValueError):
-        raise ModelError(f"{name} = {coeffs!r}: must be a sequence of real coefficients") from None
-    if a.size == 0 or not np.all(np.isfinite(a)):
-        raise ModelError(f"{name} = {coeffs!r}: must be finite real coefficients, highest power first")
-    nz = np.flatnonzero(a)
-    return a[nz[0]:] if nz.size else np.zeros(1)
+_poly = check_poly
 
 
 @dataclass(frozen=True)

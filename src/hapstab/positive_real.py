@@ -26,7 +26,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from .errors import AnalysisError, ModelError, check_real
+from .errors import AnalysisError, ModelError, check_poly, check_real
 from .frequency import min_eig, refine_minimum, theta_grid
 from .results import jsonable
 
@@ -38,15 +38,7 @@ _SIMPLE = 1e-6       # two unit-circle poles closer than this are one multiple p
 _RTOL = 1e-9         # eigenvalue slack relative to the matrix scale: eigvalsh/roundoff is ~1e-13 of it
 
 
-def _coeffs(name: str, c: Any) -> np.ndarray:
-    try:
-        a = np.atleast_1d(np.asarray(c, dtype=float)).ravel()
-    except (TypeError, ValueError):
-        raise ModelError(f"{name} = {c!r}: must be real polynomial coefficients in z") from None
-    if a.size == 0 or not np.all(np.isfinite(a)):
-        raise ModelError(f"{name} = {c!r}: must be finite real coefficients, highest power first")
-    nz = np.flatnonzero(a)
-    return a[nz[0]:] if nz.size else np.zeros(1)
+_coeffs = check_poly
 
 
 @dataclass(frozen=True)
