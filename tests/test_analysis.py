@@ -53,9 +53,16 @@ def test_methods_for_kind():
 def test_result_to_dict_is_json_ready():
     import json
 
-    d = h.critical_stiffness(h.paper_hve()).to_dict()
-    json.dumps(d)
-    assert d["method"] == "exact" and d["stable_intervals"][0][0] == 0.0
-    d = h.critical_stiffness(h.HapticLoop(h.Device(0.1, 0.1), h.SpringDamper(1.0), "spring:1", 1e-3,
-                                          0).replace(controller=h.SpringDamper(1.0, 0.0))).to_dict()
-    json.dumps(d)
+    d = json.loads(json.dumps(h.critical_stiffness(h.paper_hve()).to_dict()))
+    assert d["method"] == "exact" and d["stable_intervals"] == [[0.0, d["critical_stiffness"]]]
+    # a loop stable for every K reports inf, which JSON cannot hold as a number
+    free = h.HapticLoop(h.Device(0.1, 0.1), h.SpringDamper(1.0), None, 1e-3, 0)
+    d = json.loads(json.dumps(h.colgate(free).to_dict()))
+    assert d["critical_stiffness"] == pytest.approx(200.0)
+
+
+def test_boundary_replaces_the_templates_delays():
+    tmpl = h.paper_peb().replace(delay_backward_samples=6, fractional_delay=0.3)
+    a = h.boundary(tmpl, [1e-3], [0, 4]).critical_stiffness
+    b = h.boundary(h.paper_peb(), [1e-3], [0, 4]).critical_stiffness
+    np.testing.assert_array_equal(a, b)

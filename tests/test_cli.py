@@ -97,3 +97,23 @@ def test_paper_methods_refuse_fractional_delay_in_one_line():
     r = run("kmax", "hve", "--delay-s", "0.0105", "--method", "circle")
     assert r.exit_code == 2 and "whole number of samples" in r.stderr
     assert len(r.stderr.strip().splitlines()) == 1
+
+
+@pytest.mark.parametrize("args,needle", [
+    (("boundary", "hve", "--csv", "/nonexistent/dir/x.csv"), "cannot use /nonexistent/dir/x.csv"),
+    (("kmax", "hve", "--delay", "100000"), "at most 2000 samples"),
+    (("kmax", "hve", "--mass", "1e-300"), "cannot"),
+    (("kmax", "hve", "-B", "1e300"), "cannot"),
+    (("kmax", "hve", "--period", "1e300"), "between 1e-07 s and 1000 s"),
+    (("boundary", "hve", "--period", "0.001:0.002:1e12"), "from 1 to 100000"),
+])
+def test_extreme_input_is_one_line_and_exit_2(args, needle):
+    r = run(*args)
+    assert r.exit_code == 2 and needle in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr
+
+
+def test_delay_backward_alone_keeps_delay_for_the_other_side():
+    a = json.loads(run("kmax", "peb", "--delay", "4", "--delay-backward", "4", "--json").stdout)
+    b = json.loads(run("kmax", "peb", "--delay", "4", "--json").stdout)
+    assert a["critical_stiffness"] == b["critical_stiffness"]

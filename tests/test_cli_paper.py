@@ -59,10 +59,12 @@ def test_passivity_exact_peb():
 
 
 def test_tables_print():
-    for args in (("passivity", "peb", "-K", "3", "-n", "4"), ("audit", "hve", "-n", "10"),
-                 ("kmax", "peb", "--method", "passivity")):
+    # the readable tables carry the same verdicts as the JSON
+    for args, needle in ((("passivity", "peb", "-K", "3", "-n", "4"), "positive real"),
+                         (("audit", "hve", "-n", "10"), "eq. (18)"),
+                         (("kmax", "peb", "--method", "passivity"), "20 N/m")):
         res = run(*args)
-        assert res.exit_code == 0 and res.stdout.strip() and not res.stderr
+        assert res.exit_code == 0 and needle in res.stdout and not res.stderr
 
 
 def test_audit_json():

@@ -51,3 +51,13 @@ def test_delay_options():
 def test_errors_one_line_exit_2(args, needle):
     r = run(*args)
     assert r.exit_code == 2 and len(r.stderr.strip().splitlines()) == 1 and needle in r.stderr
+
+
+def test_region_of_rigid_body_peb_and_asymmetric_plot(tmp_path):
+    d = json.loads(run("region", "peb", "--operator", "none", "--environment", "none", "--K", "0:50",
+                       "--B", "0:0.1", "--resolution", "30", "--json").stdout)
+    assert d["agreement"]["disagree"] == 0          # the rigid-body pole is divided out
+    png = tmp_path / "a.png"
+    r = run("region", "peb", "--delay-forward", "2", "--delay-backward", "6", "--K", "0:50",
+            "--B", "0:0.1", "--resolution", "20", "--plot", str(png))
+    assert r.exit_code == 0 and png.stat().st_size > 5000

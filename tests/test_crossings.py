@@ -26,8 +26,3 @@ def test_repair_finds_a_withheld_crossing():
     cr, u, _ = _repair(A0, A1, B1, C1, 0, [], Ks, 0)      # as if no candidate had been found
     assert cr and cr[0][0] == pytest.approx(4.0074008645888, rel=1e-9)   # polished, not bisected
     assert u[0] == 0 and u[1] == 0 and u[2] == 2
-
-
-def test_k_range_edges_are_documented_constants():
-    from hapstab.crossings import K_CAP, K_MIN
-    assert K_MIN < 1 < K_CAP

@@ -62,3 +62,14 @@ def test_build_is_batched_over_periods():
     for i, t in enumerate(T):
         single = build(h.paper_hve(period=t, delay_samples=4))
         np.testing.assert_allclose(batch.closed_loop(10.0)[i], single.closed_loop(10.0)[0], atol=1e-15)
+
+
+def test_zero_master_stiffness_keeps_the_slave_spring():
+    # K_m = 0 < K_s: the slave's spring must stay in the loop (same as a plain-gain H(z))
+    base = h.paper_peb(delay_samples=4).replace(master_controller=h.SpringDamper(0.0))
+    a = build(base.replace(slave_controller=h.SpringDamper(50.0))).closed_loop()[0]
+    b = build(base.replace(slave_controller=h.DiscreteController((50.0,), (1.0,)))).closed_loop()[0]
+    np.testing.assert_allclose(np.sort(np.abs(np.linalg.eigvals(a))), np.sort(np.abs(np.linalg.eigvals(b))),
+                               atol=1e-12)
+    with pytest.raises(h.AnalysisError, match="K_s/K_m is undefined"):
+        h.critical_stiffness(base.replace(slave_controller=h.SpringDamper(50.0)))

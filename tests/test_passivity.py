@@ -93,9 +93,13 @@ def test_peb_no_delay_is_b_over_T():
 
 
 def test_discrete_controller_verdict_only():
-    # a stable H(z) = K (1 - 0.5 z^-1): passivity at its own parameters; no K to vary
+    # H(z) = 50 - 25 z^-1 is K = 25 N/m, B = 0.025 N*s/m: b = 0.1 > KT/2 + B = 0.0375, passive
+    # (spare 0.0625); H = 300 - 150 z^-1 is K = 150, B = 0.15: 0.075 + 0.15 = 0.225 > 0.1, not
     loop = HapticLoop(Device(0.15, 0.1), DiscreteController((50.0, -25.0), (1.0, 0.0)), None, 1e-3, 0)
-    assert isinstance(sampled_passivity(loop).passive, bool)
+    r = sampled_passivity(loop)
+    assert r.passive is True and r.margin == pytest.approx(0.0625, abs=1e-12)
+    r2 = sampled_passivity(loop.replace(controller=DiscreteController((300.0, -150.0), (1.0, 0.0))))
+    assert r2.passive is False and r2.margin == pytest.approx(-0.125, abs=1e-12)
     with pytest.raises(AnalysisError):
         critical_stiffness_passivity(loop)
     unstable = loop.replace(controller=DiscreteController((1.0,), (1.0, -1.5)))

@@ -90,7 +90,8 @@ def boundary(loop: HapticLoop | TeleoperationLoop, periods: Sequence[float] | np
     Parameters
     ----------
     loop : HapticLoop or TeleoperationLoop
-        Template: its own period and delay are replaced by the grid's.
+        Template: its own period and delay (fractional and backward parts too) are
+        replaced by the grid's: delays[i] whole samples, equal in both directions.
     periods : array of float
         Sampling periods T in s (> 0).
     delays : array of int
@@ -113,7 +114,10 @@ def boundary(loop: HapticLoop | TeleoperationLoop, periods: Sequence[float] | np
         raise AnalysisError("delays: the list is empty; give at least one delay")
     out = np.empty((len(ns), T.size))
     for i, n in enumerate(ns):
-        tmpl = loop.replace(delay_samples=n, period=float(T[0]))
+        # the grid's delay replaces the template's, in both directions, whole samples
+        tmpl = loop.replace(delay_samples=n, period=float(T[0]), fractional_delay=0.0)
+        if isinstance(tmpl, TeleoperationLoop):
+            tmpl = tmpl.replace(delay_backward_samples=None, fractional_delay_backward=None)
         if method == "exact":
             res = exact_kmax_batch(build(tmpl, T), intervals=False)
             out[i] = [r["kmax"] for r in res]

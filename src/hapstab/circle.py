@@ -177,6 +177,11 @@ def circle_test(loop: HapticLoop | TeleoperationLoop, approximation: str = "forw
     Ginv = loop_inverse(loop, approximation, scaling)
     if sector is None:
         return positive_real(Ginv, loop.period)
+    if isinstance(loop, TeleoperationLoop):
+        # inverting the 2x2 G^-1 leaves uncancelled factors at z = 1, which root-finding
+        # splits into spurious poles off the circle: refuse rather than answer wrongly
+        raise AnalysisError("sector: a finite sector is supported for the HVE only; for PEB use the "
+                            "passive limit (no sector)")
     return circle_criterion(Ginv.inverse(), sector, loop.period)
 
 
@@ -311,6 +316,10 @@ def _sector_kmax(loop: Any, a: str, sector: Any, scaling: str | None) -> Critica
         damp = (loop.device.damping if isinstance(loop, HapticLoop)
                 else max(loop.master.damping, loop.slave.damping))
         lo = base * (1 - 1e-7) if base > 0 else 0.0  # PR of G implies PR of K^-1 + G
+        if lo > 0 and not ok(lo):
+            raise AnalysisError("sector: the circle test fails already at the passive limit's "
+                                f"K = {lo:.6g} N/m, which PR of G guarantees; no finite-sector "
+                                "result can be trusted here")
         step = base if base > 0 else max(damp, 1e-6) / loop.period * 1e-6
         hi = lo + step
         while ok(hi):

@@ -11,9 +11,11 @@ import importlib
 import json
 import math
 import sys
+import warnings
 from typing import Any, Callable
 
 import click
+import numpy as np
 
 from .errors import HapstabError
 from .models import (Device, HapticLoop, SpringDamper, TeleoperationLoop, parse_impedance)
@@ -29,12 +31,25 @@ class HapstabGroup(click.Group):
     def main(self, args: Any = None, prog_name: str | None = None, complete_var: str | None = None,
              standalone_mode: bool = True, **extra: Any) -> Any:
         try:
-            rv = super().main(args=args, prog_name=prog_name or "hapstab",
-                              complete_var=complete_var, standalone_mode=False, **extra)
+            # extreme inputs overflow inside numpy: say so once, as an error, not as warnings
+            with np.errstate(all="ignore"), warnings.catch_warnings():
+                warnings.simplefilter("ignore", RuntimeWarning)
+                rv = super().main(args=args, prog_name=prog_name or "hapstab",
+                                  complete_var=complete_var, standalone_mode=False, **extra)
         except click.exceptions.ClickException as e:
             _fail(e.format_message())
         except HapstabError as e:
             _fail(str(e))
+        except OSError as e:
+            _fail(f"cannot use {e.filename or 'the file'}: {e.strerror or e}")
+        except MemoryError:
+            _fail("out of memory: the model is too large for this machine")
+        except ValueError as e:          # a plot format matplotlib does not know, NaN from overflow
+            _fail(f"cannot do this: {e}")
+        except (ArithmeticError, np.linalg.LinAlgError) as e:
+            # parameters so extreme that the matrices overflow: the user's input, in one line
+            _fail(f"cannot compute this: {type(e).__name__}: {e} (check the values: they may be "
+                  "outside the range the model can represent)")
         except click.exceptions.Abort:
             click.echo("hapstab: aborted", err=True)
             sys.exit(1)
@@ -127,9 +142,11 @@ def loop_options(kind: str, ranges: bool = False) -> Callable:
         if kind == "peb":
             timing += [
                 click.option("--delay-forward", "delay_forward", type=NONNEG, default=None,
-                             help="Master->slave delay in samples (fractional allowed)."),
+                             help="Master->slave delay in samples (fractional allowed; "
+                                  "default --delay)."),
                 click.option("--delay-backward", "delay_backward", type=NONNEG, default=None,
-                             help="Slave->master delay in samples (fractional allowed)."),
+                             help="Slave->master delay in samples (fractional allowed; "
+                                  "default --delay)."),
             ]
     if kind == "hve":
         devices = [
@@ -188,10 +205,9 @@ def peb_loop(kw: dict[str, Any], stiffness: float = 0.0) -> TeleoperationLoop:
                              parse_impedance(kw["environment"], "--environment"),
                              kw["period"], kw["delay"])
     fwd, bwd, ds = kw.get("delay_forward"), kw.get("delay_backward"), kw.get("delay_s")
-    if sum(x is not None for x in (ds,)) + (fwd is not None or bwd is not None) > 1 or \
-            ((ds is not None or fwd is not None or bwd is not None) and _given("delay")):
-        raise HapstabError("--delay, --delay-s and --delay-forward/--delay-backward: give one way "
-                           "of stating the delay")
+    if ds is not None and (fwd is not None or bwd is not None or _given("delay")):
+        raise HapstabError("--delay-s with --delay or --delay-forward/--delay-backward: give the "
+                           "delay one way (--delay is the default for a side not given)")
     T = loop.period
     if ds is not None:
         loop = loop.with_delays_s(ds)
@@ -317,8 +333,9 @@ def parse_periods(spec: str) -> list[float]:
         raise HapstabError(f"--period = {spec!r}: malformed number; {allowed}") from None
     if parts is not None:
         lo, hi, cnt = nums
-        if not (math.isfinite(cnt) and cnt.is_integer() and cnt >= 1):
-            raise HapstabError(f"--period = {spec!r}: count must be a whole number >= 1; {allowed}")
+        if not (math.isfinite(cnt) and cnt.is_integer() and 1 <= cnt <= 100_000):
+            raise HapstabError(f"--period = {spec!r}: count must be a whole number from 1 to "
+                               f"100000; {allowed}")
         if not hi >= lo:
             raise HapstabError(f"--period = {spec!r}: the range is empty (stop < start); {allowed}")
         nums = [lo + (hi - lo) * i / max(int(cnt) - 1, 1) for i in range(int(cnt))]

@@ -81,7 +81,7 @@ def _best_command(kind: str) -> None:
     def _cmd(B_max: float | None, as_json: bool, **kw: Any) -> None:
         from .regions import best_damping
 
-        res = best_damping(make(kw, 1.0), B_max=B_max or None)
+        res = best_damping(make(kw, 1.0), B_max=B_max)
         rows = [("best virtual damping B*", f"{res.damping:.10g} N*s/m"),
                 ("critical stiffness K*", f"{fmt(res.critical_stiffness)} N/m"),
                 ("K_max at B = 0", f"{fmt(res.critical_stiffness_at_zero_damping)} N/m"),

@@ -76,17 +76,24 @@ def _simulate_command(kind: str) -> None:
                                           if ex.spectral_radius > 0 else -math.inf),
                  files=files)
         v = res.verdict
-        rows = [("simulated", f"{v.verdict} ({v.confidence} confidence, {v.basis})"),
-                ("growth rate", f"{v.growth_rate:.6g} 1/s (+- {v.growth_rate_uncertainty:.2g})"),
-                ("exact analysis", f"{ex.verdict} (rate {d['exact_growth_rate_per_s']:.6g} 1/s)"),
-                ("samples", f"{d['samples']} x {loop.period:g} s")]
-        for lab in res.labels:
-            rows.append((f"max |x| {lab}", f"{d[f'max_abs_position_{lab}']:.6g} m"))
-            rows.append((f"max |u| {lab}", f"{d[f'max_abs_force_{lab}']:.6g} N"))
-            rows.append((f"energy into controller from {lab}",
-                         f"{d[f'final_port_energy_{lab}']:.6g} J"))
-        rows += [("why", v.reason)] + [("wrote", f) for f in files]
-        emit(d, as_json, lambda: rich_table(f"simulation, {kind}, K = {stiffness:g} N/m", rows))
+
+        def g(x: Any, spec: str = ".6g") -> str:   # summary values may be "inf"/None after overflow
+            return format(x, spec) if isinstance(x, (int, float)) else str(x)
+
+        def table() -> None:
+            rows = [("simulated", f"{v.verdict} ({v.confidence} confidence, {v.basis})"),
+                    ("growth rate", f"{g(v.growth_rate)} 1/s (+- {g(v.growth_rate_uncertainty, '.2g')})"),
+                    ("exact analysis", f"{ex.verdict} (rate {g(d['exact_growth_rate_per_s'])} 1/s)"),
+                    ("samples", f"{d['samples']} x {loop.period:g} s")]
+            for lab in res.labels:
+                rows.append((f"max |x| {lab}", f"{g(d[f'max_abs_position_{lab}'])} m"))
+                rows.append((f"max |u| {lab}", f"{g(d[f'max_abs_force_{lab}'])} N"))
+                rows.append((f"energy into controller from {lab}",
+                             f"{g(d[f'final_port_energy_{lab}'])} J"))
+            rows.extend([("why", v.reason)] + [("wrote", f) for f in files])
+            rich_table(f"simulation, {kind}, K = {stiffness:g} N/m", rows)
+
+        emit(d, as_json, table)
 
     for deco in reversed(extra):
         _cmd = deco(_cmd)

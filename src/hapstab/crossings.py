@@ -120,8 +120,7 @@ def exact_kmax_batch(sysm: SampledSystem, intervals: bool = True) -> list[dict[s
         at K_max, nan if none), ``rigid``, ``rho_small_K``.
     """
     if not sysm.varies_with_K:
-        raise AnalysisError("controller: critical stiffness needs SpringDamper controllers "
-                            "(a general H(z) has no stiffness K to vary)")
+        raise AnalysisError(sysm.fixed_reason or "controller: no stiffness K to vary")
     # K enters with the rank of A1 = B1 C1; B1 has one independent column per port
     # (its ZOH input), so that is the rank of the small C1 (PEB without delay: 1, the
     # two error signals being opposite). Factor at that rank, by groups.

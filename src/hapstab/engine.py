@@ -194,6 +194,7 @@ class SampledSystem:
     labels: list[str] = field(default_factory=list)
     varies_with_K: bool = True
     E: np.ndarray | None = None
+    fixed_reason: str = ""
 
     @property
     def order(self) -> int:
@@ -314,6 +315,7 @@ def build(loop: HapticLoop | TeleoperationLoop,
     B_ext[:, :n_plant, :] = Bd
     B1 = np.zeros((P, N, p))
     B1[:, :n_plant, :] = -Bd
+    Gam_of: dict[tuple[int, float], np.ndarray] = {}
     for (j, f), r0 in off_f.items():
         # r[k+1] = x_j((k+1)T - fT) = C (Phi x_j[k] + Gamma (f_ext - u)[k]) over (1 - f)T
         pl = slice(off_p[j], off_p[j + 1])
@@ -322,6 +324,7 @@ def build(loop: HapticLoop | TeleoperationLoop,
         A0[:, r0, :] -= Gam[:, 0, 0][:, None] * Fu0[:, j, :]
         B_ext[:, r0, j] = Gam[:, 0, 0]
         B1[:, r0, j] = -Gam[:, 0, 0]
+        Gam_of[(j, f)] = Gam[:, 0, 0]
         for l in range(1, frac[(j, f)] + 1):
             A0[:, r0 + l, r0 + l - 1] = 1.0
     # C1 rows: the K-part of each port's force; same for every period
@@ -329,15 +332,32 @@ def build(loop: HapticLoop | TeleoperationLoop,
     ks = [ch.controller.stiffness if isinstance(ch.controller, SpringDamper) else 0.0
           for ch in st.channels]
     varies = all(isinstance(ch.controller, SpringDamper) for ch in st.channels)
+    fixed_reason = "" if varies else ("controller: critical stiffness needs SpringDamper "
+                                      "controllers (a general H(z) has no stiffness K to vary)")
     K_own = np.full(P, ks[0] if varies else 0.0)
     if varies and len(set(ks)) > 1:
-        # unequal K_m, K_s: K is the master's stiffness, K_s/K_m is kept fixed
-        scale = np.array(ks) / ks[0] if ks[0] else np.ones(p)
-        C1 = C1 * scale[None, :, None]
-        Fu1 = Fu1 * scale[None, :, None]
+        if ks[0] > 0:
+            # unequal K_m, K_s: K is the master's stiffness, K_s/K_m is kept fixed
+            scale = np.array(ks) / ks[0]
+            C1 = C1 * scale[None, :, None]
+            Fu1 = Fu1 * scale[None, :, None]
+        else:
+            # K_m = 0 < K_s: no ratio to keep; the loop is exact with every port's own K
+            # folded into the fixed part, and K cannot be varied
+            own = np.array(ks)[None, :, None] * Fu1
+            Fu0 = Fu0 + own
+            A0[:, :n_plant, :] -= Bd @ own
+            for (j, f), r0 in off_f.items():
+                A0[:, r0, :] -= Gam_of[(j, f)][:, None] * own[:, j, :]
+            Fu1 = np.zeros_like(Fu1)
+            C1 = np.zeros_like(C1)
+            K_own = np.zeros(P)
+            varies = False
+            fixed_reason = ("controllers: the master's stiffness is 0 and the slave's is not, so "
+                            "K_s/K_m is undefined; give the master a stiffness > 0 to vary K")
     labels = [pt.name for pt in st.ports]
     return SampledSystem(T, A0, B1, C1, K_own, B_ext, Fu0, Fu1, pos, vel, Ac, Bc, Cf,
-                         n_plant, labels, varies, E)
+                         n_plant, labels, varies, E, fixed_reason)
 
 
 def stack(systems: Sequence[SampledSystem]) -> SampledSystem:
@@ -349,4 +369,4 @@ def stack(systems: Sequence[SampledSystem]) -> SampledSystem:
     cat = lambda name: np.concatenate([getattr(s, name) for s in systems])  # noqa: E731
     return SampledSystem(cat("periods"), cat("A0"), cat("B1"), cat("C1"), cat("stiffness"),
                          cat("B_ext"), cat("F_u0"), cat("F_u1"), s0.pos, s0.vel, s0.Ac, s0.Bc,
-                         s0.Cf, s0.n_plant, s0.labels, s0.varies_with_K, s0.E)
+                         s0.Cf, s0.n_plant, s0.labels, s0.varies_with_K, s0.E, s0.fixed_reason)

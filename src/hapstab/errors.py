@@ -78,6 +78,26 @@ def check_delay(name: str, value: Any) -> int:
         )
     if v < 0:
         raise ModelError(f"{name} = {v}: must be a whole number of samples >= 0")
+    if v > MAX_DELAY_SAMPLES:
+        raise ModelError(f"{name} = {v}: at most {MAX_DELAY_SAMPLES} samples (the exact model "
+                         "carries one state per sample of delay; use a longer period)")
+    return v
+
+
+#: The exact model has one state per sample of delay: beyond this it is slow and large.
+MAX_DELAY_SAMPLES = 2000
+
+#: Sampling periods the model represents (validated down to 10 us; below 1e-7 s the
+#: dynamics between samples drown in rounding).
+PERIOD_RANGE = (1e-7, 1e3)
+
+
+def check_period(name: str, value: Any) -> float:
+    """A sampling period in seconds within :data:`PERIOD_RANGE`."""
+    v = check_real(name, value, positive=True)
+    lo, hi = PERIOD_RANGE
+    if not lo <= v <= hi:
+        raise ModelError(f"{name} = {v:g}: must be between {lo:g} s and {hi:g} s")
     return v
 
 

@@ -16,7 +16,7 @@ from typing import Any, Union
 
 import numpy as np
 
-from .errors import AnalysisError, ModelError, check_delay, check_poly, check_real
+from .errors import AnalysisError, ModelError, check_delay, check_period, check_poly, check_real
 
 __all__ = [
     "Device", "Impedance", "NO_IMPEDANCE", "spring", "mass_spring_damper",
@@ -336,7 +336,7 @@ class HapticLoop:
             raise ModelError(f"device = {self.device!r}: must be a Device")
         _check_controller("controller", self.controller)
         object.__setattr__(self, "operator", Impedance.from_any(self.operator, "operator"))
-        object.__setattr__(self, "period", check_real("period", self.period, positive=True))
+        object.__setattr__(self, "period", check_period("period", self.period))
         object.__setattr__(self, "delay_samples", check_delay("delay_samples", self.delay_samples))
         object.__setattr__(self, "fractional_delay",
                            _check_fraction("fractional_delay", self.fractional_delay))
@@ -406,7 +406,7 @@ class TeleoperationLoop:
         _check_controller("slave_controller", self.slave_controller)
         object.__setattr__(self, "operator", Impedance.from_any(self.operator, "operator"))
         object.__setattr__(self, "environment", Impedance.from_any(self.environment, "environment"))
-        object.__setattr__(self, "period", check_real("period", self.period, positive=True))
+        object.__setattr__(self, "period", check_period("period", self.period))
         object.__setattr__(self, "delay_samples", check_delay("delay_samples", self.delay_samples))
         object.__setattr__(self, "fractional_delay",
                            _check_fraction("fractional_delay", self.fractional_delay))
@@ -470,6 +470,9 @@ class TeleoperationLoop:
             if not isinstance(getattr(self, nm), SpringDamper):
                 raise ModelError(f"{nm}: a SpringDamper is needed to vary the stiffness")
         km, ks = self.master_controller.stiffness, self.slave_controller.stiffness
+        if km == 0 and ks > 0:
+            raise AnalysisError("master_controller: stiffness 0 with a slave stiffness > 0 leaves "
+                                "K_s/K_m undefined; set the master's stiffness to vary K")
         ratio = ks / km if km > 0 else 1.0
         return dataclasses.replace(self, master_controller=self.master_controller.with_stiffness(K),
                                    slave_controller=self.slave_controller.with_stiffness(K * ratio))

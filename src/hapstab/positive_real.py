@@ -346,7 +346,10 @@ def positive_real(G: RationalMatrix, period: float | None = None, grid: int | No
     # large next to a unit-circle pole even where the Hermitian part is small
     t_eval = max(t_min, float(th[0]))  # t_min = 0 stands for the limit at th[0]
     g_norm = float(np.abs(G(t_eval)).sum()) if math.isfinite(t_min) else 0.0
-    if margin < -(rtol * scale + 1e-13 * g_norm):  # ~500 eps: a few roundings per element
+    if not (math.isfinite(margin) and math.isfinite(g_norm)):
+        fails.append("hermitian part")          # overflow: nothing can be certified
+        reasons.append("(iii) G + G^H is not finite on the circle (overflow): not certified")
+    elif margin < -(rtol * scale + 1e-13 * g_norm):  # ~500 eps: a few roundings per element
         fails.append("hermitian part")
         reasons.append(f"(iii) G + G^H has eigenvalue {margin:.6g} < 0 at w = {t_min / T:.6g} rad/s")
     ok = not fails

@@ -31,7 +31,7 @@ import numpy as np
 
 from .engine import SampledSystem, build, stack
 from .errors import AnalysisError, check_real
-from .exact import exact_kmax_batch
+from .exact import exact_kmax_batch, rigid_body_modes
 from .models import HapticLoop, SpringDamper, TeleoperationLoop
 from .results import jsonable
 
@@ -166,7 +166,16 @@ def _char_poly_grid(loop: Loop, Kg: np.ndarray, Bg: np.ndarray) -> np.ndarray:
     coef = np.linalg.solve(V, np.array(vals))                          # (monomials, N+1)
     Kn, Bn = (Kg / Ks).ravel(), (Bg / Bs).ravel()
     mono = np.stack([Kn ** i * Bn ** j for (i, j) in pts], axis=1)     # (G, monomials)
-    return mono @ coef
+    c = mono @ coef
+    # rigid-body modes are z = 1 roots for every (K, B): divide them out, as the exact
+    # analysis does, so the check judges the same poles
+    for _ in range(rigid_body_modes(A00, AK + AB)):
+        q = np.zeros((c.shape[0], c.shape[1] - 1))
+        q[:, 0] = c[:, 0]
+        for i in range(1, q.shape[1]):
+            q[:, i] = c[:, i] + q[:, i - 1]                                # synthetic division by (z - 1)
+        c = q
+    return c
 
 
 def _schur_cohn(c: np.ndarray) -> np.ndarray:
@@ -353,7 +362,10 @@ def _overlay(loop: Loop, name: str, Bs: np.ndarray) -> np.ndarray:
             f = closed_forms.colgate if n == 0 else closed_forms.eq18
         else:
             f = closed_forms.eq29 if n == 0 else closed_forms.eq34
-        return np.array([f(with_gains(loop, 1.0, B)).critical_stiffness for B in Bs])
+        try:
+            return np.array([f(with_gains(loop, 1.0, B)).critical_stiffness for B in Bs])
+        except AnalysisError:
+            return out                # the paper's line does not apply (e.g. unequal delays)
     if name not in METHODS:
         raise AnalysisError(f"overlay = {name!r}: unknown; allowed: paper, "
                             + ", ".join(m for m in ("passivity", "circle") if m in METHODS))

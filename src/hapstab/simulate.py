@@ -222,8 +222,9 @@ def simulate(loop: HapticLoop | TeleoperationLoop, duration: float, *,
         raise ModelError(f"duration = {duration}: gives {M} samples at T = {T:g} s; need >= 8")
     if M > 50_000_000:
         raise ModelError(f"duration = {duration}: {M} samples is too many (limit 5e7)")
-    if not isinstance(dense, (int, np.integer)) or isinstance(dense, bool) or dense < 0:
-        raise ModelError(f"dense = {dense!r}: must be a whole number >= 0 (points per sample)")
+    if not isinstance(dense, (int, np.integer)) or isinstance(dense, bool) or dense < 0 or dense == 1:
+        raise ModelError(f"dense = {dense!r}: must be 0 (off) or a whole number >= 2 "
+                         "(points per sample)")
     haptic = isinstance(loop, HapticLoop)
     if haptic and environment_force is not None:
         raise ModelError("environment_force: a HapticLoop has no environment port; use a TeleoperationLoop")
@@ -279,7 +280,7 @@ def simulate(loop: HapticLoop | TeleoperationLoop, duration: float, *,
     for a in arrays:
         a.setflags(write=False)
     K = float(sysm.stiffness[0])
-    delay = getattr(loop, "delay_in_samples", loop.delay_samples)
+    delay = getattr(loop, "delay_in_samples", loop.delay_in_samples)
     return SimulationResult(*arrays, verdict, tuple(sysm.labels), T, delay, K,
                             nonlinear, contact, dt, dx, dv)
 
@@ -361,7 +362,7 @@ def critical_stiffness_simulation(loop: HapticLoop | TeleoperationLoop, *,
     if not v_lo.bounded:
         return CriticalStiffnessResult(
             0.0, "simulation", (), f"unbounded already at K = {lo:.4g} N/m: {v_lo.reason}", T,
-            loop.delay_samples, details={"runs": runs, "horizon_samples": n_samples})
+            loop.delay_in_samples, details={"runs": runs, "horizon_samples": n_samples})
     v_hi = None
     K = lo
     while K < 1e4 * Ks:
@@ -374,7 +375,7 @@ def critical_stiffness_simulation(loop: HapticLoop | TeleoperationLoop, *,
     if hi is None:
         return CriticalStiffnessResult(
             math.inf, "simulation", ((0.0, math.inf),),
-            f"bounded for every K tried up to {lo:.4g} N/m", T, loop.delay_samples,
+            f"bounded for every K tried up to {lo:.4g} N/m", T, loop.delay_in_samples,
             details={"runs": runs, "horizon_samples": n_samples})
     while hi / lo - 1 > rtol:
         mid = math.sqrt(lo * hi)
@@ -386,7 +387,7 @@ def critical_stiffness_simulation(loop: HapticLoop | TeleoperationLoop, *,
     reason = (f"largest K whose simulated free response ({n_samples} samples) stays bounded; "
               f"at K = {lo:.6g}: {v_lo.reason}; at K = {hi:.6g}: {v_hi.reason}")
     return CriticalStiffnessResult(
-        lo, "simulation", ((0.0, lo),), reason, T, loop.delay_samples,
+        lo, "simulation", ((0.0, lo),), reason, T, loop.delay_in_samples,
         details={"runs": runs, "horizon_samples": n_samples, "bracket": [lo, hi],
                  "confidence": min((v_lo.confidence, v_hi.confidence),
                                    key=["low", "medium", "high"].index)})

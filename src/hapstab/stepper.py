@@ -30,7 +30,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from .engine import SampledSystem, discretize, structure_of
+from .engine import SampledSystem, discretize
 from .errors import ModelError
 from .models import HapticLoop, TeleoperationLoop
 
@@ -49,30 +49,6 @@ class Roles:
     pos_port: np.ndarray      # their port
     physical: np.ndarray      # bool mask (N,)
     E: np.ndarray             # controller input selectors (p, N)
-
-
-def _error_selectors(loop: HapticLoop | TeleoperationLoop, sysm: SampledSystem) -> np.ndarray:
-    """E (p, N) from the engine when it provides it, else from its integer-delay layout
-    (registers after the plant; register l of port j holds x_j[k-1-l])."""
-    E = getattr(sysm, "E", None)
-    if E is not None:
-        return np.asarray(E)
-    st = structure_of(loop)
-    p = len(st.ports)
-    depth = [0] * p
-    for ch in st.channels:
-        for j, _, n in ch.terms:
-            depth[j] = max(depth[j], int(n))
-    off = sysm.n_plant + np.concatenate([[0], np.cumsum(depth)]).astype(int)
-    E = np.zeros((p, sysm.order))
-    for ch in st.channels:
-        for j, sgn, n in ch.terms:
-            n = int(n)
-            if n == 0:
-                E[ch.port] += sgn * sysm.pos[j]
-            else:
-                E[ch.port, off[j] + n - 1] += sgn
-    return E
 
 
 def roles_of(loop: HapticLoop | TeleoperationLoop, sysm: SampledSystem) -> Roles:
@@ -102,7 +78,7 @@ def roles_of(loop: HapticLoop | TeleoperationLoop, sysm: SampledSystem) -> Roles
     phys[:npl] = True
     phys[pe] = True
     return Roles(A, G, Fu, A_free, pe, np.array([port_of[i] for i in pe], dtype=int), phys,
-                 _error_selectors(loop, sysm))
+                 np.asarray(sysm.E))   # the engine's error selectors (delays included)
 
 
 def initial_state(sysm: SampledSystem, roles: Roles, x0: Any, v0: Any, full: Any,
