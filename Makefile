@@ -22,7 +22,9 @@ test: $(STAMP)
 bench: $(STAMP)
 	$(BIN)/python -m pip install --quiet -e '.[test,bench]'
 	$(BIN)/python benchmarks/bench_boundary.py
+	$(BIN)/python benchmarks/bench_circle.py
 	$(BIN)/python benchmarks/bench_simulate.py
+	$(BIN)/python benchmarks/bench_regions.py
 
 clean:
 	rm -rf $(VENV) out .pytest_cache .hypothesis
