@@ -18,6 +18,22 @@ from hapstab.simulate import critical_stiffness_simulation, force_samples, simul
 
 
 # ------------------------------------------------------------ independent references
+def _rk4_held(x, v, force, m, b, k_op, h_, sub, xs):
+    """Fine RK4 of m a = force - b v - k_op x over ``sub`` steps of h_ with the force
+    held (the zero-order hold); appends each position to xs."""
+    def acc(x_, v_):
+        return (force - b * v_ - k_op * x_) / m
+    for _ in range(sub):
+        k1x, k1v = v, acc(x, v)
+        k2x, k2v = v + h_ / 2 * k1v, acc(x + h_ / 2 * k1x, v + h_ / 2 * k1v)
+        k3x, k3v = v + h_ / 2 * k2v, acc(x + h_ / 2 * k2x, v + h_ / 2 * k2v)
+        k4x, k4v = v + h_ * k3v, acc(x + h_ * k3x, v + h_ * k3v)
+        x += h_ / 6 * (k1x + 2 * k2x + 2 * k3x + k4x)
+        v += h_ / 6 * (k1v + 2 * k2v + 2 * k3v + k4v)
+        xs.append(x)
+    return x, v
+
+
 def step_recurrence(loop, s0, F):
     """s[k+1] = A_cl s[k] + B_ext f[k], one sample at a time."""
     sysm = build(loop)
@@ -45,16 +61,7 @@ def rk4_hve(m, b, k_op, K, B, T, n, x0, f_ext, M, sub=200):
         us.append(u)
         f = f_ext[k]
 
-        def acc(x_, v_):
-            return (f - u - b * v_ - k_op * x_) / m
-        for _ in range(sub):
-            k1x, k1v = v, acc(x, v)
-            k2x, k2v = v + h_ / 2 * k1v, acc(x + h_ / 2 * k1x, v + h_ / 2 * k1v)
-            k3x, k3v = v + h_ / 2 * k2v, acc(x + h_ / 2 * k2x, v + h_ / 2 * k2v)
-            k4x, k4v = v + h_ * k3v, acc(x + h_ * k3x, v + h_ * k3v)
-            x += h_ / 6 * (k1x + 2 * k2x + 2 * k3x + k4x)
-            v += h_ / 6 * (k1v + 2 * k2v + 2 * k3v + k4v)
-            xs.append(x)
+        x, v = _rk4_held(x, v, f - u, m, b, k_op, h_, sub, xs)
     return np.array(xs), np.array(us)
 
 
@@ -317,16 +324,7 @@ def rk4_hve_read_delayed(m, b, k_op, K, B, T, d, x0, f_ext, M, sub, q=None, sat=
         us.append(u)
         f = f_ext[k]
 
-        def acc(x_, v_):
-            return (f - u - b * v_ - k_op * x_) / m
-        for _ in range(sub):
-            k1x, k1v = v, acc(x, v)
-            k2x, k2v = v + h_ / 2 * k1v, acc(x + h_ / 2 * k1x, v + h_ / 2 * k1v)
-            k3x, k3v = v + h_ / 2 * k2v, acc(x + h_ / 2 * k2x, v + h_ / 2 * k2v)
-            k4x, k4v = v + h_ * k3v, acc(x + h_ * k3x, v + h_ * k3v)
-            x += h_ / 6 * (k1x + 2 * k2x + 2 * k3x + k4x)
-            v += h_ / 6 * (k1v + 2 * k2v + 2 * k3v + k4v)
-            xs.append(x)
+        x, v = _rk4_held(x, v, f - u, m, b, k_op, h_, sub, xs)
     return np.array(xs[::sub]), np.array(us)
 
 
