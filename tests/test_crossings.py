@@ -1,28 +1,83 @@
-"""The crossing analysis: the fast K_max path equals the full one, and the safety
-net finds a crossing that the candidate step did not propose."""
+"""The certified crossing analysis: the K_max-only path equals the full one, the
+three reproducers of the missed crossings (issue #8) give their true values, and
+the counts from crossing directions agree with the argument principle."""
 
 import numpy as np
 import pytest
 
 import hapstab as h
-from hapstab.crossings import _repair, exact_kmax_batch
+from hapstab.crossings import U_LO, analyse, winding
 from hapstab.engine import build
+from hapstab.loopfreq import loop_response
+
 
 
 @pytest.mark.parametrize("loop", [h.paper_hve(delay_samples=10), h.paper_peb(delay_samples=4),
                                   h.paper_hve(damping=0.05, delay_samples=2)])
 def test_kmax_only_path_equals_full_path(loop):
-    s = build(loop, np.geomspace(1e-4, 2e-2, 9))
-    fast = [r["kmax"] for r in exact_kmax_batch(s, intervals=False)]
-    full = [r["kmax"] for r in exact_kmax_batch(s, intervals=True)]
+    r = loop_response(loop, np.geomspace(1e-4, 2e-2, 9))
+    fast = [x["kmax"] for x in analyse(r, full=False)]
+    full = [x["kmax"] for x in analyse(r, full=True)]
     np.testing.assert_allclose(fast, full, rtol=1e-12)
 
 
-def test_repair_finds_a_withheld_crossing():
-    s = build(h.paper_peb(delay_samples=4))
-    A0, B1, C1 = s.A0[0], s.B1[0], s.C1[0]
-    A1 = B1 @ C1
-    Ks = np.linalg.norm(A0) / np.linalg.norm(A1)
-    cr, u, _ = _repair(A0, A1, B1, C1, 0, [], Ks, 0)      # as if no candidate had been found
-    assert cr and cr[0][0] == pytest.approx(4.0074008645888, rel=1e-9)   # polished, not bisected
-    assert u[0] == 0 and u[1] == 0 and u[2] == 2
+def _eig_count(loop, K):
+    """Poles strictly outside the circle from the closed-loop matrix (rigid mode
+    at z = 1 dropped), for comparison with the argument principle."""
+    s = build(loop)
+    ev = np.linalg.eigvals(s.closed_loop(K)[0])
+    if loop_response(loop).rigid:
+        ev = ev[np.argsort(np.abs(ev - 1))[1:]]
+    return int(np.sum(np.abs(ev) > 1))
+
+
+@pytest.mark.parametrize("loop", [h.paper_hve(delay_samples=7), h.paper_peb(delay_samples=3),
+                                  h.paper_peb(delay_samples=3).replace(operator=None, environment=None),
+                                  h.paper_hve(delay_samples=2).replace(fractional_delay=0.4)])
+def test_winding_counts_match_eigenvalues(loop):
+    r = loop_response(loop)
+    Ks = np.geomspace(1e-3, 1e6, 23) * 1.0001
+    got = winding(r, np.zeros(Ks.size, int), Ks / r.scale[0])
+    want = [_eig_count(loop, K) for K in Ks]
+    np.testing.assert_array_equal(got, want)
+
+
+# issue #8's reproducers; true values from an independent brute force (tests/brute.py)
+ISSUE1 = h.TeleoperationLoop(h.Device(0.45, 2.2), h.Device(0.56, 0.0048), h.SpringDamper(1, 0.002),
+                             h.SpringDamper(1, 0.002), h.spring(0.82), h.spring(3200), 0.00072, 30)
+ISSUE1B = h.TeleoperationLoop(h.Device(0.2136, 0.001524), h.Device(2.4919, 0.78027),
+                              h.SpringDamper(1, 0.0022915), h.SpringDamper(0.48475, 0.0), None,
+                              h.spring(808.67), 0.0032137, 24)
+FREE = h.TeleoperationLoop(h.Device(0.113, 0.0027), h.Device(0.28, 0.0032), h.SpringDamper(1, 0.0004),
+                           h.SpringDamper(1, 0.0004), None, None, 0.000376, 11)
+
+
+def test_missed_window_of_a_lightly_damped_resonance():
+    res = h.critical_stiffness(ISSUE1)
+    assert res.critical_stiffness == pytest.approx(19.4668, rel=1e-5)
+    (a, b), (c, d) = res.stable_intervals
+    assert a == 0 and b == res.critical_stiffness and 270 < c < 290 and d == pytest.approx(1295.01, rel=1e-5)
+    # inside the window the loop is unstable, on both sides stable
+    for K, want in ((0.999 * b, True), (1.001 * b, False), (165.0, False), (1.001 * c, True)):
+        assert h.stability(ISSUE1.with_stiffness(K)).stable is want, K
+
+
+def test_unequal_controllers_three_intervals():
+    res = h.critical_stiffness(ISSUE1B)
+    assert res.critical_stiffness == pytest.approx(2.84221, rel=1e-5)
+    ivs = res.stable_intervals
+    assert len(ivs) == 3
+    assert ivs[1][0] == pytest.approx(15.6, rel=2e-3) and ivs[1][1] == pytest.approx(45.69, rel=1e-4)
+    assert ivs[2][0] == pytest.approx(127.3, rel=2e-3) and ivs[2][1] == pytest.approx(191.45, rel=1e-4)
+
+
+def test_free_peb_is_not_biased_low_and_names_the_complex_pair():
+    res = h.critical_stiffness(FREE)
+    assert res.critical_stiffness == pytest.approx(1.0810478, rel=1e-7)
+    assert "complex pole pair" in res.reason and "rigid-body" in res.reason
+    assert np.isfinite(res.crossing_frequency_hz) and res.crossing_frequency_hz > 0
+
+
+def test_anchor_count_at_small_K_is_zero_for_a_damped_loop():
+    r = loop_response(h.paper_hve(delay_samples=5))
+    assert winding(r, np.zeros(1, int), np.array([U_LO]))[0] == 0

@@ -119,7 +119,7 @@ def boundary(loop: HapticLoop | TeleoperationLoop, periods: Sequence[float] | np
         if isinstance(tmpl, TeleoperationLoop):
             tmpl = tmpl.replace(delay_backward_samples=None, fractional_delay_backward=None)
         if method == "exact":
-            res = exact_kmax_batch(build(tmpl, T), intervals=False)
+            res = exact_kmax_batch(tmpl, T, intervals=False)
             out[i] = [r["kmax"] for r in res]
         else:
             f = _resolve(method)

@@ -1,464 +1,507 @@
-"""The crossing analysis behind the exact critical stiffness: every K at which a
-closed-loop pole of ``A(K) = A0 + K B1 C1`` reaches |z| = 1, and the stable set in K.
+"""The certain crossing analysis behind the exact critical stiffness: every K > 0 at
+which a closed-loop pole is on |z| = 1, and the stable set in K.
 
-``r = rank(B1 C1)`` is 1 for the HVE and 2 for PEB (1 without delay), so
-``chi(z, K) = det(zI - A(K))`` has degree N in z and r in K.
+A pole is on the unit circle at (theta, K) exactly where the characteristic
+function det M(e^{j theta}, K) = F0 + u F1 + u^2 F2 vanishes (u = K / scale; see
+:mod:`hapstab.loopfreq`). The set of such points in the box
+theta in [0, pi] x u in [U_LO, U_HI] is found by branch and prune on
+boxes (theta-cell x u-interval) with verified enclosures (:mod:`hapstab.discs`):
 
-1. Coefficients: chi(z, 0) from the eigenvalues of A0 (a product of root factors,
-   backward stable); for r = 1 the K-coefficient by Faddeev-LeVerrier applied to
-   B1; for r = 2 eigenvalues at two more K and interpolation in K.
-2. Candidates: a pole is on |z| = 1 for real K only where chi(z, K) and its
-   reversal ``z^N chi(1/z, K)`` share the root K: for r = 1 the polynomial
-   ``a b~ - a~ b``, for r = 2 the resultant of two quadratics in K. It is exactly
-   (anti-)palindromic, so its unit-circle roots are the real roots in cos(theta) of
-   a Chebyshev series of half the degree (colleague matrix). No grid.
-3. Polish: Newton on ``Im mu(theta) = 0``, mu an eigenvalue of
-   ``G(e^{j theta}) = C1 (zI - A0)^-1 B1`` (K = 1/mu) by linear solves, to rounding.
-   Crossings at z = +-1 come from the real eigenvalues of G(+-1).
-4. Classification: poles outside the circle are counted at an anchor near K = 0
-   and inside each gap between crossings. Each crossing moves 2 poles (1 at
-   z = +-1); a count that jumps by more means a missed crossing, which is then
-   found by bisection on the count and polished. Near a crossing the count is only
-   as good as eigenvalues of poles crowding z = 1, so it never sets a value.
+* **exclusion** -- if the enclosure of F over a box does not contain 0, no
+  crossing is in the box;
+* **isolation** -- if the Krawczyk operator of the real 2x2 system
+  (Re F, Im F) = 0 in (theta, u) maps the box into its interior, the box holds
+  exactly one crossing, and the (interval) Jacobian is regular on it, so the
+  sign of its determinant is the direction of the crossing (Im(F_u / F_theta) > 0:
+  the pole moves outwards as K grows); Newton's method then polishes it. Boxes
+  centred on theta = 0 or pi (symmetric, F(-theta) = conj F(theta)) hold the real
+  crossings through z = +-1;
+* otherwise the box is split (in theta or u, whichever dominates the enclosure).
 
-Modes at z = 1 that exist for every K (a mass nothing ties to ground) are
-rigid-body modes: counted, divided out and reported, never called unstable.
+**Why nothing is missed.** Every point of the (theta, u) box lies in a box that
+was excluded by a proof (0 not in an enclosure of F), or in a box proved to hold
+exactly one zero, or in a box left *unresolved* at the rounding floor, which is
+reported as an uncertain K-interval, never dropped. The enclosures are sound for
+every point of a cell (derivative bounds, circular arithmetic, a rounding
+allowance per operation), so a lightly damped resonance whose crossings lie close
+together is still separated: the boxes are split until each crossing is alone.
+
+**Counting.** The number of poles outside the circle at u = U_LO comes from the
+argument principle, Z_out = q - wind(det M) (:func:`winding`), certified the same
+way (each cell's enclosure excludes 0, so the argument's increment across it is
+the principal value). Each crossing then changes the count by its direction
+times 2 (complex pair) or 1 (z = +-1); counts are cross-checked by windings in
+gaps. The cost grows with the number of crossings (about the delay) and not with
+the number of states: the delay is a phase.
+
+References
+----------
+R. Krawczyk, "Newton-Algorithmen zur Bestimmung von Nullstellen mit
+Fehlerschranken", Computing 4 (1969) 187-201; R. E. Moore, R. B. Kearfott and
+M. J. Cloud, *Introduction to Interval Analysis*, SIAM 2009, ch. 8.
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
-from .charpoly import (chi_coefficients, crossing_polys, deflate, positive_real_roots,
-                       rough_mu, unit_circle_angles)
-from .engine import SampledSystem
+from .discs import EPS_OP
 from .errors import AnalysisError
+from .loopfreq import LoopResponse
 
-__all__ = ["exact_kmax_batch", "K_CAP", "K_MIN"]
+__all__ = ["analyse", "winding", "U_LO", "U_HI"]
 
-#: The analysed range of K is (K_MIN, K_CAP] * K_scale, K_scale = ||A0|| / ||A1|| (about
-#: 2m/T^2 for a light damper, less for a heavy one): beyond it the closed loop's
-#: entries dwarf rounding and its eigenvalues carry no information.
-K_CAP = 1e12
-
-#: ... and K below K_MIN * K_scale is not resolved: a free mass's pole leaves z = 1
-#: at a rate proportional to K, and rounding blurs the first 1e-9 of |z| - 1.
-K_MIN = 1e-6
-
-
-# --------------------------------------------------------------- exact K_max core
-def _mu_and_slope(A0: np.ndarray, B1: np.ndarray, C1: np.ndarray, theta: np.ndarray
-                  ) -> tuple[np.ndarray, np.ndarray]:
-    """The eigenvalue mu of ``G(e^{j theta}) = C1 (zI - A0)^-1 B1`` nearest the real
-    axis (K = 1/mu) and d mu / d theta, by one batched inverse."""
-    N = A0.shape[-1]
-    z = np.exp(1j * theta)
-    R = np.linalg.inv(z[:, None, None] * np.eye(N) - A0)
-    X = R @ B1
-    G = C1 @ X
-    dG = -1j * z[:, None, None] * (C1 @ (R @ X))          # dG/dtheta = -j z C1 R^2 B1
-    if G.shape[-1] == 1:
-        return G[:, 0, 0], dG[:, 0, 0]
-    t = G[:, 0, 0] + G[:, 1, 1]
-    d = G[:, 0, 0] * G[:, 1, 1] - G[:, 0, 1] * G[:, 1, 0]
-    sq = np.sqrt(t * t / 4 - d)
-    mus = np.stack([t / 2 + sq, t / 2 - sq], axis=-1)
-    rel = np.abs(mus.imag) / np.maximum(np.abs(mus), 1e-300)
-    mu = np.take_along_axis(mus, np.argmin(rel, axis=-1)[:, None], axis=-1)[:, 0]
-    dt = dG[:, 0, 0] + dG[:, 1, 1]
-    dd = dG[:, 0, 0] * G[:, 1, 1] + G[:, 0, 0] * dG[:, 1, 1] - dG[:, 0, 1] * G[:, 1, 0] \
-        - G[:, 0, 1] * dG[:, 1, 0]
-    den = 2 * mu - t
-    dmu = (dt * mu - dd) / np.where(den != 0, den, 1e-300)   # from mu^2 - t mu + d = 0
-    return mu, dmu
+#: The analysed range of the dimensionless stiffness u = K T^2 / m (m the lightest
+#: port's mass): below 1e-14 the loop is the continuous one to 1e-14 and nothing
+#: can cross; above 1e10 the loop is far beyond any device (K = 1e10 m/T^2) and poles
+#: approach the circle asymptotically, closer than rounding can resolve.
+U_LO, U_HI = 1e-14, 1e10
+#: A cell narrower than this (relative to theta + 1) cannot be split any more.
+THETA_FLOOR = 64 * np.finfo(float).eps
+#: A u-interval narrower than this (relative) cannot be split any more.
+U_FLOOR = 64 * np.finfo(float).eps
+#: Safety valve on the number of boxes in one round (memory), far above real needs.
+MAX_BOXES = 2_000_000
+#: Safety valve on the rounds of splitting: 50 halvings of theta per decade of u and
+#: 60 of u reach both floors from the initial boxes several times over.
+MAX_ROUNDS = 600
 
 
-def _polish(A0, B1, C1, theta, iters: int = 30):
-    """Newton on Im mu(theta) = 0, damped, each candidate until its step is at rounding."""
-    th = theta.copy()
-    mu = np.empty(th.size, complex)
-    active = np.ones(th.size, bool)
-    for _ in range(iters):
-        idx = np.flatnonzero(active)
-        if idx.size == 0:
+# ----------------------------------------------------------------------- cells
+@dataclass
+class Cells:
+    """theta-cells [th - rho, th + rho] with their enclosures of F0, F1, F2."""
+
+    item: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
+    th: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    rho: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    kind: np.ndarray = field(default_factory=lambda: np.zeros(0, int))   # 0 inner, 1 at 0, 2 at pi
+    pc: np.ndarray = field(default_factory=lambda: np.zeros((3, 0), complex))  # value at th
+    pr: np.ndarray = field(default_factory=lambda: np.zeros((3, 0)))
+    pd: np.ndarray = field(default_factory=lambda: np.zeros((3, 0), complex))  # derivative at th
+    vc: np.ndarray = field(default_factory=lambda: np.zeros((3, 0), complex))  # value on the cell
+    vr: np.ndarray = field(default_factory=lambda: np.zeros((3, 0)))
+    dc: np.ndarray = field(default_factory=lambda: np.zeros((3, 0), complex))  # derivative on the cell
+    dr: np.ndarray = field(default_factory=lambda: np.zeros((3, 0)))
+
+    def add(self, resp: LoopResponse, item, th, rho, kind) -> np.ndarray:
+        """Append cells, computing their enclosures; returns their indices."""
+        item, th, rho = np.asarray(item, int), np.asarray(th, float), np.asarray(rho, float)
+        pts = resp.coefficients(item, th, np.zeros_like(rho))
+        cel = resp.coefficients(item, th, rho)
+        vd = [c.value_disc(rho, p) for c, p in zip(cel, pts)]
+        start = self.th.size
+        cat = np.concatenate
+        self.item, self.th, self.rho = cat([self.item, item]), cat([self.th, th]), cat([self.rho, rho])
+        self.kind = cat([self.kind, np.broadcast_to(kind, th.shape)])
+        self.pc = cat([self.pc, np.array([p.vc for p in pts])], axis=1)
+        self.pr = cat([self.pr, np.array([p.vr for p in pts])], axis=1)
+        self.pd = cat([self.pd, np.array([p.dc for p in pts])], axis=1)
+        self.vc = cat([self.vc, np.array([v[0] for v in vd])], axis=1)
+        self.vr = cat([self.vr, np.array([v[1] for v in vd])], axis=1)
+        self.dc = cat([self.dc, np.array([c.dc for c in cel])], axis=1)
+        self.dr = cat([self.dr, np.array([c.dr for c in cel])], axis=1)
+        return np.arange(start, self.th.size)
+
+
+def _initial_cells(resp: LoopResponse, items: np.ndarray) -> tuple[np.ndarray, ...]:
+    """A uniform partition of [0, pi] fine enough for the delay's phase to turn by
+    at most ~0.4 rad per cell; end cells are centred on 0 and pi."""
+    m = max(8, int(np.ceil(np.pi * resp.phase_rate / 0.4)))
+    h = np.pi / m
+    th = (np.arange(m + 1) * h)
+    th[-1] = np.pi
+    rho = np.full(m + 1, h / 2)
+    th[1:-1] = (np.arange(1, m) * h)            # interior cells [(k-1/2)h, (k+1/2)h]
+    kind = np.zeros(m + 1, int)
+    kind[0], kind[-1] = 1, 2
+    rho[0] = rho[-1] = h / 2
+    it = np.repeat(items, m + 1)
+    return it, np.tile(th, items.size), np.tile(rho, items.size), np.tile(kind, items.size)
+
+
+def _theta_floor(c: Cells, cell: np.ndarray) -> np.ndarray:
+    """Cells that cannot be split further: theta is stored with a relative error of
+    one unit round-off, so inner cells stop at THETA_FLOOR relative to theta; the
+    end cell at 0 is exact down to underflow; the one at pi to THETA_FLOOR * pi."""
+    th, rho, kind = c.th[cell], c.rho[cell], c.kind[cell]
+    lim = np.where(kind == 1, 1e-290, THETA_FLOOR * np.where(kind == 2, np.pi, th))
+    return rho <= lim
+
+
+def _split_cells(c: Cells, idx: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Children (item, th, rho, kind) of cells idx: two per cell."""
+    th, rho, kind, item = c.th[idx], c.rho[idx], c.kind[idx], c.item[idx]
+    h = rho / 2
+    end = kind != 0
+    # an end cell [-rho, rho] around 0 (or pi) covers [0, rho]: its children are the
+    # end cell [-rho/2, rho/2] and the inner cell [rho/2, rho]
+    left_th = np.where(kind == 1, 0.0, np.where(kind == 2, np.pi - 1.5 * h, th - h))
+    left_rho = np.where(end, np.where(kind == 1, h, 0.5 * h), h)
+    left_kind = np.where(kind == 1, 1, 0)
+    right_th = np.where(kind == 1, 1.5 * h, np.where(kind == 2, np.pi, th + h))
+    right_rho = np.where(end, np.where(kind == 1, 0.5 * h, h), h)
+    right_kind = np.where(kind == 2, 2, 0)
+    return (np.concatenate([item, item]), np.concatenate([left_th, right_th]),
+            np.concatenate([left_rho, right_rho]), np.concatenate([left_kind, right_kind]))
+
+
+# ------------------------------------------------------------------- disc algebra
+def _dmul(ac, ar, bc, br):
+    aa, ba = np.abs(ac), np.abs(bc)
+    return ac * bc, aa * br + ar * ba + ar * br + EPS_OP * aa * ba
+
+
+def _dpoly(c: np.ndarray, r: np.ndarray, uc: np.ndarray, ur: np.ndarray):
+    """Disc enclosure of c0 + c1 u + c2 u^2 over the real disc (uc, ur)."""
+    ac, ar = c[2], r[2]
+    for l in (1, 0):
+        ac, ar = _dmul(ac, ar, uc, ur)
+        ar = ar + r[l] + EPS_OP * (np.abs(ac) + np.abs(c[l]))
+        ac = ac + c[l]
+    return ac, ar
+
+
+# -------------------------------------------------------------------- the boxes
+@dataclass
+class Found:
+    """Crossings (u, theta, direction, multiplicity) and unresolved u-intervals per item."""
+
+    cross: list[list[tuple[float, float, int, int]]]
+    unsure: list[list[tuple[float, float]]]
+
+
+def _box_test(c: Cells, cell: np.ndarray, ua: np.ndarray, ub: np.ndarray):
+    """Classify boxes: 0 excluded, 1 one zero (Krawczyk), 2 split. Also returns the
+    contributions of theta and u to the enclosure radius (which to split)."""
+    uc, ur = 0.5 * (ua + ub), 0.5 * (ub - ua)
+    g = lambda a: a[:, cell]  # noqa: E731
+    vc, vr, dc, dr = g(c.vc), g(c.vr), g(c.dc), g(c.dr)
+    fc, fr = _dpoly(vc, vr, uc, ur)
+    status = np.full(cell.size, 2)
+    status[np.abs(fc) > fr] = 0
+    # Jacobian enclosures over the box
+    tc, tr = _dpoly(dc, dr, uc, ur)                              # F_theta
+    u2c, u2r = _dmul(vc[2], vr[2], 2 * uc, 2 * ur)
+    kc, kr = vc[1] + u2c, vr[1] + u2r + EPS_OP * (np.abs(vc[1]) + np.abs(u2c))   # F_u
+    rho = c.rho[cell]
+    w_theta, w_u = rho * (np.abs(tc) + tr), ur * (np.abs(kc) + kr)
+    live = np.flatnonzero(status == 2)
+    if live.size:
+        status[live] = _krawczyk(c, cell[live], uc[live], ur[live], rho[live],
+                                 tc[live], tr[live], kc[live], kr[live])
+    return status, w_theta, w_u, np.abs(fc)
+
+
+def _krawczyk(c: Cells, cell, uc, ur, rho, tc, tr, kc, kr) -> np.ndarray:
+    """1 where the Krawczyk operator maps the box into its interior (exactly one
+    zero), 0 where it misses the box (no zero), else 2."""
+    z = np.zeros(uc.shape)
+    pc, pr, pd = c.pc[:, cell], c.pr[:, cell], c.pd[:, cell]
+    f, frad = _dpoly(pc, pr, uc, z)                              # F at the centre
+    ft = pd[0] + uc * (pd[1] + uc * pd[2])                       # F_theta at the centre
+    fu = pc[1] + 2 * uc * pc[2]                                  # F_u at the centre
+    a, b, cc, d = ft.real, fu.real, ft.imag, fu.imag             # J = [[a, b], [cc, d]]
+    det = a * d - b * cc
+    ok = np.isfinite(det) & (np.abs(det) > 1e-300)
+    with np.errstate(all="ignore"):
+        Y = np.array([[d, -b], [-cc, a]]) / np.where(ok, det, 1.0)   # (2, 2, n)
+        # interval entries of J over the box: [centre - radius, centre + radius]
+        Jc = np.array([[tc.real, kc.real], [tc.imag, kc.imag]])
+        Jr = np.array([[tr, kr], [tr, kr]])
+        rad = np.array([rho, ur])
+        out = np.full(uc.shape, 2)
+        half = np.zeros((2,) + uc.shape)
+        shift = np.zeros((2,) + uc.shape)
+        for i in range(2):
+            # (Y F)_i for F in its disc
+            shift[i] = Y[i, 0] * f.real + Y[i, 1] * f.imag
+            half[i] = (np.abs(Y[i, 0]) + np.abs(Y[i, 1])) * frad
+            for k in range(2):
+                mc = (1.0 if i == k else 0.0) - (Y[i, 0] * Jc[0, k] + Y[i, 1] * Jc[1, k])
+                mr = np.abs(Y[i, 0]) * Jr[0, k] + np.abs(Y[i, 1]) * Jr[1, k]
+                half[i] += (np.abs(mc) + mr) * rad[k]
+            half[i] += EPS_OP * (np.abs(shift[i]) + half[i])
+        inside = np.all(np.abs(shift) + half < rad, axis=0)
+        outside = np.any(np.abs(shift) - half > rad, axis=0)
+    out[ok & inside] = 1
+    out[ok & outside & ~inside] = 0
+    return out
+
+
+def _boxes(resp: LoopResponse, items: np.ndarray, u_cap: np.ndarray, polish: bool = True
+           ) -> Found:
+    """Branch and prune over (theta, u) for the given items (see module doc).
+
+    ``u_cap[item]`` bounds the u of interest (inf: all); it is lowered to each
+    crossing found when only the lowest crossing is wanted (finite caps).
+    """
+    L = resp.size
+    lowest_only = np.isfinite(u_cap)
+    found = Found([[] for _ in range(L)], [[] for _ in range(L)])
+    c = Cells()
+    it, th, rho, kind = _initial_cells(resp, items)
+    cells = c.add(resp, it, th, rho, kind)
+    edges = np.geomspace(U_LO, U_HI, int(round(np.log10(U_HI / U_LO))) + 1)
+    cell = np.repeat(cells, edges.size - 1)
+    ua = np.tile(edges[:-1], cells.size)
+    ub = np.tile(edges[1:], cells.size)
+    cap = np.where(lowest_only, u_cap, np.inf).astype(float)
+    rounds = 0
+    while cell.size:
+        keep = ua < cap[c.item[cell]]
+        cell, ua, ub = cell[keep], ua[keep], np.minimum(ub[keep], np.maximum(ua[keep], cap[c.item[cell[keep]]]))
+        if not cell.size:
             break
-        m, dm = _mu_and_slope(A0[idx], B1[idx], C1[idx], th[idx])
-        mu[idx] = m
-        slope = dm.imag
-        step = m.imag / np.where(slope != 0, slope, np.inf)
-        lim = 0.2 * np.maximum(np.minimum(th[idx], np.pi - th[idx]), 1e-3)  # stay near the candidate
-        step = np.clip(step, -lim, lim)
-        th[idx] = np.clip(th[idx] - step, 1e-12, np.pi - 1e-12)
-        # 1e-12 relative in theta is below the noise of Im mu near the root and
-        # gives K to ~1e-12; quadratic convergence has done its work by then
-        active[idx] = np.abs(step) > 1e-12 * np.maximum(th[idx], 1e-3)
-    idx = np.flatnonzero(~active)
-    if idx.size:  # value at the converged angle
-        mu[idx] = _mu_and_slope(A0[idx], B1[idx], C1[idx], th[idx])[0]
-    return th, mu
+        if cell.size > MAX_BOXES:
+            raise AnalysisError("the crossing analysis needs more than "
+                                f"{MAX_BOXES} boxes; the loop is beyond what it can certify")
+        status, w_th, w_u, f_abs = _box_test(c, cell, ua, ub)
+        one = np.flatnonzero(status == 1)
+        if one.size:
+            res = _polish(resp, c, cell[one], ua[one], ub[one]) if polish else None
+            for j, k in enumerate(one):
+                i = int(c.item[cell[k]])
+                u, t, dirn = res[j] if res is not None else (0.5 * (ua[k] + ub[k]), c.th[cell[k]], 0)
+                mult = 1 if c.kind[cell[k]] else 2
+                found.cross[i].append((u, t, dirn, mult))
+                if lowest_only[i]:
+                    cap[i] = min(cap[i], u)
+        rest = np.flatnonzero(status == 2)
+        if not rest.size:
+            break
+        cell, ua, ub, w_th, w_u = cell[rest], ua[rest], ub[rest], w_th[rest], w_u[rest]
+        f_abs = f_abs[rest]
+        th_small = _theta_floor(c, cell)
+        u_small = (ub - ua) <= U_FLOOR * ub
+        # at the theta floor, splitting u cannot help once theta alone spans 0;
+        # a non-finite enclosure (overflow) cannot be refined either
+        stuck = th_small & (u_small | (w_th >= f_abs)) | ~np.isfinite(f_abs + w_th + w_u)
+        rounds += 1
+        if rounds > MAX_ROUNDS:
+            stuck[:] = True
+        for k in np.flatnonzero(stuck):
+            i = int(c.item[cell[k]])
+            found.unsure[i].append((float(ua[k]), float(ub[k])))
+            if lowest_only[i]:
+                cap[i] = min(cap[i], ua[k])
+        go = ~stuck
+        cell, ua, ub, w_th, w_u = cell[go], ua[go], ub[go], w_th[go], w_u[go]
+        split_th = (w_th >= w_u) & ~th_small[go] | u_small[go]
+        # u-splits: at the geometric mean of wide intervals, else the midpoint
+        su = np.flatnonzero(~split_th)
+        mid = np.where(ub[su] > 4 * ua[su], np.sqrt(ua[su] * ub[su]), 0.5 * (ua[su] + ub[su]))
+        new_cell = [cell[su], cell[su]]
+        new_ua, new_ub = [ua[su], mid], [mid, ub[su]]
+        st = np.flatnonzero(split_th)
+        if st.size:
+            parents, inv = np.unique(cell[st], return_inverse=True)
+            kids = c.add(resp, *_split_cells(c, parents))
+            left, right = kids[:parents.size], kids[parents.size:]
+            new_cell += [left[inv], right[inv]]
+            new_ua += [ua[st], ua[st]]
+            new_ub += [ub[st], ub[st]]
+        cell, ua, ub = np.concatenate(new_cell), np.concatenate(new_ua), np.concatenate(new_ub)
+    return found
 
 
-def exact_kmax_batch(sysm: SampledSystem, intervals: bool = True) -> list[dict[str, Any]]:
-    """Exact K_max and the stable intervals in K for every period of ``sysm``.
+def _polish(resp: LoopResponse, c: Cells, cell: np.ndarray, ua: np.ndarray, ub: np.ndarray
+            ) -> list[tuple[float, float, int]]:
+    """Newton's method inside boxes proved to hold exactly one zero: (u, theta, direction).
+
+    In an end box (theta = 0 or pi) the zero is real: Newton on Re F in u alone.
+    The iterate is kept in its box; the box's centre is the fallback (the box
+    already pins the zero to within its size)."""
+    th = c.th[cell].copy()
+    end = c.kind[cell] != 0
+    lo_t, hi_t = th - c.rho[cell], th + c.rho[cell]
+    u = 0.5 * (ua + ub)
+    item = c.item[cell]
+    z = np.zeros(th.shape)
+    for _ in range(12):
+        F = resp.coefficients(item, th, z)
+        f = F[0].vc + u * (F[1].vc + u * F[2].vc)
+        ft = F[0].dc + u * (F[1].dc + u * F[2].dc)
+        fu = F[1].vc + 2 * u * F[2].vc
+        a, b, cc, d = ft.real, fu.real, ft.imag, fu.imag
+        det = a * d - b * cc
+        with np.errstate(all="ignore"):
+            dth = np.where(end, 0.0, -(d * f.real - b * f.imag) / det)
+            du = np.where(end, -f.real / b, -(-cc * f.real + a * f.imag) / det)
+        dth = np.where(np.isfinite(dth), dth, 0.0)
+        du = np.where(np.isfinite(du), du, 0.0)
+        th = np.clip(th + dth, lo_t, hi_t)
+        u = np.clip(u + du, ua, ub)
+        if np.all(np.abs(du) <= 4 * np.finfo(float).eps * u) and np.all(np.abs(dth) <= 1e-15 * (1 + th)):
+            break
+    F = resp.coefficients(item, th, z)
+    ft = F[0].dc + u * (F[1].dc + u * F[2].dc)
+    fu = F[1].vc + 2 * u * F[2].vc
+    det = ft.real * fu.imag - fu.real * ft.imag
+    th = np.where(c.kind[cell] == 1, 0.0, np.where(c.kind[cell] == 2, np.pi, th))
+    return [(float(uu), float(tt), int(np.sign(dd))) for uu, tt, dd in zip(u, th, det)]
+
+
+# ------------------------------------------------------------------ the winding
+def winding(resp: LoopResponse, items: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """Poles outside the unit circle at u = K/scale for each item, by the argument
+    principle, certified: ``Z_out = q - wind(det M)``. -1 where a pole is within
+    the rounding floor of the circle (the count cannot be certified)."""
+    items, u = np.asarray(items, int), np.asarray(u, float)
+    m = max(8, int(np.ceil(np.pi * resp.phase_rate / 0.4)))
+    a0 = np.linspace(0.0, np.pi, m + 1)
+    row = np.repeat(np.arange(items.size), m)
+    a, b = np.tile(a0[:-1], items.size), np.tile(a0[1:], items.size)
+    done_a, done_b, done_row = [], [], []
+    bad_rows = np.zeros(items.size, bool)
+    for _ in range(200):
+        if not row.size:
+            break
+        mid, rho = 0.5 * (a + b), 0.5 * (b - a)
+        pts = resp.coefficients(items[row], mid, np.zeros_like(mid))
+        cel = resp.coefficients(items[row], mid, rho)
+        vd = [cc.value_disc(rho, p) for cc, p in zip(cel, pts)]
+        fc, fr = _dpoly(np.array([v[0] for v in vd]), np.array([v[1] for v in vd]), u[row],
+                        np.zeros(row.size))
+        ok = np.abs(fc) > fr
+        done_a.append(a[ok]), done_b.append(b[ok]), done_row.append(row[ok])
+        a, b, row = a[~ok], b[~ok], row[~ok]
+        floor = (b - a) <= THETA_FLOOR * (1.0 + a)
+        bad_rows[row[floor]] = True
+        a, b, row = a[~floor], b[~floor], row[~floor]
+        mid = 0.5 * (a + b)
+        a, b, row = np.concatenate([a, mid]), np.concatenate([mid, b]), np.concatenate([row, row])
+    if row.size:
+        bad_rows[row] = True
+    A, Bv, R = np.concatenate(done_a), np.concatenate(done_b), np.concatenate(done_row)
+    ends = np.concatenate([A, Bv])
+    rr = np.concatenate([R, R])
+    F = resp.coefficients(items[rr], ends, np.zeros_like(ends))
+    val = F[0].vc + u[rr] * (F[1].vc + u[rr] * F[2].vc)
+    fa, fb = val[:A.size], val[A.size:]
+    inc = np.angle(fb / fa)
+    total = np.zeros(items.size)
+    np.add.at(total, R, inc)
+    turns = total / np.pi
+    out = resp.q - np.round(turns).astype(int)
+    bad = bad_rows | (np.abs(turns - np.round(turns)) > 1e-6)
+    return np.where(bad, -1, out)
+
+
+# ------------------------------------------------------------------ the analysis
+def analyse(resp: LoopResponse, full: bool = True) -> list[dict[str, Any]]:
+    """Exact K_max and stable set in K for every item of ``resp``.
 
     Parameters
     ----------
-    sysm : SampledSystem
-    intervals : bool
-        If False, only K_max is wanted (``boundary``): only the crossings near
-        the lowest one are polished and only the first two gaps are classified;
-        a point whose first gaps do not settle K_max falls back to the full path.
-        ``intervals`` is then ``((0, K_max),)`` only.
+    resp : LoopResponse
+    full : bool
+        All crossings and every stable interval (True), or only K_max (False:
+        ``intervals`` is then ``((0, K_max),)`` when K_max > 0).
 
     Returns
     -------
     list of dict
-        One per period: ``kmax``, ``intervals``, ``theta`` (angle of the crossing
-        at K_max, nan if none), ``rigid``, ``rho_small_K``.
+        ``kmax``, ``intervals``, ``theta`` (angle of the crossing at K_max, nan if
+        none), ``rigid``, ``outside_small_K`` (poles outside at K -> 0+),
+        ``uncertain`` (K-intervals the numerics could not resolve).
     """
-    if not sysm.varies_with_K:
-        raise AnalysisError(sysm.fixed_reason or "controller: no stiffness K to vary")
-    # K enters with the rank of A1 = B1 C1; B1 has one independent column per port
-    # (its ZOH input), so that is the rank of the small C1 (PEB without delay: 1, the
-    # two error signals being opposite). Factor at that rank, by groups.
-    U, S, Vt = np.linalg.svd(sysm.C1, full_matrices=False)      # (P, p, p), (P, p), (P, p, N)
-    ranks = np.sum(S > 1e-12 * S[:, :1], axis=1)
-    out: list[dict[str, Any] | None] = [None] * sysm.C1.shape[0]
-    for r in np.unique(ranks):
-        idx = np.flatnonzero(ranks == r)
-        if not 1 <= r <= 2:
-            raise AnalysisError(f"stiffness enters the loop with rank {r}; only 1 or 2 is supported")
-        B1 = sysm.B1[idx] @ (U[idx, :, :r] * S[idx, None, :r])
-        C1 = Vt[idx, :r, :]
-        for i, res in zip(idx, _kmax_core(sysm.A0[idx], B1, C1, intervals)):
-            out[i] = res
-    return out  # type: ignore[return-value]
+    L = resp.size
+    items = np.arange(L)
+    anchor = winding(resp, items, np.full(L, U_LO))
+    cap = np.full(L, np.inf if full else U_HI)
+    need = items if full else items[anchor == 0]
+    found = _boxes(resp, need, np.where(np.isin(items, need), cap, -np.inf)) if need.size else \
+        Found([[] for _ in range(L)], [[] for _ in range(L)])
+    out = []
+    for i in range(L):
+        out.append(_classify(resp, i, int(anchor[i]), found.cross[i], found.unsure[i], full))
+    return out
 
 
-def _kmax_core(A0: np.ndarray, B1: np.ndarray, C1: np.ndarray, full: bool = True
-               ) -> list[dict[str, Any]]:
-    A1 = B1 @ C1
-    P, N, _ = A0.shape
-    r = B1.shape[-1]
-    Ks = np.linalg.norm(A0, axis=(1, 2)) / np.maximum(np.linalg.norm(A1, axis=(1, 2)), 1e-300)
-    Ks = 2.0 ** np.round(np.log2(Ks))   # a power of two keeps K/Ks exact
-    eig0 = np.linalg.eigvals(A0)
-    # rigid-body modes need a pole of A0 at z = 1: look for them only there
-    rigid = np.zeros(P, int)
-    near1 = np.flatnonzero(np.abs(eig0 - 1.0).min(axis=1) < 1e-6)
-    if near1.size:
-        Sv = np.linalg.svd(np.concatenate([np.eye(N) - A0[near1], A1[near1]], axis=1),
-                           compute_uv=False)
-        rigid[near1] = np.sum(Sv < 1e-10 * np.maximum(1.0, Sv[:, :1]), axis=1)  # as rigid_body_modes()
-    coef = chi_coefficients(A0, A1, Ks, r, eig0, B1, C1)
-
-    # --- complex crossings: candidates, then polish on the exact frequency response
-    cs = coef.copy()
-    for p in np.flatnonzero(rigid):
-        cs[p] = [deflate(ci, rigid[p]) for ci in coef[p]]
-    ths = unit_circle_angles(crossing_polys(cs))
-    cand_p = np.repeat(np.arange(P), [t.size for t in ths])
-    crossings: list[list[tuple[float, float]]] = [[] for _ in range(P)]  # (K, theta)
-    if cand_p.size:
-        th0 = np.concatenate(ths)
-        mu0 = rough_mu(cs[cand_p], Ks[cand_p], th0)
-        # K = 1/mu must be positive; the rough angle (resultant near z = 1) can be
-        # a few % off, so the test on Im is generous and the polish decides
-        ok0 = (np.abs(mu0.imag) < (0.5 if r == 2 else 0.05) * np.abs(mu0)) & (mu0.real > 0)
-        if not full and ok0.any():
-            # only the lowest crossings can decide K_max; rough K is accurate for r = 1
-            # (a crossing polynomial of moderate degree) but can be a few % off for r = 2
-            Krough = np.where(ok0, 1.0 / np.where(ok0, mu0.real, 1.0), np.inf)
-            lowest = np.full(P, np.inf)
-            np.minimum.at(lowest, cand_p, Krough)
-            ok0 &= Krough <= (1.01 if r == 1 else 4.0) * lowest[cand_p]
-        if ok0.any():
-            ps, th1 = cand_p[ok0], th0[ok0]
-            th, mu = _polish(A0[ps], B1[ps], C1[ps], th1)
-            good = (np.abs(mu.imag) <= 1e-9 * np.abs(mu)) & (mu.real > 0)
-            for p, t, m in zip(ps[good], th[good], mu[good]):
-                crossings[p].append((1.0 / m.real, float(t)))
-
-    # --- real crossings at z = +1 and z = -1: K = 1/mu for the real eigenvalues mu of
-    # the real r x r matrix G(+-1), by linear solves (det(I - A) itself is tiny and
-    # inaccurate at small T); where +-1 is a pole of A0 (a free mass) use chi(+-1, K)
-    for zsign, theta in ((1.0, 0.0), (-1.0, math.pi)):
-        M = zsign * np.eye(N) - A0
-        direct = np.abs(eig0 - zsign).min(axis=1) > 1e-7
-        if direct.any():
-            idx = np.flatnonzero(direct)
-            G = C1[idx] @ np.linalg.solve(M[idx], B1[idx])
-            for p, mus in zip(idx, np.linalg.eigvals(G)):
-                crossings[p].extend((1.0 / m.real, theta) for m in mus
-                                    if abs(m.imag) <= 1e-12 * abs(m) and m.real > 0)
-        if (~direct).any():
-            zpow = zsign ** np.arange(N + 1)
-            idx = np.flatnonzero(~direct)
-            vals = np.array([cs[p] @ zpow for p in idx])
-            # chi(+-1, K) has a root at K = 0 for each pole of A0 at +-1 (rigid modes
-            # already divided out): remove it exactly rather than let rounding move it
-            n0 = np.sum(np.abs(eig0[idx] - zsign) <= 1e-7, axis=1) - (rigid[idx] if zsign > 0 else 0)
-            for j, k in enumerate(n0):
-                if k > 0:
-                    vals[j] = np.concatenate([vals[j, k:], np.zeros(k)])
-            for p, roots in zip(idx, positive_real_roots(vals)):
-                crossings[p].extend((k * Ks[p], theta) for k in roots)
-
-    # crossings beyond K_CAP x the loop's stiffness scale are out of the analysed range:
-    # there the closed loop's entries are so large that its eigenvalues are noise
-    # crossings below K_MIN x the scale are K = 0 roots blurred by rounding
-    for p in range(P):
-        kept: list[tuple[float, float]] = []
-        for K, th in sorted(crossings[p]):
-            if K_MIN * Ks[p] < K <= K_CAP * Ks[p] and (not kept or K > kept[-1][0] * (1 + 1e-10)):
-                kept.append((K, th))
-        crossings[p] = kept
-
-    probes = [_probes([k for k, _ in crossings[p]], Ks[p]) for p in range(P)]
+def _classify(resp: LoopResponse, i: int, anchor: int, cross, unsure, full: bool) -> dict[str, Any]:
+    s = float(resp.scale[i])
+    base = {"rigid": resp.rigid, "outside_small_K": anchor}
+    unc = _merge(unsure)
+    if anchor < 0:
+        return {**base, "kmax": 0.0, "intervals": (), "theta": math.nan,
+                "uncertain": ((0.0, U_LO * s),)}
+    events = sorted([(u, u, t, d, m) for u, t, d, m in cross] +
+                    [(a, b, math.nan, 0, 0) for a, b in unc])
     if not full:
-        # anchor, gap (0, K1), and just above K1: inside the window of rough K in
-        # which no candidate was dropped (1 % for r = 1, 4x for r = 2)
-        win = 1.005 if r == 1 else 1.5
-        probes = [m[:2] + ([min(m[2], win * crossings[p][0][0])] if len(m) > 2 else [])
-                  for p, m in enumerate(probes)]
-    mp = np.repeat(np.arange(P), [len(m) for m in probes])
-    mK = np.concatenate(probes)
-    outside = np.empty(mK.size, dtype=int)
-    on = np.empty(mK.size, dtype=int)
-    rho = np.empty(mK.size)
-    # the anchor (K_MIN * Ks) counts like K = 0 unless A0 has a pole on the circle
-    off_circle = np.abs(np.abs(eig0) - 1.0).min(axis=1) > 1e-6
-    anchor_idx = np.cumsum([0] + [len(m) for m in probes[:-1]])
-    reuse = np.zeros(mK.size, bool)
-    reuse[anchor_idx] = off_circle
-    for s in range(0, mK.size, 2048):
-        sl = slice(s, s + 2048)
-        k0 = reuse[sl]
-        eig = np.empty((k0.size, N), complex)
-        eig[k0] = eig0[mp[sl][k0]]                 # already known
-        if (~k0).any():
-            pp = mp[sl][~k0]
-            eig[~k0] = np.linalg.eigvals(A0[pp] + mK[sl][~k0, None, None] * A1[pp])
-        outside[sl], rho[sl], on[sl] = _count_outside_batch(eig, rigid[mp[sl]])
-    # away from the anchor a pole on the circle (within 1e-9) counts as outside: not stable
-    anchor = np.concatenate([[True] + [False] * (len(m) - 1) for m in probes])
-    outside = np.where(anchor, outside, outside + on)
-    out: list[dict[str, Any] | None] = []
-    redo = []
-    pos = 0
-    for p in range(P):
-        cnt = len(probes[p])
-        u, rh, on0 = outside[pos:pos + cnt], rho[pos:pos + cnt], int(on[pos])
-        pos += cnt
-        cr = crossings[p]
-        if not full:
-            settled = u[1] > 0 or not cr or (cnt == 3 and u[2] > 0)
-            if settled and _consistent(cr[:cnt - 2], u, on0):
-                if u[1] > 0 or rh[1] >= 1.0:
-                    res = {"kmax": 0.0, "intervals": (), "theta": math.nan}
-                elif not cr:
-                    res = {"kmax": math.inf, "intervals": ((0.0, math.inf),), "theta": math.nan}
-                else:
-                    K1, th1 = cr[0]
-                    if th1 in (0.0, math.pi):
-                        K1 = _refine_endpoints({"kmax": K1, "intervals": ()}, A0[p], A1[p],
-                                               int(rigid[p]), {K1})["kmax"]
-                    res = {"kmax": K1, "intervals": ((0.0, K1),), "theta": th1}
-                out.append({**res, "rigid": int(rigid[p]), "rho_small_K": float(rh[1])})
-            else:
-                out.append(None)
-                redo.append(p)
-            continue
-        if not _consistent(cr, u, on0):
-            cr, u, rh = _repair(A0[p], A1[p], B1[p], C1[p], int(rigid[p]), cr, Ks[p], on0)
-            crossings[p] = cr
-        res = _intervals(cr, u[1:], rh[1:], int(rigid[p]))
-        real_K = {k for k, th in cr if th in (0.0, math.pi)}
-        ends = {e for iv in res["intervals"] for e in iv}
-        if real_K & ends:
-            res = _refine_endpoints(res, A0[p], A1[p], int(rigid[p]), real_K)
-        out.append(res)
-    if redo:
-        for p, res in zip(redo, _kmax_core(A0[redo], B1[redo], C1[redo], True)):
-            out[p] = res
-    return out  # type: ignore[return-value]
-
-
-def _count_outside_batch(eig: np.ndarray, n_rigid: np.ndarray
-                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Vectorised :func:`_count_outside` over rows (rigid modes excluded per row),
-    plus the number of poles on the circle (within 1e-9)."""
-    a = np.abs(eig)
-    if np.any(n_rigid):
-        order = np.argsort(np.abs(eig - 1.0), axis=-1)
-        mask = np.ones_like(a, bool)
-        for m in np.unique(n_rigid[n_rigid > 0]):
-            rows = np.flatnonzero(n_rigid == m)
-            np.put_along_axis(mask[rows], order[rows, :m], False, axis=-1)
-            sub = mask[rows]
-            np.put_along_axis(sub, order[rows, :m], False, axis=-1)
-            mask[rows] = sub
-        a = np.where(mask, a, 0.0)
-    on = np.abs(a - 1.0) <= 1e-9
-    return np.sum((a >= 1.0) & ~on, axis=-1), a.max(axis=-1), np.sum(on, axis=-1)
-
-
-def _probes(Kv: list[float], Ks: float) -> list[float]:
-    """Where to count poles outside the circle: K_MIN * Ks (anchors the count; a
-    pole still on the circle there may go either way), then one point inside each
-    gap between consecutive crossings."""
-    if not Kv:
-        return [K_MIN * Ks, Ks]
-    return [K_MIN * Ks, Kv[0] / 2] + [(a + b) / 2 for a, b in zip(Kv, Kv[1:])] + [2 * Kv[-1]]
-
-
-def _count_outside(eig: np.ndarray, n_rigid: int) -> tuple[int, float, int]:
-    """(poles strictly outside, spectral radius, poles on the circle within 1e-9),
-    rigid-body modes excluded."""
-    if n_rigid:
-        eig = eig[np.argsort(np.abs(eig - 1.0))[n_rigid:]]
-    a = np.abs(eig)
-    on = np.abs(a - 1.0) <= 1e-9
-    return int(np.sum((a >= 1.0) & ~on)), float(a.max()), int(on.sum())
-
-
-def _mult(th: float) -> int:
-    return 1 if th in (0.0, math.pi) else 2
-
-
-def _consistent(cr: list[tuple[float, float]], u: np.ndarray, on0: int = 0) -> bool:
-    """Counts at the probes agree with the crossings found: between K = 0 (count
-    u[0] strictly outside, on0 on the circle) and the first gap only the poles on
-    the circle may leave; each crossing moves 2 poles (complex pair) or 1 (real,
-    z = +-1) across the circle, so a larger jump means a crossing was missed."""
-    if not u[0] <= u[1] <= u[0] + on0:
-        return False
-    return all(abs(int(u[g + 2]) - int(u[g + 1])) <= _mult(th) for g, (_, th) in enumerate(cr))
-
-
-def _repair(A0, A1, B1, C1, rigid, cr, Ks, on0: int, rounds: int = 8):
-    """Fallback when a crossing was missed: bisect on the outside count where it
-    disagrees with the crossings found, then polish the new crossing exactly."""
-    def count(K: float) -> int:   # on the circle counts as outside (K > 0: not stable)
-        c = _count_outside(np.linalg.eigvals(A0 + K * A1), rigid)
-        return c[0] + c[2]
-
-    def bisect(lo: float, hi: float, ulo: int) -> float:
-        for _ in range(200):   # to rounding of K
-            mid = 0.5 * (lo + hi)
-            if hi - lo <= 4e-16 * hi:
-                break
-            if count(mid) == ulo:
-                lo = mid
-            else:
-                hi = mid
-        return hi
-
-    for _ in range(rounds):
-        pr = _probes([k for k, _ in cr], Ks)
-        u = np.array([count(k) for k in pr])
-        u[0] = _count_outside(np.linalg.eigvals(A0 + pr[0] * A1), rigid)[0]
-        if _consistent(cr, u, on0):
-            break
-        if not u[0] <= u[1] <= u[0] + on0:
-            segs = [(pr[0], pr[1], u[0] + on0)]
+        if anchor > 0:
+            return {**base, "kmax": 0.0, "intervals": (), "theta": math.nan, "uncertain": ()}
+        if not events:
+            return {**base, "kmax": math.inf, "intervals": ((0.0, math.inf),), "theta": math.nan,
+                    "uncertain": ()}
+        a, b, t, d, m = events[0]
+        if d < 0:
+            raise AnalysisError("crossing analysis: the first crossing points inwards while no "
+                                "pole is outside; please report this loop")
+        kmax = a * s
+        uncertain = ((a * s, b * s),) if m == 0 else ()
+        return {**base, "kmax": kmax, "intervals": ((0.0, kmax),) if kmax > 0 else (),
+                "theta": t, "uncertain": uncertain}
+    counts = [anchor]
+    for a, b, t, d, m in events:
+        if m == 0:   # an unresolved zone: count just above it by the argument principle
+            nxt = int(winding(resp, np.array([i]), np.array([b * (1 + 1e-9)]))[0])
+            counts.append(nxt if nxt >= 0 else counts[-1])
         else:
-            segs = []
-            for g, (K, th) in enumerate(cr):
-                if abs(int(u[g + 2]) - int(u[g + 1])) > _mult(th):
-                    # counts are noisy right at a crossing when poles crowd z = 1
-                    # (small T): look 1e-3 away from the known one
-                    lo_k, hi_k = K * (1 - 1e-3), K * (1 + 1e-3)
-                    below, above = count(lo_k), count(hi_k)
-                    if below != u[g + 1] and pr[g + 1] < lo_k:
-                        segs.append((pr[g + 1], lo_k, u[g + 1]))
-                    if above != u[g + 2] and hi_k < pr[g + 2]:
-                        segs.append((hi_k, pr[g + 2], above))
-                    break
-        if not segs:
-            break
-        added = False
-        for lo, hi, ulo in segs:
-            new = _polish_at(A0, A1, B1, C1, bisect(lo, hi, ulo))
-            if all(abs(new[0] / k - 1) > 1e-9 for k, _ in cr):
-                cr = sorted(cr + [new])
-                added = True
-        if not added:
-            break
-    pr = _probes([k for k, _ in cr], Ks)
-    res = [_count_outside(np.linalg.eigvals(A0 + k * A1), rigid) for k in pr]
-    u = np.array([r[0] + (r[2] if i > 0 else 0) for i, r in enumerate(res)])
-    return cr, u, np.array([r[1] for r in res])
-
-
-def _polish_at(A0, A1, B1, C1, K: float) -> tuple[float, float]:
-    """(K, theta) of the crossing found by bisection at K, polished on the exact
-    frequency response when it is a complex pair."""
-    eig = np.linalg.eigvals(A0 + K * A1)
-    z = eig[np.argmin(np.abs(np.abs(eig) - 1.0))]
-    th = abs(math.atan2(z.imag, z.real))
-    if th < 1e-9:
-        return K, 0.0
-    if th > math.pi - 1e-9:
-        return K, math.pi
-    t, mu = _polish(A0[None], B1[None], C1[None], np.array([th]))
-    # the bisection's K is only as good as the eigenvalues near z = 1; the polished
-    # crossing is exact, and must be the same crossing (within a few %)
-    if abs(mu[0].imag) <= 1e-9 * abs(mu[0]) and mu[0].real > 0 and abs(1 / mu[0].real / K - 1) < 3e-2:
-        return 1.0 / mu[0].real, float(t[0])
-    return K, th
-
-
-def _intervals(cr, u, rho, rigid) -> dict[str, Any]:
-    edges = [0.0] + [k for k, _ in cr] + [math.inf]
-    intervals: list[tuple[float, float]] = []
-    for g in range(len(u)):
-        if u[g] == 0 and rho[g] < 1.0:
-            lo, hi = edges[g], edges[g + 1]
-            if intervals and intervals[-1][1] == lo:   # a touching crossing: merge
+            counts.append(counts[-1] + d * m)
+    if min(counts) < 0:
+        raise AnalysisError("crossing analysis: a negative count of unstable poles; please "
+                            "report this loop")
+    _verify(resp, i, events, counts)
+    edges_lo = [0.0] + [b * s for a, b, *_ in events]
+    edges_hi = [a * s for a, b, *_ in events] + [math.inf]
+    thetas = [t for _, _, t, _, _ in events]
+    intervals, upper, kmax, theta = [], [], 0.0, math.nan
+    for g, cnt in enumerate(counts):
+        if cnt == 0:
+            lo, hi = edges_lo[g], edges_hi[g]
+            if intervals and intervals[-1][1] == lo:
                 intervals[-1] = (intervals[-1][0], hi)
+                upper[-1] = g
             else:
                 intervals.append((lo, hi))
+                upper.append(g)
     if intervals and intervals[0][0] == 0.0:
         kmax = intervals[0][1]
-        theta = next((th for k, th in cr if k == kmax), math.nan)
-    else:
-        kmax, theta = 0.0, math.nan
-    return {"kmax": float(kmax), "intervals": tuple((float(a), float(b)) for a, b in intervals),
-            "theta": theta, "rigid": rigid, "rho_small_K": float(rho[0])}
+        theta = thetas[upper[0]] if upper[0] < len(thetas) else math.nan
+    uncertain = tuple((a * s, b * s) for a, b, *_r in events if _r[2] == 0)
+    return {**base, "kmax": float(kmax), "intervals": tuple(intervals), "theta": theta,
+            "uncertain": uncertain}
 
 
-def _refine_endpoints(res: dict[str, Any], A0: np.ndarray, A1: np.ndarray, rigid: int,
-                      real_K: set[float]) -> dict[str, Any]:
-    """Polish interval endpoints that are real crossings (z = +-1)."""
-    def fix(K: float) -> float:
-        if K not in real_K:
-            return K
-        for z in (1.0, -1.0):
-            k = _refine_real(A0, A1, z, K, rigid)
-            if k != K:
-                return k
-        return K
-    iv = tuple((fix(a) if a > 0 else a, fix(b) if math.isfinite(b) else b)
-               for a, b in res["intervals"])
-    kmax = fix(res["kmax"]) if 0 < res["kmax"] < math.inf else res["kmax"]
-    return {**res, "intervals": iv, "kmax": kmax}
+def _verify(resp: LoopResponse, i: int, events, counts) -> None:
+    """Cross-check the counts from crossing directions by the argument principle in
+    a few gaps (the first and last, and up to 6 others)."""
+    if not events:
+        return
+    gaps = sorted({1, len(events)} | set(range(2, len(events), max(1, len(events) // 6))))
+    us = []
+    for g in gaps:
+        lo = events[g - 1][1]
+        hi = events[g][0] if g < len(events) else lo * 4
+        us.append(math.sqrt(lo * hi) if hi > lo else lo)
+    got = winding(resp, np.full(len(us), i), np.array(us))
+    for g, c in zip(gaps, got):
+        if c >= 0 and c != counts[g]:
+            raise AnalysisError(f"crossing analysis: the pole count {counts[g]} from crossing "
+                                f"directions disagrees with the argument principle ({c}) at "
+                                f"K = {us[gaps.index(g)] * resp.scale[i]:.6g}; please report this loop")
 
 
-def _refine_real(A0: np.ndarray, A1: np.ndarray, z: float, K0: float, m: int) -> float:
-    """Polish a real crossing K of det(zI - A0 - K A1) = 0 (z = +-1) by the
-    generalised eigenvalues of the pencil (zI - A0, A1), nearest to K0."""
-    if m:
-        return K0
-    from scipy.linalg import eigvals
-    N = A0.shape[0]
-    with np.errstate(all="ignore"):
-        ev = eigvals(z * np.eye(N) - A0, A1)
-    ev = ev[np.isfinite(ev)]
-    if ev.size == 0:
-        return K0
-    k = ev[np.argmin(np.abs(ev - K0))]
-    return float(k.real) if abs(k - K0) < 1e-6 * abs(K0) else K0
+def _merge(iv: list[tuple[float, float]]) -> list[tuple[float, float]]:
+    out: list[tuple[float, float]] = []
+    for a, b in sorted(iv):
+        if out and a <= out[-1][1]:
+            out[-1] = (out[-1][0], max(out[-1][1], b))
+        else:
+            out.append((a, b))
+    return out

@@ -1,29 +1,58 @@
 """Exact stability and exact critical stiffness of the sampled-data loop.
 
-``stability(loop)`` reads the closed-loop poles of the exact model
-(:mod:`hapstab.engine`); ``exact_critical_stiffness(loop)`` finds every K at which a
-pole reaches |z| = 1 (:mod:`hapstab.crossings`: no grid, no bracket, polished to
-rounding) and the stable set in K. Rigid-body modes (poles at z = 1 that no K
-moves) are reported as marginal, never as unstable.
+``exact_critical_stiffness(loop)`` finds every K at which a pole reaches |z| = 1
+(:mod:`hapstab.crossings`: certified branch and prune on the loop's characteristic
+function with the delays as exact phases, :mod:`hapstab.loopfreq`) and the stable
+set in K. ``stability(loop)`` counts the poles outside the circle by the argument
+principle, certified the same way, and reports the dominant pole (eigenvalues of
+the closed-loop matrix, polished on the characteristic function). Rigid-body modes
+(poles at z = 1 that no K moves) are divided out exactly and reported as marginal,
+never as unstable.
 """
 
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import Any, Sequence
 
 import numpy as np
 
-from .crossings import exact_kmax_batch  # re-exported: the public batched core
+from .crossings import analyse, winding
 from .engine import SampledSystem, build
-from .models import HapticLoop, TeleoperationLoop
+from .loopfreq import LoopResponse, loop_response
+from .models import HapticLoop, SpringDamper, TeleoperationLoop
 from .results import CriticalStiffnessResult, StabilityResult
 
 __all__ = ["stability", "exact_critical_stiffness", "exact_kmax_batch", "rigid_body_modes",
            "spectral_radius"]
 
-#: |z| - 1 below this (relative to rounding of the eigenvalue solver) is "on the circle".
-MARGINAL_TOL = 1e-9
+#: A polished dominant pole with ||z| - 1| below this is on the circle to the
+#: accuracy of the discretised model (coefficients good to ~1e-14 relative; a
+#: pole's modulus then to ~1e-12 near z = 1, where poles crowd at small T).
+MARGINAL_TOL = 1e-12
+
+
+def exact_kmax_batch(loop: HapticLoop | TeleoperationLoop,
+                     periods: Sequence[float] | np.ndarray | None = None,
+                     intervals: bool = True) -> list[dict[str, Any]]:
+    """Exact K_max (and the stable set in K) of ``loop`` at each sampling period.
+
+    Parameters
+    ----------
+    loop : HapticLoop or TeleoperationLoop
+        Spring-damper controllers; K is the (master's) stiffness, K_s/K_m kept.
+    periods : array of float, optional
+        Sampling periods (s); default the loop's own.
+    intervals : bool
+        Every stable interval (True) or only K_max (False, faster).
+
+    Returns
+    -------
+    list of dict
+        See :func:`hapstab.crossings.analyse`.
+    """
+    return analyse(loop_response(loop, periods), full=intervals)
+
 
 def rigid_body_modes(A0: np.ndarray, A1: np.ndarray) -> int:
     """Number of independent modes at z = 1 that no K moves: dim null([I - A0; A1])."""
@@ -33,22 +62,51 @@ def rigid_body_modes(A0: np.ndarray, A1: np.ndarray) -> int:
     return int(np.sum(S < 1e-10 * scale))
 
 
-def _spectral_radius(eigs: np.ndarray, n_rigid: int) -> np.ndarray:  # noqa: D401
-    """Spectral radius over the last axis, excluding the n_rigid eigenvalues nearest 1."""
-    if n_rigid:
+def spectral_radius(sysm: SampledSystem, K: np.ndarray | float) -> np.ndarray:
+    """Spectral radius of A(K) for each period (rigid-body modes excluded), from
+    the eigenvalues of the closed-loop matrix."""
+    A = sysm.closed_loop(K)
+    m = rigid_body_modes(sysm.A0[0], sysm.A1()[0]) if sysm.varies_with_K else 0
+    eigs = np.linalg.eigvals(A)
+    if m:
         order = np.argsort(np.abs(eigs - 1.0), axis=-1)
-        eigs = np.take_along_axis(eigs, order[..., n_rigid:], axis=-1)
+        eigs = np.take_along_axis(eigs, order[..., m:], axis=-1)
     return np.abs(eigs).max(axis=-1)
 
 
-def spectral_radius(sysm: SampledSystem, K: np.ndarray | float) -> np.ndarray:
-    """Spectral radius of A(K) for each period (rigid-body modes excluded)."""
-    A = sysm.closed_loop(K)
-    m = rigid_body_modes(sysm.A0[0], sysm.A1()[0]) if sysm.varies_with_K else 0
-    return _spectral_radius(np.linalg.eigvals(A), m)
-
-
 # ---------------------------------------------------------------------- stability
+def _spring_dampers(loop: HapticLoop | TeleoperationLoop) -> bool:
+    cs = [loop.controller] if isinstance(loop, HapticLoop) else \
+        [loop.master_controller, loop.slave_controller]
+    if not all(isinstance(c, SpringDamper) for c in cs):
+        return False
+    return not (cs[0].stiffness == 0 and any(c.stiffness > 0 for c in cs))
+
+
+def _polish_pole(resp: LoopResponse, u: float, z0: complex) -> complex:
+    """Newton's method on det M(z, K) = 0 (the exact characteristic function) from
+    an eigenvalue z0 of the closed-loop matrix: eigenvalues of poles crowding z = 1
+    lose accuracy, the characteristic function in y = z - 1 does not."""
+    if z0 == 0:
+        return z0
+    th = np.array([-1j * np.log(z0)])
+    zero = np.zeros(1)
+    idx = np.zeros(1, int)
+    for _ in range(30):
+        F = resp.coefficients(idx, th, zero)
+        f = F[0].vc + u * (F[1].vc + u * F[2].vc)
+        df = F[0].dc + u * (F[1].dc + u * F[2].dc)
+        if not (np.isfinite(f[0]) and np.isfinite(df[0])) or df[0] == 0:
+            return z0
+        step = f[0] / df[0]
+        th = th - step
+        if abs(step) <= 1e-15 * max(1.0, abs(th[0])):
+            break
+    z = complex(np.exp(1j * th[0]))
+    # accept only a refinement of the same pole
+    return z if abs(z - z0) <= 1e-6 * max(1.0, abs(z0)) else z0
+
+
 def stability(loop: HapticLoop | TeleoperationLoop) -> StabilityResult:
     """Exact stability of the sampled-data loop at its own parameters.
 
@@ -60,8 +118,10 @@ def stability(loop: HapticLoop | TeleoperationLoop) -> StabilityResult:
     -------
     StabilityResult
         ``stable`` if every closed-loop pole has |z| < 1, ``unstable`` if one has
-        |z| > 1, ``marginal`` if the largest is on the circle (within 1e-9) or a
-        rigid-body mode sits at z = 1.
+        |z| > 1 (the count of poles outside comes from the argument principle,
+        certified), ``marginal`` if a pole is on the circle to the model's accuracy
+        (the count cannot be certified, or the dominant pole is within 1e-12 of the
+        circle) or a rigid-body mode sits at z = 1.
 
     References
     ----------
@@ -70,52 +130,54 @@ def stability(loop: HapticLoop | TeleoperationLoop) -> StabilityResult:
     sysm = build(loop)
     A = sysm.closed_loop()[0]
     eigs = np.linalg.eigvals(A)
-    m = rigid_body_modes(sysm.A0[0], sysm.A1()[0]) if sysm.varies_with_K else 0
+    T = loop.period
+    certified = _spring_dampers(loop)
+    if certified:
+        resp = loop_response(loop)
+        m = resp.rigid
+        u = float(sysm.stiffness[0] / resp.scale[0])
+        count = int(winding(resp, np.zeros(1, int), np.array([u]))[0])
+    else:
+        m = rigid_body_modes(sysm.A0[0], sysm.A1()[0]) if sysm.varies_with_K else 0
+        count = -2
     rest = eigs
     if m:
-        order = np.argsort(np.abs(eigs - 1.0))
-        rest = eigs[order[m:]]
+        rest = eigs[np.argsort(np.abs(eigs - 1.0))[m:]]
     k = int(np.argmax(np.abs(rest))) if rest.size else 0
     dom = complex(rest[k]) if rest.size else complex(1.0)
+    if certified:
+        dom = _polish_pole(resp, u, dom)
     rho = abs(dom)
-    T = loop.period
     freq = abs(math.atan2(dom.imag, dom.real)) / (2 * math.pi * T)
-    K = float(sysm.stiffness[0])
-    if sysm.varies_with_K and K > 0 and abs(rho - 1) < 1e-6:
-        # closer to the circle than eigenvalues of poles crowding z = 1 resolve:
-        # let the exact crossing analysis place K (consistent with K_max by design)
-        ex = exact_kmax_batch(sysm)[0]
-        ends = [e for iv in ex["intervals"] for e in iv if 0 < e < math.inf]
-        note = (f"; |z| = {rho:.12g} is within 1e-6 of the circle, so the verdict comes from "
-                "the exact crossing analysis")
-        if any(abs(K - e) <= 1e-12 * e for e in ends):
-            return StabilityResult("marginal", rho, dom, freq, "K is at a stability boundary: a pole "
-                                   f"is on the unit circle ({_describe(dom, T)}){note}", T,
-                                   tuple(complex(e) for e in eigs), m)
-        inside = any(a < K < b for a, b in ex["intervals"])
-        rho_verdict = min(rho, 1 - 1e-16) if inside else max(rho, 1 + 1e-16)
-        reason_extra = note
-    else:
-        reason_extra, rho_verdict = "", rho
-    if rho_verdict > 1 + MARGINAL_TOL or (reason_extra and rho_verdict > 1):
-        verdict = "unstable"
-        reason = (f"closed-loop pole at |z| = {rho:.10g} ({_describe(dom, T)}): "
-                  "the response grows")
-    elif rho_verdict >= 1 - MARGINAL_TOL and not reason_extra:
-        verdict = "marginal"
-        reason = f"closed-loop pole on the unit circle ({_describe(dom, T)}): sustained oscillation or drift"
-    elif m:
-        verdict = "marginal"
-        reason = (f"{m} rigid-body mode(s) at z = 1: nothing ties the masses to ground, so a "
-                  "constant offset persists; all other poles have |z| <= "
-                  f"{rho:.6g} < 1")
-    else:
-        verdict = "stable"
-        reason = f"all closed-loop poles inside the unit circle (largest |z| = {rho:.10g})"
-    if m and verdict != "marginal":
-        reason += f"; {m} rigid-body mode(s) at z = 1 excluded"
-    reason += reason_extra
+    verdict, reason = _verdict(count, rho, dom, T, m)
     return StabilityResult(verdict, rho, dom, freq, reason, T, tuple(complex(e) for e in eigs), m)
+
+
+def _verdict(count: int, rho: float, dom: complex, T: float, m: int) -> tuple[str, str]:
+    """(verdict, reason) from the certified count of poles outside (-1: not
+    certifiable, -2: not available) and the dominant pole."""
+    near = abs(rho - 1.0) <= MARGINAL_TOL
+    if count == -1 or (count in (0, -2) and near and m == 0) or (count == -2 and near):
+        return "marginal", (f"closed-loop pole on the unit circle to the model's accuracy "
+                            f"({_describe(dom, T)}, |z| = {rho:.15g}): sustained oscillation or "
+                            "drift; the count of poles outside cannot be certified")
+    if count > 0 or (count == -2 and rho > 1 + MARGINAL_TOL):
+        n = f"{count} closed-loop pole(s)" if count > 0 else "a closed-loop pole"
+        reason = (f"{n} outside the unit circle (certified by the argument principle); the "
+                  f"largest at |z| = {rho:.10g} ({_describe(dom, T)}): the response grows")
+        if count == -2:
+            reason = (f"closed-loop pole at |z| = {rho:.10g} ({_describe(dom, T)}): the "
+                      "response grows")
+        if m:
+            reason += f"; {m} rigid-body mode(s) at z = 1 excluded"
+        return "unstable", reason
+    if m:
+        return "marginal", (f"{m} rigid-body mode(s) at z = 1: nothing ties the masses to ground, "
+                            "so a constant offset persists; all other poles have |z| <= "
+                            f"{rho:.6g} < 1")
+    return "stable", (f"all closed-loop poles inside the unit circle (largest |z| = {rho:.10g}"
+                      + ("; none outside, certified by the argument principle)" if count == 0
+                         else ")"))
 
 
 def _describe(z: complex, T: float) -> str:
@@ -146,18 +208,20 @@ def exact_critical_stiffness(loop: HapticLoop | TeleoperationLoop) -> CriticalSt
     AnalysisError
         If the controller is not a spring-damper.
     """
-    sysm = build(loop)
-    res = exact_kmax_batch(sysm)[0]
+    res = exact_kmax_batch(loop)[0]
     return _to_result(res, loop.period, loop.delay_in_samples)
 
 
 def _to_result(res: dict[str, Any], T: float, n: int | float) -> CriticalStiffnessResult:
     kmax, th = res["kmax"], res["theta"]
     freq = th / (2 * math.pi * T) if np.isfinite(th) else math.nan
-    if kmax == 0.0:
-        reason = (f"unstable for every K > 0: already as K -> 0+ the spectral radius is "
-                  f"{res['rho_small_K']:.6g} > 1 (the virtual damping, delay and terminations "
-                  "alone destabilise the loop)")
+    if kmax == 0.0 and res["outside_small_K"] < 0:
+        reason = ("marginal for K -> 0+: a pole is on the unit circle to the model's accuracy "
+                  "(e.g. an undamped termination), so no K > 0 can be certified stable")
+    elif kmax == 0.0:
+        reason = (f"unstable for every K > 0: already as K -> 0+, {res['outside_small_K']} "
+                  "closed-loop pole(s) lie outside the unit circle (the virtual damping, delay "
+                  "and terminations alone destabilise the loop)")
     elif math.isinf(kmax):
         reason = "stable for every K > 0 (no closed-loop pole reaches the unit circle)"
     elif th == 0.0:
@@ -170,6 +234,11 @@ def _to_result(res: dict[str, Any], T: float, n: int | float) -> CriticalStiffne
     if len(res["intervals"]) > 1:
         reason += f"; the stable set in K is not one interval ({len(res['intervals'])} intervals)"
     if res["rigid"]:
-        reason += f"; {res['rigid']} rigid-body mode(s) at z = 1 (marginal, K-independent) excluded"
+        reason += f"; {res['rigid']} rigid-body mode(s) at z = 1 (marginal, K-independent) divided out"
+    if res["uncertain"]:
+        spans = ", ".join(f"[{a:.8g}, {b:.8g}]" for a, b in res["uncertain"])
+        reason += (f"; marginal within K in {spans}: a pole is within rounding of the unit "
+                   "circle there, so the numerics cannot decide (K_max is the lower end)")
     return CriticalStiffnessResult(kmax, "exact", res["intervals"], reason, T, n, freq,
-                                   {"rigid_body_modes": res["rigid"]})
+                                   {"rigid_body_modes": res["rigid"],
+                                    "uncertain_intervals": [list(iv) for iv in res["uncertain"]]})

@@ -31,7 +31,9 @@ import numpy as np
 
 from .engine import SampledSystem, build, stack
 from .errors import AnalysisError, check_real
-from .exact import exact_kmax_batch, rigid_body_modes
+from .crossings import analyse
+from .exact import rigid_body_modes
+from .loopfreq import loop_response, stack_responses
 from .models import HapticLoop, SpringDamper, TeleoperationLoop
 from .results import jsonable
 
@@ -135,9 +137,13 @@ def _systems_over_B(loop: Loop, Bs: np.ndarray, K: float = 1.0) -> list[tuple[np
 def kmax_over_B(loop: Loop, Bs: Sequence[float], intervals: bool = False) -> list[dict[str, Any]]:
     """Exact crossing analysis for each virtual damping in ``Bs`` (batched)."""
     Bs = np.asarray(Bs, float)
+    resps = [loop_response(with_gains(loop, 1.0, float(B))) for B in Bs]
+    groups: dict[int, list[int]] = {}
+    for i, r in enumerate(resps):       # B = 0 and B != 0 share one structure here
+        groups.setdefault(0, []).append(i)
     out: list[dict[str, Any] | None] = [None] * Bs.size
-    for idx, sysm in _systems_over_B(loop, Bs):
-        for i, r in zip(idx, exact_kmax_batch(sysm, intervals=intervals)):
+    for idx in groups.values():
+        for i, r in zip(idx, analyse(stack_responses([resps[i] for i in idx]), full=intervals)):
             out[i] = r
     return out  # type: ignore[return-value]
 

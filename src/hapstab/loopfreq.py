@@ -1,0 +1,374 @@
+"""The loop's characteristic function on the unit circle, with the delays as exact
+phases: the frequency half of the one engine.
+
+For ports j (device + attached impedance, ZOH-discretised exactly) and spring-damper
+controllers H_j(z) = K k_j + beta_j (1 - z^-1) (beta_j = B_j / T) acting on
+``e_i = sum_j s_ij z^-n_ij x_j((k - f_ij) T)``, write the plant of port j as
+``P_j = N_j(y) / d_j(y)`` in the shifted variable ``y = z - 1`` (accurate when T is
+small and every pole crowds z = 1) and the measurement with a fractional delay f as
+``z^-1 Nt_j^f(y) / d_j(y)`` (modified z-transform). With
+
+    M_ij(z, K) = delta_ij d_j(y) + (sum_terms s z^-n Ptilde_j) H_j(z),
+
+the closed loop's characteristic polynomial is ``chi(z) = z^(N - q) det M`` exactly
+(determinant identity for a feedback interconnection; q = sum_j deg d_j, N the
+engine's state count), so for real K the number of closed-loop poles outside the
+unit circle is
+
+    Z_out(K) = q - wind(det M(e^{j theta}, K), theta: 0 -> 2 pi)
+
+and det M = F0 + K F1 + K^2 F2 is evaluated at any angle in O(1) operations,
+whatever the delay: ``z^-n = e^{-j n theta}`` is a phase, never n states.
+
+Rigid-body mode: when every port is free (no spring to ground) and every error
+signal is a difference (each column of s sums to zero: PEB without operator or
+environment), det M has the factor y for every K. It is divided out exactly: the
+sum of the rows is divided by y analytically (divided differences of the delay
+phase and of the fractional-delay numerators), which is the quotient by the
+common translation.
+
+References
+----------
+The paper, Fig. 2a / Fig. 3, eq. (20) and (23). K. J. Astrom and B. Wittenmark,
+*Computer-Controlled Systems*, 3rd ed., sec. 2.3 (ZOH sampling) and 7.7 (modified
+z-transform).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+from scipy.linalg import expm
+
+from .discs import (Jet, base_jets, delay_jet, geometric_sum_jet, one_minus_delay_jet,
+                    poly_jet, zero)
+from .engine import port_matrices, split_delay, structure_of
+from .errors import AnalysisError
+from .models import HapticLoop, SpringDamper, TeleoperationLoop
+
+__all__ = ["LoopResponse", "loop_response", "stack_responses"]
+
+#: Relative error assumed for the discretised coefficients (matrix exponential and
+#: Leverrier recursion on matrices of order <= 8: a few tens of unit round-offs).
+COEF_REL = 64 * np.finfo(float).eps
+
+
+@dataclass
+class PortPoly:
+    """Polynomials in y = z - 1 (ascending) of one port, one row per item."""
+
+    d: np.ndarray          # (L, q+1)  det(yI - (Phi - I))
+    dhat: np.ndarray       # (L, q)    d / y (free ports only, else empty)
+    N: np.ndarray          # (L, q)    C adj(yI - E) Gamma
+    Nt: dict[float, np.ndarray]   # fraction f -> (L, q+1): z^-1 Nt / d is the f-delayed measurement
+    D: dict[float, np.ndarray]    # fraction f -> (L, q): (Nt - (1 + y) N) / y
+    err: dict[str, np.ndarray]    # coefficient error bounds, same shapes
+
+
+@dataclass
+class LoopResponse:
+    """det M(e^{j theta}, K) of a batch of loops of one structure (see module doc).
+
+    Attributes
+    ----------
+    terms : tuple of tuple of (j, s, n, f)
+        For each channel i, the measured ports with sign, whole and fractional delay.
+    ports : list of PortPoly
+    k : (L, p) array
+        Stiffness of each channel per unit K (k_0 = 1: K is the first port's).
+    beta : (L, p) array
+        B_j / T.
+    scale : (L,) array
+        K scale: u = K / scale is what the analysis works with (a power of two near
+        min mass / T^2, so K/scale is exact).
+    q : int
+        Plant order (sum of deg d_j) less the rigid modes divided out.
+    rigid : int
+        Rigid-body modes divided out (0 or 1).
+    periods : (L,) array
+    """
+
+    terms: tuple[tuple[tuple[int, float, int, float], ...], ...]
+    ports: list[PortPoly]
+    k: np.ndarray
+    beta: np.ndarray
+    scale: np.ndarray
+    q: int
+    rigid: int
+    periods: np.ndarray
+
+    @property
+    def size(self) -> int:
+        return self.periods.size
+
+    @property
+    def phase_rate(self) -> int:
+        """Oscillations of det M over theta in [0, pi] (round-trip delay + order)."""
+        return sum(max(t[2] + int(np.ceil(t[3])) for t in ch) for ch in self.terms) + self.q + 2
+
+    # ------------------------------------------------------------------ evaluation
+    def coefficients(self, idx: np.ndarray, theta: np.ndarray, rho: np.ndarray) -> list[Jet]:
+        """Jets of F0, F1, F2 (det M = F0 + u F1 + u^2 F2, u = K/scale) on the cells
+        ``[theta - rho, theta + rho]`` of items ``idx``."""
+        b = base_jets(theta, rho)
+        cache: dict = {}
+
+        def pj(name: str, j: int, f: float = 0.0) -> Jet:
+            key = (name, j, f)
+            if key not in cache:
+                pp = self.ports[j]
+                arr = {"d": pp.d, "dhat": pp.dhat, "N": pp.N}.get(name)
+                if arr is None:
+                    arr = (pp.Nt if name == "Nt" else pp.D)[f]
+                err = pp.err[name if name in ("d", "dhat", "N") else f"{name}{f}"]
+                cache[key] = poly_jet(arr[idx], err[idx], b["y"])
+            return cache[key]
+
+        def measured(j: int, n: int, f: float) -> Jet:      # z^-n x_j((k - f) T) per unit force
+            base = pj("N", j) if f == 0 else b["zinv"] * pj("Nt", j, f)
+            return base if n == 0 else delay_jet(theta, rho, n) * base
+
+        shape = theta.shape
+        p = len(self.ports)
+        hb = [b["1-zinv"].scale(self.beta[idx, j]) for j in range(p)]
+        ku = [self.k[idx, j] * self.scale[idx] for j in range(p)]
+        if p == 1:
+            (j, s, n, f), = self.terms[0]
+            T00 = measured(j, n, f).scale(s)
+            return [pj("d", 0) + T00 * hb[0], T00.scale(ku[0]), zero(shape)]
+        # two ports: det(diag(d) + T diag(H)) = d0 d1 + d1 T00 H0 + d0 T11 H1 + Delta H0 H1
+        # with Delta = T00 T11 - T01 T10 formed without cancellation (below); with a
+        # rigid-body mode everything is divided by y (d_j = y dhat_j, Delta / y)
+        T00, T11, Delta = self._two_port(idx, theta, rho, b, pj)
+        if self.rigid:
+            X = b["y"] * pj("dhat", 0) * pj("dhat", 1)
+            Y0, Y1 = pj("dhat", 1) * T00, pj("dhat", 0) * T11
+        else:
+            X = pj("d", 0) * pj("d", 1)
+            Y0, Y1 = pj("d", 1) * T00, pj("d", 0) * T11
+        F0 = X + Y0 * hb[0] + Y1 * hb[1] + Delta * hb[0] * hb[1]
+        F1 = Y0.scale(ku[0]) + Y1.scale(ku[1]) + Delta * (hb[0].scale(ku[1]) + hb[1].scale(ku[0]))
+        F2 = Delta.scale(ku[0] * ku[1])
+        return [F0, F1, F2]
+
+    def _two_port(self, idx, theta, rho, b, pj) -> tuple[Jet, Jet, Jet]:
+        """T00, T11 and Delta = T00 T11 - T01 T10 (or Delta / y with a rigid mode) for
+        the position-error structure: channel i measures its own port undelayed (+1)
+        and the other port with delay n_i + f_i (-1), eq. (20).
+
+        With P_j^f = N_j + e_j, e_j = z^-1 y D_j^f (module doc) and w the round-trip
+        phase: Delta = N0 N1 (1 - w) - w (e0 N1 + N0 e1 + e0 e1), and
+        (1 - w)/y = w G_n (a geometric sum), e_j / y = z^-1 D_j^f: no cancellation,
+        so F2 = Delta k0 k1 is 0 without delay, exactly.
+        """
+        own, cross = [], []
+        for i, ch in enumerate(self.terms):
+            mine = [t for t in ch if t[0] == i]
+            other = [t for t in ch if t[0] != i]
+            if len(ch) != 2 or len(mine) != 1 or mine[0][1:] != (1.0, 0, 0.0) or other[0][1] != -1.0:
+                raise AnalysisError("two-port loop: only the position-error structure of eq. (20) "
+                                    "is supported by the exact analysis")
+            own.append(mine[0])
+            cross.append(other[0])
+        N0, N1 = pj("N", 0), pj("N", 1)
+        n_rt = cross[0][2] + cross[1][2]
+        # e_j / y of port j measured by the other channel (channel 1 measures port 0)
+        fr = {0: cross[1][3], 1: cross[0][3]}
+        ey = {j: (b["zinv"] * pj("D", j, fr[j]) if fr[j] else None) for j in (0, 1)}
+        w = delay_jet(theta, rho, n_rt) if n_rt else None
+        if self.rigid:
+            base = zero(theta.shape) if not n_rt else N0 * N1 * w * geometric_sum_jet(theta, rho, n_rt)
+            corr = zero(theta.shape)
+            if ey[0] is not None:
+                corr = corr + ey[0] * N1
+            if ey[1] is not None:
+                corr = corr + N0 * ey[1]
+            if ey[0] is not None and ey[1] is not None:
+                corr = corr + ey[0] * ey[1] * b["y"]
+            delta = base - (corr if w is None else w * corr)
+        else:
+            base = zero(theta.shape) if not n_rt else N0 * N1 * one_minus_delay_jet(theta, rho, n_rt)
+            corr = zero(theta.shape)
+            e = {j: (ey[j] * b["y"] if ey[j] is not None else None) for j in (0, 1)}
+            if e[0] is not None:
+                corr = corr + e[0] * N1
+            if e[1] is not None:
+                corr = corr + N0 * e[1]
+            if e[0] is not None and e[1] is not None:
+                corr = corr + e[0] * e[1]
+            delta = base - (corr if w is None else w * corr)
+        return N0, N1, delta
+
+
+# ---------------------------------------------------------------------- building
+def _zoh(A: np.ndarray, T: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(Phi, S) with Phi = e^{AT}, S = int_0^T e^{As} ds, batched over T."""
+    n = A.shape[0]
+    M = np.zeros((2 * n, 2 * n))
+    M[:n, :n], M[:n, n:] = A, np.eye(n)
+    E = expm(T[:, None, None] * M[None])
+    return E[:, :n, :n], E[:, :n, n:]
+
+
+def _port_poly(A: np.ndarray, Bv: np.ndarray, free: bool, T: np.ndarray,
+               fractions: Sequence[float]) -> PortPoly:
+    """Polynomials of one port (state [x, v, rest...], position = state 0)."""
+    L, q = T.size, A.shape[0]
+    Phi, S = _zoh(A, T)
+    E = A[None] @ S                                  # Phi - I, accurate for small T
+    G = S @ Bv[None]                                 # (L, q, 1)
+    # d(y) = prod (y - expm1(lambda T)): a free port's lambda = 0 is structural
+    lam = np.linalg.eigvals(A[1:, 1:]) if free else np.linalg.eigvals(A)
+    delta = np.expm1(T[:, None] * lam[None, :])
+    if free:
+        delta = np.concatenate([np.zeros((L, 1)), delta], axis=1)
+    d_desc = np.ones((L, 1), complex)
+    for i in range(q):
+        d_desc = np.concatenate([d_desc, np.zeros((L, 1))], axis=1)
+        d_desc[:, 1:] -= delta[:, i:i + 1] * d_desc[:, :-1]
+    d_desc = d_desc.real
+    if free:
+        d_desc[:, -1] = 0.0                           # exactly: a root at y = 0
+    # Leverrier on vectors: adj(yI - E) Gamma = sum_k y^(q-1-k) v_k
+    v = G[:, :, 0].copy()
+    vs = [v]
+    for k in range(1, q):
+        v = np.einsum("lij,lj->li", E, v) + d_desc[:, k:k + 1] * G[:, :, 0]
+        vs.append(v)
+    V = np.stack(vs, axis=1)                          # (L, q, q): row k = v_k
+    N = V[:, ::-1, 0]                                 # ascending: coefficient of y^(q-1-k)
+    d = d_desc[:, ::-1].copy()
+    # magnitudes that rounding acts on: coefficients of prod (y + |delta_i|)
+    mag = np.ones((L, 1))
+    for i in range(q):
+        mag = np.concatenate([mag, np.zeros((L, 1))], axis=1)
+        mag[:, 1:] += np.abs(delta[:, i:i + 1]) * mag[:, :-1]
+    scale_d = mag[:, ::-1]
+    err = {"d": COEF_REL * scale_d, "N": COEF_REL * (np.abs(N) + np.abs(V).max(axis=2)[:, ::-1])}
+    dhat = d[:, 1:] if free else np.zeros((L, 0))
+    err["dhat"] = err["d"][:, 1:] if free else np.zeros((L, 0))
+    Nt, D = {}, {}
+    for f in fractions:
+        Phf, Sf = _zoh(A, (1.0 - f) * T)
+        Gf = (Sf @ Bv[None])[:, 0, 0]                 # C Gamma_{1-f}
+        c_phi = Phf[:, 0, :]                          # C Phi_{1-f}
+        part = np.einsum("li,lki->lk", c_phi, V)[:, ::-1]        # ascending, degree q-1
+        nt = Gf[:, None] * d
+        nt[:, :q] += part
+        Nt[f] = nt
+        onepy_N = np.zeros((L, q + 1))
+        onepy_N[:, :q] += N
+        onepy_N[:, 1:] += N
+        diff = nt - onepy_N
+        D[f] = diff[:, 1:]                            # the constant term is 0 exactly
+        err[f"Nt{f}"] = COEF_REL * (np.abs(nt) + np.abs(Gf)[:, None] * scale_d
+                                    + np.pad(np.abs(part), ((0, 0), (0, 1))))
+        err[f"D{f}"] = (err[f"Nt{f}"] + COEF_REL * np.abs(onepy_N))[:, 1:]
+    return PortPoly(d, dhat, N, Nt, D, err)
+
+
+def loop_response(loop: HapticLoop | TeleoperationLoop,
+                  periods: Sequence[float] | np.ndarray | None = None) -> LoopResponse:
+    """The characteristic function of ``loop`` on the unit circle for each period.
+
+    Raises
+    ------
+    AnalysisError
+        If a controller is not a :class:`~hapstab.models.SpringDamper` (no K to
+        vary), or the master's stiffness is 0 while the slave's is not.
+    """
+    st = structure_of(loop)
+    T = np.atleast_1d(np.asarray(loop.period if periods is None else periods, float))
+    ctrls = [ch.controller for ch in st.channels]
+    if not all(isinstance(c, SpringDamper) for c in ctrls):
+        raise AnalysisError("controller: critical stiffness needs SpringDamper controllers "
+                            "(a general H(z) has no stiffness K to vary)")
+    ks = np.array([c.stiffness for c in ctrls], float)
+    if ks[0] == 0 and np.any(ks > 0):
+        raise AnalysisError("controllers: the master's stiffness is 0 and the slave's is not, so "
+                            "K_s/K_m is undefined; give the master a stiffness > 0 to vary K")
+    ratio = ks / ks[0] if ks[0] > 0 else np.ones_like(ks)   # K_s/K_m kept (the one convention)
+    terms = tuple(tuple((j, float(s), *split_delay(d)) for j, s, d in ch.terms)
+                  for ch in st.channels)
+    fracs: dict[int, set[float]] = {j: set() for j in range(len(st.ports))}
+    for ch in terms:
+        for j, _, _, f in ch:
+            if f:
+                fracs[j].add(f)
+    ports, masses, free = [], [], []
+    for j, pt in enumerate(st.ports):
+        A, Bm, _ = port_matrices(pt)
+        M = pt.device.mass + pt.termination.mass
+        # a spring with k T^2 / m below 1e-20 moves the pole at z = 1 by less than
+        # double precision can see: the port is free (and the spring dropped)
+        fr = pt.termination.stiffness * float(T.max()) ** 2 / M < 1e-20
+        if fr:
+            A = A.copy()
+            A[1, 0] = 0.0
+        free.append(fr)
+        masses.append(pt.device.mass + pt.termination.mass)
+        ports.append(_port_poly(A, Bm, fr, T, sorted(fracs[j])))
+    for j, pp in enumerate(ports):
+        arrays = [pp.d, pp.N] + list(pp.Nt.values()) + list(pp.D.values())
+        if not all(np.all(np.isfinite(a)) for a in arrays) or not np.any(pp.N):
+            pt = st.ports[j]
+            raise AnalysisError(
+                f"{pt.name}: cannot analyse mass = {pt.device.mass:g} kg with damping "
+                f"{pt.device.damping:g} N*s/m at T = {T.min():g}..{T.max():g} s: the discretised "
+                "plant over- or underflows double precision")
+    p = len(ports)
+    # the rigid-body rule (one place): every port free and every column of s sums to 0
+    col = np.zeros(p)
+    for ch in terms:
+        for j, s, _, _ in ch:
+            col[j] += s
+    rigid = int(all(free) and np.all(col == 0))
+    q = sum(pp.d.shape[1] - 1 for pp in ports) - rigid
+    scale = 2.0 ** np.round(np.log2(min(masses) / T ** 2))
+    beta = np.array([[c.damping for c in ctrls]]) / T[:, None]
+    # |B| T / m beyond 1e8: the damper's pole pair is beyond double precision's reach
+    ratio_B = np.abs(beta).max(axis=1) * T ** 2 / min(masses) if beta.size else np.zeros(T.size)
+    if not (np.all(np.isfinite(scale)) and np.all(scale > 0) and np.all(ratio_B <= 1e8)):
+        raise AnalysisError(f"virtual damping = {[c.damping for c in ctrls]} N*s/m: cannot analyse "
+                            f"|B| T / m = {ratio_B.max():.3g} (at most 1e8; the loop's poles then lie "
+                            "beyond double precision)")
+    resp = LoopResponse(terms, ports, np.broadcast_to(ratio, (T.size, p)).copy(), beta, scale,
+                        q, rigid, T)
+    _check_finite(resp, ctrls)
+    return resp
+
+
+def _check_finite(resp: LoopResponse, ctrls) -> None:
+    """Refuse parameters whose characteristic function overflows (e.g. B = 1e300)."""
+    th = np.array([0.0, 1.0, np.pi])
+    idx = np.repeat(np.arange(resp.size), th.size)
+    F = resp.coefficients(idx, np.tile(th, resp.size), np.zeros(idx.size))
+    with np.errstate(all="ignore"):
+        top = [np.abs(f.vc) * u for f, u in zip(F, (1.0, 1e10, 1e20))]   # up to u = U_HI
+    if not all(np.all(np.isfinite(t)) for t in top):
+        raise AnalysisError(f"virtual damping = {[c.damping for c in ctrls]} N*s/m: cannot analyse "
+                            "these parameters, the loop's characteristic function overflows "
+                            "double precision")
+
+
+def stack_responses(resps: Sequence[LoopResponse]) -> LoopResponse:
+    """Concatenate responses of one structure (same terms and port orders)."""
+    r0 = resps[0]
+    for r in resps:
+        if r.terms != r0.terms or r.q != r0.q or [pp.d.shape for pp in r.ports][1:] != \
+                [pp.d.shape for pp in r0.ports][1:]:
+            raise AnalysisError("stack_responses: the loops differ in structure")
+    cat = np.concatenate
+    ports = []
+    for j in range(len(r0.ports)):
+        ps = [r.ports[j] for r in resps]
+        ports.append(PortPoly(cat([x.d for x in ps]), cat([x.dhat for x in ps]),
+                              cat([x.N for x in ps]),
+                              {f: cat([x.Nt[f] for x in ps]) for f in ps[0].Nt},
+                              {f: cat([x.D[f] for x in ps]) for f in ps[0].D},
+                              {k: cat([x.err[k] for x in ps]) for k in ps[0].err}))
+    return LoopResponse(r0.terms, ports, cat([r.k for r in resps]), cat([r.beta for r in resps]),
+                        cat([r.scale for r in resps]), r0.q, r0.rigid,
+                        cat([r.periods for r in resps]))
