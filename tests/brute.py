@@ -30,14 +30,17 @@ def _plant_tf(m: float, b: float, znum, zden) -> tuple[np.ndarray, np.ndarray]:
     return num, den
 
 
-def closed_loop_matrix(ports: list[tuple[float, float, tuple, tuple]], channels, K: float,
-                       B: float, T: float) -> np.ndarray:
+def closed_loop_matrix(ports: list[tuple[float, float, tuple, tuple]], channels, K,
+                       B, T: float) -> np.ndarray:
     """Closed-loop matrix of a loop.
 
     ports: [(mass, damping, Z_num, Z_den)], channels: for each port i a list of
     (j, sign, delay) terms of its error signal e_i = sum sign * x_j[k - delay].
+    K, B: one stiffness and virtual damping (any sign) for every port, or one per port.
     """
     p = len(ports)
+    Kp = np.broadcast_to(np.asarray(K, float), (p,))
+    Bp = np.broadcast_to(np.asarray(B, float), (p,))
     blocks = []
     for m, b, zn, zd in ports:
         num, den = _plant_tf(m, b, zn, zd)
@@ -77,7 +80,7 @@ def closed_loop_matrix(ports: list[tuple[float, float, tuple, tuple]], channels,
     for i, terms in enumerate(channels):
         u = np.zeros(N)
         for j, sgn, n in terms:
-            u += sgn * ((K + B / T) * delayed(j, n) - (B / T) * delayed(j, n + 1))
+            u += sgn * ((Kp[i] + Bp[i] / T) * delayed(j, n) - (Bp[i] / T) * delayed(j, n + 1))
         Ad, Bd, _ = blocks[i]
         sl = slice(off_x[i], off_x[i + 1])
         M[sl, sl] += Ad
@@ -91,10 +94,13 @@ def hve(m: float, b: float, zn, zd, n: int, B: float, T: float):
     return lambda K: closed_loop_matrix(ports, channels, K, B, T)
 
 
-def peb(mm: float, bm: float, ms: float, bs: float, op, env, n: int, B: float, T: float):
+def peb(mm: float, bm: float, ms: float, bs: float, op, env, n: int, B: float, T: float,
+        ratio: float = 1.0, B_s: float | None = None):
+    """PEB with C_m = K + B(z-1)/(Tz) and C_s = ratio K + B_s(z-1)/(Tz) (B_s defaults to B)."""
     ports = [(mm, bm, *op), (ms, bs, *env)]
     channels = [[(0, 1.0, 0), (1, -1.0, n)], [(1, 1.0, 0), (0, -1.0, n)]]
-    return lambda K: closed_loop_matrix(ports, channels, K, B, T)
+    Bs = B if B_s is None else B_s
+    return lambda K: closed_loop_matrix(ports, channels, [K, ratio * K], [B, Bs], T)
 
 
 def spectral_radius(make, K: float) -> float:

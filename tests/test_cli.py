@@ -53,6 +53,25 @@ def test_boundary_json_and_csv(tmp_path):
     assert csv.read_text().count("\n") == 7
 
 
+@pytest.mark.parametrize("args", [("-B", "-0.05"), ("--virtual-damping=-0.05",)])
+def test_negative_virtual_damping_is_accepted(args):
+    r = run("kmax", "hve", *args, "--json")
+    assert r.exit_code == 0, r.stderr
+    d = json.loads(r.stdout)
+    # half the device damping cancelled: K_max ~ 2(b - |B|)/T = 100 N/m (exact 100.045)
+    assert d["critical_stiffness"] == pytest.approx(100.04488824943, rel=1e-9)
+
+
+def test_negative_virtual_damping_beyond_device_damping_says_unstable_for_every_k():
+    r = run("kmax", "hve", "-B", "-0.5", "--json")
+    assert r.exit_code == 0, r.stderr
+    d = json.loads(r.stdout)
+    assert d["critical_stiffness"] == 0.0 and d["stable_intervals"] == []
+    assert "unstable for every K > 0" in d["reason"]
+    r = run("check", "peb", "-K", "3", "-B", "-0.005", "--json")
+    assert r.exit_code == 0 and json.loads(r.stdout)["verdict"] == "stable"
+
+
 def test_demo_prints_both_figures():
     r = run("demo", "--json")
     d = json.loads(r.stdout)
@@ -64,6 +83,8 @@ def test_demo_prints_both_figures():
     (("kmax", "hve", "--mass", "0"), "must be > 0"),
     (("kmax", "hve", "--period", "nan"), "must be finite"),
     (("kmax", "hve", "--damping", "inf"), "must be finite"),
+    (("kmax", "hve", "-B", "nan"), "'--virtual-damping' / '-B': 'nan': must be finite"),
+    (("kmax", "hve", "--damping", "-0.1"), "'--damping' / '-b': '-0.1': must be >= 0"),
     (("kmax", "hve", "--delay", "2.5"), "whole number of samples"),
     (("kmax", "hve", "--method", "eq34"), "--method = 'eq34': unknown for hve; allowed:"),
     (("kmax", "peb", "--environment", "msd:1,2"), "--environment = 'msd:1,2'"),

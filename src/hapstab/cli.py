@@ -108,7 +108,7 @@ class Delay(click.ParamType):
         return v
 
 
-POS, NONNEG = Number(positive=True), Number(nonnegative=True)
+POS, NONNEG, REAL = Number(positive=True), Number(nonnegative=True), Number()
 
 
 def _stack(*decorators: Callable) -> Callable:
@@ -166,8 +166,9 @@ def loop_options(kind: str, ranges: bool = False) -> Callable:
         ]
     return _stack(
         *devices, *timing,
-        click.option("--virtual-damping", "-B", type=NONNEG, default=0.0, show_default=True,
-                     help="Virtual damping B in N*s/m (H(z) = K + B(z-1)/(Tz), eq. 23)."),
+        click.option("--virtual-damping", "-B", type=REAL, default=0.0, show_default=True,
+                     help="Virtual damping B in N*s/m (H(z) = K + B(z-1)/(Tz), eq. 23); any sign "
+                          "(B < 0 cancels device damping or friction)."),
         click.option("--operator", default="spring:1", show_default=True,
                      help="Operator impedance: none | spring:k | msd:m,b,k."),
         click.option("--json", "as_json", is_flag=True, help="Print one JSON object on stdout."),
