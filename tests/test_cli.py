@@ -27,6 +27,16 @@ def test_kmax_peb_with_closed_form():
     assert json.loads(r.stdout)["critical_stiffness"] == pytest.approx(4.0)
 
 
+def test_kmax_gil2004_reproducer_is_accurate():
+    # issue #8: bT/m = 2e-8 gave 23.89 from cancellation; the true value (40-digit
+    # evaluation of the same closed form) is 20.0000000666666666
+    r = run("kmax", "hve", "--mass", "5", "--damping", "0.001", "--period", "1e-4", "--operator",
+            "none", "--method", "gil2004", "--json")
+    assert r.exit_code == 0, r.stderr
+    assert json.loads(r.stdout)["critical_stiffness"] == pytest.approx(20.000000066666666635,
+                                                                       rel=1e-12)
+
+
 def test_kmax_table_without_json():
     r = run("kmax", "hve")
     assert r.exit_code == 0 and "critical stiffness" in r.stdout and "200.022" in r.stdout

@@ -113,3 +113,35 @@ def test_negative_b_beyond_device_damping_gives_zero_with_reason(f, loop, needs)
     assert res.critical_stiffness == 0.0 and res.stable_intervals == ()
     assert "no K > 0 satisfies it" in res.reason and needs in res.reason
 
+
+# --------------------------------------------- Gil et al. 2004 without cancellation
+def _gil2004_mpmath(m, b, T):
+    """The paper's [5] closed form, verbatim, in 40 digits at the float inputs."""
+    import mpmath as mp
+
+    with mp.workdps(40):
+        m, b, T = mp.mpf(m), mp.mpf(b), mp.mpf(T)
+        a = b * T / m
+        d = mp.exp(-a)
+        return b * b / m * (1 - d) / (1 - d - a * d)
+
+
+def test_gil2004_accurate_for_every_bt_over_m():
+    import numpy as np
+
+    worst = 0.0
+    for a in np.concatenate([np.geomspace(1e-12, 3.7, 240), [0.999999, 1.0, 1.000001]]):
+        for m, T in ((0.15, 1e-3), (5.0, 1e-4)):
+            loop = h.HapticLoop(h.Device(m, a * m / T), h.SpringDamper(1.0), None, T, 0)
+            ref = _gil2004_mpmath(m, a * m / T, T)
+            worst = max(worst, abs(h.gil2004(loop).critical_stiffness / float(ref) - 1))
+    # the issue's bound; observed ~4e-16 (the series/closed-form switch at a = 1 included)
+    assert worst <= 1e-12
+
+
+def test_gil2004_reproducer_small_bt_over_m():
+    # bT/m = 2e-8: the verbatim formula in doubles gave 23.89 (19 % off)
+    loop = h.HapticLoop(h.Device(5.0, 0.001), h.SpringDamper(1.0), None, 1e-4, 0)
+    K = h.gil2004(loop).critical_stiffness
+    assert K == pytest.approx(20.000000066666666635, rel=1e-12)
+    assert K == pytest.approx(float(_gil2004_mpmath(5.0, 0.001, 1e-4)), rel=1e-12)
