@@ -24,6 +24,18 @@ def _range(spec: str, name: str, signed: bool = False) -> tuple[float, float]:
     return lo, hi
 
 
+def _equal_controllers(kw: dict[str, Any]) -> None:
+    """A K-B region and the best damping are defined for C_m = C_s: refuse the PEB
+    options that make the controllers differ, naming the one given."""
+    ratio, B_s = kw.get("slave_stiffness_ratio", 1.0), kw.get("slave_virtual_damping")
+    if ratio != 1.0:
+        raise HapstabError(f"--slave-stiffness-ratio = {ratio:g}: a K-B region / best damping is "
+                           "defined for C_m = C_s; allowed here: 1 (the default)")
+    if B_s is not None:
+        raise HapstabError(f"--slave-virtual-damping = {B_s:g}: a K-B region / best damping is "
+                           "defined for C_m = C_s (B is the swept variable); allowed here: not given")
+
+
 def _region_command(kind: str) -> None:
     make = LOOP_KINDS[kind]
 
@@ -45,6 +57,7 @@ def _region_command(kind: str) -> None:
         from .analysis import METHODS
         from .regions import stability_region
 
+        _equal_controllers(kw)
         K, B = _range(K_spec, "--K"), _range(B_spec, "--B", signed=True)
         names = [o.strip() for o in overlays.split(",") if o.strip() and o.strip() != "none"]
         for o in names:
@@ -87,6 +100,7 @@ def _best_command(kind: str) -> None:
     def _cmd(B_max: float | None, B_min: float | None, as_json: bool, **kw: Any) -> None:
         from .regions import best_damping
 
+        _equal_controllers(kw)
         if B_min is not None and B_min > 0:
             raise HapstabError(f"--min-damping = {B_min:g}: must be <= 0 (the search always "
                                "includes B = 0)")
