@@ -11,6 +11,8 @@ geometric grid and bisecting.
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 from scipy import signal
 
@@ -30,6 +32,22 @@ def _plant_tf(m: float, b: float, znum, zden) -> tuple[np.ndarray, np.ndarray]:
     return num, den
 
 
+def _key(coeffs) -> tuple:
+    return tuple(float(c) for c in np.atleast_1d(np.asarray(coeffs, float)))
+
+
+@functools.lru_cache(maxsize=256)
+def _zoh_block(m: float, b: float, zn: tuple, zd: tuple, T: float):
+    """(Ad, Bd, Cd) of one device + termination, ZOH (cached: K_max scans rebuild the
+    same plant for every K)."""
+    num, den = _plant_tf(m, b, zn, zd)
+    A, Bm, C, D = signal.tf2ss(num, den)
+    Ad, Bd, Cd, Dd, _ = signal.cont2discrete((A, Bm, C, D), T, method="zoh")
+    for M in (Ad, Bd, Cd):
+        M.setflags(write=False)
+    return Ad, Bd, Cd
+
+
 def closed_loop_matrix(ports: list[tuple[float, float, tuple, tuple]], channels, K,
                        B, T: float) -> np.ndarray:
     """Closed-loop matrix of a loop.
@@ -41,12 +59,7 @@ def closed_loop_matrix(ports: list[tuple[float, float, tuple, tuple]], channels,
     p = len(ports)
     Kp = np.broadcast_to(np.asarray(K, float), (p,))
     Bp = np.broadcast_to(np.asarray(B, float), (p,))
-    blocks = []
-    for m, b, zn, zd in ports:
-        num, den = _plant_tf(m, b, zn, zd)
-        A, Bm, C, D = signal.tf2ss(num, den)
-        Ad, Bd, Cd, Dd, _ = signal.cont2discrete((A, Bm, C, D), T, method="zoh")
-        blocks.append((Ad, Bd, Cd))
+    blocks = [_zoh_block(float(m), float(b), _key(zn), _key(zd), float(T)) for m, b, zn, zd in ports]
     nxs = [bl[0].shape[0] for bl in blocks]
     # registers of each measured position: depth = max delay + 1 (the B term needs e[k-n-1])
     depth = [0] * p

@@ -149,9 +149,10 @@ def test_best_damping_searches_negative_b_and_can_find_it_best():
     ref = brute.kmax(brute.hve(m, b, (k,), (1, 0), n, bd.damping, T))
     assert bd.critical_stiffness == pytest.approx(ref, rel=1e-6)
     assert bd.critical_stiffness > 4 * bd.critical_stiffness_at_zero_damping
-    for dB in (-0.02, 0.02):   # a maximum: brute force lower on both sides
-        assert brute.kmax(brute.hve(m, b, (k,), (1, 0), n, bd.damping + dB, T)) < ref
-    only_pos = best_damping(loop, B_min=0.0)
+    for dB in (-0.05, 0.05):   # a maximum: 0.1 % below K*, brute force is unstable on both sides
+        make = brute.hve(m, b, (k,), (1, 0), n, bd.damping + dB, T)
+        assert brute.spectral_radius(make, 0.999 * ref) > 1
+    only_pos = best_damping(loop, B_min=0.0, B_max=0.05, resolution=16)   # K_max = 0 from 0.03 on
     assert only_pos.B_curve[0] == 0.0 and only_pos.damping >= 0.0
     assert only_pos.critical_stiffness < bd.critical_stiffness
 
