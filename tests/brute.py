@@ -11,6 +11,8 @@ geometric grid and bisecting.
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 from scipy import signal
 
@@ -30,20 +32,34 @@ def _plant_tf(m: float, b: float, znum, zden) -> tuple[np.ndarray, np.ndarray]:
     return num, den
 
 
-def closed_loop_matrix(ports: list[tuple[float, float, tuple, tuple]], channels, K: float,
-                       B: float, T: float) -> np.ndarray:
+def _key(coeffs) -> tuple:
+    return tuple(float(c) for c in np.atleast_1d(np.asarray(coeffs, float)))
+
+
+@functools.lru_cache(maxsize=256)
+def _zoh_block(m: float, b: float, zn: tuple, zd: tuple, T: float):
+    """(Ad, Bd, Cd) of one device + termination, ZOH (cached: K_max scans rebuild the
+    same plant for every K)."""
+    num, den = _plant_tf(m, b, zn, zd)
+    A, Bm, C, D = signal.tf2ss(num, den)
+    Ad, Bd, Cd, Dd, _ = signal.cont2discrete((A, Bm, C, D), T, method="zoh")
+    for M in (Ad, Bd, Cd):
+        M.setflags(write=False)
+    return Ad, Bd, Cd
+
+
+def closed_loop_matrix(ports: list[tuple[float, float, tuple, tuple]], channels, K,
+                       B, T: float) -> np.ndarray:
     """Closed-loop matrix of a loop.
 
     ports: [(mass, damping, Z_num, Z_den)], channels: for each port i a list of
     (j, sign, delay) terms of its error signal e_i = sum sign * x_j[k - delay].
+    K, B: one stiffness and virtual damping (any sign) for every port, or one per port.
     """
     p = len(ports)
-    blocks = []
-    for m, b, zn, zd in ports:
-        num, den = _plant_tf(m, b, zn, zd)
-        A, Bm, C, D = signal.tf2ss(num, den)
-        Ad, Bd, Cd, Dd, _ = signal.cont2discrete((A, Bm, C, D), T, method="zoh")
-        blocks.append((Ad, Bd, Cd))
+    Kp = np.broadcast_to(np.asarray(K, float), (p,))
+    Bp = np.broadcast_to(np.asarray(B, float), (p,))
+    blocks = [_zoh_block(float(m), float(b), _key(zn), _key(zd), float(T)) for m, b, zn, zd in ports]
     nxs = [bl[0].shape[0] for bl in blocks]
     # registers of each measured position: depth = max delay + 1 (the B term needs e[k-n-1])
     depth = [0] * p
@@ -77,7 +93,7 @@ def closed_loop_matrix(ports: list[tuple[float, float, tuple, tuple]], channels,
     for i, terms in enumerate(channels):
         u = np.zeros(N)
         for j, sgn, n in terms:
-            u += sgn * ((K + B / T) * delayed(j, n) - (B / T) * delayed(j, n + 1))
+            u += sgn * ((Kp[i] + Bp[i] / T) * delayed(j, n) - (Bp[i] / T) * delayed(j, n + 1))
         Ad, Bd, _ = blocks[i]
         sl = slice(off_x[i], off_x[i + 1])
         M[sl, sl] += Ad
@@ -91,10 +107,13 @@ def hve(m: float, b: float, zn, zd, n: int, B: float, T: float):
     return lambda K: closed_loop_matrix(ports, channels, K, B, T)
 
 
-def peb(mm: float, bm: float, ms: float, bs: float, op, env, n: int, B: float, T: float):
+def peb(mm: float, bm: float, ms: float, bs: float, op, env, n: int, B: float, T: float,
+        ratio: float = 1.0, B_s: float | None = None):
+    """PEB with C_m = K + B(z-1)/(Tz) and C_s = ratio K + B_s(z-1)/(Tz) (B_s defaults to B)."""
     ports = [(mm, bm, *op), (ms, bs, *env)]
     channels = [[(0, 1.0, 0), (1, -1.0, n)], [(1, 1.0, 0), (0, -1.0, n)]]
-    return lambda K: closed_loop_matrix(ports, channels, K, B, T)
+    Bs = B if B_s is None else B_s
+    return lambda K: closed_loop_matrix(ports, channels, [K, ratio * K], [B, Bs], T)
 
 
 def spectral_radius(make, K: float) -> float:

@@ -26,6 +26,29 @@ def test_paper_case_nothing_wrong_with_forward_and_eq18():
     assert a.exact_kmax > r["eq18"].critical_stiffness
 
 
+@pytest.mark.parametrize("loop,keys", [
+    (h.paper_hve(delay_samples=4, damping=-0.03), ("gil", "eq18")),
+    (h.paper_peb(damping=-0.004), ("eq29", "eq34")),
+])
+def test_negative_b_closed_forms_keep_their_promise(loop, keys):
+    # for B < 0 the paper's lines are the exact passivity limit: nothing to flag, and
+    # the exact loop is stable just below each promised K (checked here independently)
+    a = audit(loop)
+    r = rows(a)
+    assert a.virtual_damping < 0
+    for k in keys + ("circle-forward", "passivity"):
+        assert r[k].flag is None
+        assert r[k].critical_stiffness == pytest.approx(a.passivity_kmax, rel=1e-9)
+        assert h.stability(loop.with_stiffness(r[k].critical_stiffness * (1 - 1e-6))).stable
+    assert a.exact_kmax > a.passivity_kmax
+
+
+def test_negative_b_beyond_device_damping_lists_zero_everywhere():
+    a = audit(h.paper_hve(damping=-0.2))
+    assert a.exact_kmax == 0.0 and all(r.critical_stiffness == 0.0 for r in a.rows)
+    assert not a.flagged
+
+
 def test_eq34_without_delay_over_promises_with_virtual_damping():
     # (34) at n = 0, B > 0 allows (b + 2B)/T, where (29) allows (b - 2B)/T
     loop = h.paper_peb(damping=0.005)

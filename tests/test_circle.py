@@ -153,7 +153,7 @@ def test_finite_sector_is_less_conservative_and_tends_to_the_passive_limit():
 
 # ------------------------------------------------------------- invariants
 @settings(max_examples=25, deadline=None)
-@given(b=st.floats(0.01, 1.0), B=st.floats(0.0, 0.5), T=st.floats(1e-4, 1e-2),
+@given(b=st.floats(0.01, 1.0), B=st.floats(-0.5, 0.5), T=st.floats(1e-4, 1e-2),
        n=st.integers(0, 12))
 def test_forward_circle_equals_sampled_passivity(b, B, T, n):
     # two formulas (G^-1 of eq. 15 vs Colgate-Schenkel's (1 - e^-jw)/(1 - cos w))
@@ -164,8 +164,8 @@ def test_forward_circle_equals_sampled_passivity(b, B, T, n):
 
 
 @settings(max_examples=15, deadline=None)
-@given(bm=st.floats(0.005, 0.5), bs=st.floats(0.005, 0.5), Bm=st.floats(0.0, 0.05),
-       Bs=st.floats(0.0, 0.05), ratio=st.floats(0.25, 4.0), T=st.floats(1e-4, 1e-2),
+@given(bm=st.floats(0.005, 0.5), bs=st.floats(0.005, 0.5), Bm=st.floats(-0.05, 0.05),
+       Bs=st.floats(-0.05, 0.05), ratio=st.floats(0.25, 4.0), T=st.floats(1e-4, 1e-2),
        n=st.integers(0, 6))
 def test_forward_circle_equals_multiport_passivity(bm, bs, Bm, Bs, ratio, T, n):
     loop = TeleoperationLoop(Device(0.1, bm), Device(0.1, bs), SpringDamper(1.0, Bm),
@@ -174,6 +174,21 @@ def test_forward_circle_equals_multiport_passivity(bm, bs, Bm, Bs, ratio, T, n):
     p = h.critical_stiffness(loop, method="passivity").critical_stiffness
     # 2x2 determinant roots on both sides: agreement to 1e-7 relative
     assert c == pytest.approx(p, rel=1e-7, abs=1e-9)
+
+
+@pytest.mark.parametrize("n", [0, 3])
+def test_forward_with_negative_b_beyond_device_damping_says_not_pr_for_any_k(n):
+    loop = HapticLoop(Device(0.15, 0.1), SpringDamper(1.0, -0.13), "spring:1", 1e-3, n)
+    res = h.critical_stiffness(loop, method="circle")
+    assert res.critical_stiffness == 0.0 and res.stable_intervals == ()
+    assert "not PR for any K >= 0" in res.reason
+    assert not circle_test(loop.with_stiffness(0.0)).positive_real
+
+
+@pytest.mark.parametrize("n", [0, 4])
+def test_forward_with_negative_b_is_eq34_for_peb(n):
+    loop = h.paper_peb(delay_samples=n, damping=-0.003)
+    assert kmax(loop) == pytest.approx((0.02 - 0.006) / ((n + 1) * 1e-3), rel=1e-9)
 
 
 def test_bad_input():

@@ -27,6 +27,16 @@ def test_kmax_peb_with_closed_form():
     assert json.loads(r.stdout)["critical_stiffness"] == pytest.approx(4.0)
 
 
+def test_kmax_gil2004_reproducer_is_accurate():
+    # issue #8: bT/m = 2e-8 gave 23.89 from cancellation; the true value (40-digit
+    # evaluation of the same closed form) is 20.0000000666666666
+    r = run("kmax", "hve", "--mass", "5", "--damping", "0.001", "--period", "1e-4", "--operator",
+            "none", "--method", "gil2004", "--json")
+    assert r.exit_code == 0, r.stderr
+    assert json.loads(r.stdout)["critical_stiffness"] == pytest.approx(20.000000066666666635,
+                                                                       rel=1e-12)
+
+
 def test_kmax_table_without_json():
     r = run("kmax", "hve")
     assert r.exit_code == 0 and "critical stiffness" in r.stdout and "200.022" in r.stdout
@@ -53,6 +63,36 @@ def test_boundary_json_and_csv(tmp_path):
     assert csv.read_text().count("\n") == 7
 
 
+@pytest.mark.parametrize("args", [("-B", "-0.05"), ("--virtual-damping=-0.05",)])
+def test_negative_virtual_damping_is_accepted(args):
+    r = run("kmax", "hve", *args, "--json")
+    assert r.exit_code == 0, r.stderr
+    d = json.loads(r.stdout)
+    # half the device damping cancelled: K_max ~ 2(b - |B|)/T = 100 N/m (exact 100.045)
+    assert d["critical_stiffness"] == pytest.approx(100.04488824943, rel=1e-9)
+
+
+def test_negative_virtual_damping_beyond_device_damping_says_unstable_for_every_k():
+    r = run("kmax", "hve", "-B", "-0.5", "--json")
+    assert r.exit_code == 0, r.stderr
+    d = json.loads(r.stdout)
+    assert d["critical_stiffness"] == 0.0 and d["stable_intervals"] == []
+    assert "unstable for every K > 0" in d["reason"]
+    r = run("check", "peb", "-K", "3", "-B", "-0.005", "--json")
+    assert r.exit_code == 0 and json.loads(r.stdout)["verdict"] == "stable"
+
+
+def test_simulate_with_negative_virtual_damping():
+    r = run("simulate", "hve", "-K", "50", "-B", "-0.05", "--duration", "1", "--json")
+    assert r.exit_code == 0, r.stderr
+    d = json.loads(r.stdout)
+    # K = 50 < K_max(B = -0.05) = 100.04: bounded, and the exact analysis agrees
+    assert d["exact_verdict"] == "stable" and d["verdict"] == "bounded"
+    d = json.loads(run("simulate", "hve", "-K", "50", "-B", "-0.2", "--duration", "1",
+                       "--json").stdout)
+    assert d["exact_verdict"] == "unstable" and d["exact_growth_rate_per_s"] > 0
+
+
 def test_demo_prints_both_figures():
     r = run("demo", "--json")
     d = json.loads(r.stdout)
@@ -64,6 +104,8 @@ def test_demo_prints_both_figures():
     (("kmax", "hve", "--mass", "0"), "must be > 0"),
     (("kmax", "hve", "--period", "nan"), "must be finite"),
     (("kmax", "hve", "--damping", "inf"), "must be finite"),
+    (("kmax", "hve", "-B", "nan"), "'--virtual-damping' / '-B': 'nan': must be finite"),
+    (("kmax", "hve", "--damping", "-0.1"), "'--damping' / '-b': '-0.1': must be >= 0"),
     (("kmax", "hve", "--delay", "2.5"), "whole number of samples"),
     (("kmax", "hve", "--method", "eq34"), "--method = 'eq34': unknown for hve; allowed:"),
     (("kmax", "peb", "--environment", "msd:1,2"), "--environment = 'msd:1,2'"),

@@ -23,6 +23,25 @@ def test_region_json_plot_csv(tmp_path):
     assert png.stat().st_size > 5000 and csv.stat().st_size > 0
 
 
+def test_region_b_window_through_zero(tmp_path):
+    png = tmp_path / "neg.png"
+    r = run("region", "hve", "--delay", "10", "--K", "0:900", "--B", "-2:20", "--resolution", "20",
+            "--plot", str(png), "--json")
+    assert r.exit_code == 0, r.stderr
+    d = json.loads(r.stdout)
+    assert d["B_range"] == [-2.0, 20.0] and d["rows"][0]["virtual_damping"] == -2.0
+    assert d["rows"][0]["stable_intervals"] == []          # |B| > b: unstable for every K
+    assert d["agreement"]["disagree"] == 0 and png.stat().st_size > 5000
+
+
+def test_best_damping_min_damping():
+    d = json.loads(run("best-damping", "hve", "--delay", "10", "--min-damping", "0", "--json").stdout)
+    assert d["curve"]["virtual_damping"][0] == 0.0
+    assert d["virtual_damping"] == pytest.approx(12.61, rel=1e-3)
+    d = json.loads(run("best-damping", "hve", "--delay", "10", "--json").stdout)
+    assert d["curve"]["virtual_damping"][0] < 0             # both signs searched by default
+
+
 def test_best_damping_json():
     r = run("best-damping", "hve", "--delay", "10", "--json")
     d = json.loads(r.stdout)
@@ -47,6 +66,11 @@ def test_delay_options():
     (("region", "hve", "--K", "5:1", "--B", "0:1"), "--K = '5:1'"),
     (("region", "hve", "--K", "0:x", "--B", "0:1"), "malformed"),
     (("region", "hve", "--K", "0:10", "--B", "0:1", "--overlay", "magic"), "--overlay = 'magic'"),
+    (("region", "hve", "--K", "-1:10", "--B", "0:1"), "--K = '-1:10': allowed: lo:hi with 0 <= lo"),
+    (("region", "hve", "--K", "0:10", "--B", "1:-1"), "--B = '1:-1': allowed: lo:hi with lo < hi, "
+                                                      "either sign"),
+    (("best-damping", "hve", "--min-damping", "0.5"), "--min-damping = 0.5: must be <= 0"),
+    (("best-damping", "hve", "--max-damping", "0"), "'--max-damping': '0': must be > 0"),
 ])
 def test_errors_one_line_exit_2(args, needle):
     r = run(*args)

@@ -133,6 +133,56 @@ def test_against_independent_brute_force(kind, p):
     assert h.critical_stiffness(loop).critical_stiffness == pytest.approx(brute.kmax(make), rel=1e-6)
 
 
+NEGATIVE_B_CASES = [  # B < 0 (cancelling device damping), with and without delay/operator
+    ("hve", (0.15, 0.1, (1,), (1, 0), 0, -0.03, 1e-3)),
+    ("hve", (0.15, 0.1, (0,), (1,), 10, -0.05, 1e-3)),
+    ("hve", (0.05, 0.3, (0.1, 0.5, 50), (1, 0), 3, -0.2, 5e-4)),
+    ("hve", (0.15, 0.1, (1,), (1, 0), 10, -0.0999, 1e-3)),     # b + B = 1e-4: K_max ~ 0.013
+    ("peb", (0.015, 0.02, 0.015, 0.02, ((1,), (1, 0)), ((1,), (1, 0)), 4, -0.004, 1e-3)),
+    ("peb", (0.3, 0.2, 0.1, 0.6, ((0,), (1,)), ((0.5, 1, 500), (1, 0)), 2, -0.05, 4e-3)),
+]
+
+
+@pytest.mark.parametrize("kind,p", NEGATIVE_B_CASES)
+def test_negative_virtual_damping_against_independent_brute_force(kind, p):
+    loop, make = _loop(kind, p)
+    K = h.critical_stiffness(loop).critical_stiffness
+    assert 0 < K < math.inf
+    # as above: the brute-force bisection resolves ~1e-9, 1e-6 leaves margin
+    assert K == pytest.approx(brute.kmax(make, lo=1e-8), rel=1e-6)
+
+
+def test_negative_b_lowers_kmax_like_net_damping():
+    # B < 0 takes damping away: K_max(B = -0.05) is about half K_max(0) at n = 0
+    # (eq. 1: 2(b - |B|)/T), both exact and brute force
+    K0 = h.critical_stiffness(h.paper_hve()).critical_stiffness
+    Kn = h.critical_stiffness(h.paper_hve(damping=-0.05)).critical_stiffness
+    assert Kn == pytest.approx(K0 / 2, rel=2e-3) and Kn < K0
+
+
+@pytest.mark.parametrize("B,op,n", [(-0.1000001, None, 0), (-0.12, None, 10), (-0.2, "spring:1", 0),
+                                    (-0.3, "spring:1", 10)])
+def test_negative_b_beyond_device_damping_is_unstable_for_every_k(B, op, n):
+    loop = h.HapticLoop(h.Device(0.15, 0.1), h.SpringDamper(1.0, B), op, 1e-3, n)
+    res = h.critical_stiffness(loop)
+    assert res.critical_stiffness == 0.0 and res.stable_intervals == ()
+    assert "unstable for every K > 0" in res.reason
+    zn, zd = ((0,), (1,)) if op is None else ((1,), (1, 0))
+    assert brute.kmax(brute.hve(0.15, 0.1, zn, zd, n, B, 1e-3), lo=1e-8) == 0.0
+    assert h.stability(loop.with_stiffness(1e-3)).verdict == "unstable"
+
+
+def test_unequal_peb_controllers_with_negative_slave_damping_against_brute_force():
+    # C_s = 2 K + B_s (z-1)/(Tz), B_s < 0, B_m > 0: K is the master's, K_s/K_m = 2 kept
+    mm, bm, ms, bs, op, env, n, T = 0.02, 0.05, 0.03, 0.08, ((1,), (1, 0)), ((5,), (1, 0)), 3, 1e-3
+    loop = h.TeleoperationLoop(h.Device(mm, bm), h.Device(ms, bs), h.SpringDamper(1.0, 0.01),
+                               h.SpringDamper(2.0, -0.03), h.Impedance(*op), h.Impedance(*env), T, n)
+    make = brute.peb(mm, bm, ms, bs, op, env, n, 0.01, T, ratio=2.0, B_s=-0.03)
+    K = h.critical_stiffness(loop).critical_stiffness
+    assert 0 < K < math.inf
+    assert K == pytest.approx(brute.kmax(make), rel=1e-6)
+
+
 def test_stable_set_with_two_intervals_matches_brute_force_grid():
     loop = h.TeleoperationLoop(h.Device(0.19928093469739114, 0.05458898739705752),
                                h.Device(0.13333897384215598, 0.6481864867733761),

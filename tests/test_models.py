@@ -97,6 +97,27 @@ def test_spring_damper_transfer_is_eq_23():
     assert np.polyval(num, z) / np.polyval(den, z) == pytest.approx(K + B * (z - 1) / (T * z))
 
 
+@pytest.mark.parametrize("B", [-0.5, -1e-9, -30.0])
+def test_spring_damper_accepts_negative_virtual_damping(B):
+    # B < 0 is used in practice (to cancel device damping or friction): accepted as given
+    c = h.SpringDamper(10.0, B)
+    assert c.damping == B
+    num, den = c.transfer(1e-3)
+    z = 0.2 - 0.7j
+    assert np.polyval(num, z) / np.polyval(den, z) == pytest.approx(10.0 + B * (z - 1) / (1e-3 * z))
+
+
+@pytest.mark.parametrize("B", [math.nan, math.inf, -math.inf, "soft"])
+def test_spring_damper_rejects_non_finite_virtual_damping(B):
+    with pytest.raises(ModelError, match="virtual damping"):
+        h.SpringDamper(10.0, B)
+
+
+def test_spring_damper_still_rejects_negative_stiffness():
+    with pytest.raises(ModelError, match=r"stiffness = -1.0: must be >= 0"):
+        h.SpringDamper(-1.0, -0.1)
+
+
 def test_discrete_controller_must_be_proper():
     with pytest.raises(ModelError, match="proper"):
         h.DiscreteController((1.0, 0.0, 1.0), (1.0, 0.5))

@@ -22,11 +22,36 @@ def kmax(loop, method="passivity", **kw):
 
 
 @pytest.mark.parametrize("b,B,T", [(0.1, 0.0, 1e-3), (0.1, 0.03, 1e-3), (1.0, 0.5, 5e-3),
-                                   (0.3, 0.29, 2e-4), (0.05, 0.08, 1e-3)])
+                                   (0.3, 0.29, 2e-4), (0.05, 0.08, 1e-3),
+                                   (0.1, -0.03, 1e-3), (1.0, -0.5, 5e-3), (0.3, -0.29, 2e-4),
+                                   (0.05, -0.08, 1e-3), (0.2, -1e-6, 1e-4)])
 def test_no_delay_is_eq1_exactly(b, B, T):
-    # eq. (1): b > KT/2 + |B|  ->  K_max = 2 (b - B)/T (0 when B >= b)
+    # eq. (1): b > KT/2 + |B|  ->  K_max = 2 (b - |B|)/T (0 when |B| >= b), either sign of B
     loop = HapticLoop(Device(0.15, b), SpringDamper(1.0, B), "spring:1", T, 0)
-    assert kmax(loop) == pytest.approx(max(0.0, 2 * (b - B) / T), rel=1e-12, abs=1e-9)
+    assert kmax(loop) == pytest.approx(max(0.0, 2 * (b - abs(B)) / T), rel=1e-12, abs=1e-9)
+
+
+@pytest.mark.parametrize("B", [-0.02, -0.06])
+def test_negative_b_verdict_flips_at_eq1(B):
+    # n = 0, B < 0: margin = b - |B| - KT/2, worst at w -> 0 (not at Nyquist as for B > 0)
+    K = 2 * (0.1 - abs(B)) / 1e-3
+    loop = HapticLoop(Device(0.15, 0.1), SpringDamper(K * (1 - 1e-6), B), None, 1e-3, 0)
+    r = sampled_passivity(loop)
+    assert r.passive and r.margin == pytest.approx(K * 1e-6 * 1e-3 / 2, rel=1e-3)
+    assert r.worst_frequency_hz < 1e-3
+    assert not sampled_passivity(loop.with_stiffness(K * (1 + 1e-6))).passive
+
+
+@pytest.mark.parametrize("loop", [
+    HapticLoop(Device(0.15, 0.1), SpringDamper(1.0, -0.15), "spring:1", 1e-3, 0),
+    HapticLoop(Device(0.15, 0.1), SpringDamper(1.0, -0.12), None, 1e-3, 5),
+    h.paper_peb(delay_samples=2, damping=-0.011),
+])
+def test_negative_b_beyond_device_damping_is_not_passive_for_any_k(loop):
+    res = h.critical_stiffness(loop, method="passivity")
+    assert res.critical_stiffness == 0.0 and res.stable_intervals == ()
+    assert "not passive for any K >= 0" in res.reason and "missing" in res.reason
+    assert not sampled_passivity(loop.with_stiffness(0.0)).passive
 
 
 def test_issue_number_732():
@@ -66,7 +91,8 @@ def _brute_kmax(b, B, T, n):
 
 
 @pytest.mark.parametrize("b,B,T,n", [(1.0, 0.5, 1e-3, 1), (0.1, 0.02, 2e-3, 4), (0.2, 0.3, 1e-3, 2),
-                                     (0.1, 0.0, 1e-3, 10)])
+                                     (0.1, 0.0, 1e-3, 10), (0.2, -0.05, 1e-3, 3),
+                                     (1.0, -0.5, 1e-3, 1)])
 def test_matches_brute_force(b, B, T, n):
     loop = HapticLoop(Device(0.1, b), SpringDamper(1.0, B), None, T, n)
     # the brute grid stops at w = 1e-3/T: its K can only be larger, by O((n w)^2) ~ 1e-4
@@ -130,12 +156,29 @@ def test_hve_bounds_never_exceed_exact(m, b, B, T, n, op):
     assert kmax(loop, "circle") <= exact * (1 + 1e-6) + 1e-9
 
 
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(m=st.floats(0.01, 1.0), b=st.floats(0.01, 1.0), f=st.floats(0.0, 0.9),
+       T=st.floats(2e-4, 1e-2), n=st.integers(0, 8), op=passive_impedance())
+def test_hve_bounds_never_exceed_exact_with_negative_b(m, b, f, T, n, op):
+    # B = -f b: b + B >= 0.1 b keeps K_max well above the exact analysis' smallest
+    # resolved K (near b + B = 0 it tends to 0, below that resolution)
+    loop = HapticLoop(Device(m, b), SpringDamper(1.0, -f * b), op, T, n)
+    exact = kmax(loop, "exact")
+    assert kmax(loop, "passivity") <= exact * (1 + 1e-6) + 1e-9
+    assert kmax(loop, "circle") <= exact * (1 + 1e-6) + 1e-9
+    # and for B <= 0 both are eq. (18) exactly (the worst case is w -> 0)
+    line = h.eq18(loop).critical_stiffness
+    assert kmax(loop, "passivity") == pytest.approx(line, rel=1e-7)
+
+
 @settings(max_examples=20, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(mm=st.floats(0.005, 0.5), ms=st.floats(0.005, 0.5), bm=st.floats(0.005, 0.5),
-       bs=st.floats(0.005, 0.5), Bm=st.floats(0.0, 0.05), Bs=st.floats(0.0, 0.05),
+       bs=st.floats(0.005, 0.5), Bm=st.floats(-0.4, 0.05), Bs=st.floats(-0.4, 0.05),
        ratio=st.floats(0.25, 4.0), T=st.floats(5e-4, 1e-2), n=st.integers(0, 5),
        op=passive_impedance(), env=passive_impedance())
 def test_peb_bounds_never_exceed_exact(mm, ms, bm, bs, Bm, Bs, ratio, T, n, op, env):
+    # negative B_m, B_s scaled to at most 0.4 of the port's damping (see the HVE test)
+    Bm, Bs = (Bm * bm if Bm < 0 else Bm), (Bs * bs if Bs < 0 else Bs)
     loop = TeleoperationLoop(Device(mm, bm), Device(ms, bs), SpringDamper(1.0, Bm),
                              SpringDamper(ratio, Bs), op, env, T, n)
     exact = kmax(loop, "exact")

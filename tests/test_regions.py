@@ -83,3 +83,91 @@ def test_region_plot_and_csv(tmp_path):
     res.to_csv(str(tmp_path / "r.csv"))
     assert (tmp_path / "r.csv").read_text().count("\n") == 401
     assert np.isfinite(res.overlays["paper"]).all()
+
+
+# ------------------------------------------------ negative virtual damping B < 0
+def test_region_through_zero_matches_brute_force_and_its_grid_check():
+    res = stability_region(HVE10, (0, 20), (-0.12, 0.1), resolution=23)
+    assert res.B_rows[0] < -0.1 < 0 < res.B_rows[-1]
+    assert res.agreement["disagree"] == 0 and res.agreement["compared"] > 450
+    make = lambda B: brute.hve(0.15, 0.1, (1,), (1, 0), 10, B, 1e-3)  # noqa: E731
+    checked = 0
+    for i, B in enumerate(res.B_rows):
+        mk = make(B)
+        ends = [e for iv in res.intervals[i] for e in iv if 0 < e < 20]
+        for j, K in enumerate(res.K_grid[1:-1], start=1):
+            if any(abs(K - e) <= 1e-3 * e for e in ends):   # boundary itself: rounding
+                continue
+            assert res.stable_exact[i, j] == (brute.spectral_radius(mk, K) < 1), (K, B)
+            checked += 1
+    assert checked > 400
+    # rows below B = -b: unstable for every K; rows just above: a small stable interval
+    kmax = res.kmax()
+    assert np.all(kmax[res.B_rows < -0.1] == 0.0) and np.all(kmax[res.B_rows > -0.09] > 0)
+
+
+def test_region_wide_b_window_through_zero():
+    # the issue's --B -2:20 on the delayed HVE: the grid check agrees everywhere
+    res = stability_region(HVE10, (0, 900), (-2, 20), resolution=40)
+    assert res.agreement["disagree"] == 0
+    assert res.kmax()[0] == 0.0 and res.kmax().max() > 600
+
+
+@pytest.mark.parametrize("n", [0, 10])
+def test_region_overlays_with_negative_b_are_the_papers_lines(n):
+    loop = h.paper_hve(delay_samples=n)
+    res = stability_region(loop, (0, 300), (-0.15, 0.05), resolution=9,
+                           overlays=["paper", "passivity", "circle"])
+    neg = res.B_rows <= 0
+    B = res.B_rows[neg]
+    # n = 0: Colgate-Schenkel 2(b - |B|)/T; n = 10: (18) = (b + B)/(T/2 + t_d), both = passivity
+    line = (2 * (0.1 - np.abs(B)) / 1e-3 if n == 0 else (0.1 + B) / (0.5e-3 + n * 1e-3)).clip(0)
+    np.testing.assert_allclose(res.overlays["paper"][neg], line, rtol=1e-12, atol=1e-9)
+    for name in ("passivity", "circle"):
+        # frequency sweeps: rounding slack ~1e-12 of the damping scale -> ~1e-9 N/m
+        np.testing.assert_allclose(res.overlays[name][neg], line, rtol=1e-9, atol=1e-9)
+    # sufficient conditions: never above the exact boundary
+    assert np.all(res.overlays["passivity"] <= res.kmax() * (1 + 1e-9) + 1e-9)
+
+
+def test_d_decomposition_points_with_negative_b_put_a_pole_on_the_circle():
+    dd = d_decomposition(HVE10, n_theta=400)
+    pts = np.vstack([c[(c[:, 0] > 0.01) & (c[:, 0] < 50) & (c[:, 1] < 0) & (c[:, 1] > -0.1)]
+                     for c in dd["curves"]])
+    assert len(pts) > 5
+    for K, B in pts[:: max(1, len(pts) // 8)]:
+        eig = np.linalg.eigvals(build(with_gains(HVE10, K, B)).closed_loop()[0])
+        assert np.min(np.abs(np.abs(eig) - 1)) < 1e-7
+
+
+def test_best_damping_searches_negative_b_and_can_find_it_best():
+    # a 10 g device on a 100 N/m operator with n = 6: the delay's phase makes B < 0 damp
+    m, b, k, T, n = 0.0103, 0.0251, 100.0, 0.00452, 6
+    loop = h.HapticLoop(h.Device(m, b), h.SpringDamper(1.0), h.spring(k), T, n)
+    bd = best_damping(loop)
+    assert bd.damping < -b and bd.B_curve[0] < bd.damping and "B* < 0" in bd.reason
+    ref = brute.kmax(brute.hve(m, b, (k,), (1, 0), n, bd.damping, T))
+    assert bd.critical_stiffness == pytest.approx(ref, rel=1e-6)
+    assert bd.critical_stiffness > 4 * bd.critical_stiffness_at_zero_damping
+    for dB in (-0.05, 0.05):   # a maximum: 0.1 % below K*, brute force is unstable on both sides
+        make = brute.hve(m, b, (k,), (1, 0), n, bd.damping + dB, T)
+        assert brute.spectral_radius(make, 0.999 * ref) > 1
+    only_pos = best_damping(loop, B_min=0.0, B_max=0.05, resolution=16)   # K_max = 0 from 0.03 on
+    assert only_pos.B_curve[0] == 0.0 and only_pos.damping >= 0.0
+    assert only_pos.critical_stiffness < bd.critical_stiffness
+
+
+def test_best_damping_bounds_are_validated():
+    with pytest.raises(AnalysisError, match="B_min = 0.5: must be <= 0"):
+        best_damping(HVE10, B_min=0.5)
+    with pytest.raises(h.ModelError, match="B_max"):
+        best_damping(HVE10, B_max=-1.0)
+
+
+def test_best_damping_unstable_everywhere_says_so():
+    # no device damping, no operator, delay: with B in [-0.5, 1e-12] no K > 0 is stable
+    loop = h.HapticLoop(h.Device(0.15, 0.0), h.SpringDamper(1.0), None, 1e-3, 10)
+    bd = best_damping(loop, B_max=1e-12, B_min=-0.5, resolution=8)
+    assert bd.critical_stiffness == 0.0 and bd.damping == 0.0 and np.all(bd.K_curve == 0)
+    assert "unstable for every K > 0 at every B" in bd.reason
+    assert brute.kmax(brute.hve(0.15, 0.0, (0,), (1,), 10, -0.25, 1e-3), lo=1e-8) == 0.0

@@ -125,6 +125,20 @@ def test_hve_matches_fine_rk4_between_samples():
     np.testing.assert_allclose(res.dense_time[::sub], res.time, atol=1e-15)
 
 
+@pytest.mark.parametrize("B,K,n", [(-0.05, 40.0, 0), (-0.03, 5.0, 10), (-0.12, 2.0, 3)])
+def test_hve_with_negative_virtual_damping_matches_fine_rk4(B, K, n):
+    # B < 0 enters u = K e + B (e - e_prev)/T as written, stable or not (B = -0.12 < -b grows)
+    m, b, T, sub = 0.15, 0.1, 1e-3, 20
+    loop = h.paper_hve(T, n, K, B)
+    res = simulate(loop, 0.5, force="step:2", initial_position=0.003, dense=sub)
+    M = res.time.size - 1
+    xs, us = rk4_hve(m, b, 1.0, K, B, T, n, 0.003, np.full(M, 2.0), M, sub=sub)
+    # RK4 at T/20 on modes below ~20 rad/s: truncation far below 1e-9 of the scale
+    np.testing.assert_allclose(res.dense_position[:, 0], xs, rtol=0, atol=1e-9 * np.abs(xs).max())
+    np.testing.assert_allclose(res.controller_force[:-1, 0], us, rtol=1e-9,
+                               atol=1e-12 * np.abs(us).max())
+
+
 def test_peb_matches_fine_rk4_between_samples():
     T, n, K = 2e-3, 4, 0.7
     loop = h.paper_peb(T, n, K)
@@ -280,6 +294,12 @@ def test_outputs_csv_dict_plot(tmp_path):
     h.TeleoperationLoop(h.Device(0.015, 0.02), h.Device(0.03, 0.05), h.SpringDamper(1),
                         h.SpringDamper(1), "spring:1", "msd:0.01,0.1,50", 2e-3, 3,
                         fractional_delay=0.3, fractional_delay_backward=0.8),
+    # negative virtual damping, down to b + B = 1e-4 (K_max ~ 0.01 N/m, below the scan's start)
+    h.paper_hve(1e-3, 4, damping=-0.05), h.paper_hve(1e-3, 10, damping=-0.0999),
+    h.HapticLoop(h.Device(0.15, 0.1), h.SpringDamper(1.0, -0.0999), None, 1e-3, 3),
+    h.paper_peb(1e-3, 4, damping=-0.004),
+    h.TeleoperationLoop(h.Device(0.015, 0.02), h.Device(0.015, 0.02), h.SpringDamper(1, 0.002),
+                        h.SpringDamper(2, -0.006), "spring:1", "spring:1", 1e-3, 2),
 ])
 def test_simulation_kmax_within_one_percent_of_exact(loop):
     ex = exact_critical_stiffness(loop).critical_stiffness
@@ -381,6 +401,16 @@ def test_simulation_kmax_zero_when_unstable_for_every_k():
     assert exact_critical_stiffness(loop).critical_stiffness == 0.0
     res = critical_stiffness_simulation(loop)
     assert res.critical_stiffness == 0.0 and "unbounded already" in res.reason
+
+
+@pytest.mark.parametrize("B,op,n", [(-0.12, None, 0), (-0.2, "spring:1", 10)])
+def test_simulation_kmax_zero_when_negative_b_exceeds_device_damping(B, op, n):
+    loop = h.HapticLoop(h.Device(0.15, 0.1), h.SpringDamper(1.0, B), op, 1e-3, n)
+    assert exact_critical_stiffness(loop).critical_stiffness == 0.0
+    res = critical_stiffness_simulation(loop)
+    assert res.critical_stiffness == 0.0 and "unbounded already" in res.reason
+    # the downward scan went below the usual start (1e-6 m/T^2 = 0.15 N/m)
+    assert float(res.reason.split("K = ")[1].split()[0]) < 1e-4
 
 
 def test_simulation_kmax_finds_the_first_boundary_of_a_split_stable_set():

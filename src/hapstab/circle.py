@@ -242,6 +242,10 @@ def critical_stiffness_circle(loop: HapticLoop | TeleoperationLoop, approximatio
     Conditions (i)-(ii) hold for every K >= 0 here (poles at z = 0 and a simple
     pole at z = 1 with residue K T times a PSD matrix), except for PEB with
     C_m != C_s and ``scaling=None`` (non-Hermitian residue: K_max = 0).
+    Any sign of the virtual damping B: G^-1 is affine in B too, and negative B
+    only lowers the Hermitian part; with ``B <= 0`` the forward-difference limit is
+    eq. (18) (HVE) resp. (34) (PEB, b_m = b_s) exactly, and 0 when the device
+    damping does not cover |B| (the reason says so).
 
     Parameters
     ----------
@@ -282,8 +286,15 @@ def critical_stiffness_circle(loop: HapticLoop | TeleoperationLoop, approximatio
         why = "residue (25) at z = 1 is not Hermitian for K_m != K_s (no port scaling)"
     else:
         K, th = _affine_kmax(loop, lambda t: _hermitian_parts(loop, a, D, t), n + 2)
-        why = (f"G^-1(z) is PR for K <= K_max; at K_max, condition (iii) binds at "
-               f"w = {th / T:.6g} rad/s") if math.isfinite(K) else "G^-1(z) is PR for every K >= 0"
+        if K == 0:   # condition (iii) fails at K = 0: the virtual damping (e.g. B < -b) wins
+            why = ("G^-1(z) is not PR for any K >= 0: condition (iii) fails already at K = 0 "
+                   f"(at w = {th / T:.6g} rad/s; the virtual damping takes more than the device "
+                   "damping provides)")
+        elif math.isfinite(K):
+            why = (f"G^-1(z) is PR for K <= K_max; at K_max, condition (iii) binds at "
+                   f"w = {th / T:.6g} rad/s")
+        else:
+            why = "G^-1(z) is PR for every K >= 0"
     eq = "(15)" if isinstance(loop, HapticLoop) else "(30)"
     reason = f"circle criterion (Theorem 2.1), {a} approximation, G^-1 of eq. {eq}: {why}"
     if a != "forward":

@@ -108,7 +108,7 @@ class Delay(click.ParamType):
         return v
 
 
-POS, NONNEG = Number(positive=True), Number(nonnegative=True)
+POS, NONNEG, REAL = Number(positive=True), Number(nonnegative=True), Number()
 
 
 def _stack(*decorators: Callable) -> Callable:
@@ -163,11 +163,19 @@ def loop_options(kind: str, ranges: bool = False) -> Callable:
             click.option("--slave-damping", type=NONNEG, default=0.02, show_default=True, help="N*s/m"),
             click.option("--environment", default="spring:1", show_default=True,
                          help="Environment impedance: none | spring:k | msd:m,b,k."),
+            click.option("--slave-stiffness-ratio", "slave_stiffness_ratio", type=POS, default=1.0,
+                         show_default=True,
+                         help="K_s / K_m, > 0: the slave's stiffness is this times the master's "
+                              "(K is the master's; the ratio is kept as K varies)."),
+            click.option("--slave-virtual-damping", "slave_virtual_damping", type=REAL, default=None,
+                         help="Slave virtual damping B_s in N*s/m, any sign (default: "
+                              "--virtual-damping, i.e. C_m = C_s)."),
         ]
     return _stack(
         *devices, *timing,
-        click.option("--virtual-damping", "-B", type=NONNEG, default=0.0, show_default=True,
-                     help="Virtual damping B in N*s/m (H(z) = K + B(z-1)/(Tz), eq. 23)."),
+        click.option("--virtual-damping", "-B", type=REAL, default=0.0, show_default=True,
+                     help="Virtual damping B in N*s/m (H(z) = K + B(z-1)/(Tz), eq. 23); any sign "
+                          "(B < 0 cancels device damping or friction)."),
         click.option("--operator", default="spring:1", show_default=True,
                      help="Operator impedance: none | spring:k | msd:m,b,k."),
         click.option("--json", "as_json", is_flag=True, help="Print one JSON object on stdout."),
@@ -197,10 +205,15 @@ def hve_loop(kw: dict[str, Any], stiffness: float = 0.0) -> HapticLoop:
 
 
 def peb_loop(kw: dict[str, Any], stiffness: float = 0.0) -> TeleoperationLoop:
-    """Build the PEB teleoperator from parsed options (C_m = C_s)."""
-    c = SpringDamper(stiffness, kw["virtual_damping"])
+    """Build the PEB teleoperator from parsed options: C_m = K + B(z-1)/(Tz) and
+    C_s = R K + B_s(z-1)/(Tz), R = --slave-stiffness-ratio (default 1) and
+    B_s = --slave-virtual-damping (default B), so C_m = C_s unless they are given."""
+    ratio = kw.get("slave_stiffness_ratio", 1.0)
+    B_s = kw.get("slave_virtual_damping")
+    cm = SpringDamper(stiffness, kw["virtual_damping"])
+    cs = SpringDamper(ratio * stiffness, kw["virtual_damping"] if B_s is None else B_s)
     loop = TeleoperationLoop(Device(kw["master_mass"], kw["master_damping"]),
-                             Device(kw["slave_mass"], kw["slave_damping"]), c, c,
+                             Device(kw["slave_mass"], kw["slave_damping"]), cm, cs,
                              parse_impedance(kw["operator"], "--operator"),
                              parse_impedance(kw["environment"], "--environment"),
                              kw["period"], kw["delay"])

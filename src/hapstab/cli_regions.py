@@ -6,20 +6,34 @@ from typing import Any
 
 import click
 
-from .cli import LOOP_KINDS, NONNEG, cli, emit, fmt, loop_options, rich_table
+from .cli import LOOP_KINDS, POS, REAL, cli, emit, fmt, loop_options, rich_table
 from .errors import HapstabError
 
 
-def _range(spec: str, name: str) -> tuple[float, float]:
-    allowed = "allowed: lo:hi with 0 <= lo < hi (e.g. 0:800)"
+def _range(spec: str, name: str, signed: bool = False) -> tuple[float, float]:
+    """``lo:hi`` with lo < hi, finite; ``lo >= 0`` unless ``signed`` (virtual damping)."""
+    allowed = ("allowed: lo:hi with lo < hi, either sign (e.g. -2:20)" if signed
+               else "allowed: lo:hi with 0 <= lo < hi (e.g. 0:800)")
     parts = spec.split(":")
     try:
         lo, hi = (float(x) for x in parts)
     except ValueError:
         raise HapstabError(f"{name} = {spec!r}: malformed; {allowed}") from None
-    if not (lo >= 0 and hi > lo and hi < float("inf")):
+    if not ((signed or lo >= 0) and hi > lo and lo > -float("inf") and hi < float("inf")):
         raise HapstabError(f"{name} = {spec!r}: {allowed}")
     return lo, hi
+
+
+def _equal_controllers(kw: dict[str, Any]) -> None:
+    """A K-B region and the best damping are defined for C_m = C_s: refuse the PEB
+    options that make the controllers differ, naming the one given."""
+    ratio, B_s = kw.get("slave_stiffness_ratio", 1.0), kw.get("slave_virtual_damping")
+    if ratio != 1.0:
+        raise HapstabError(f"--slave-stiffness-ratio = {ratio:g}: a K-B region / best damping is "
+                           "defined for C_m = C_s; allowed here: 1 (the default)")
+    if B_s is not None:
+        raise HapstabError(f"--slave-virtual-damping = {B_s:g}: a K-B region / best damping is "
+                           "defined for C_m = C_s (B is the swept variable); allowed here: not given")
 
 
 def _region_command(kind: str) -> None:
@@ -28,7 +42,8 @@ def _region_command(kind: str) -> None:
     @region.command(kind)
     @loop_options(kind)
     @click.option("--K", "K_spec", required=True, help="Stiffness window lo:hi in N/m.")
-    @click.option("--B", "B_spec", required=True, help="Virtual damping window lo:hi in N*s/m.")
+    @click.option("--B", "B_spec", required=True,
+                  help="Virtual damping window lo:hi in N*s/m, either sign (e.g. -2:20).")
     @click.option("--resolution", type=click.IntRange(2, 2000), default=200, show_default=True,
                   help="Rows (B values) and grid columns (K values).")
     @click.option("--overlay", "overlays", default="paper,passivity,circle", show_default=True,
@@ -42,7 +57,8 @@ def _region_command(kind: str) -> None:
         from .analysis import METHODS
         from .regions import stability_region
 
-        K, B = _range(K_spec, "--K"), _range(B_spec, "--B")
+        _equal_controllers(kw)
+        K, B = _range(K_spec, "--K"), _range(B_spec, "--B", signed=True)
         names = [o.strip() for o in overlays.split(",") if o.strip() and o.strip() != "none"]
         for o in names:
             if o != "paper" and o not in METHODS:
@@ -76,12 +92,19 @@ def _best_command(kind: str) -> None:
 
     @best.command(kind)
     @loop_options(kind)
-    @click.option("--max-damping", "B_max", type=NONNEG, default=None,
-                  help="Largest B to search (default: where K_max falls to 0).")
-    def _cmd(B_max: float | None, as_json: bool, **kw: Any) -> None:
+    @click.option("--max-damping", "B_max", type=POS, default=None,
+                  help="Largest B to search, > 0 (default: where K_max falls to 0).")
+    @click.option("--min-damping", "B_min", type=REAL, default=None,
+                  help="Smallest B to search, <= 0 (default: where K_max falls to 0 going "
+                       "down; 0 searches B >= 0 only).")
+    def _cmd(B_max: float | None, B_min: float | None, as_json: bool, **kw: Any) -> None:
         from .regions import best_damping
 
-        res = best_damping(make(kw, 1.0), B_max=B_max)
+        _equal_controllers(kw)
+        if B_min is not None and B_min > 0:
+            raise HapstabError(f"--min-damping = {B_min:g}: must be <= 0 (the search always "
+                               "includes B = 0)")
+        res = best_damping(make(kw, 1.0), B_max=B_max, B_min=B_min)
         rows = [("best virtual damping B*", f"{res.damping:.10g} N*s/m"),
                 ("critical stiffness K*", f"{fmt(res.critical_stiffness)} N/m"),
                 ("K_max at B = 0", f"{fmt(res.critical_stiffness_at_zero_damping)} N/m"),

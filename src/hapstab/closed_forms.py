@@ -41,7 +41,13 @@ def _peb(loop, name: str) -> tuple[float, float, float, float]:
     return b, cm.damping, loop.period, loop.delay_in_samples
 
 
-def _result(K: float, method: str, reason: str, loop) -> CriticalStiffnessResult:
+def _result(K: float, method: str, reason: str, loop,
+            need: tuple[float, str, float] | None = None) -> CriticalStiffnessResult:
+    """``need = (b, label, value)``: when K <= 0, say that b does not exceed ``label``."""
+    if not K > 0 and need is not None:
+        b, label, value = need
+        reason += (f"; no K > 0 satisfies it: b = {b:g} N*s/m does not exceed {label} = "
+                   f"{value:g} N*s/m")
     K = max(0.0, K)
     return CriticalStiffnessResult(K, method, ((0.0, K),) if K > 0 else (), reason,
                                    loop.period, loop.delay_in_samples)
@@ -56,6 +62,12 @@ def colgate(loop: HapticLoop) -> CriticalStiffnessResult:
     (n >= 1) it is not a stability condition at all: it ignores the delay and
     over-promises; see :func:`eq18`.
 
+    Negative virtual damping B < 0 enters through |B|, as eq. (1) has it: the
+    passivity margin is ``b - KT/2 + B cos(wT)``, whose worst case is cos(wT) = -1
+    for B > 0 and cos(wT) = +1 for B < 0, so ``K_max = 2 (b - |B|)/T`` either way
+    (the paper's (13) writes ``+ B`` with B >= 0 in mind). ``|B| >= b`` gives
+    K_max = 0 with the reason.
+
     References
     ----------
     Colgate & Schenkel 1997; the paper, eq. (1) and (13).
@@ -63,7 +75,8 @@ def colgate(loop: HapticLoop) -> CriticalStiffnessResult:
     b, B, T, n = _hve(loop, "colgate")
     K = 2 * (b - abs(B)) / T
     note = "" if n == 0 else f"; derived without delay, here n = {n} (not valid)"
-    return _result(K, "colgate", f"eq. (1)/(13) Colgate-Schenkel: b > KT/2 + |B|{note}", loop)
+    return _result(K, "colgate", f"eq. (1)/(13) Colgate-Schenkel: b > KT/2 + |B|{note}", loop,
+                   (b, "|B|", abs(B)))
 
 
 def gil(loop: HapticLoop) -> CriticalStiffnessResult:
@@ -73,38 +86,60 @@ def gil(loop: HapticLoop) -> CriticalStiffnessResult:
     virtual damping B (for large B the true boundary bends away from this line).
     Identical in form to the paper's eq. (18).
 
+    B < 0 is used as written: ``K < (b - |B|)/(T/2 + t_d)`` (negative virtual
+    damping subtracts from the device's). For B <= 0 the line is exactly the
+    sampled-data passivity limit (see :func:`eq18`), so it is a sufficient
+    stability bound with a passive operator; ``b + B <= 0`` gives K_max = 0.
+
     References
     ----------
     Gil, Sanchez, Hulin, Preusche, Hirzinger 2013 (the paper's [6]); the paper, eq. (2).
     """
     b, B, T, n = _hve(loop, "gil")
     K = (B + b) / (T / 2 + n * T)
-    return _result(K, "gil", "eq. (2) Gil et al.: K < (B + b)/(T/2 + t_d), valid for small B", loop)
+    return _result(K, "gil", "eq. (2) Gil et al.: K < (B + b)/(T/2 + t_d), valid for small B", loop,
+                   (b, "-B", -B))
 
 
 def eq18(loop: HapticLoop) -> CriticalStiffnessResult:
     """The paper's delayed HVE condition, eq. (18): ``b + B > KT/2 + K t_d``.
 
     From the forward-difference circle criterion, eq. (15)-(17), assuming the
-    worst case occurs at cos(wT) = 1 — true for B small; for larger B with delay
-    it is not the worst case, and the line can promise unstable stiffnesses.
-    At n = 0 it reduces to (13).
+    worst case occurs at cos(wT) = 1 — true for B small; for larger B > 0 with
+    delay it is not the worst case, and the line can promise unstable stiffnesses.
+
+    For B <= 0 the assumption is exact: the real part (16) is
+    ``b + B cos((n+1)wT) - (KT/2) D_n(wT)`` with the Dirichlet kernel
+    ``D_n(x) = sin((n + 1/2)x)/sin(x/2) <= 2n + 1``, and both terms are smallest at
+    w -> 0 when B <= 0. So for negative B, (18) reads ``K < (b - |B|)/(T/2 + t_d)``
+    and *is* the exact sampled-data passivity limit (:mod:`hapstab.passivity`), a
+    sufficient stability bound with a passive operator; ``b + B <= 0`` gives
+    K_max = 0. At n = 0 it reduces to (1)/(13) for B <= 0 only; for B > 0 it
+    gives 2(b + B)/T, above (1)'s 2(b - B)/T.
     """
     b, B, T, n = _hve(loop, "eq18")
     K = (b + B) / (T / 2 + n * T)
-    return _result(K, "eq18", "eq. (18): b + B > KT/2 + K t_d (forward difference, B small)", loop)
+    return _result(K, "eq18", "eq. (18): b + B > KT/2 + K t_d (forward difference, B small)", loop,
+                   (b, "-B", -B))
 
 
 def eq29(loop: TeleoperationLoop) -> CriticalStiffnessResult:
-    """The paper's non-delayed PEB condition, eq. (29): ``b > KT + 2B``, b = min(b_m, b_s).
+    """The paper's non-delayed PEB condition, eq. (29): ``b > KT + 2|B|``, b = min(b_m, b_s).
 
     Sufficient condition for C_m = C_s from the circle criterion on eq. (24),
     taking the worst case of cos(wT) in (26) and (28). Derived for n = 0.
+
+    The paper writes ``2B`` with B >= 0 in mind; the worst case of
+    ``KT/2 - B cos(wT)`` in (28) is ``KT/2 + |B|`` (cos(wT) = -1 for B > 0, +1 for
+    B < 0), so negative virtual damping enters through |B|:
+    ``K_max = (b - 2|B|)/T``, 0 when ``2|B| >= b``. With b_m = b_s this is the exact
+    two-port sampled-data passivity limit for either sign of B.
     """
     b, B, T, n = _peb(loop, "eq29")
-    K = (b - 2 * B) / T
+    K = (b - 2 * abs(B)) / T
     note = "" if n == 0 else f"; derived without delay, here n = {n} (not valid)"
-    return _result(K, "eq29", f"eq. (29): b > KT + 2B, b = min(b_m, b_s){note}", loop)
+    return _result(K, "eq29", f"eq. (29): b > KT + 2|B|, b = min(b_m, b_s){note}", loop,
+                   (b, "2|B|", 2 * abs(B)))
 
 
 def eq34(loop: TeleoperationLoop) -> CriticalStiffnessResult:
@@ -113,10 +148,39 @@ def eq34(loop: TeleoperationLoop) -> CriticalStiffnessResult:
     From (32)-(33) assuming the worst case at cos(wT) = 1 — derived for B small.
     Note that at n = 0 with B > 0 it does *not* reduce to (29) (it allows more
     stiffness as B grows, where (29) allows less).
+
+    For B <= 0 the assumption is exact: with equal controllers the passivity
+    matrix needs ``b - KT/2 + B cos(wT) >= |B cos((n+1)wT) - (KT/2) D_n(wT)|``
+    (D_n as in :func:`eq18`), whose worst case is w -> 0 when B <= 0. So for
+    negative B, (34) reads ``K < (b - 2|B|)/(T + t_d)``, is the exact two-port
+    passivity limit for b_m = b_s (sufficient, conservative otherwise), reduces
+    to (29) at n = 0, and gives K_max = 0 when ``b + 2B <= 0``.
     """
     b, B, T, n = _peb(loop, "eq34")
     K = (b + 2 * B) / (T + n * T)
-    return _result(K, "eq34", "eq. (34): b + 2B > KT + K t_d, b = min(b_m, b_s) (B small)", loop)
+    return _result(K, "eq34", "eq. (34): b + 2B > KT + K t_d, b = min(b_m, b_s) (B small)", loop,
+                   (b, "-2B", -2 * B))
+
+
+#: Below this bT/m the denominator of Gil et al. 2004's K_cr is summed as a series: its
+#: closed form 1 - e^-a - a e^-a subtracts terms of size ~a to leave ~a^2/2, losing about
+#: log10(4/a) digits (19 % at a = 2e-8). Above it the closed form loses at most ~4 ulp
+#: (at a = 1 the two subtracted terms are 0.63 and 0.37 of a result 0.26), while the
+#: series, alternating with terms <= 1/2 for a <= 1, has converged to 1 ulp after
+#: _GIL_TERMS terms (the next term, 23 a^22 / 24!, is below 4e-23).
+_GIL_SERIES_BELOW = 1.0
+_GIL_TERMS = 22
+
+
+def _gil_s(a: float) -> float:
+    """``s(a) = (1 - e^-a - a e^-a) / a^2 = sum_j (-1)^j (j + 1) a^j / (j + 2)!``, to
+    rounding for every a > 0 (series below :data:`_GIL_SERIES_BELOW`, closed form above)."""
+    if a < _GIL_SERIES_BELOW:
+        acc = 0.0
+        for j in range(_GIL_TERMS - 1, -1, -1):      # Horner, smallest terms first
+            acc = (j + 1) / math.factorial(j + 2) - a * acc
+        return acc
+    return (-math.expm1(-a) - a * math.exp(-a)) / (a * a)
 
 
 def gil2004(loop: HapticLoop) -> CriticalStiffnessResult:
@@ -127,6 +191,23 @@ def gil2004(loop: HapticLoop) -> CriticalStiffnessResult:
 
     Holds while bT/m is below about 3.72; past that a second Jury condition binds
     and this expression is no longer the boundary.
+
+    Evaluated without cancellation, accurate to about 1e-15 relative for every
+    a = bT/m > 0: with ``b^2/m = (m/T^2) a^2`` it is
+    ``K_cr = (m/T^2) (1 - e^-a) / s(a)``, ``s(a) = (1 - e^-a - a e^-a)/a^2``, where
+    ``1 - e^-a = -expm1(-a)`` and s(a) is summed as its power series
+    ``1/2 - a/3 + a^2/8 - ...`` for a < 1 (the closed form's subtraction cancels
+    there; see :data:`_GIL_SERIES_BELOW`). As a -> 0, K_cr -> 2b/T (eq. 1).
+
+    Parameters
+    ----------
+    loop : HapticLoop
+        SpringDamper with B = 0, no operator, no delay.
+
+    Returns
+    -------
+    CriticalStiffnessResult
+        ``method = "gil2004"``; the reason notes when bT/m is past 3.72.
 
     Raises
     ------
@@ -145,8 +226,7 @@ def gil2004(loop: HapticLoop) -> CriticalStiffnessResult:
     if b == 0:
         return _result(0.0, "gil2004", "b = 0: no stiffness is stable", loop)
     a = b * T / m
-    d = math.exp(-a)
-    K = (b * b / m) * (1 - d) / (1 - d - a * d)
+    K = (m / (T * T)) * -math.expm1(-a) / _gil_s(a)
     note = "" if a < 3.72 else f"; bT/m = {a:.3g} > 3.72: outside its range"
     return _result(K, "gil2004", f"Gil et al. 2004 exact K_cr (no operator, n = 0, B = 0){note}", loop)
 

@@ -232,7 +232,16 @@ class SpringDamper:
     stiffness : float
         K in N/m, >= 0.
     damping : float
-        Virtual damping B in N*s/m (backward difference), >= 0.
+        Virtual damping B in N*s/m (backward difference): any finite real.
+        B < 0 is used in practice to cancel a device's own damping or friction;
+        it subtracts from the device's damping (Colgate-Schenkel's passivity
+        condition is b > KT/2 + |B|), and with |B| large enough the loop is
+        unstable for every K > 0, which the analyses report with a reason.
+
+    Raises
+    ------
+    ModelError
+        If K is negative or not finite, or B is not finite.
     """
 
     stiffness: float
@@ -240,7 +249,7 @@ class SpringDamper:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "stiffness", check_real("stiffness", self.stiffness, nonnegative=True))
-        object.__setattr__(self, "damping", check_real("virtual damping", self.damping, nonnegative=True))
+        object.__setattr__(self, "damping", check_real("virtual damping", self.damping))
 
     def transfer(self, period: float) -> tuple[np.ndarray, np.ndarray]:
         """(num, den) of H(z) in z, highest power first."""

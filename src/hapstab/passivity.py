@@ -180,7 +180,11 @@ def critical_stiffness_passivity(loop: HapticLoop | TeleoperationLoop,
 
     The passivity matrix is affine in K, so K_max is the minimum over w of its
     PSD limit (see :func:`hapstab.frequency.psd_limit`), on a dense grid refined
-    by golden section. At n = 0 this is exactly eq. (1): ``K_max = 2(b - |B|)/T``.
+    by golden section. At n = 0 this is exactly eq. (1): ``K_max = 2(b - |B|)/T``,
+    for either sign of B. Negative virtual damping is handled like any other: for
+    B <= 0 the limit binds at w -> 0 and equals eq. (18), ``(b + B)/(T/2 + t_d)``;
+    when the device damping does not cover it (e.g. ``B < -b``) K_max = 0 and the
+    reason says how much damping is missing at K = 0.
 
     Parameters
     ----------
@@ -222,9 +226,18 @@ def critical_stiffness_passivity(loop: HapticLoop | TeleoperationLoop,
     th = theta_grid(whole_delay(loop, "sampled-data passivity") + 2)
     t_min, K = refine_minimum(k_of, th, k_of(th))
     fin = math.isfinite(K)
-    reason = ("sampled-data passivity (Colgate-Schenkel 1997"
-              + (", multiport" if isinstance(loop, TeleoperationLoop) else "") + "): passive for K <= K_max"
-              + (f"; binds at w = {t_min / T:.6g} rad/s" if fin else " = inf"))
+    head = ("sampled-data passivity (Colgate-Schenkel 1997"
+            + (", multiport" if isinstance(loop, TeleoperationLoop) else "") + "): ")
+    if K > 0:
+        reason = head + "passive for K <= K_max" + (f"; binds at w = {t_min / T:.6g} rad/s" if fin
+                                                    else " = inf")
+    else:  # already at K = 0 the damping does not cover the virtual damping (e.g. B < -b)
+        Db, WB = _parts(loop, th, scaling, "B")
+        m0 = min_eig(Db + WB)
+        i = int(np.argmin(m0))
+        reason = head + (f"not passive for any K >= 0: at K = 0, {-m0[i]:.6g} N*s/m of damping is "
+                         f"already missing at w = {th[i] / T:.6g} rad/s (the virtual damping "
+                         "takes more than the device damping provides)")
     return CriticalStiffnessResult(
         float(K), "passivity", ((0.0, float(K)),) if K > 0 else (), reason, T, whole_delay(loop, "sampled-data passivity"),
         t_min / (2 * math.pi * T) if fin else float("nan"),

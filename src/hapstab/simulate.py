@@ -294,6 +294,12 @@ def _stiffness_scale(loop: HapticLoop | TeleoperationLoop) -> float:
     return m / loop.period ** 2
 
 
+#: The downward scan of :func:`critical_stiffness_simulation` stops at this many m/T^2:
+#: the exact analysis resolves K from 1e-6 of its own scale (about 2 m/T^2), and a
+#: stiffness this small moves the poles by less than the 2000-sample growth fit sees.
+_K_FLOOR = 1e-10
+
+
 def critical_stiffness_simulation(loop: HapticLoop | TeleoperationLoop, *,
                                   n_samples: int = 2000, window: int = 500, rtol: float = 1e-4,
                                   seed: int = 0, ratio: float = 4.0) -> CriticalStiffnessResult:
@@ -302,7 +308,10 @@ def critical_stiffness_simulation(loop: HapticLoop | TeleoperationLoop, *,
     K is raised from ``1e-6 m/T^2`` by factors of ``ratio`` until the simulated
     free response (from a seeded random initial state, which excites every mode)
     is unbounded, then the last bounded / first unbounded pair is bisected in
-    log K to relative width ``rtol``. Each verdict is :func:`hapstab.growth.assess`
+    log K to relative width ``rtol``. If the loop is unbounded already at the
+    start (e.g. a negative virtual damping B that nearly cancels the device
+    damping b leaves K_max ~ (b + B)/(T/2 + t_d), arbitrarily small), K is
+    lowered by ``ratio`` down to ``1e-10 m/T^2`` before K_max = 0 is reported. Each verdict is :func:`hapstab.growth.assess`
     on ``n_samples`` samples (observed explosion, else the fitted growth rate).
 
     Parameters
@@ -359,13 +368,21 @@ def critical_stiffness_simulation(loop: HapticLoop | TeleoperationLoop, *,
     Ks = _stiffness_scale(loop)
     lo, hi = 1e-6 * Ks, None
     v_lo = verdict(lo)
-    if not v_lo.bounded:
-        return CriticalStiffnessResult(
-            0.0, "simulation", (), f"unbounded already at K = {lo:.4g} N/m: {v_lo.reason}", T,
-            loop.delay_in_samples, details={"runs": runs, "horizon_samples": n_samples})
     v_hi = None
+    if not v_lo.bounded:
+        # a negative virtual damping that nearly cancels the device's leaves K_max far
+        # below the usual start: scan down before concluding that no K is stable
+        hi, v_hi = lo, v_lo
+        while not v_lo.bounded and lo > _K_FLOOR * Ks:
+            hi, v_hi = lo, v_lo
+            lo /= ratio
+            v_lo = verdict(lo)
+        if not v_lo.bounded:
+            return CriticalStiffnessResult(
+                0.0, "simulation", (), f"unbounded already at K = {lo:.4g} N/m: {v_lo.reason}", T,
+                loop.delay_in_samples, details={"runs": runs, "horizon_samples": n_samples})
     K = lo
-    while K < 1e4 * Ks:
+    while hi is None and K < 1e4 * Ks:
         K *= ratio
         v = verdict(K)
         if not v.bounded:
