@@ -194,7 +194,10 @@ def _box_test(c: Cells, cell: np.ndarray, ua: np.ndarray, ub: np.ndarray):
     if live.size:
         status[live] = _krawczyk(c, cell[live], uc[live], ur[live], rho[live],
                                  tc[live], tr[live], kc[live], kr[live])
-    return status, w_theta, w_u, np.abs(fc)
+    # the error of F at the box's centre (rounding and the coefficients' own error):
+    # once the box's extent contributes less than that, splitting cannot decide it
+    _, noise = _dpoly(c.pc[:, cell], c.pr[:, cell], uc, np.zeros_like(uc))
+    return status, w_theta, w_u, np.abs(fc), noise
 
 
 def _krawczyk(c: Cells, cell, uc, ur, rho, tc, tr, kc, kr) -> np.ndarray:
@@ -260,7 +263,7 @@ def _boxes(resp: LoopResponse, items: np.ndarray, u_cap: np.ndarray, polish: boo
         if cell.size > MAX_BOXES:
             raise AnalysisError("the crossing analysis needs more than "
                                 f"{MAX_BOXES} boxes; the loop is beyond what it can certify")
-        status, w_th, w_u, f_abs = _box_test(c, cell, ua, ub)
+        status, w_th, w_u, f_abs, noise = _box_test(c, cell, ua, ub)
         one = np.flatnonzero(status == 1)
         if one.size:
             res = _polish(resp, c, cell[one], ua[one], ub[one]) if polish else None
@@ -275,12 +278,14 @@ def _boxes(resp: LoopResponse, items: np.ndarray, u_cap: np.ndarray, polish: boo
         if not rest.size:
             break
         cell, ua, ub, w_th, w_u = cell[rest], ua[rest], ub[rest], w_th[rest], w_u[rest]
-        f_abs = f_abs[rest]
+        f_abs, noise = f_abs[rest], noise[rest]
         th_small = _theta_floor(c, cell)
         u_small = (ub - ua) <= U_FLOOR * ub
-        # at the theta floor, splitting u cannot help once theta alone spans 0;
-        # a non-finite enclosure (overflow) cannot be refined either
-        stuck = th_small & (u_small | (w_th >= f_abs)) | ~np.isfinite(f_abs + w_th + w_u)
+        # at the theta floor, splitting u cannot help once theta alone spans 0; nor
+        # can any split once the box adds less than the error of F itself (the
+        # numerics cannot tell this box from a zero); nor can a non-finite enclosure
+        stuck = (th_small & (u_small | (w_th >= f_abs)) | (w_th + w_u <= noise)
+                 | ~np.isfinite(f_abs + w_th + w_u))
         rounds += 1
         if rounds > MAX_ROUNDS:
             stuck[:] = True
@@ -446,14 +451,18 @@ def _classify(resp: LoopResponse, i: int, anchor: int, cross, unsure, full: bool
         uncertain = ((a * s, b * s),) if m == 0 else ()
         return {**base, "kmax": kmax, "intervals": ((0.0, kmax),) if kmax > 0 else (),
                 "theta": t, "uncertain": uncertain}
-    counts = [anchor]
-    for a, b, t, d, m in events:
-        if m == 0:   # an unresolved zone: count just above it by the argument principle
-            nxt = int(winding(resp, np.array([i]), np.array([b * (1 + 1e-9)]))[0])
-            counts.append(nxt if nxt >= 0 else counts[-1])
+    counts: list[int | None] = [anchor]
+    for g, (a, b, t, d, m) in enumerate(events):
+        prev = counts[-1]
+        if m == 0 or prev is None:
+            # after an unresolved zone: count in the next gap by the argument principle
+            # (None: not certifiable either, so that gap is not claimed stable)
+            hi = events[g + 1][0] if g + 1 < len(events) else 4 * b
+            nxt = int(winding(resp, np.array([i]), np.array([math.sqrt(b * hi) if hi > b else b]))[0])
+            counts.append(nxt if nxt >= 0 else None)
         else:
-            counts.append(counts[-1] + d * m)
-    if min(counts) < 0:
+            counts.append(prev + d * m)
+    if min(c for c in counts if c is not None) < 0:
         raise AnalysisError("crossing analysis: a negative count of unstable poles; please "
                             "report this loop")
     _verify(resp, i, events, counts)
@@ -491,7 +500,7 @@ def _verify(resp: LoopResponse, i: int, events, counts) -> None:
         us.append(math.sqrt(lo * hi) if hi > lo else lo)
     got = winding(resp, np.full(len(us), i), np.array(us))
     for g, c in zip(gaps, got):
-        if c >= 0 and c != counts[g]:
+        if c >= 0 and counts[g] is not None and c != counts[g]:
             raise AnalysisError(f"crossing analysis: the pole count {counts[g]} from crossing "
                                 f"directions disagrees with the argument principle ({c}) at "
                                 f"K = {us[gaps.index(g)] * resp.scale[i]:.6g}; please report this loop")
