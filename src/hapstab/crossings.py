@@ -175,6 +175,86 @@ class Found:
     unsure: list[list[tuple[float, float]]]
 
 
+def _quad_roots(a0: np.ndarray, a1: np.ndarray, a2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Real roots of a0 + a1 u + a2 u^2 (nan where none), without cancellation."""
+    with np.errstate(all="ignore"):
+        disc = a1 * a1 - 4 * a0 * a2
+        sq = np.sqrt(np.where(disc >= 0, disc, np.nan))
+        qq = -0.5 * (a1 + np.copysign(sq, a1))
+        r1 = np.where(a2 != 0, qq / a2, -a0 / a1)
+        r2 = np.where(a2 != 0, a0 / qq, np.nan)
+    return r1, r2
+
+
+def _trim(c: Cells, cell: np.ndarray, ua: np.ndarray, ub: np.ndarray
+          ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The parts of each box's u-interval where a zero of F may lie, exactly in u.
+
+    For every u, F(cell, u) lies in the disc q(u) +- R(u), q = sum c_l u^l and
+    R = sum r_l u^l (the cell's enclosures of F0, F1, F2). A zero needs
+    |Re(e^{-j phi} q(u))| <= R(u) and |Im(e^{-j phi} q(u))| <= R(u) for any phi:
+    four real quadratic inequalities in u, solved exactly. phi is the argument of
+    q'(u) at the box's centre, so one of the two is sharp at a crossing and the
+    other excludes the box when q passes the real axis away from 0.
+    Returns boxes (cell, ua, ub): zero, one or several per input box.
+    """
+    vc, vr = c.vc[:, cell], c.vr[:, cell]
+    um = np.where(ub > 4 * ua, np.sqrt(ua * ub), 0.5 * (ua + ub))
+    dq = vc[1] + 2 * um * vc[2]
+    dq = np.where(np.abs(dq) > 0, dq, np.where(np.abs(vc[2]) > 0, vc[2], 1.0))
+    rot = np.exp(-1j * np.angle(dq))
+    # R(u) gets the rounding of evaluating q in the rotated frame
+    R = vr + 4 * EPS_OP * np.abs(vc)
+    roots = [ua, ub]
+    quads = []
+    for part in (np.real, np.imag):
+        g = part(rot[None] * vc)
+        for sgn in (1.0, -1.0):
+            a = g - sgn * R                      # g - R <= 0 and g + R >= 0
+            quads.append((a, sgn))
+            roots.extend(_quad_roots(a[0], a[1], a[2]))
+    br = np.sort(np.stack(roots, axis=1), axis=1)           # nan sort last
+    br = np.where(np.isnan(br), ub[:, None], br)
+    br = np.clip(br, ua[:, None], ub[:, None])
+    lo, hi = br[:, :-1], br[:, 1:]
+    mid = 0.5 * (lo + hi)
+    ok = hi > lo
+    for a, sgn in quads:
+        val = a[0][:, None] + mid * (a[1][:, None] + mid * a[2][:, None])
+        ok &= (val <= 0) if sgn > 0 else (val >= 0)
+    # also keep a zero-width feasible point at a breakpoint (tangency): test the
+    # breakpoints themselves
+    pt_ok = np.ones(br.shape, bool)
+    for a, sgn in quads:
+        val = a[0][:, None] + br * (a[1][:, None] + br * a[2][:, None])
+        pt_ok &= (val <= 0) if sgn > 0 else (val >= 0)
+    # merge feasible pieces: a piece is [lo, hi] if ok; isolated feasible breakpoints
+    # become tiny pieces. Breakpoints carry rounding: widen by a few ulps (relative).
+    pieces_c, pieces_a, pieces_b = [], [], []
+    rows, cols = np.nonzero(ok)
+    pieces_c.append(rows), pieces_a.append(lo[rows, cols]), pieces_b.append(hi[rows, cols])
+    rows, cols = np.nonzero(pt_ok & ~np.concatenate([ok, np.zeros((ok.shape[0], 1), bool)], axis=1)
+                            & ~np.concatenate([np.zeros((ok.shape[0], 1), bool), ok], axis=1))
+    pieces_c.append(rows), pieces_a.append(br[rows, cols]), pieces_b.append(br[rows, cols])
+    r = np.concatenate(pieces_c)
+    a = np.concatenate(pieces_a)
+    b = np.concatenate(pieces_b)
+    widen = 1e-12 * np.maximum(np.abs(a), np.abs(b))
+    a = np.maximum(a - widen, ua[r])
+    b = np.minimum(b + widen, ub[r])
+    order = np.lexsort((a, r))
+    r, a, b = r[order], a[order], b[order]
+    if r.size:   # merge overlapping pieces of one box
+        new = np.ones(r.size, bool)
+        new[1:] = (r[1:] != r[:-1]) | (a[1:] > np.maximum.accumulate(b)[:-1])
+        grp = np.cumsum(new) - 1
+        rr, aa = r[new], a[new]
+        bb = np.full(rr.size, -np.inf)
+        np.maximum.at(bb, grp, b)
+        r, a, b = rr, aa, bb
+    return cell[r], a, b
+
+
 def _box_test(c: Cells, cell: np.ndarray, ua: np.ndarray, ub: np.ndarray):
     """Classify boxes: 0 excluded, 1 one zero (Krawczyk), 2 split. Also returns the
     contributions of theta and u to the enclosure radius (which to split)."""
@@ -249,15 +329,16 @@ def _boxes(resp: LoopResponse, items: np.ndarray, u_cap: np.ndarray, polish: boo
     c = Cells()
     it, th, rho, kind = _initial_cells(resp, items)
     cells = c.add(resp, it, th, rho, kind)
-    edges = np.geomspace(U_LO, U_HI, int(round(np.log10(U_HI / U_LO))) + 1)
-    cell = np.repeat(cells, edges.size - 1)
-    ua = np.tile(edges[:-1], cells.size)
-    ub = np.tile(edges[1:], cells.size)
+    cell = cells
+    ua, ub = np.full(cells.size, U_LO), np.full(cells.size, U_HI)
     cap = np.where(lowest_only, u_cap, np.inf).astype(float)
     rounds = 0
     while cell.size:
         keep = ua < cap[c.item[cell]]
         cell, ua, ub = cell[keep], ua[keep], np.minimum(ub[keep], np.maximum(ua[keep], cap[c.item[cell[keep]]]))
+        if not cell.size:
+            break
+        cell, ua, ub = _trim(c, cell, ua, ub)
         if not cell.size:
             break
         if cell.size > MAX_BOXES:
@@ -296,7 +377,8 @@ def _boxes(resp: LoopResponse, items: np.ndarray, u_cap: np.ndarray, polish: boo
                 cap[i] = min(cap[i], ua[k])
         go = ~stuck
         cell, ua, ub, w_th, w_u = cell[go], ua[go], ub[go], w_th[go], w_u[go]
-        split_th = (w_th >= w_u) & ~th_small[go] | u_small[go]
+        # u is treated exactly by _trim, so splitting u only helps at the theta floor
+        split_th = ~th_small[go]
         # u-splits: at the geometric mean of wide intervals, else the midpoint
         su = np.flatnonzero(~split_th)
         mid = np.where(ub[su] > 4 * ua[su], np.sqrt(ua[su] * ub[su]), 0.5 * (ua[su] + ub[su]))
@@ -424,7 +506,8 @@ def analyse(resp: LoopResponse, full: bool = True) -> list[dict[str, Any]]:
         Found([[] for _ in range(L)], [[] for _ in range(L)])
     out = []
     for i in range(L):
-        out.append(_classify(resp, i, int(anchor[i]), found.cross[i], found.unsure[i], full))
+        out.append(_classify(resp, i, int(anchor[i]), _dedupe(found.cross[i]), found.unsure[i],
+                             full))
     return out
 
 
@@ -504,6 +587,18 @@ def _verify(resp: LoopResponse, i: int, events, counts) -> None:
             raise AnalysisError(f"crossing analysis: the pole count {counts[g]} from crossing "
                                 f"directions disagrees with the argument principle ({c}) at "
                                 f"K = {us[gaps.index(g)] * resp.scale[i]:.6g}; please report this loop")
+
+
+def _dedupe(cross: list[tuple[float, float, int, int]]) -> list[tuple[float, float, int, int]]:
+    """One crossing proved in two boxes that share an edge (a zero on the common
+    boundary of two cells) is one crossing: polished values within 1e-9 agree."""
+    out: list[tuple[float, float, int, int]] = []
+    for cr in sorted(cross):
+        if out and abs(cr[0] - out[-1][0]) <= 1e-9 * cr[0] and abs(cr[1] - out[-1][1]) <= 1e-9 \
+                and cr[2] == out[-1][2]:
+            continue
+        out.append(cr)
+    return out
 
 
 def _merge(iv: list[tuple[float, float]]) -> list[tuple[float, float]]:
