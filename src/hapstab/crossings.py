@@ -110,8 +110,8 @@ class Cells:
 
 def _initial_cells(resp: LoopResponse, items: np.ndarray) -> tuple[np.ndarray, ...]:
     """A uniform partition of [0, pi] fine enough for the delay's phase to turn by
-    at most ~0.4 rad per cell; end cells are centred on 0 and pi."""
-    m = max(8, int(np.ceil(np.pi * resp.phase_rate / 0.4)))
+    at most ~1.2 rad per cell; end cells are centred on 0 and pi."""
+    m = max(8, int(np.ceil(np.pi * resp.phase_rate / 1.2)))
     h = np.pi / m
     th = (np.arange(m + 1) * h)
     th[-1] = np.pi
@@ -316,8 +316,8 @@ def _krawczyk(c: Cells, cell, uc, ur, rho, tc, tr, kc, kr) -> np.ndarray:
     return out
 
 
-def _boxes(resp: LoopResponse, items: np.ndarray, u_cap: np.ndarray, polish: bool = True
-           ) -> Found:
+def _boxes(resp: LoopResponse, items: np.ndarray, u_cap: np.ndarray, polish: bool = True,
+           estimate: bool = True) -> Found:
     """Branch and prune over (theta, u) for the given items (see module doc).
 
     ``u_cap[item]`` bounds the u of interest (inf: all); it is lowered to each
@@ -332,6 +332,14 @@ def _boxes(resp: LoopResponse, items: np.ndarray, u_cap: np.ndarray, polish: boo
     cell = cells
     ua, ub = np.full(cells.size, U_LO), np.full(cells.size, U_HI)
     cap = np.where(lowest_only, u_cap, np.inf).astype(float)
+    guess = np.zeros(L, bool)
+    if estimate and lowest_only.any():
+        # a first cap from the near-real roots u at the cells' centres: with it the
+        # high-u boxes are never refined. A cap below the true lowest crossing finds
+        # nothing and is retried without it, so the result does not depend on it.
+        est = _estimate_lowest(c, cells, L)
+        guess = lowest_only & np.isfinite(est) & (est < cap)
+        cap = np.where(guess, est, cap)
     rounds = 0
     while cell.size:
         keep = ua < cap[c.item[cell]]
@@ -393,7 +401,29 @@ def _boxes(resp: LoopResponse, items: np.ndarray, u_cap: np.ndarray, polish: boo
             new_ua += [ua[st], ua[st]]
             new_ub += [ub[st], ub[st]]
         cell, ua, ub = np.concatenate(new_cell), np.concatenate(new_ua), np.concatenate(new_ub)
+    retry = np.flatnonzero(guess & np.array([not found.cross[i] and not found.unsure[i]
+                                             for i in range(L)]))
+    if retry.size:
+        again = _boxes(resp, retry, np.where(np.isin(np.arange(L), retry), u_cap, -np.inf),
+                       polish, estimate=False)
+        for i in retry:
+            found.cross[i], found.unsure[i] = again.cross[i], again.unsure[i]
     return found
+
+
+def _estimate_lowest(c: Cells, cells: np.ndarray, L: int) -> np.ndarray:
+    """Per item, 1.05 times the lowest positive u that is a nearly real root of
+    F(theta_m, u) at some cell centre (inf if none): a guess, never trusted."""
+    p0, p1, p2 = c.pc[0, cells], c.pc[1, cells], c.pc[2, cells]
+    with np.errstate(all="ignore"):
+        sq = np.sqrt(p1 * p1 - 4 * p0 * p2)
+        qq = -0.5 * (p1 + np.where(np.real(np.conj(p1) * sq) >= 0, sq, -sq))
+        roots = [np.where(np.abs(p2) > 0, qq / p2, np.nan), p0 / qq]
+    est = np.full(L, np.inf)
+    for r in roots:
+        ok = np.isfinite(r) & (r.real > U_LO) & (np.abs(r.imag) <= 0.3 * np.abs(r))
+        np.minimum.at(est, c.item[cells[ok]], 1.05 * r.real[ok])
+    return est
 
 
 def _polish(resp: LoopResponse, c: Cells, cell: np.ndarray, ua: np.ndarray, ub: np.ndarray
@@ -439,7 +469,7 @@ def winding(resp: LoopResponse, items: np.ndarray, u: np.ndarray) -> np.ndarray:
     principle, certified: ``Z_out = q - wind(det M)``. -1 where a pole is within
     the rounding floor of the circle (the count cannot be certified)."""
     items, u = np.asarray(items, int), np.asarray(u, float)
-    m = max(8, int(np.ceil(np.pi * resp.phase_rate / 0.4)))
+    m = max(8, int(np.ceil(np.pi * resp.phase_rate / 1.2)))
     a0 = np.linspace(0.0, np.pi, m + 1)
     row = np.repeat(np.arange(items.size), m)
     a, b = np.tile(a0[:-1], items.size), np.tile(a0[1:], items.size)

@@ -24,7 +24,6 @@ from dataclasses import dataclass, field
 from typing import Sequence
 
 import numpy as np
-from scipy.linalg import expm
 
 from .models import (Device, DiscreteController, HapticLoop, Impedance, SpringDamper,
                      TeleoperationLoop)
@@ -108,6 +107,38 @@ def port_matrices(port: Port) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return A, B, Cf
 
 
+# Pade (13, 13) coefficients of exp (Higham 2005, Table 2.3) and the norm bound theta_13
+_PADE13 = (64764752532480000.0, 32382376266240000.0, 7771770303897600.0, 1187353796428800.0,
+           129060195264000.0, 10559470521600.0, 670442572800.0, 33522128640.0, 1323241920.0,
+           40840800.0, 960960.0, 16380.0, 182.0, 1.0)
+_THETA13 = 5.371920351148152
+
+
+def expm_batched(M: np.ndarray) -> np.ndarray:
+    """exp of each matrix of a stack (P, n, n): scaling and squaring with the (13, 13)
+    Pade approximant (N. J. Higham, SIAM J. Matrix Anal. Appl. 26 (2005) 1179-1193),
+    vectorised over the stack (scipy's expm loops over it in Python)."""
+    M = np.asarray(M, float)
+    n = M.shape[-1]
+    norm = np.abs(M).sum(axis=-2).max(axis=-1)                   # 1-norm per matrix
+    with np.errstate(divide="ignore"):
+        s = np.maximum(0, np.ceil(np.log2(np.maximum(norm, 1e-300) / _THETA13))).astype(int)
+    X = M / (2.0 ** s)[:, None, None]
+    b = _PADE13
+    I = np.broadcast_to(np.eye(n), X.shape)
+    X2 = X @ X
+    X4 = X2 @ X2
+    X6 = X4 @ X2
+    U = X @ (X6 @ (b[13] * X6 + b[11] * X4 + b[9] * X2) + b[7] * X6 + b[5] * X4 + b[3] * X2
+             + b[1] * I)
+    V = X6 @ (b[12] * X6 + b[10] * X4 + b[8] * X2) + b[6] * X6 + b[4] * X4 + b[2] * X2 + b[0] * I
+    R = np.linalg.solve(V - U, V + U)
+    for k in range(int(s.max()) if s.size else 0):
+        sq = s > k
+        R[sq] = R[sq] @ R[sq]
+    return R
+
+
 def discretize(A: np.ndarray, B: np.ndarray, periods: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Exact zero-order-hold discretisation for each period (batched matrix exponential).
 
@@ -116,7 +147,7 @@ def discretize(A: np.ndarray, B: np.ndarray, periods: np.ndarray) -> tuple[np.nd
     n, m = B.shape
     M = np.zeros((n + m, n + m))
     M[:n, :n], M[:n, n:] = A, B
-    E = expm(np.asarray(periods, float)[:, None, None] * M[None])
+    E = expm_batched(np.asarray(periods, float)[:, None, None] * M[None])
     return E[:, :n, :n], E[:, :n, n:]
 
 

@@ -40,11 +40,10 @@ from dataclasses import dataclass
 from typing import Sequence
 
 import numpy as np
-from scipy.linalg import expm
 
 from .discs import (Jet, base_jets, delay_jet, geometric_sum_jet, one_minus_delay_jet,
                     poly_jet, zero)
-from .engine import port_matrices, split_delay, structure_of
+from .engine import expm_batched, port_matrices, split_delay, structure_of
 from .errors import AnalysisError
 from .models import HapticLoop, SpringDamper, TeleoperationLoop
 
@@ -208,7 +207,7 @@ def _zoh(A: np.ndarray, T: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     n = A.shape[0]
     M = np.zeros((2 * n, 2 * n))
     M[:n, :n], M[:n, n:] = A, np.eye(n)
-    E = expm(T[:, None, None] * M[None])
+    E = expm_batched(T[:, None, None] * M[None])
     return E[:, :n, :n], E[:, :n, n:]
 
 
