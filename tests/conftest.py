@@ -38,17 +38,19 @@ _one_blas_thread()
 
 
 def pytest_terminal_summary(terminalreporter, exitstatus, config):  # noqa: ARG001
-    """Print the campaign's failure summary (and write it to out/campaign-report.json)."""
+    """Print the campaign's failure summary (and write it to out/campaign-report[-shard].json)."""
     from references import campaign
 
     if not campaign.RESULTS:
         return
     terminalreporter.write_sep("=", "hapstab vs brute-force campaign")
     terminalreporter.write_line(campaign.summary())
+    shard = os.environ.get("HAPSTAB_CAMPAIGN_SHARD", "").replace("/", "of")
+    path = os.path.join("out", f"campaign-report{'-' + shard if shard else ''}.json")
     try:
         os.makedirs("out", exist_ok=True)
-        with open(os.path.join("out", "campaign-report.json"), "w") as f:
+        with open(path, "w") as f:
             json.dump(campaign.report_json(), f, indent=1)
-        terminalreporter.write_line("full report: out/campaign-report.json")
+        terminalreporter.write_line(f"full report: {path}")
     except OSError:
         pass
