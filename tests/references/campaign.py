@@ -393,8 +393,15 @@ def check(s: Scenario, verdicts: bool = True) -> Outcome:
         if ends and abs(Kt / e - 1) <= MATCH:
             continue   # the scan's double-precision bisection was off; hapstab is right
         rel = abs(Kt / e - 1) if ends else math.inf
-        problem("missed boundary", f"true boundary at K = {Kt!r} (referee) has no hapstab endpoint "
-                f"within {MATCH:g}; nearest hapstab endpoint {e!r} (rel. {rel:.3g})", rel)
+        # hapstab documents its analysed range as 1e-6...1e12 x ||A0||/||A1||: a boundary
+        # outside it is still a wrong answer, but labelled as such (the scale is taken
+        # from the reference's own matrices, which differ from hapstab's only in layout)
+        A0, A1 = brute.matrices(L)
+        Ks = np.linalg.norm(A0) / np.linalg.norm(A1)
+        where = (" below hapstab's analysed range" if Kt < 1e-6 * Ks
+                 else " above hapstab's analysed range" if Kt > 1e12 * Ks else "")
+        problem("missed boundary" + where, f"true boundary at K = {Kt!r} (referee) has no hapstab "
+                f"endpoint within {MATCH:g}; nearest hapstab endpoint {e!r} (rel. {rel:.3g})", rel)
 
     # (a) every endpoint hapstab reports must flip stability as its intervals claim,
     # and every interval / gap must be what it claims inside
