@@ -168,10 +168,22 @@ class Scenario:
                 f"-B {self.B!r} --operator {self.operator} --environment {self.environment} --json")
 
     def python(self) -> str:
-        """A Python line that rebuilds the scenario and runs hapstab on it."""
-        fields = ", ".join(f"{f.name}={getattr(self, f.name)!r}" for f in dataclasses.fields(self))
-        return ("from references.campaign import Scenario; import hapstab as h; "
-                f"h.critical_stiffness(Scenario({fields}).hapstab_loop())")
+        """Python that builds the loop with hapstab's classes only and runs hapstab on it
+        (B < 0 needs the campaign's builder: run from the repository root)."""
+        if self.negative_B:
+            fields = ", ".join(f"{f.name}={getattr(self, f.name)!r}" for f in dataclasses.fields(self))
+            return ("PYTHONPATH=tests python -c \"from references.campaign import Scenario; "
+                    f"import hapstab as h; print(h.critical_stiffness(Scenario({fields})"
+                    ".hapstab_loop()))\"")
+        if not self.is_peb:
+            loop = (f"h.HapticLoop(h.Device({self.m!r}, {self.b!r}), h.SpringDamper(1.0, {self.B!r}), "
+                    f"{self.operator!r}, {self.T!r}, {self.n})")
+        else:
+            loop = (f"h.TeleoperationLoop(h.Device({self.m!r}, {self.b!r}), h.Device({self.ms!r}, "
+                    f"{self.bs!r}), h.SpringDamper(1.0, {self.B!r}), h.SpringDamper({self.ratio!r}, "
+                    f"{self.Bs!r}), {self.operator!r}, {self.environment!r}, {self.T!r}, {self.n}, "
+                    f"delay_backward_samples={self.nb})")
+        return f"import hapstab as h; print(h.critical_stiffness({loop}))"
 
 
 # ------------------------------------------------------------------- generator
