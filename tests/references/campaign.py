@@ -363,8 +363,20 @@ def settle(L: brute.Loop, Kb: float) -> float | None:
 
 def check(s: Scenario, verdicts: bool = True) -> Outcome:
     """Compare hapstab with the brute-force reference on one scenario (see module
-    docstring); every problem found is a line of ``Outcome.problems``."""
+    docstring); every problem found is a line of ``Outcome.problems``. An exception in
+    the reference is a problem of its own category (counted, never hidden)."""
     t0 = time.perf_counter()
+    try:
+        return _check(s, verdicts, t0)
+    except Exception as e:   # noqa: BLE001 - the reference failed: report it as such
+        out = Outcome(s, problems=[f"[reference error] {type(e).__name__}: {e}"],
+                      categories={"reference error"}, worst_rel=math.inf,
+                      seconds=time.perf_counter() - t0)
+        RESULTS.append(out)
+        return out
+
+
+def _check(s: Scenario, verdicts: bool, t0: float) -> Outcome:
     out = Outcome(s)
     L = s.brute_loop()
     s_lo, _ = brute.scale(L)
