@@ -94,10 +94,14 @@ def test_rigid_mode_is_deflated_exactly():
 
 
 def test_reference_reproduces_known_values():
-    # the paper's delayed HVE (README: 9.536097554689) and the analytic Colgate limit
-    # b > KT/2 of the operator-free device without delay, to the scan's 1e-10 bisection
+    # the paper's delayed HVE (README: 9.536097554689, also checked against a 40-digit
+    # mpmath solution in test_exact.py), to the scan's 1e-10 bisection
     s = brute.stable_intervals(brute.hve_loop(0.15, 0.1, 1e-3, 10, 0.0, "spring:1"))
     assert s.kmax == pytest.approx(9.536097554689, rel=1e-9)
+    # the operator-free device without delay, B = 0: Colgate's b > K T/2, which the
+    # exact limit approaches to O(bT/m) = 7e-5 relative here (1e-3 leaves margin)
+    s = brute.stable_intervals(brute.hve_loop(0.15, 0.01, 1e-3, 0))
+    assert s.kmax == pytest.approx(2 * 0.01 / 1e-3, rel=1e-3)
 
 
 # ------------------------------------------------------------------ issue #8
