@@ -1,5 +1,7 @@
 """Method dispatch and the vectorised boundary."""
 
+import re
+
 import numpy as np
 import pytest
 
@@ -38,6 +40,19 @@ def test_boundary_csv(tmp_path):
 def test_boundary_rejects_bad_grids(periods, delays, err):
     with pytest.raises(err):
         h.boundary(h.paper_hve(), periods, delays)
+
+
+@pytest.mark.parametrize("periods,bad", [([1e-3, 1e-9], "1e-09"), ([1e-3, 1e9], "1e+09"),
+                                         ([1e-3, 2e-3, 5e3], "5000"), ([1e-3, float("nan")], "nan"),
+                                         ([1e-3, 0.0], "0.0")])
+def test_boundary_checks_every_period_like_the_model(periods, bad):
+    # every period, not only the first: 1e-9 used to give K_max = 0 and 1e9 inf
+    with pytest.raises(ModelError, match="^" + re.escape(f"period = {bad}: must ")) as e:
+        h.boundary(h.paper_hve(), periods, [0])
+    assert "\n" not in str(e.value)
+    with pytest.raises(ModelError) as m:   # the same rule as the model's own period check
+        h.paper_hve(period=periods[-1])
+    assert str(m.value) == str(e.value)
 
 
 def test_unknown_method_names_the_allowed_ones():

@@ -148,6 +148,10 @@ def test_paper_methods_refuse_fractional_delay_in_one_line():
     (("kmax", "hve", "-B", "1e300"), "cannot"),
     (("kmax", "hve", "--period", "1e300"), "between 1e-07 s and 1000 s"),
     (("boundary", "hve", "--period", "0.001:0.002:1e12"), "from 1 to 100000"),
+    # every period is checked, not only the first (these gave 0.0 and inf)
+    (("boundary", "hve", "--period", "0.001,1e-9"), "period = 1e-09: must be between 1e-07 s and 1000 s"),
+    (("boundary", "hve", "--period", "0.001,1e9"), "period = 1e+09: must be between 1e-07 s and 1000 s"),
+    (("boundary", "peb", "--period", "0.001:3000:3"), "period = 1500: must be between"),
 ])
 def test_extreme_input_is_one_line_and_exit_2(args, needle):
     r = run(*args)

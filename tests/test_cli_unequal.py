@@ -10,7 +10,7 @@ from click.testing import CliRunner
 import hapstab as h
 from hapstab.cli import cli
 
-import brute
+from references import brute
 
 UNEQUAL = ("--slave-stiffness-ratio", "2", "--slave-virtual-damping", "-0.003")
 

@@ -9,7 +9,7 @@ import hapstab as h
 from hapstab.engine import build
 from hapstab.errors import ModelError
 
-import brute
+from references import brute
 
 
 def test_integer_delay_in_seconds_is_exactly_the_integer_model():

@@ -1,5 +1,5 @@
 """Engine: exact ZOH, the affine dependence on K, and the closed loop against an
-independent construction (tests/brute.py)."""
+independent construction (tests/references/brute.py)."""
 
 import numpy as np
 import pytest
@@ -8,7 +8,7 @@ from scipy.integrate import solve_ivp
 import hapstab as h
 from hapstab.engine import build, discretize, port_matrices, structure_of
 
-import brute
+from references import brute
 
 
 def test_zoh_matches_fine_ode_integration():

@@ -1,7 +1,7 @@
 """Exact stability and critical stiffness against references not derived in hapstab:
 the paper's closed forms inside their range, Gil et al. 2004's exact K_cr, a 40-digit
 mpmath solution of the characteristic equation, an independent brute-force
-eigenvalue bisection (tests/brute.py), and invariants (hypothesis)."""
+eigenvalue bisection (tests/references/brute.py), and invariants (hypothesis)."""
 
 import math
 
@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 import hapstab as h
 from hapstab.errors import AnalysisError
 
-import brute
+from references import brute
 
 PERIODS = np.arange(1, 11) * 1e-3
 

@@ -8,7 +8,7 @@ from hapstab.engine import build
 from hapstab.errors import AnalysisError
 from hapstab.regions import best_damping, d_decomposition, stability_region, with_gains
 
-import brute
+from references import brute
 
 HVE10 = h.paper_hve(delay_samples=10)
 

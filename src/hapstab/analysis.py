@@ -13,7 +13,7 @@ import numpy as np
 
 from .closed_forms import CLOSED_FORMS
 from .engine import build
-from .errors import AnalysisError, check_delay, check_real
+from .errors import AnalysisError, check_delay, check_period
 from .exact import exact_critical_stiffness, exact_kmax_batch
 from .models import HapticLoop, TeleoperationLoop
 from .results import BoundaryResult, CriticalStiffnessResult
@@ -107,8 +107,8 @@ def boundary(loop: HapticLoop | TeleoperationLoop, periods: Sequence[float] | np
     T = np.atleast_1d(np.asarray(periods, dtype=float))
     if T.size == 0:
         raise AnalysisError("periods: the range is empty; give at least one period")
-    for t in T:
-        check_real("period", t, positive=True)
+    for t in T:   # every period, by the models' own rule (not only the first, which builds the loop)
+        check_period("period", float(t))
     ns = [check_delay("delay", n) for n in np.atleast_1d(delays)]
     if not ns:
         raise AnalysisError("delays: the list is empty; give at least one delay")

@@ -36,6 +36,7 @@ _ON_CIRCLE = 1e-9    # | |p| - 1 | below this: a unit-circle root (np.roots is ~
 _CANCEL = 1e-7       # a pole and a zero closer than this (relative) cancel: sqrt(eps)-level root errors
 _SIMPLE = 1e-6       # two unit-circle poles closer than this are one multiple pole (double roots split ~1e-8)
 _RTOL = 1e-9         # eigenvalue slack relative to the matrix scale: eigvalsh/roundoff is ~1e-13 of it
+_POLE_GAP = 1e-9     # the sweep keeps this far (rad/sample) from unit-circle poles, where G is undefined
 
 
 _coeffs = check_poly
@@ -327,7 +328,7 @@ def positive_real(G: RationalMatrix, period: float | None = None, grid: int | No
     # while staying far enough from a pole at z = 1 for G + G^H to be accurate
     if on_circle.size:  # stay just off unit-circle poles, where G is undefined
         d = np.min(np.abs(th[:, None] - on_circle[None, :]), axis=1)
-        th = th[d > 1e-9]
+        th = th[d > _POLE_GAP]
         th = np.unique(np.concatenate([th, _near(on_circle)]))
     # the w -> 0 limit is reached to O(w^2): 1e-6/(deg+1) is within ~1e-12 of it,
     # while staying far enough from a pole at z = 1 for G + G^H to be accurate
@@ -335,7 +336,14 @@ def positive_real(G: RationalMatrix, period: float | None = None, grid: int | No
 
     def lam(t: np.ndarray) -> np.ndarray:
         Gz = G(t)
-        return min_eig(Gz + np.conj(np.swapaxes(Gz, 1, 2)))
+        out = min_eig(Gz + np.conj(np.swapaxes(Gz, 1, 2)))
+        if on_circle.size:
+            # within _POLE_GAP of a unit-circle pole G + G^H is rounding (|G| ~ 1/gap): the
+            # golden-section refinement must stay out of that band just as the grid does,
+            # or it walks onto the pole and both the minimum and its tolerance are noise
+            gap = np.min(np.abs(np.asarray(t, float)[:, None] - on_circle[None, :]), axis=1)
+            out = np.where(gap > _POLE_GAP, out, np.nan)
+        return out
 
     vals = lam(th)
     finite = np.isfinite(vals)
