@@ -22,8 +22,6 @@ polynomial zeros", Numer. Math. 18 (1972) 305-320.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
 __all__ = ["Jet", "EPS_OP", "base_jets", "delay_jet", "poly_jet", "geometric_sum_jet", "one_minus_delay_jet", "const", "zero"]
@@ -33,34 +31,50 @@ __all__ = ["Jet", "EPS_OP", "base_jets", "delay_jet", "poly_jet", "geometric_sum
 EPS_OP = 4.0 * np.finfo(float).eps
 
 
-@dataclass
 class Jet:
     """Discs enclosing a function's values (vc, vr) and derivatives (dc, dr) on cells."""
 
-    vc: np.ndarray
-    vr: np.ndarray
-    dc: np.ndarray
-    dr: np.ndarray
+    __slots__ = ("vc", "vr", "dc", "dr", "_va", "_da")
+
+    def __init__(self, vc: np.ndarray, vr: np.ndarray, dc: np.ndarray, dr: np.ndarray) -> None:
+        self.vc, self.vr, self.dc, self.dr = vc, vr, dc, dr
+        self._va = self._da = None
+
+    @property
+    def va(self) -> np.ndarray:
+        """|vc|, computed once."""
+        if self._va is None:
+            self._va = np.abs(self.vc)
+        return self._va
+
+    @property
+    def da(self) -> np.ndarray:
+        """|dc|, computed once."""
+        if self._da is None:
+            self._da = np.abs(self.dc)
+        return self._da
 
     def __add__(self, o: "Jet") -> "Jet":
         vc, dc = self.vc + o.vc, self.dc + o.dc
-        vr = self.vr + o.vr + EPS_OP * (np.abs(self.vc) + np.abs(o.vc))
-        dr = self.dr + o.dr + EPS_OP * (np.abs(self.dc) + np.abs(o.dc))
+        vr = self.vr + o.vr + EPS_OP * (self.va + o.va)
+        dr = self.dr + o.dr + EPS_OP * (self.da + o.da)
         return Jet(vc, vr, dc, dr)
 
     def __neg__(self) -> "Jet":
-        return Jet(-self.vc, self.vr, -self.dc, self.dr)
+        out = Jet(-self.vc, self.vr, -self.dc, self.dr)
+        out._va, out._da = self._va, self._da
+        return out
 
     def __sub__(self, o: "Jet") -> "Jet":
         return self + (-o)
 
     def __mul__(self, o: "Jet") -> "Jet":
         a, b = self, o
-        av, bv, ad, bd = np.abs(a.vc), np.abs(b.vc), np.abs(a.dc), np.abs(b.dc)
+        av, bv, ad, bd = a.va, b.va, a.da, b.da
         vc = a.vc * b.vc
-        vr = av * b.vr + a.vr * bv + a.vr * b.vr + EPS_OP * av * bv
+        vr = av * b.vr + a.vr * (bv + b.vr) + EPS_OP * av * bv
         dc = a.dc * b.vc + a.vc * b.dc
-        dr = (ad * b.vr + a.dr * bv + a.dr * b.vr + av * b.dr + a.vr * bd + a.vr * b.dr
+        dr = (ad * b.vr + a.dr * (bv + b.vr) + av * b.dr + a.vr * (bd + b.dr)
               + EPS_OP * (ad * bv + av * bd))
         return Jet(vc, vr, dc, dr)
 

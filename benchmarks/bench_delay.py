@@ -1,0 +1,101 @@
+"""Benchmark (issue 8): the cost of an exact K_max as the delay grows, against a naive
+eigenvalue bisection of the same loop, and 10,000 boundary points.
+
+Baseline ("naive eigenvalue bisection"): the closed-loop matrix of the loop
+(hapstab's own state-space engine, N = n + a few states), ``numpy.linalg.eigvals``
+at each trial K, bisection to 1e-6 relative inside the bracket [K_max / 2, 2 K_max]
+(handed to it for free: a real user would also need a scan). Where one solve takes
+longer than 2 s, the baseline is 23 solves (its bisection steps) times the median of
+3 timed solves, and is marked "extrapolated".
+
+hapstab: ``exact_kmax_batch(loop, intervals=False)`` (K_max only) and
+``critical_stiffness(loop)`` (every stable interval), medians of repeated runs; peak
+memory of one K_max call by ``tracemalloc`` (numpy reports its buffers to it).
+
+Loops: HVE m = 0.3 kg, b = 2 N s/m, operator msd:0.5,5,500, T = 1 ms; the paper's
+PEB (Fig. 6 parameters), T = 1 ms. Run on one core: ``python benchmarks/bench_delay.py``.
+"""
+
+import os
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+os.environ.setdefault("MKL_NUM_THREADS", "1")
+
+import statistics  # noqa: E402
+import time  # noqa: E402
+import tracemalloc  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+import hapstab as h  # noqa: E402
+from hapstab.engine import build  # noqa: E402
+from hapstab.exact import exact_kmax_batch  # noqa: E402
+
+DELAYS = (10, 100, 300, 1000)
+
+
+def loops(n: int):
+    hve = h.HapticLoop(h.Device(0.3, 2.0), h.SpringDamper(1.0), h.mass_spring_damper(0.5, 5, 500),
+                       1e-3, n)
+    return {"hve": hve, "peb": h.paper_peb(delay_samples=n)}
+
+
+def median_time(f, repeat: int) -> float:
+    ts = []
+    for _ in range(repeat):
+        t = time.perf_counter()
+        f()
+        ts.append(time.perf_counter() - t)
+    return statistics.median(ts)
+
+
+def naive(loop, kmax: float) -> tuple[float, float, str]:
+    """(seconds, K found, note) of eigenvalue bisection to 1e-6 inside [K/2, 2K]."""
+    s = build(loop)
+    A0, A1 = s.A0[0], (s.B1 @ s.C1)[0]
+    t1 = time.perf_counter()
+    np.linalg.eigvals(A0 + kmax * A1)
+    one = time.perf_counter() - t1
+    steps = int(np.ceil(np.log2(1.5 / 1e-6))) + 2
+    if one > 2.0:
+        ts = [median_time(lambda: np.linalg.eigvals(A0 + kmax * A1), 1) for _ in range(3)]
+        return steps * statistics.median(ts), float("nan"), "extrapolated"
+    rho = lambda K: np.abs(np.linalg.eigvals(A0 + K * A1)).max()  # noqa: E731
+    t = time.perf_counter()
+    lo, hi = kmax / 2, 2 * kmax
+    rho(lo), rho(hi)
+    while hi - lo > 1e-6 * hi:
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if rho(mid) < 1 else (lo, mid)
+    return time.perf_counter() - t, lo, "measured"
+
+
+def main() -> None:
+    print(f"{'loop':4} {'n':>5} {'N':>5} | {'naive bisection':>17} | {'hapstab K_max':>13} "
+          f"{'ratio':>7} {'peak MB':>8} | {'all intervals':>13} | agree")
+    for n in DELAYS:
+        for name, loop in loops(n).items():
+            N = build(loop).order
+            rep = 5 if n <= 300 else 3
+            k = exact_kmax_batch(loop, intervals=False)[0]["kmax"]
+            t_fast = median_time(lambda: exact_kmax_batch(loop, intervals=False), rep)
+            t_full = median_time(lambda: h.critical_stiffness(loop), max(1, rep // 2))
+            tracemalloc.start()
+            exact_kmax_batch(loop, intervals=False)
+            peak = tracemalloc.get_traced_memory()[1] / 2**20
+            tracemalloc.stop()
+            t_naive, k_naive, note = naive(loop, k)
+            agree = "n/a" if np.isnan(k_naive) else f"{abs(k_naive / k - 1):.1e}"
+            print(f"{name:4} {n:5d} {N:5d} | {t_naive * 1e3:10.0f} ms {note[:5]:>5} | "
+                  f"{t_fast * 1e3:10.1f} ms {t_naive / t_fast:6.0f}x {peak:8.1f} | "
+                  f"{t_full * 1e3:10.0f} ms | {agree}", flush=True)
+    T = np.linspace(1e-4, 2e-2, 10_000)
+    for name, loop, n in (("hve", h.paper_hve(), 10), ("peb", h.paper_peb(), 4)):
+        t = median_time(lambda: h.boundary(loop, T, [n]), 3)
+        print(f"10,000 boundary points, paper {name} (n = {n}): {t:.2f} s "
+              f"({t / T.size * 1e6:.0f} us per point)", flush=True)
+
+
+if __name__ == "__main__":
+    main()
