@@ -317,18 +317,22 @@ def _krawczyk(c: Cells, cell, uc, ur, rho, tc, tr, kc, kr) -> np.ndarray:
 
 
 def _boxes(resp: LoopResponse, items: np.ndarray, u_cap: np.ndarray, polish: bool = True,
-           estimate: bool = True) -> Found:
+           estimate: bool = True, start: tuple[Cells, np.ndarray] | None = None) -> Found:
     """Branch and prune over (theta, u) for the given items (see module doc).
 
     ``u_cap[item]`` bounds the u of interest (inf: all); it is lowered to each
     crossing found when only the lowest crossing is wanted (finite caps).
+    ``start``: cells already built (and the indices of a partition of [0, pi] per item).
     """
     L = resp.size
     lowest_only = np.isfinite(u_cap)
     found = Found([[] for _ in range(L)], [[] for _ in range(L)])
-    c = Cells()
-    it, th, rho, kind = _initial_cells(resp, items)
-    cells = c.add(resp, it, th, rho, kind)
+    if start is None:
+        c = Cells()
+        cells = c.add(resp, *_initial_cells(resp, items))
+    else:
+        c, cells = start
+        cells = cells[np.isin(c.item[cells], items)]
     cell = cells
     ua, ub = np.full(cells.size, U_LO), np.full(cells.size, U_HI)
     cap = np.where(lowest_only, u_cap, np.inf).astype(float)
@@ -464,6 +468,49 @@ def _polish(resp: LoopResponse, c: Cells, cell: np.ndarray, ua: np.ndarray, ub: 
 
 
 # ------------------------------------------------------------------ the winding
+def _winding_cells(resp: LoopResponse, c: Cells, leaves: np.ndarray, u: np.ndarray
+                   ) -> np.ndarray:
+    """:func:`winding` at u[item] on cells already built (a partition of [0, pi] per
+    item, centred cells, the ends centred on 0 and pi): cells whose disc holds 0 at u
+    are split. Between the centres of neighbouring cells the argument changes by
+    Arg(w / F_i) + Arg(F_(i+1) / w) for any w in both discs (each disc excludes 0 and
+    holds the value at the shared edge), so no further evaluation is needed."""
+    L = resp.size
+    bad_item = np.zeros(L, bool)
+    for _ in range(200):
+        it = c.item[leaves]
+        fc, fr = _dpoly(c.vc[:, leaves], c.vr[:, leaves], u[it], np.zeros(leaves.size))
+        holds0 = ~(np.abs(fc) > fr)
+        if not holds0.any():
+            break
+        floor = holds0 & _theta_floor(c, leaves)
+        bad_item[it[floor]] = True
+        split = leaves[holds0 & ~floor]
+        keep = leaves[~holds0 | floor]
+        if not split.size:
+            break
+        kids = c.add(resp, *_split_cells(c, split))
+        leaves = np.concatenate([keep, kids])
+    else:
+        bad_item[c.item[leaves]] = True
+    it = c.item[leaves]
+    order = np.lexsort((c.th[leaves], it))
+    leaves, it = leaves[order], it[order]
+    fc, fr = _dpoly(c.vc[:, leaves], c.vr[:, leaves], u[it], np.zeros(leaves.size))
+    F, _ = _dpoly(c.pc[:, leaves], c.pr[:, leaves], u[it], np.zeros(leaves.size))
+    same = it[1:] == it[:-1]
+    ri, rj = fr[:-1], fr[1:]
+    with np.errstate(all="ignore"):
+        t = np.where(ri + rj > 0, ri / (ri + rj), 0.5)
+        w = fc[:-1] + (fc[1:] - fc[:-1]) * t
+        inc = np.angle(w / F[:-1]) + np.angle(F[1:] / w)
+    total = np.zeros(L)
+    np.add.at(total, it[:-1][same], inc[same])
+    turns = total / np.pi
+    bad = bad_item | ~np.isfinite(turns) | (np.abs(turns - np.round(turns)) > 1e-6)
+    return np.where(bad, -1, resp.q - np.round(np.where(np.isfinite(turns), turns, 0)).astype(int))
+
+
 def winding(resp: LoopResponse, items: np.ndarray, u: np.ndarray) -> np.ndarray:
     """Poles outside the unit circle at u = K/scale for each item, by the argument
     principle, certified: ``Z_out = q - wind(det M)``. -1 where a pole is within
@@ -529,10 +576,13 @@ def analyse(resp: LoopResponse, full: bool = True) -> list[dict[str, Any]]:
     """
     L = resp.size
     items = np.arange(L)
-    anchor = winding(resp, items, np.full(L, U_LO))
+    c = Cells()
+    first = c.add(resp, *_initial_cells(resp, items))
+    anchor = _winding_cells(resp, c, first, np.full(L, U_LO))
     cap = np.full(L, np.inf if full else U_HI)
     need = items if full else items[anchor == 0]
-    found = _boxes(resp, need, np.where(np.isin(items, need), cap, -np.inf)) if need.size else \
+    found = _boxes(resp, need, np.where(np.isin(items, need), cap, -np.inf),
+                   start=(c, first)) if need.size else \
         Found([[] for _ in range(L)], [[] for _ in range(L)])
     out = []
     for i in range(L):
