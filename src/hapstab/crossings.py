@@ -377,7 +377,8 @@ def _boxes(resp: LoopResponse, items: np.ndarray, u_cap: np.ndarray, polish: boo
         # at the theta floor, splitting u cannot help once theta alone spans 0; nor
         # can any split once the box adds less than the error of F itself (the
         # numerics cannot tell this box from a zero); nor can a non-finite enclosure
-        stuck = (th_small & (u_small | (w_th >= f_abs)) | (w_th + w_u <= noise)
+        th_done = th_small | (w_th <= noise)          # theta splits cannot help any more
+        stuck = (th_done & (u_small | (w_u <= noise)) | th_small & (w_th >= f_abs)
                  | ~np.isfinite(f_abs + w_th + w_u))
         rounds += 1
         if rounds > MAX_ROUNDS:
@@ -389,8 +390,8 @@ def _boxes(resp: LoopResponse, items: np.ndarray, u_cap: np.ndarray, polish: boo
                 cap[i] = min(cap[i], ua[k])
         go = ~stuck
         cell, ua, ub, w_th, w_u = cell[go], ua[go], ub[go], w_th[go], w_u[go]
-        # u is treated exactly by _trim, so splitting u only helps at the theta floor
-        split_th = ~th_small[go]
+        # u is treated exactly by _trim, so splitting u only helps once theta cannot
+        split_th = ~th_done[go]
         # u-splits: at the geometric mean of wide intervals, else the midpoint
         su = np.flatnonzero(~split_th)
         mid = np.where(ub[su] > 4 * ua[su], np.sqrt(ua[su] * ub[su]), 0.5 * (ua[su] + ub[su]))
@@ -645,7 +646,9 @@ def _classify(resp: LoopResponse, i: int, anchor: int, cross, unsure, full: bool
     if intervals and intervals[0][0] == 0.0:
         kmax = intervals[0][1]
         theta = thetas[upper[0]] if upper[0] < len(thetas) else math.nan
-    uncertain = tuple((a * s, b * s) for a, b, *_r in events if _r[2] == 0)
+    # an unresolved zone matters only where it borders a stable (or unknown) gap
+    uncertain = tuple((a * s, b * s) for g, (a, b, t, d, m) in enumerate(events)
+                      if m == 0 and (counts[g] in (0, None) or counts[g + 1] in (0, None)))
     return {**base, "kmax": float(kmax), "intervals": tuple(intervals), "theta": theta,
             "uncertain": uncertain}
 

@@ -237,8 +237,10 @@ def _to_result(res: dict[str, Any], T: float, n: int | float) -> CriticalStiffne
         reason += f"; {res['rigid']} rigid-body mode(s) at z = 1 (marginal, K-independent) divided out"
     if res["uncertain"]:
         spans = ", ".join(f"[{a:.8g}, {b:.8g}]" for a, b in res["uncertain"])
+        at = any(a == kmax for a, _ in res["uncertain"])
         reason += (f"; marginal within K in {spans}: a pole is within rounding of the unit "
-                   "circle there, so the numerics cannot decide (K_max is the lower end)")
+                   "circle there, so the numerics cannot decide"
+                   + (" (K_max is its lower end, the safe side)" if at else ""))
     return CriticalStiffnessResult(kmax, "exact", res["intervals"], reason, T, n, freq,
                                    {"rigid_body_modes": res["rigid"],
                                     "uncertain_intervals": [list(iv) for iv in res["uncertain"]]})
