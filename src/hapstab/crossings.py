@@ -340,19 +340,40 @@ def _boxes(resp: LoopResponse, items: np.ndarray, u_cap: np.ndarray, polish: boo
     if estimate and lowest_only.any():
         # a first cap from the near-real roots u at the cells' centres: with it the
         # high-u boxes are never refined. A cap below the true lowest crossing finds
-        # nothing and is retried without it, so the result does not depend on it.
+        # nothing; the boxes above it are then taken up, so the result does not
+        # depend on the guess.
         est = _estimate_lowest(c, cells, L)
         guess = lowest_only & np.isfinite(est) & (est < cap)
         cap = np.where(guess, est, cap)
     rounds = 0
-    while cell.size:
-        keep = ua < cap[c.item[cell]]
-        cell, ua, ub = cell[keep], ua[keep], np.minimum(ub[keep], np.maximum(ua[keep], cap[c.item[cell[keep]]]))
+    deferred: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+    while True:
         if not cell.size:
-            break
+            # every box below the caps is settled: items whose guessed cap found nothing
+            # take up the boxes above it, with a cap 16 times higher (U_HI at last)
+            ran_dry = guess & np.array([not found.cross[i] and not found.unsure[i]
+                                        for i in range(L)])
+            if not ran_dry.any() or not deferred:
+                break
+            dc_, da_, db_ = (np.concatenate(x) for x in zip(*deferred))
+            deferred = []
+            back = ran_dry[c.item[dc_]]
+            cap = np.where(ran_dry, np.where(cap * 16 < U_HI, cap * 16, U_HI), cap)
+            guess &= ~(ran_dry & (cap >= U_HI))
+            cell, ua, ub = dc_[back], da_[back], db_[back]
+            continue
+        cp = cap[c.item[cell]]
+        over = ub > cp
+        if over.any():   # the part above a cap waits (it matters only if nothing is below)
+            g = over & guess[c.item[cell]]
+            deferred.append((cell[g], np.maximum(ua[g], cp[g]), ub[g]))
+        keep = ua < cp
+        cell, ua, ub = cell[keep], ua[keep], np.minimum(ub[keep], cp[keep])
+        if not cell.size:
+            continue
         cell, ua, ub = _trim(c, cell, ua, ub)
         if not cell.size:
-            break
+            continue
         if cell.size > MAX_BOXES:
             raise AnalysisError("the crossing analysis needs more than "
                                 f"{MAX_BOXES} boxes; the loop is beyond what it can certify")
@@ -369,7 +390,8 @@ def _boxes(resp: LoopResponse, items: np.ndarray, u_cap: np.ndarray, polish: boo
                     cap[i] = min(cap[i], u)
         rest = np.flatnonzero(status == 2)
         if not rest.size:
-            break
+            cell = cell[:0]
+            continue
         cell, ua, ub, w_th, w_u = cell[rest], ua[rest], ub[rest], w_th[rest], w_u[rest]
         f_abs, noise = f_abs[rest], noise[rest]
         th_small = _theta_floor(c, cell)
@@ -406,13 +428,6 @@ def _boxes(resp: LoopResponse, items: np.ndarray, u_cap: np.ndarray, polish: boo
             new_ua += [ua[st], ua[st]]
             new_ub += [ub[st], ub[st]]
         cell, ua, ub = np.concatenate(new_cell), np.concatenate(new_ua), np.concatenate(new_ub)
-    retry = np.flatnonzero(guess & np.array([not found.cross[i] and not found.unsure[i]
-                                             for i in range(L)]))
-    if retry.size:
-        again = _boxes(resp, retry, np.where(np.isin(np.arange(L), retry), u_cap, -np.inf),
-                       polish, estimate=False)
-        for i in retry:
-            found.cross[i], found.unsure[i] = again.cross[i], again.unsure[i]
     return found
 
 
