@@ -91,8 +91,11 @@ class Cells:
     def add(self, resp: LoopResponse, item, th, rho, kind) -> np.ndarray:
         """Append cells, computing their enclosures; returns their indices."""
         item, th, rho = np.asarray(item, int), np.asarray(th, float), np.asarray(rho, float)
-        pts = resp.coefficients(item, th, np.zeros_like(rho))
-        cel = resp.coefficients(item, th, rho)
+        n = th.size
+        both = resp.coefficients(np.concatenate([item, item]), np.concatenate([th, th]),
+                                 np.concatenate([np.zeros_like(rho), rho]))
+        pts = [_half(j, slice(0, n)) for j in both]
+        cel = [_half(j, slice(n, 2 * n)) for j in both]
         vd = [c.value_disc(rho, p) for c, p in zip(cel, pts)]
         start = self.th.size
         cat = np.concatenate
@@ -106,6 +109,11 @@ class Cells:
         self.dc = cat([self.dc, np.array([c.dc for c in cel])], axis=1)
         self.dr = cat([self.dr, np.array([c.dr for c in cel])], axis=1)
         return np.arange(start, self.th.size)
+
+
+def _half(j, sl: slice):
+    """One half of a jet evaluated on two stacked batches (points, then cells)."""
+    return type(j)(j.vc[sl], j.vr[sl], j.dc[sl], j.dr[sl])
 
 
 def _initial_cells(resp: LoopResponse, items: np.ndarray) -> tuple[np.ndarray, ...]:

@@ -389,15 +389,3 @@ def build(loop: HapticLoop | TeleoperationLoop,
     labels = [pt.name for pt in st.ports]
     return SampledSystem(T, A0, B1, C1, K_own, B_ext, Fu0, Fu1, pos, vel, Ac, Bc, Cf,
                          n_plant, labels, varies, E, fixed_reason)
-
-
-def stack(systems: Sequence[SampledSystem]) -> SampledSystem:
-    """Concatenate systems of the same structure (same order N) along the batch axis,
-    e.g. one loop at many virtual dampings, so one batched analysis covers them all."""
-    s0 = systems[0]
-    if any(s.order != s0.order or s.n_ports != s0.n_ports for s in systems):
-        raise ValueError("stack: systems must have the same order and ports")
-    cat = lambda name: np.concatenate([getattr(s, name) for s in systems])  # noqa: E731
-    return SampledSystem(cat("periods"), cat("A0"), cat("B1"), cat("C1"), cat("stiffness"),
-                         cat("B_ext"), cat("F_u0"), cat("F_u1"), s0.pos, s0.vel, s0.Ac, s0.Bc,
-                         s0.Cf, s0.n_plant, s0.labels, s0.varies_with_K, s0.E, s0.fixed_reason)

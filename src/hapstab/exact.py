@@ -150,6 +150,9 @@ def stability(loop: HapticLoop | TeleoperationLoop) -> StabilityResult:
     rho = abs(dom)
     freq = abs(math.atan2(dom.imag, dom.real)) / (2 * math.pi * T)
     verdict, reason = _verdict(count, rho, dom, T, m)
+    if (verdict == "unstable" and count > 0 and rho <= 1) or (verdict == "stable" and rho >= 1):
+        reason += (f" (the eigenvalue solver puts the largest pole at |z| = {rho:.12g}; with "
+                   "poles crowding z = 1 it is less accurate than the certified count)")
     return StabilityResult(verdict, rho, dom, freq, reason, T, tuple(complex(e) for e in eigs), m)
 
 

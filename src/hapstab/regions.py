@@ -29,7 +29,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from .engine import SampledSystem, build, stack
+from .engine import build
 from .errors import AnalysisError, check_real
 from .crossings import analyse
 from .exact import rigid_body_modes
@@ -125,27 +125,12 @@ def d_decomposition(loop: Loop, n_theta: int = 4000) -> dict[str, Any]:
     return {"curves": curves, "z1": lines["z1"], "zm1": lines["zm1"], "period": T}
 
 
-def _systems_over_B(loop: Loop, Bs: np.ndarray, K: float = 1.0) -> list[tuple[np.ndarray, SampledSystem]]:
-    """Batched systems for each B, grouped by state order (B = 0 drops a state)."""
-    built = [build(with_gains(loop, K, float(B))) for B in Bs]
-    groups: dict[int, list[int]] = {}
-    for i, s in enumerate(built):
-        groups.setdefault(s.order, []).append(i)
-    return [(np.array(idx), stack([built[i] for i in idx])) for idx in groups.values()]
-
-
 def kmax_over_B(loop: Loop, Bs: Sequence[float], intervals: bool = False) -> list[dict[str, Any]]:
     """Exact crossing analysis for each virtual damping in ``Bs`` (batched)."""
     Bs = np.asarray(Bs, float)
+    # one structure for every B (B enters only as beta = B/T): one batched analysis
     resps = [loop_response(with_gains(loop, 1.0, float(B))) for B in Bs]
-    groups: dict[int, list[int]] = {}
-    for i, r in enumerate(resps):       # B = 0 and B != 0 share one structure here
-        groups.setdefault(0, []).append(i)
-    out: list[dict[str, Any] | None] = [None] * Bs.size
-    for idx in groups.values():
-        for i, r in zip(idx, analyse(stack_responses([resps[i] for i in idx]), full=intervals)):
-            out[i] = r
-    return out  # type: ignore[return-value]
+    return analyse(stack_responses(resps), full=intervals)
 
 
 # -------------------------------------------------------------- grid cross-check
