@@ -64,6 +64,10 @@ U_LO, U_HI = 1e-14, 1e10
 THETA_FLOOR = 64 * np.finfo(float).eps
 #: A u-interval narrower than this (relative) cannot be split any more.
 U_FLOOR = 64 * np.finfo(float).eps
+#: Phase turn of the delay per first cell (rad): the full analysis needs every crossing
+#: and starts fine; for K_max alone (small K, where the delayed part of F is small)
+#: coarse cells exclude as well and fewer are split. Measured, not a tolerance.
+TURN_FULL, TURN_KMAX = 1.2, 3.0
 #: Safety valve on the number of boxes in one round (memory), far above real needs.
 MAX_BOXES = 2_000_000
 #: Safety valve on the rounds of splitting: 50 halvings of theta per decade of u and
@@ -72,21 +76,39 @@ MAX_ROUNDS = 600
 
 
 # ----------------------------------------------------------------------- cells
-@dataclass
 class Cells:
-    """theta-cells [th - rho, th + rho] with their enclosures of F0, F1, F2."""
+    """theta-cells [th - rho, th + rho] with their enclosures of F0, F1, F2.
 
-    item: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
-    th: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    rho: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    kind: np.ndarray = field(default_factory=lambda: np.zeros(0, int))   # 0 inner, 1 at 0, 2 at pi
-    pc: np.ndarray = field(default_factory=lambda: np.zeros((3, 0), complex))  # value at th
-    pr: np.ndarray = field(default_factory=lambda: np.zeros((3, 0)))
-    pd: np.ndarray = field(default_factory=lambda: np.zeros((3, 0), complex))  # derivative at th
-    vc: np.ndarray = field(default_factory=lambda: np.zeros((3, 0), complex))  # value on the cell
-    vr: np.ndarray = field(default_factory=lambda: np.zeros((3, 0)))
-    dc: np.ndarray = field(default_factory=lambda: np.zeros((3, 0), complex))  # derivative on the cell
-    dr: np.ndarray = field(default_factory=lambda: np.zeros((3, 0)))
+    Attributes (views of the first ``size`` cells): ``item``, ``th``, ``rho``, ``kind``
+    (0 inner, 1 centred on 0, 2 centred on pi); per coefficient l = 0, 1, 2 (first
+    axis): ``pc``, ``pr`` the value at th and its error, ``pd`` the derivative at th,
+    ``vc``, ``vr`` a disc of the values on the cell, ``dc``, ``dr`` of the derivatives.
+    Storage grows geometrically, so adding cells round after round stays linear.
+    """
+
+    _ONE = ("item", "th", "rho", "kind")
+    _THREE = ("pc", "pr", "pd", "vc", "vr", "dc", "dr")
+
+    def __init__(self) -> None:
+        self.size = 0
+        self._cap = 0
+        self._buf: dict[str, np.ndarray] = {}
+        self._grow(1024)
+
+    def _grow(self, need: int) -> None:
+        cap = max(need, 2 * self._cap)
+        dt = {"item": int, "kind": int, "pc": complex, "pd": complex, "vc": complex, "dc": complex}
+        for name in self._ONE + self._THREE:
+            shape = (cap,) if name in self._ONE else (3, cap)
+            new = np.zeros(shape, dt.get(name, float))
+            if name in self._buf:
+                new[..., :self.size] = self._buf[name][..., :self.size]
+            self._buf[name] = new
+        self._cap = cap
+
+    def _views(self) -> None:
+        for name, arr in self._buf.items():
+            setattr(self, name, arr[..., :self.size])
 
     def add(self, resp: LoopResponse, item, th, rho, kind) -> np.ndarray:
         """Append cells, computing their enclosures; returns their indices."""
@@ -97,18 +119,20 @@ class Cells:
         pts = [_half(j, slice(0, n)) for j in both]
         cel = [_half(j, slice(n, 2 * n)) for j in both]
         vd = [c.value_disc(rho, p) for c, p in zip(cel, pts)]
-        start = self.th.size
-        cat = np.concatenate
-        self.item, self.th, self.rho = cat([self.item, item]), cat([self.th, th]), cat([self.rho, rho])
-        self.kind = cat([self.kind, np.broadcast_to(kind, th.shape)])
-        self.pc = cat([self.pc, np.array([p.vc for p in pts])], axis=1)
-        self.pr = cat([self.pr, np.array([p.vr for p in pts])], axis=1)
-        self.pd = cat([self.pd, np.array([p.dc for p in pts])], axis=1)
-        self.vc = cat([self.vc, np.array([v[0] for v in vd])], axis=1)
-        self.vr = cat([self.vr, np.array([v[1] for v in vd])], axis=1)
-        self.dc = cat([self.dc, np.array([c.dc for c in cel])], axis=1)
-        self.dr = cat([self.dr, np.array([c.dr for c in cel])], axis=1)
-        return np.arange(start, self.th.size)
+        start = self.size
+        if start + n > self._cap:
+            self._grow(start + n)
+        sl = slice(start, start + n)
+        b = self._buf
+        b["item"][sl], b["th"][sl], b["rho"][sl] = item, th, rho
+        b["kind"][sl] = np.broadcast_to(kind, th.shape)
+        for l in range(3):
+            b["pc"][l, sl], b["pr"][l, sl], b["pd"][l, sl] = pts[l].vc, pts[l].vr, pts[l].dc
+            b["vc"][l, sl], b["vr"][l, sl] = vd[l]
+            b["dc"][l, sl], b["dr"][l, sl] = cel[l].dc, cel[l].dr
+        self.size = start + n
+        self._views()
+        return np.arange(start, self.size)
 
 
 def _half(j, sl: slice):
@@ -116,10 +140,12 @@ def _half(j, sl: slice):
     return type(j)(j.vc[sl], j.vr[sl], j.dc[sl], j.dr[sl])
 
 
-def _initial_cells(resp: LoopResponse, items: np.ndarray) -> tuple[np.ndarray, ...]:
-    """A uniform partition of [0, pi] fine enough for the delay's phase to turn by
-    at most ~1.2 rad per cell; end cells are centred on 0 and pi."""
-    m = max(8, int(np.ceil(np.pi * resp.phase_rate / 1.2)))
+def _initial_cells(resp: LoopResponse, items: np.ndarray, turn: float = 1.2
+                   ) -> tuple[np.ndarray, ...]:
+    """A uniform partition of [0, pi] in which the delay's phase turns by at most
+    ``turn`` rad per cell; end cells are centred on 0 and pi. Only the cost depends
+    on it: cells are split wherever their enclosures need it."""
+    m = max(8, int(np.ceil(np.pi * resp.phase_rate / turn)))
     h = np.pi / m
     th = (np.arange(m + 1) * h)
     th[-1] = np.pi
@@ -601,7 +627,7 @@ def analyse(resp: LoopResponse, full: bool = True) -> list[dict[str, Any]]:
     L = resp.size
     items = np.arange(L)
     c = Cells()
-    first = c.add(resp, *_initial_cells(resp, items))
+    first = c.add(resp, *_initial_cells(resp, items, TURN_FULL if full else TURN_KMAX))
     anchor = _winding_cells(resp, c, first, np.full(L, U_LO))
     cap = np.full(L, np.inf if full else U_HI)
     need = items if full else items[anchor == 0]
