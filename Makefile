@@ -25,6 +25,7 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_circle.py
 	$(BIN)/python benchmarks/bench_simulate.py
 	$(BIN)/python benchmarks/bench_regions.py
+	$(BIN)/python benchmarks/bench_delay.py
 
 clean:
 	rm -rf $(VENV) out .pytest_cache .hypothesis
