@@ -648,7 +648,10 @@ def _classify(resp: LoopResponse, i: int, anchor: int, cross, unsure, full: bool
     if anchor < 0:
         return {**base, "kmax": 0.0, "intervals": (), "theta": math.nan,
                 "uncertain": ((0.0, U_LO * s),)}
-    events = sorted([(u, u, t, d, m) for u, t, d, m in cross] +
+    # a crossing inside an unresolved zone is part of it: the count after the zone comes
+    # from the argument principle above the zone, which accounts for all it holds
+    inside = lambda u: any(a <= u <= b for a, b in unc)  # noqa: E731
+    events = sorted([(u, u, t, d, m) for u, t, d, m in cross if not inside(u)] +
                     [(a, b, math.nan, 0, 0) for a, b in unc])
     if not full:
         if anchor > 0:
