@@ -725,12 +725,13 @@ def _verify(resp: LoopResponse, i: int, events, counts) -> None:
 
 
 def _dedupe(cross: list[tuple[float, float, int, int]]) -> list[tuple[float, float, int, int]]:
-    """One crossing proved in two boxes that share an edge (a zero on the common
-    boundary of two cells) is one crossing: polished values within 1e-9 agree."""
+    """A safety net: one zero proved in two boxes would be polished by Newton's method
+    to the same point (to rounding), and is one crossing. Two distinct crossings are
+    never this close (the Krawczyk boxes that isolate them are disjoint)."""
     out: list[tuple[float, float, int, int]] = []
     for cr in sorted(cross):
-        if out and abs(cr[0] - out[-1][0]) <= 1e-9 * cr[0] and abs(cr[1] - out[-1][1]) <= 1e-9 \
-                and cr[2] == out[-1][2]:
+        if out and abs(cr[0] - out[-1][0]) <= 1e-12 * cr[0] \
+                and abs(cr[1] - out[-1][1]) <= 1e-12 * (1.0 + cr[1]) and cr[2] == out[-1][2]:
             continue
         out.append(cr)
     return out

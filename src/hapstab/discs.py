@@ -162,7 +162,9 @@ def one_minus_delay_jet(theta: np.ndarray, rho: np.ndarray, n: int) -> Jet:
     """Jet of 1 - e^{-j n theta} = 2j sin(n theta / 2) e^{-j n theta / 2} (no cancellation)."""
     th = np.asarray(theta)
     v = 2j * np.sin(0.5 * n * th) * np.exp(-0.5j * n * th)
-    spread = np.minimum(n * rho, 2.0) + EPS_OP * np.abs(v)
+    # the rounding of n theta itself (an absolute phase error) matters where 1 - w
+    # vanishes (theta = 2 pi k / n)
+    spread = np.minimum(n * rho, 2.0) + EPS_OP * (np.abs(v) + n * np.abs(th))
     return Jet(v, spread, 1j * n * np.exp(-1j * n * th), n * spread)
 
 
@@ -195,8 +197,12 @@ def geometric_sum_jet(theta: np.ndarray, rho: np.ndarray, n: int) -> Jet:
     dg_taylor = 1j * s1 - th * s2 - 0.5j * th ** 2 * s3 + th ** 3 / 6.0 * s4
     dg = np.where(small, dg_taylor, dg_exact)
     rnd = EPS_OP * n * (1.0 + n * np.abs(th))
+    # the Taylor centre of G' stops at theta^3: its remainder is below
+    # theta^4 sum k^5 / 24, doubled for the tail of the series (|n theta| < 1e-2)
+    s5 = float(n) ** 6 / 6.0
+    tail = np.where(small, 2.0 * np.abs(th) ** 4 * s5 / 24.0, 0.0)
     near = np.abs(th) - 2.0 * rho <= 1.0 / n
-    out = Jet(g, rho * s1 + rnd, dg, rho * s2 + n * rnd)
+    out = Jet(g, rho * s1 + rnd, dg, rho * s2 + n * rnd + tail)
     if not np.all(near):
         b = base_jets(th, rho)
         zn = np.exp(1j * n * th)
