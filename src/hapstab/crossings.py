@@ -62,7 +62,9 @@ __all__ = ["analyse", "winding", "U_LO", "U_HI"]
 U_LO, U_HI = 1e-14, 1e10
 #: A cell narrower than this (relative to theta + 1) cannot be split any more.
 THETA_FLOOR = 64 * np.finfo(float).eps
-#: A u-interval narrower than this (relative) cannot be split any more.
+#: A u-interval narrower than this (relative) cannot be split any more: 64 unit
+#: round-offs, below which the midpoint of a split is no longer a distinct number
+#: from its ends for the trimming's quadratic evaluations.
 U_FLOOR = 64 * np.finfo(float).eps
 #: Phase turn of the delay per first cell (rad): the full analysis needs every crossing
 #: and starts fine; for K_max alone (small K, where the delayed part of F is small)
@@ -557,6 +559,8 @@ def _winding_cells(resp: LoopResponse, c: Cells, leaves: np.ndarray, u: np.ndarr
     total = np.zeros(L)
     np.add.at(total, it[:-1][same], inc[same])
     turns = total / np.pi
+    # F is real at theta = 0 and pi, so the turns are whole up to the rounding of the
+    # end values' arguments (~1e-15); 1e-6 off means something is wrong: not certified
     bad = bad_item | ~np.isfinite(turns) | (np.abs(turns - np.round(turns)) > 1e-6)
     return np.where(bad, -1, resp.q - np.round(np.where(np.isfinite(turns), turns, 0)).astype(int))
 
@@ -602,7 +606,7 @@ def winding(resp: LoopResponse, items: np.ndarray, u: np.ndarray) -> np.ndarray:
     np.add.at(total, R, inc)
     turns = total / np.pi
     out = resp.q - np.round(turns).astype(int)
-    bad = bad_rows | (np.abs(turns - np.round(turns)) > 1e-6)
+    bad = bad_rows | (np.abs(turns - np.round(turns)) > 1e-6)   # as in _winding_cells
     return np.where(bad, -1, out)
 
 
