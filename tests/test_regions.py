@@ -171,3 +171,13 @@ def test_best_damping_unstable_everywhere_says_so():
     assert bd.critical_stiffness == 0.0 and bd.damping == 0.0 and np.all(bd.K_curve == 0)
     assert "unstable for every K > 0 at every B" in bd.reason
     assert brute.kmax(brute.hve(0.15, 0.0, (0,), (1,), 10, -0.25, 1e-3), lo=1e-8) == 0.0
+
+
+def test_the_K_zero_column_is_the_exact_verdict_at_K_zero():
+    # issue #9 item 6: at K = 0 the paper's delayed HVE rests on the operator spring
+    # (stable); the intervals are for K > 0, so K = 0 is judged on its own
+    res = stability_region(h.paper_hve(delay_samples=10), K=(0, 900), B=(0, 20), resolution=5)
+    assert res.stable_exact[:, 0].all() and res.stable_grid[:, 0].all()
+    free = h.HapticLoop(h.Device(0.15, 0.1), h.SpringDamper(1.0), None, 1e-3, 2)
+    res = stability_region(free, K=(0, 50), B=(0, 0.05), resolution=4)
+    assert not res.stable_exact[:, 0].any()          # a free mass at K = 0: pole at z = 1

@@ -31,7 +31,7 @@ import numpy as np
 
 from .engine import build
 from .errors import AnalysisError, check_real
-from .crossings import analyse
+from .crossings import analyse, winding
 from .exact import rigid_body_modes
 from .loopfreq import loop_response, stack_responses
 from .models import HapticLoop, SpringDamper, TeleoperationLoop
@@ -327,6 +327,11 @@ def stability_region(loop: Loop, K: tuple[float, float], B: tuple[float, float],
     for i, r in enumerate(rows):
         for a, b in r["intervals"]:
             exact[i] |= (Kg > a) & (Kg < b)
+    if np.any(Kg == 0):
+        # K = 0 itself (the intervals are for K > 0): the certified count at K = 0
+        resp = stack_responses([loop_response(with_gains(loop, 1.0, float(B))) for B in Brows])
+        zero_ok = winding(resp, np.arange(n), np.zeros(n)) == 0
+        exact[:, Kg == 0] = zero_ok[:, None]
     grid = _schur_cohn(_char_poly_grid(loop, KK, BB)).reshape(KK.shape)
     # near an exact boundary either verdict is within rounding: compare away from it
     margin = 1e-3 * (K_hi - K_lo)
