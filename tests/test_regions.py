@@ -15,19 +15,24 @@ HVE10 = h.paper_hve(delay_samples=10)
 
 def test_region_matches_brute_force_grid():
     res = stability_region(HVE10, (0, 900), (0, 20), resolution=24)
-    make = lambda B: brute.hve(0.15, 0.1, (1,), (1, 0), 10, B, 1e-3)  # noqa: E731
+    assert _inner_points_match_brute_force(res, 900) > 400
+    assert res.agreement["disagree"] == 0
+
+
+def _inner_points_match_brute_force(res, K_hi):
+    """Every inner grid point of the delayed HVE's region against the brute force;
+    returns how many were compared."""
     checked = 0
     for i, B in enumerate(res.B_rows):
-        mk = make(B)
-        ends = [e for iv in res.intervals[i] for e in iv if 0 < e < 900]
+        mk = brute.hve(0.15, 0.1, (1,), (1, 0), 10, B, 1e-3)
+        ends = [e for iv in res.intervals[i] for e in iv if 0 < e < K_hi]
         for j, K in enumerate(res.K_grid[1:-1], start=1):
             # within 0.1 % (relative) of an exact boundary either verdict is rounding
             if any(abs(K - e) <= 1e-3 * e for e in ends):
                 continue
             assert res.stable_exact[i, j] == (brute.spectral_radius(mk, K) < 1), (K, B)
             checked += 1
-    assert checked > 400
-    assert res.agreement["disagree"] == 0
+    return checked
 
 
 def test_region_rows_equal_exact_kmax():
@@ -90,17 +95,7 @@ def test_region_through_zero_matches_brute_force_and_its_grid_check():
     res = stability_region(HVE10, (0, 20), (-0.12, 0.1), resolution=23)
     assert res.B_rows[0] < -0.1 < 0 < res.B_rows[-1]
     assert res.agreement["disagree"] == 0 and res.agreement["compared"] > 450
-    make = lambda B: brute.hve(0.15, 0.1, (1,), (1, 0), 10, B, 1e-3)  # noqa: E731
-    checked = 0
-    for i, B in enumerate(res.B_rows):
-        mk = make(B)
-        ends = [e for iv in res.intervals[i] for e in iv if 0 < e < 20]
-        for j, K in enumerate(res.K_grid[1:-1], start=1):
-            if any(abs(K - e) <= 1e-3 * e for e in ends):   # boundary itself: rounding
-                continue
-            assert res.stable_exact[i, j] == (brute.spectral_radius(mk, K) < 1), (K, B)
-            checked += 1
-    assert checked > 400
+    assert _inner_points_match_brute_force(res, 20) > 400
     # rows below B = -b: unstable for every K; rows just above: a small stable interval
     kmax = res.kmax()
     assert np.all(kmax[res.B_rows < -0.1] == 0.0) and np.all(kmax[res.B_rows > -0.09] > 0)
