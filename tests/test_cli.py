@@ -87,10 +87,10 @@ def test_simulate_with_negative_virtual_damping():
     assert r.exit_code == 0, r.stderr
     d = json.loads(r.stdout)
     # K = 50 < K_max(B = -0.05) = 100.04: bounded, and the exact analysis agrees
-    assert d["exact_verdict"] == "stable" and d["verdict"] == "bounded"
+    assert d["linear_loop_verdict"] == "stable" and d["verdict"] == "bounded"
     d = json.loads(run("simulate", "hve", "-K", "50", "-B", "-0.2", "--duration", "1",
                        "--json").stdout)
-    assert d["exact_verdict"] == "unstable" and d["exact_growth_rate_per_s"] > 0
+    assert d["linear_loop_verdict"] == "unstable" and d["linear_loop_growth_rate_per_s"] > 0
 
 
 def test_demo_prints_both_figures():

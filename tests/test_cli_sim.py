@@ -23,7 +23,7 @@ def test_simulate_hve_json_agrees_with_exact(tmp_path):
     assert r.exit_code == 0, r.output
     d = json.loads(r.stdout)
     ex = stability(h.paper_hve(1e-3, 10, 9.0))
-    assert d["verdict"] == "bounded" and d["exact_verdict"] == ex.verdict == "stable"
+    assert d["verdict"] == "bounded" and d["linear_loop_verdict"] == ex.verdict == "stable"
     # rate fitted from the trajectory vs the exact dominant pole (noise-free data)
     assert d["growth_rate_per_s"] == pytest.approx(math.log(ex.spectral_radius) / 1e-3, rel=1e-6)
     assert d["samples"] == 3000
@@ -41,7 +41,8 @@ def test_simulate_nonlinear_options():
              "--resolution", "1e-5", "--duration", "1", "--json"])
     assert r.exit_code == 0, r.output
     d = json.loads(r.stdout)
-    assert d["nonlinear"] == {"wall": 0.001, "saturation": 5.0, "resolution": 1e-5}
+    assert d["nonlinear"] == {"wall": 0.001, "saturation": 5.0, "resolution": 1e-5,
+                              "quantizer": "floor"}
     assert d["max_abs_force_device"] <= 5.0
 
 

@@ -92,8 +92,8 @@ def test_audit_unequal_lists_no_paper_lines():
 
 def test_simulate_unequal():
     d = ok_json(run("simulate", "peb", "-K", "3", "--duration", "1", *UNEQUAL, "--json"))
-    assert d["exact_spectral_radius"] == h.stability(paper_unequal(3.0)).spectral_radius
-    assert d["verdict"] == "bounded" and d["exact_verdict"] == "stable"
+    assert d["linear_loop_spectral_radius"] == h.stability(paper_unequal(3.0)).spectral_radius
+    assert d["verdict"] == "bounded" and d["linear_loop_verdict"] == "stable"
 
 
 @pytest.mark.parametrize("args,needle", [

@@ -106,8 +106,7 @@ def test_hve_matches_hapstab_linear():
     fz = _sine(M, 1.0, 2.0)
     res = simulate(loop, M * 2e-3, force=fz, initial_position=x0)
     x, u = hve_run(mass=0.2, damping=0.3, op_stiffness=40.0, op_damping=0.5, K=150.0, B=0.01,
-                   period=2e-3, delay=3, x0=x0, force=fz, n_samples=M,
-                   rest=0.0)   # current hapstab: the operator spring rests at x = 0
+                   period=2e-3, delay=3, x0=x0, force=fz, n_samples=M)   # spring rests at x0
     # both exact ZOH, different matrix exponentials and summation orders: rounding
     # only, amplified by at most the loop's decay over the run
     np.testing.assert_allclose(x, res.position[:, 0], rtol=0, atol=1e-9 * np.abs(x).max())
@@ -115,15 +114,17 @@ def test_hve_matches_hapstab_linear():
                                atol=1e-9 * np.abs(u).max())
 
 
-def test_hve_matches_hapstab_nonlinear():
-    # hapstab's wall pulls (no no-pull rule) and its encoder rounds to nearest
+@pytest.mark.parametrize("opts", [{}, {"quantizer": "nearest", "wall_pulls": True}])
+def test_hve_matches_hapstab_nonlinear(opts):
+    # defaults: the wall only pushes, the encoder reads floor(x / resolution); and
+    # the other choices
     M = 2000
     loop = h.HapticLoop(h.Device(0.15, 0.5), h.SpringDamper(40.0, 0.02), "spring:1", T, 2)
     fz = _sine(M)
-    kw = dict(wall=0.004, resolution=2e-4, saturation=0.3)
+    kw = dict(wall=0.004, resolution=2e-4, saturation=0.3, **opts)
     res = simulate(loop, M * T, force=fz, initial_position=0.0, **kw)
     x, u = hve_run(**DEV, K=40.0, B=0.02, delay=2, x0=0.0, force=fz, n_samples=M,
-                   wall_pulls=True, quantizer="nearest", rest=0.0, **kw)
+                   **kw)
     assert res.contact.any() and not res.contact.all()
     # rounding-level differences unless a quantisation decision differs (a jump of
     # K*resolution = 8 mN); no position lands on a tie in this run
@@ -141,8 +142,7 @@ def test_peb_matches_hapstab_linear(n, B):
     res = simulate(loop, M * T, force=fm, environment_force=fs, initial_position=[xm0, xs0])
     xm, xs, um, us = peb_run(master=(0.015, 0.02), slave=(0.02, 0.03), op=(1.0, 0.1),
                              env=(3.0, 0.05), K=10.0, B=B, period=T, delay=n, xm0=xm0, xs0=xs0,
-                             force_m=fm, force_s=fs, n_samples=M,
-                             rest_m=0.0, rest_s=0.0)   # current hapstab: springs rest at 0
+                             force_m=fm, force_s=fs, n_samples=M)   # springs rest where they start
     assert np.isfinite(res.position).all() and np.abs(xm).max() < 1.0
     # exact ZOH both: rounding only, relative to the run's own scale
     np.testing.assert_allclose(np.c_[xm, xs], res.position, rtol=0,
@@ -165,7 +165,7 @@ def test_peb_delay_enters_only_the_remote_position():
 
 
 def test_peb_matches_hapstab_nonlinear():
-    # encoder on both robots (hapstab rounds to nearest) and saturated actuators
+    # encoder on both robots (floor, the default) and saturated actuators
     M, n = 2000, 3
     c = h.SpringDamper(10.0, 0.002)
     loop = h.TeleoperationLoop(h.Device(0.015, 0.02), h.Device(0.015, 0.02), c, c,
@@ -175,7 +175,7 @@ def test_peb_matches_hapstab_nonlinear():
     res = simulate(loop, M * T, force=fm, initial_position=[0.0, 0.0], **kw)
     xm, xs, um, us = peb_run(master=(0.015, 0.02), slave=(0.015, 0.02), op=(1.0, 0.0),
                              env=(1.0, 0.0), K=10.0, B=0.002, period=T, delay=n, xm0=0.0,
-                             force_m=fm, n_samples=M, quantizer="nearest", **kw)
+                             force_m=fm, n_samples=M, **kw)
     U = np.c_[um, us]
     assert (np.abs(U) == 0.2).any() and len(np.unique(np.round(xs / 1e-3))) > 5
     # rounding-level unless a quantisation decision differs (a jump of K*resolution

@@ -101,7 +101,7 @@ def rk4_peb(mm, bm, ms, bs, kh, ke, K, T, n, xm0, f_h, M, sub=100):
     (h.paper_peb(2e-3, 4, 1.5, 0.003), "pulse:1,0.05,0.01", "sine:0.5,7"),
 ])
 def test_samples_equal_exact_recurrence(loop, force, env):
-    res = simulate(loop, 3.0, force=force, environment_force=env, initial_position=0.01)
+    res = simulate(loop, 3.0, force=force, environment_force=env, initial_position=0.01, rest_position=0.0)
     M = res.time.size - 1
     F = res.exogenous_force[:-1]
     ref = step_recurrence(loop, res.states[0], F)
@@ -115,7 +115,7 @@ def test_hve_matches_fine_rk4_between_samples():
     m, b, K, B, T, n = 0.15, 0.1, 6.0, 0.01, 1e-3, 10
     loop = h.paper_hve(T, n, K, B)
     sub = 50
-    res = simulate(loop, 0.5, force="step:2", initial_position=0.003, dense=sub)
+    res = simulate(loop, 0.5, force="step:2", initial_position=0.003, dense=sub, rest_position=0.0)
     M = res.time.size - 1
     xs, us = rk4_hve(m, b, 1.0, K, B, T, n, 0.003, np.full(M, 2.0), M, sub=sub)
     # RK4 at T/50 has local error ~ (w h)^5 with w ~ 10 rad/s: ~1e-16; 1e-9 relative is rounding
@@ -130,7 +130,7 @@ def test_hve_with_negative_virtual_damping_matches_fine_rk4(B, K, n):
     # B < 0 enters u = K e + B (e - e_prev)/T as written, stable or not (B = -0.12 < -b grows)
     m, b, T, sub = 0.15, 0.1, 1e-3, 20
     loop = h.paper_hve(T, n, K, B)
-    res = simulate(loop, 0.5, force="step:2", initial_position=0.003, dense=sub)
+    res = simulate(loop, 0.5, force="step:2", initial_position=0.003, dense=sub, rest_position=0.0)
     M = res.time.size - 1
     xs, us = rk4_hve(m, b, 1.0, K, B, T, n, 0.003, np.full(M, 2.0), M, sub=sub)
     # RK4 at T/20 on modes below ~20 rad/s: truncation far below 1e-9 of the scale
@@ -142,7 +142,7 @@ def test_hve_with_negative_virtual_damping_matches_fine_rk4(B, K, n):
 def test_peb_matches_fine_rk4_between_samples():
     T, n, K = 2e-3, 4, 0.7
     loop = h.paper_peb(T, n, K)
-    res = simulate(loop, 0.4, force="sine:1,5", initial_position=[0.002, 0.0], dense=20)
+    res = simulate(loop, 0.4, force="sine:1,5", initial_position=[0.002, 0.0], dense=20, rest_position=0.0)
     M = res.time.size - 1
     f = force_samples("sine:1,5", res.time[:-1])
     xs = rk4_peb(0.015, 0.02, 0.015, 0.02, 1.0, 1.0, K, T, n, 0.002, f, M, sub=20)
@@ -184,8 +184,8 @@ def test_verdict_agrees_with_stability_away_from_boundary(loop, factor):
 
 def test_stable_decays_unstable_grows():
     kmax = exact_critical_stiffness(h.paper_hve(1e-3, 10)).critical_stiffness
-    lo = simulate(h.paper_hve(1e-3, 10, 0.5 * kmax), 20.0, initial_position=0.01)
-    hi = simulate(h.paper_hve(1e-3, 10, 1.5 * kmax), 20.0, initial_position=0.01)
+    lo = simulate(h.paper_hve(1e-3, 10, 0.5 * kmax), 20.0, initial_position=0.01, rest_position=0.0)
+    hi = simulate(h.paper_hve(1e-3, 10, 1.5 * kmax), 20.0, initial_position=0.01, rest_position=0.0)
     env = lambda x: np.abs(x[-2000:]).max() / np.abs(x[:2000]).max()  # noqa: E731
     assert env(lo.position[:, 0]) < 0.2 and env(hi.position[:, 0]) > 5
     assert lo.bounded and not hi.bounded
@@ -193,7 +193,7 @@ def test_stable_decays_unstable_grows():
 
 def test_explosion_is_observed():
     # net damping b - KT/2 = -19.9 N s/m: growth ~ exp(66 t), far past 1e12 in 2 s
-    res = simulate(h.paper_hve(1e-3, 0, 40000.0), 2.0, initial_position=0.01)
+    res = simulate(h.paper_hve(1e-3, 0, 40000.0), 2.0, initial_position=0.01, rest_position=0.0)
     assert not res.bounded and res.verdict.basis == "observed" and res.verdict.confidence == "high"
 
 
@@ -352,7 +352,7 @@ def test_fractional_delay_matches_fine_rk4():
     T, K, B = 1e-3, 5.0, 0.01
     loop = h.HapticLoop(h.Device(0.15, 0.1), h.SpringDamper(K, B), "spring:1", T, 2,
                         fractional_delay=0.5)
-    res = simulate(loop, 0.3, force="step:1", initial_position=0.002)
+    res = simulate(loop, 0.3, force="step:1", initial_position=0.002, rest_position=0.0)
     M = res.time.size - 1
     xs, us = rk4_hve_read_delayed(0.15, 0.1, 1.0, K, B, T, 2.5, 0.002, np.ones(M), M, sub=40)
     # RK4 at T/40 on ~6 rad/s dynamics: truncation far below 1e-9 of the scale
@@ -367,7 +367,9 @@ def test_nonlinear_stepping_matches_fine_rk4(d):
     n, f = int(d), d - int(d)
     loop = h.HapticLoop(h.Device(0.15, 0.5), h.SpringDamper(K, B), "spring:1", T, n,
                         fractional_delay=f)
-    kw = dict(resolution=2e-4, saturation=0.3, wall=0.004)
+    # the RK4 reference rounds to the nearest step (no ties occur here) and lets the
+    # wall's damper pull: the same options here
+    kw = dict(resolution=2e-4, quantizer="nearest", saturation=0.3, wall=0.004, wall_pulls=True)
     res = simulate(loop, 0.5, force="sine:2,3", initial_position=0.0, **kw)
     M = res.time.size - 1
     fz = force_samples("sine:2,3", res.time[:-1])

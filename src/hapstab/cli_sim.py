@@ -15,6 +15,10 @@ from .cli import LOOP_KINDS, NONNEG, POS, Number, cli, emit, loop_options, parse
 
 
 # ------------------------------------------------------------------ simulate
+#: What ``stability`` describes beside a run: the loop itself, or its linearisation.
+LINEAR_LOOP = {False: "this loop",
+               True: "linearised loop (wall always in contact, no saturation or quantisation)"}
+
 @cli.group("simulate")
 def simulate_cmd() -> None:
     """Time-domain simulation of the sampled-data loop (exact between samples)."""
@@ -26,7 +30,9 @@ def _simulate_command(kind: str) -> None:
                           help="Exogenous environment force on the slave (same forms as --force).")
              ] if kind == "peb" else [
         click.option("--wall", type=Number(), default=None,
-                     help="Unilateral virtual wall at x = WALL m: force only while x > WALL.")]
+                     help="Unilateral virtual wall at x = WALL m: force only while x > WALL."),
+        click.option("--wall-pulls", is_flag=True,
+                     help="Let the wall's damper pull the device in (default: a wall only pushes).")]
 
     @simulate_cmd.command(kind)
     @loop_options(kind)
@@ -38,6 +44,11 @@ def _simulate_command(kind: str) -> None:
                   help="Initial position of the device / master in m (history at rest there).")
     @click.option("--saturation", type=POS, default=None, help="Actuator force limit in N.")
     @click.option("--resolution", type=POS, default=None, help="Encoder resolution in m.")
+    @click.option("--quantizer", type=click.Choice(["floor", "nearest"]), default="floor",
+                  show_default=True,
+                  help="Encoder reading: floor (count of lines passed) or nearest step.")
+    @click.option("--rest", type=Number(), default=None,
+                  help="Rest position of the operator's spring in m (default: --x0).")
     @click.option("--dense", type=click.IntRange(0, 1000), default=0, show_default=True,
                   help="Also compute the exact trajectory at this many points per sample (plot).")
     @click.option("--csv", "csv_path", type=click.Path(dir_okay=False), default=None,
@@ -45,9 +56,10 @@ def _simulate_command(kind: str) -> None:
     @click.option("--plot", "plot_path", type=click.Path(dir_okay=False), default=None,
                   help="Write a plot of position, force and port energy (PNG, SVG, PDF).")
     def _cmd(stiffness: float, duration: float, force: str, x0: float, saturation: float | None,
-             resolution: float | None, dense: int, csv_path: str | None, plot_path: str | None,
-             as_json: bool, environment_force: str | None = None, wall: float | None = None,
-             **kw: Any) -> None:
+             resolution: float | None, quantizer: str, rest: float | None, dense: int,
+             csv_path: str | None, plot_path: str | None, as_json: bool,
+             environment_force: str | None = None, wall: float | None = None,
+             wall_pulls: bool = False, **kw: Any) -> None:
         from .exact import stability
         from .simulate import simulate
 
@@ -57,11 +69,13 @@ def _simulate_command(kind: str) -> None:
             opts["environment_force"] = None if environment_force in (None, "none") else environment_force
             x_init: Any = [x0, 0.0]
         else:
-            opts["wall"] = wall
+            opts.update(wall=wall, wall_pulls=wall_pulls)
             x_init = x0
         res = simulate(loop, duration, force=None if force == "none" else force,
                        initial_position=x_init, saturation=saturation, resolution=resolution,
-                       dense=dense, **opts)
+                       quantizer=quantizer, dense=dense,
+                       rest_position=None if rest is None else
+                       ([rest, 0.0] if kind == "peb" else rest), **opts)
         ex = stability(loop)
         files = []
         if csv_path:
@@ -71,9 +85,12 @@ def _simulate_command(kind: str) -> None:
             res.plot(plot_path)
             files.append(plot_path)
         d = res.summary()
-        d.update(exact_verdict=ex.verdict, exact_spectral_radius=ex.spectral_radius,
-                 exact_growth_rate_per_s=(math.log(ex.spectral_radius) / loop.period
-                                          if ex.spectral_radius > 0 else -math.inf),
+        # the exact analysis is of the linear loop: this one, or with nonlinear elements
+        # the linearised one (wall always in contact, no saturation or quantisation)
+        d.update(linear_loop=LINEAR_LOOP[bool(res.nonlinear)], linear_loop_verdict=ex.verdict,
+                 linear_loop_spectral_radius=ex.spectral_radius,
+                 linear_loop_growth_rate_per_s=(math.log(ex.spectral_radius) / loop.period
+                                                if ex.spectral_radius > 0 else -math.inf),
                  files=files)
         v = res.verdict
 
@@ -81,10 +98,17 @@ def _simulate_command(kind: str) -> None:
             return format(x, spec) if isinstance(x, (int, float)) else str(x)
 
         def table() -> None:
-            rows = [("simulated", f"{v.verdict} ({v.confidence} confidence, {v.basis})"),
-                    ("growth rate", f"{g(v.growth_rate)} 1/s (+- {g(v.growth_rate_uncertainty, '.2g')})"),
-                    ("exact analysis", f"{ex.verdict} (rate {g(d['exact_growth_rate_per_s'])} 1/s)"),
-                    ("samples", f"{d['samples']} x {loop.period:g} s")]
+            rows = [("simulated", f"{v.verdict}: {v.behaviour} ({v.confidence} confidence, "
+                                  f"{v.basis})"),
+                    ("growth rate", f"{g(v.growth_rate)} 1/s (+- {g(v.growth_rate_uncertainty, '.2g')})")]
+            if v.amplitude_m is not None:
+                rows.append(("limit cycle", f"amplitude {v.amplitude_m:.4g} m, period "
+                                            f"{v.period_s:.4g} s"))
+            if v.duration_hint_s is not None:
+                rows.append(("to decide", f"run about {v.duration_hint_s:.3g} s"))
+            rows += [(f"exact, {d['linear_loop']}",
+                      f"{ex.verdict} (rate {g(d['linear_loop_growth_rate_per_s'])} 1/s)"),
+                     ("samples", f"{d['samples']} x {loop.period:g} s")]
             for lab in res.labels:
                 rows.append((f"max |x| {lab}", f"{g(d[f'max_abs_position_{lab}'])} m"))
                 rows.append((f"max |u| {lab}", f"{g(d[f'max_abs_force_{lab}'])} N"))

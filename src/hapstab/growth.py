@@ -32,7 +32,7 @@ import numpy as np
 
 from .results import jsonable
 
-__all__ = ["BoundednessVerdict", "assess", "dmd_rate"]
+__all__ = ["BoundednessVerdict", "assess", "combine", "dmd_rate"]
 
 #: |state| beyond this (relative to the initial scale) is "observed unbounded".
 EXPLODE = 1e12
@@ -47,7 +47,7 @@ class BoundednessVerdict:
 
     Attributes
     ----------
-    verdict : {"bounded", "unbounded", "marginal"}
+    verdict : {"bounded", "unbounded", "marginal", "undecided"}
         ``marginal``: the fitted dominant mode neither grows nor decays within the
         fit's resolution (a pole on the unit circle: sustained oscillation, or drift
         such as a constant force pushing masses nothing ties to ground).
@@ -67,6 +67,18 @@ class BoundednessVerdict:
         Relative residual of the linear fit (0 for an exactly linear loop, up to
         rounding).
     reason : str
+    behaviour : {"at rest", "settles", "grows", "marginal", "limit cycle", "drifts", "undecided"}
+        What the motion does, in words that fit the loop: a linear run ``settles``,
+        ``grows`` or is ``marginal``; a nonlinear run settles, oscillates in a
+        ``limit cycle`` (``amplitude_m``, ``period_s``), ``grows``, ``drifts`` or is
+        ``undecided`` (then ``duration_hint_s`` says how long a run would tell).
+    amplitude_m, period_s : float or None
+        Limit cycle: half the peak-to-peak position of the port that moves most,
+        and the mean time between its upward crossings of its mean.
+    duration_hint_s : float or None
+        A run length that would decide, when this one is too short to.
+    judged_on : str
+        What the verdict was read from (e.g. "free response and input channel").
     """
 
     verdict: str
@@ -77,15 +89,32 @@ class BoundednessVerdict:
     observed_growth: float
     fit_residual: float
     reason: str
+    behaviour: str = ""
+    amplitude_m: float | None = None
+    period_s: float | None = None
+    duration_hint_s: float | None = None
+    judged_on: str = "trajectory"
+
+    def __post_init__(self) -> None:
+        if not self.behaviour:
+            b = {"bounded": "settles", "unbounded": "grows"}.get(self.verdict, self.verdict)
+            if self.verdict == "bounded" and self.growth_rate == -math.inf:
+                b = "at rest"
+            object.__setattr__(self, "behaviour", b)
 
     @property
     def bounded(self) -> bool:
         return self.verdict == "bounded"
 
     def to_dict(self) -> dict[str, Any]:
-        return jsonable({"verdict": self.verdict, "growth_rate_per_s": self.growth_rate,
+        return jsonable({"verdict": self.verdict, "behaviour": self.behaviour,
+                         "growth_rate_per_s": self.growth_rate,
                          "growth_rate_uncertainty_per_s": self.growth_rate_uncertainty,
                          "confidence": self.confidence, "basis": self.basis,
+                         "judged_on": self.judged_on,
+                         "limit_cycle_amplitude_m": self.amplitude_m,
+                         "limit_cycle_period_s": self.period_s,
+                         "duration_hint_s": self.duration_hint_s,
                          "observed_growth": self.observed_growth,
                          "fit_residual": self.fit_residual, "reason": self.reason})
 
@@ -138,7 +167,7 @@ def dmd_rate(D: np.ndarray, U: np.ndarray | None = None) -> tuple[float, float]:
 
 
 def assess(states: np.ndarray, forces: np.ndarray | None, period: float,
-           window: int | None = None) -> BoundednessVerdict:
+           window: int | None = None, differences: bool = True) -> BoundednessVerdict:
     """Verdict on a trajectory at the sampling instants.
 
     Parameters
@@ -146,22 +175,34 @@ def assess(states: np.ndarray, forces: np.ndarray | None, period: float,
     states : (M+1, N) array
         The closed-loop state at each sampling instant.
     forces : (M, p) array or None
-        Exogenous forces held over each sample.
+        Exogenous forces held over each sample (``s[k+1] = A s[k] + G f[k]``).
     period : float
         T in s.
     window : int, optional
-        Number of final differences the rate is fitted on (default: the last half,
+        Number of final snapshots the rate is fitted on (default: the last half,
         at most 1024: a linear fit needs a few times the state dimension).
+    differences : bool
+        Fit the differences ``s[k+1] - s[k]`` (default: a constant offset, such as
+        a rigid-body position, is not growth) or the states themselves (a mode at
+        z = 1 counts as marginal: a constant force would make it drift).
 
     Returns
     -------
     BoundednessVerdict
+
+    Notes
+    -----
+    A forced trajectory can hide its own dynamics: in a sinusoidal steady state
+    the input is a linear function of the state, and the fit cannot tell the
+    loop from the input. :func:`hapstab.simulate.simulate` therefore judges a
+    linear run on its free responses (see :func:`combine`), not on the forced
+    trajectory.
     """
     S = np.asarray(states, float)
     if not np.all(np.isfinite(S)):
         return BoundednessVerdict("unbounded", math.inf, 0.0, "high", "observed", math.inf, 0.0,
                                   "the state overflowed (non-finite): observed unbounded")
-    D = np.diff(S, axis=0)
+    D = np.diff(S, axis=0) if differences else S[1:]
     M = D.shape[0]
     if M < 8:
         raise ValueError(f"trajectory of {M} samples: at least 8 are needed for a verdict")
@@ -175,13 +216,33 @@ def assess(states: np.ndarray, forces: np.ndarray | None, period: float,
                                   f"the state grew beyond {EXPLODE:.0e} times its initial size")
     W = min(M, window or min(max(M // 2, 16), 1024))
     Dw = D[-W:]
-    Uw = None
-    if forces is not None and np.size(forces):
-        F = np.asarray(forces, float).reshape(M, -1)
-        Uw = np.diff(np.vstack([F[:1], F]), axis=0)[-W:]   # force changes drive the differences
+    Uw = _input_snapshots(forces, M, differences)
+    Uw = None if Uw is None else Uw[-W:]
     if not np.any(Dw):
+        what = "constant" if differences else "zero"
         return BoundednessVerdict("bounded", -math.inf, 0.0, "high", "observed", obs, 0.0,
-                                  "the state is constant over the last part of the run")
+                                  f"the state is {what} over the last part of the run")
+    return _fitted_verdict(Dw, Uw, period, obs)
+
+
+def _input_snapshots(forces: np.ndarray | None, M: int, differences: bool) -> np.ndarray | None:
+    """The input acting between snapshot k and k+1, row k (DMDc pairs U[k] with D[k]).
+
+    With differences, d[k+1] = A d[k] + G (f[k+1] - f[k]); with states,
+    s[k+2] = A s[k+1] + G f[k+1]: either way row k holds what enters at k+1.
+    """
+    if forces is None or not np.size(forces):
+        return None
+    F = np.asarray(forces, float).reshape(M, -1)
+    U = np.zeros_like(F)
+    U[:-1] = np.diff(F, axis=0) if differences else F[1:]
+    return U
+
+
+def _fitted_verdict(Dw: np.ndarray, Uw: np.ndarray | None, period: float,
+                    obs: float) -> BoundednessVerdict:
+    """The DMD(c) rate of the window, its uncertainty from the two halves, the verdict."""
+    W = Dw.shape[0]
     rho, resid = dmd_rate(Dw, Uw)
     half = W // 2
     rates = []
@@ -206,5 +267,45 @@ def assess(states: np.ndarray, forces: np.ndarray | None, period: float,
     if math.isfinite(rate) and abs(rate) <= unc:
         verdict, what = "marginal", "neither grows nor decays (a pole on the unit circle)"
     reason = (f"fitted dominant mode {what}: rate {rate:.4g} 1/s (+-{unc:.2g}), linear-fit "
-              f"residual {resid:.1e}; observed change of |ds| over the run x{obs:.3g}")
+              f"residual {resid:.1e}; observed change over the run x{obs:.3g}")
     return BoundednessVerdict(verdict, rate, unc, conf, "rate estimate", obs, resid, reason)
+
+
+_CONF = ("low", "medium", "high")
+
+
+def combine(parts: list[tuple[str, BoundednessVerdict]]) -> BoundednessVerdict:
+    """One verdict for a linear run from the verdicts of its free responses.
+
+    A linear run is the sum of the free response from its initial state and the
+    responses to its inputs; a bounded input gives a bounded response exactly when
+    the loop's response to an impulse where it enters decays. So the run is judged
+    on those homogeneous responses, never on the forced trajectory (whose steady
+    state a fit would mistake for the loop's own dynamics).
+
+    Parameters
+    ----------
+    parts : list of (what, verdict)
+        E.g. ``("free response from the initial state", v)``.
+
+    Returns
+    -------
+    BoundednessVerdict
+        The verdict of the fastest-growing part; ``confidence`` is that part's if
+        it grows, else the lowest of the parts that move.
+    """
+    moving = [(w, v) for w, v in parts if v.growth_rate > -math.inf or v.verdict != "bounded"]
+    judged = "; ".join(w for w, _ in parts)
+    if not moving:
+        return BoundednessVerdict("bounded", -math.inf, 0.0, "high", "observed", 1.0, 0.0,
+                                  "nothing moves: the loop stays at rest", "at rest",
+                                  judged_on=judged)
+    what, top = max(moving, key=lambda wv: wv[1].growth_rate)
+    conf = top.confidence if top.verdict != "bounded" else min(
+        (v.confidence for _, v in moving), key=_CONF.index)
+    reason = "; ".join(f"{w}: {v.reason}" for w, v in moving)
+    if top.verdict == "bounded":
+        reason = "every motion decays, so the run stays bounded: " + reason
+    return BoundednessVerdict(top.verdict, top.growth_rate, top.growth_rate_uncertainty, conf,
+                              top.basis, top.observed_growth, max(v.fit_residual for _, v in moving),
+                              reason, judged_on=judged)

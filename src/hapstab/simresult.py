@@ -46,6 +46,8 @@ class SimulationResult:
         Wall engaged at each sample (with ``wall``).
     dense_time, dense_position, dense_velocity : arrays or None
         Exact output between samples (``dense`` points per sample).
+    rest : tuple of float
+        Rest position of each port's operator / environment spring (m).
     """
 
     time: np.ndarray
@@ -66,6 +68,7 @@ class SimulationResult:
     dense_time: np.ndarray | None = field(default=None, repr=False)
     dense_position: np.ndarray | None = field(default=None, repr=False)
     dense_velocity: np.ndarray | None = field(default=None, repr=False)
+    rest: tuple[float, ...] = ()
 
     @property
     def bounded(self) -> bool:
@@ -76,6 +79,7 @@ class SimulationResult:
         out: dict[str, Any] = {"samples": self.time.size - 1, "duration_s": float(self.time[-1]),
                                "period_s": self.period, "delay_samples": self.delay_samples,
                                "stiffness": self.stiffness, "nonlinear": self.nonlinear,
+                               "rest_position_m": list(self.rest),
                                **self.verdict.to_dict()}
         for j, lab in enumerate(self.labels):
             out[f"max_abs_position_{lab}"] = float(np.abs(self.position[:, j]).max())

@@ -10,10 +10,26 @@ recurrence ``s[k+1] = A_cl s[k] + B_ext f[k]``, many samples per matrix product
 Optional nonlinear elements act at the sampling instants, where a real
 controller sees and commands them:
 
-* ``resolution``: the controller sees positions quantised to the encoder step;
-* ``wall``: the virtual environment (HVE) pushes only while the (delayed,
-  measured) position it sees penetrates ``x > wall``;
+* ``resolution``: the controller sees positions quantised to the encoder step Δ:
+  by default ``Δ floor(x / Δ)``, the count of encoder lines passed (an
+  incremental encoder's reading), or with ``quantizer="nearest"`` the nearest
+  step (ties away from zero);
+* ``wall``: the virtual environment (HVE) acts only while the (delayed,
+  measured) position it sees penetrates ``x > wall``, and then only pushes: a
+  virtual damper that would pull the device into the wall (``u < 0`` while the
+  device leaves it fast) gives no force, unless ``wall_pulls=True``;
 * ``saturation``: each actuator force is clipped to +-saturation.
+
+The operator's (and the environment's) spring is relaxed at the port's initial
+position, where a hand holding the device at rest puts it; ``rest_position``
+moves it.
+
+The verdict separates the loop from its input. A linear run is judged on its
+free responses (:func:`hapstab.growth.combine`): from the initial state, and
+from an impulse where each force enters — a bounded force gives a bounded
+response exactly when these decay. A nonlinear run is judged on its envelope
+(:func:`hapstab.behaviour.assess_nonlinear`): it settles, oscillates in a limit
+cycle, grows, drifts, or the run is too short to tell.
 
 References
 ----------
@@ -30,7 +46,9 @@ import numpy as np
 
 from .engine import build, structure_of
 from .errors import AnalysisError, ModelError, check_real
-from .growth import BoundednessVerdict, assess
+from .behaviour import assess_nonlinear
+from .engine import port_matrices
+from .growth import BoundednessVerdict, assess, combine
 from .models import HapticLoop, TeleoperationLoop
 from .results import CriticalStiffnessResult
 from .simresult import SimulationResult
@@ -173,8 +191,11 @@ def simulate(loop: HapticLoop | TeleoperationLoop, duration: float, *,
              initial_position: float | Sequence[float] = 0.0,
              initial_velocity: float | Sequence[float] = 0.0,
              initial_state: Sequence[float] | None = None,
-             wall: float | None = None, saturation: float | None = None,
-             resolution: float | None = None, dense: int = 0) -> SimulationResult:
+             rest_position: float | Sequence[float] | None = None,
+             wall: float | None = None, wall_pulls: bool = False,
+             saturation: float | None = None,
+             resolution: float | None = None, quantizer: str = "floor",
+             dense: int = 0) -> SimulationResult:
     """Simulate the sampled-data loop for ``duration`` seconds.
 
     Parameters
@@ -192,19 +213,32 @@ def simulate(loop: HapticLoop | TeleoperationLoop, duration: float, *,
         at the initial position (delay registers and controller states consistent).
     initial_state : sequence, optional
         The full closed-loop state instead (engine layout), for experts.
+    rest_position : float or sequence, optional
+        Where each port's operator / environment spring is relaxed (m); default
+        the port's initial position (a hand holding the device at rest there).
     wall : float, optional
         HVE only: the virtual environment acts only while the position it sees
         (delayed, quantised) penetrates ``x > wall``; it then acts on ``x - wall``.
+    wall_pulls : bool
+        Let the wall's damper pull the device in (``u < 0`` in contact). Default
+        False: a wall only pushes.
     saturation : float, optional
         Actuator force limit |u| <= saturation (N), each port.
     resolution : float, optional
-        Encoder resolution (m): the controller sees ``resolution * round(x / resolution)``.
+        Encoder resolution Δ (m).
+    quantizer : {"floor", "nearest"}
+        ``floor``: the controller sees ``Δ floor(x / Δ)`` (an encoder's count);
+        ``nearest``: the nearest multiple of Δ, ties away from zero.
     dense : int
         If >= 2, also return the exact trajectory at ``dense`` points per sample.
 
     Returns
     -------
     SimulationResult
+        ``verdict``: for a linear run, judged on its free responses (from the
+        initial state, and from an impulse where each force enters); for a
+        nonlinear one, on its envelope (settles, limit cycle, grows, drifts,
+        undecided).
 
     Raises
     ------
@@ -216,25 +250,10 @@ def simulate(loop: HapticLoop | TeleoperationLoop, duration: float, *,
     The paper, Fig. 2a, Fig. 3, eq. (19)-(23), Section 5.
     """
     T = loop.period
-    dur = check_real("duration", duration, positive=True)
-    M = int(round(dur / T))
-    if M < 8:
-        raise ModelError(f"duration = {duration}: gives {M} samples at T = {T:g} s; need >= 8")
-    if M > 50_000_000:
-        raise ModelError(f"duration = {duration}: {M} samples is too many (limit 5e7)")
-    if not isinstance(dense, (int, np.integer)) or isinstance(dense, bool) or dense < 0 or dense == 1:
-        raise ModelError(f"dense = {dense!r}: must be 0 (off) or a whole number >= 2 "
-                         "(points per sample)")
+    M = _samples(duration, T, dense)
     haptic = isinstance(loop, HapticLoop)
-    if haptic and environment_force is not None:
-        raise ModelError("environment_force: a HapticLoop has no environment port; use a TeleoperationLoop")
-    if wall is not None and not haptic:
-        raise ModelError("wall: the unilateral wall is the HVE's virtual environment; a "
-                         "TeleoperationLoop's environment is its impedance (--environment)")
-    wall = None if wall is None else check_real("wall", wall)
-    sat = None if saturation is None else check_real("saturation", saturation, positive=True)
-    res = None if resolution is None else check_real("resolution", resolution, positive=True)
-
+    nl = _nonlinear_options(haptic, environment_force, wall, wall_pulls, saturation, resolution,
+                            quantizer)
     sysm = build(loop)
     p = sysm.n_ports
     roles = roles_of(loop, sysm)
@@ -244,45 +263,159 @@ def simulate(loop: HapticLoop | TeleoperationLoop, duration: float, *,
     if p > 1:
         F[:, 1] = force_samples(environment_force, t[:-1], "environment_force")
     pos_idx = np.argmax(sysm.pos, axis=1)
-    offset = np.zeros(p)
-    if wall is not None:
-        offset[0] = wall
-    pe_idx, pe_off = roles.pos_entries, offset[roles.pos_port]
-
-    def measure(s: np.ndarray) -> np.ndarray:
-        """What the controller reads: quantised positions relative to the wall."""
-        sm = s.copy()
-        x = s[pe_idx]
-        sm[pe_idx] = (res * np.round(x / res) if res else x) - pe_off
-        return sm
-
+    measure = _measurement(roles, p, nl)
     s0 = make_initial_state(sysm, roles, initial_position, initial_velocity, initial_state, measure)
-    nonlinear = {k: v for k, v in (("wall", wall), ("saturation", sat), ("resolution", res))
-                 if v is not None}
+    springs = np.array([pt.termination.stiffness for pt in structure_of(loop).ports])
+    rest = _rest(rest_position, s0[pos_idx], p)
+    Fd = F + springs * rest              # a spring relaxed at r: -k (x - r) = -k x + k r
     contact = None
-    if not nonlinear:
-        S = propagate_linear(roles.A, roles.G, s0, F, M)
+    if not nl:
+        S = propagate_linear(roles.A, roles.G, s0, Fd, M)
         with np.errstate(over="ignore", invalid="ignore"):
             U = S @ roles.Fu.T
     else:
-        S, U, contact = step_nonlinear(roles, s0, F, M, measure, wall is not None, sat)
+        S, U, contact = step_nonlinear(roles, s0, Fd, M, measure, wall is not None,
+                                       nl.get("saturation"), wall_pulls)
     X, V = S[:, pos_idx], S[:, pos_idx + 1]
     with np.errstate(over="ignore", invalid="ignore"):
         dX = np.diff(X, axis=0)
         pe = np.vstack([np.zeros(p), np.cumsum(U[:-1] * dX, axis=0)])
         ee = np.vstack([np.zeros(p), np.cumsum(F * dX, axis=0)])
     Fx = np.vstack([F, F[-1:]])
-    verdict = assess(S, F, T)
+    if not nl:
+        verdict = _linear_verdict(roles, s0, Fd, S, T, sysm.labels)
+    else:
+        verdict = _nonlinear_verdict(loop, roles, S, X, T, nl)
     dt = dx = dv = None
     if dense >= 2 and np.all(np.isfinite(S)):
-        dt, dx, dv = dense_output(sysm, S, F - U[:-1], T, dense)
+        dt, dx, dv = dense_output(sysm, S, Fd - U[:-1], T, dense)
     arrays = [t, X, V, U, Fx, pe, ee, S]
     for a in arrays:
         a.setflags(write=False)
     K = float(sysm.stiffness[0])
-    delay = getattr(loop, "delay_in_samples", loop.delay_in_samples)
-    return SimulationResult(*arrays, verdict, tuple(sysm.labels), T, delay, K,
-                            nonlinear, contact, dt, dx, dv)
+    return SimulationResult(*arrays, verdict, tuple(sysm.labels), T, loop.delay_in_samples, K,
+                            nl, contact, dt, dx, dv, rest=tuple(float(r) for r in rest))
+
+
+def _samples(duration: float, T: float, dense: Any) -> int:
+    """Number of samples of the run; checks ``duration`` and ``dense``."""
+    dur = check_real("duration", duration, positive=True)
+    M = int(round(dur / T))
+    if M < 8:
+        raise ModelError(f"duration = {duration}: gives {M} samples at T = {T:g} s; need >= 8")
+    if M > 50_000_000:
+        raise ModelError(f"duration = {duration}: {M} samples is too many (limit 5e7)")
+    if not isinstance(dense, (int, np.integer)) or isinstance(dense, bool) or dense < 0 or dense == 1:
+        raise ModelError(f"dense = {dense!r}: must be 0 (off) or a whole number >= 2 "
+                         "(points per sample)")
+    return M
+
+
+def _nonlinear_options(haptic: bool, environment_force: Any, wall: Any, wall_pulls: Any,
+                       saturation: Any, resolution: Any, quantizer: Any) -> dict[str, Any]:
+    """The nonlinear elements asked for (checked); empty for a linear run."""
+    if haptic and environment_force is not None:
+        raise ModelError("environment_force: a HapticLoop has no environment port; use a TeleoperationLoop")
+    if wall is not None and not haptic:
+        raise ModelError("wall: the unilateral wall is the HVE's virtual environment; a "
+                         "TeleoperationLoop's environment is its impedance (--environment)")
+    if not isinstance(wall_pulls, (bool, np.bool_)):
+        raise ModelError(f"wall_pulls = {wall_pulls!r}: must be True or False")
+    if quantizer not in QUANTIZERS:
+        raise ModelError(f"quantizer = {quantizer!r}: allowed: {', '.join(QUANTIZERS)}")
+    nl: dict[str, Any] = {}
+    if wall is not None:
+        nl["wall"] = check_real("wall", wall)
+        if wall_pulls:
+            nl["wall_pulls"] = True
+    if saturation is not None:
+        nl["saturation"] = check_real("saturation", saturation, positive=True)
+    if resolution is not None:
+        nl["resolution"] = check_real("resolution", resolution, positive=True)
+        nl["quantizer"] = quantizer
+    return nl
+
+
+#: How an encoder reading is formed from the position (see :func:`simulate`).
+QUANTIZERS = ("floor", "nearest")
+
+
+def quantize(x: np.ndarray, resolution: float, quantizer: str = "floor") -> np.ndarray:
+    """The encoder's reading of ``x``: ``Δ floor(x/Δ)`` or the nearest multiple of Δ
+    (ties away from zero, not to even)."""
+    if quantizer == "floor":
+        return resolution * np.floor(x / resolution)
+    return resolution * np.sign(x) * np.floor(np.abs(x) / resolution + 0.5)
+
+
+def _measurement(roles: Any, p: int, nl: dict[str, Any]) -> Any:
+    """What the controller reads: quantised positions relative to the wall."""
+    offset = np.zeros(p)
+    offset[0] = nl.get("wall", 0.0)
+    pe_idx, pe_off = roles.pos_entries, offset[roles.pos_port]
+    res, how = nl.get("resolution"), nl.get("quantizer", "floor")
+
+    def measure(s: np.ndarray) -> np.ndarray:
+        sm = s.copy()
+        x = s[pe_idx]
+        sm[pe_idx] = (quantize(x, res, how) if res else x) - pe_off
+        return sm
+
+    return measure
+
+
+def _rest(rest_position: Any, initial: np.ndarray, p: int) -> np.ndarray:
+    """Rest position of each port's termination spring (default: where it starts)."""
+    if rest_position is None:
+        return np.array(initial, float)
+    a = np.asarray(rest_position, float).ravel() if np.size(rest_position) in (1, p) else None
+    if a is None or not np.all(np.isfinite(a)):
+        raise ModelError(f"rest_position = {rest_position!r}: must be one finite number or one "
+                         f"per port ({p})")
+    return np.broadcast_to(a, (p,)).astype(float)
+
+
+def _linear_verdict(roles: Any, s0: np.ndarray, F: np.ndarray, S: np.ndarray, T: float,
+                    labels: Sequence[str]) -> BoundednessVerdict:
+    """Judge a linear run on its free responses: from the initial state (differences:
+    a resting offset is not growth) and from an impulse where each force enters
+    (states: a mode at z = 1 that a constant force would make drift is marginal)."""
+    if not np.all(np.isfinite(S)):
+        return assess(S, None, T)                       # observed overflow
+    M = S.shape[0] - 1
+    parts = [("free response from the initial state",
+              assess(propagate_linear(roles.A, roles.G, s0, None, M), None, T))]
+    for j in np.flatnonzero(np.any(F != 0, axis=0)):
+        g = roles.G[:, j] / np.abs(roles.G[:, j]).max()
+        imp = propagate_linear(roles.A, roles.G, g, None, M)
+        parts.append((f"response to a force impulse on the {labels[j]}",
+                      assess(imp, None, T, differences=False)))
+    return combine(parts)
+
+
+def _nonlinear_verdict(loop: HapticLoop | TeleoperationLoop, roles: Any, S: np.ndarray,
+                       X: np.ndarray, T: float, nl: dict[str, Any]) -> BoundednessVerdict:
+    """Judge a nonlinear run on its envelope, told how fast the linearised loop grows
+    and whether the model bounds the run."""
+    M = S.shape[0] - 1
+    s_rand = np.random.default_rng(0).standard_normal(roles.A.shape[0])
+    lin = assess(propagate_linear(roles.A, roles.G, s_rand, None, M), None, T)
+    return assess_nonlinear(S, X, T, linear_rate=lin.growth_rate, bound=_bound(loop, nl, lin))
+
+
+def _bound(loop: HapticLoop | TeleoperationLoop, nl: dict[str, Any],
+           lin: BoundednessVerdict) -> str | None:
+    """Why the run cannot grow, when the model says so; else None."""
+    ports = structure_of(loop).ports
+    if "saturation" in nl and all(
+            np.linalg.eigvals(port_matrices(pt)[0]).real.max() < 0 for pt in ports):
+        return (f"the actuator force is limited to +-{nl['saturation']:g} N and every device "
+                "with its operator / environment is stable on its own")
+    if set(nl) <= {"resolution", "quantizer"} and lin.bounded and lin.confidence == "high":
+        return ("quantisation changes what the controller reads by less than one encoder step, "
+                "a bounded disturbance of the linear loop, which is stable (its free response "
+                f"decays at {lin.growth_rate:.3g} 1/s)")
+    return None
 
 
 # ------------------------------------------------- the paper's K_max procedure

@@ -120,8 +120,12 @@ def initial_state(sysm: SampledSystem, roles: Roles, x0: Any, v0: Any, full: Any
 
 def step_nonlinear(roles: Roles, s0: np.ndarray, F: np.ndarray, M: int,
                    measure: Callable[[np.ndarray], np.ndarray], has_wall: bool,
-                   sat: float | None) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+                   sat: float | None, wall_pulls: bool = False
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
     """Step M samples with the nonlinear elements at the sampling instants.
+
+    The wall (port 0) acts only on a penetration it sees, and then only pushes
+    (``u >= 0``) unless ``wall_pulls``; saturation clips each port's force.
 
     Returns
     -------
@@ -143,6 +147,8 @@ def step_nonlinear(roles: Roles, s0: np.ndarray, F: np.ndarray, M: int,
             C[k] = c = bool(E0 @ sm > 0)   # the wall pushes only on penetration it sees
             if not c:
                 u[0] = 0.0
+            elif not wall_pulls and u[0] < 0:
+                u[0] = 0.0               # a wall pushes out; its damper must not pull in
         if sat is not None:
             u = np.clip(u, -sat, sat)
         U[k] = u
