@@ -52,6 +52,8 @@ DECISIVE = 2.0
 CLEAR = 10.0
 #: The fraction of successive stretches that must move in the trend's direction.
 MONOTONE = 0.75
+#: An envelope slope beyond this many standard errors is a trend, not scatter.
+TREND_SE = 3.0
 #: Stretches the window is cut into (whole cycles each when it oscillates).
 STRETCHES = 8
 
@@ -202,7 +204,11 @@ def _classify(env: Envelope, duration_s: float, linear_rate: float | None,
         return _verdict("bounded", "settles", conf, "trajectory", env,
                         f"the motion dies out at {rate:.3g} 1/s: {span}")
     flat = env.amps.max() <= FLAT * max(env.amps.min(), 1e-300)
-    if flat and env.cycles >= CYCLES_MIN:
+    rate, se = env.rate()
+    # a flat envelope that still rises steadily (every stretch above the last, the
+    # slope > 3 standard errors) may be a slow growth, not a cycle
+    rising = rate > TREND_SE * se and env.fraction(up=True) >= MONOTONE
+    if flat and env.cycles >= CYCLES_MIN and not rising:
         return _limit_cycle(env, duration_s, linear_rate, bound, span)
     if flat and env.monotone and not bound:
         speed = float(env.amps.mean()) / (env.window_s / STRETCHES)

@@ -15,6 +15,10 @@ Differences ``s[k+1] - s[k]`` are fitted rather than states, so constant offsets
 (a step force, a wall's rest position, a rigid-body mode at z = 1) do not count
 as growth.
 
+A forced trajectory is not fitted: :func:`combine` judges a linear run on its
+free responses (from the initial state, and from an impulse where each force
+enters). Nonlinear runs are judged by :mod:`hapstab.behaviour`.
+
 References
 ----------
 The paper, Section 5 (boundedness of the simulated outputs); J. L. Proctor,
@@ -252,8 +256,9 @@ def _fitted_verdict(Dw: np.ndarray, Uw: np.ndarray | None, period: float,
     rate = math.log(rho) / period if rho > 0 else -math.inf
     finite = [r for r in rates if math.isfinite(r)]
     unc = max((abs(r - rate) for r in finite), default=0.0) if math.isfinite(rate) else 0.0
-    # the rate cannot be resolved better than rounding of |lambda| allows
-    unc = max(unc, 1e-12 / period)
+    # |lambda| is not resolved better than rounding (1e-12) nor than the fit itself:
+    # a relative residual r leaves |lambda| uncertain by about r
+    unc = max(unc, max(1e-12, resid) / period)
     if not math.isfinite(rate):
         conf = "high"
     elif resid < 1e-6 and abs(rate) > 5 * unc:

@@ -94,7 +94,8 @@ def plot_simulation(res: Any, path: str | None = None) -> Any:
     ax3.set_xlabel("time (s)")
     v = res.verdict
     ax1.set_title(f"K = {res.stiffness:g} N/m, T = {res.period * 1e3:g} ms, n = {res.delay_samples}: "
-                  f"{v.verdict} ({v.confidence} confidence, rate {v.growth_rate:.3g} 1/s)", fontsize=9)
+                  f"{v.verdict}: {v.behaviour} ({v.confidence} confidence, rate "
+                  f"{v.growth_rate:.3g} 1/s)", fontsize=9)
     for ax in (ax1, ax2, ax3):
         ax.grid(True, alpha=0.3)
         ax.legend(fontsize=8, loc="best")
