@@ -29,8 +29,8 @@ import tracemalloc  # noqa: E402
 import numpy as np  # noqa: E402
 
 import hapstab as h  # noqa: E402
-from hapstab.engine import build  # noqa: E402
-from hapstab.exact import exact_kmax_batch  # noqa: E402
+from hapstab.engine.system import build
+from hapstab.analysis.exact.core import exact_kmax_batch
 
 DELAYS = (10, 100, 300, 1000)
 SCAN = 400          # geometric scan points of the naive method over 1e-3 ... 1e7 N/m

@@ -16,8 +16,8 @@ import time  # noqa: E402
 import numpy as np  # noqa: E402
 
 import hapstab as h  # noqa: E402
-from hapstab.engine import build  # noqa: E402
-from hapstab.regions import stability_region, with_gains  # noqa: E402
+from hapstab.engine.system import build
+from hapstab.analysis.regions import stability_region, with_gains
 
 LOOP = h.paper_hve(delay_samples=10)
 K, B, RES = (0.0, 900.0), (0.0, 20.0), 200

@@ -6,9 +6,11 @@ import math
 import pytest
 
 import hapstab as h
-from hapstab.audit import audit
+from hapstab.analysis.audit import audit
 from hapstab.errors import AnalysisError
-from hapstab.models import Device, DiscreteController, HapticLoop, SpringDamper, TeleoperationLoop
+from hapstab.models.parts import Device
+from hapstab.models.controllers import DiscreteController, SpringDamper
+from hapstab.models.loops import HapticLoop, TeleoperationLoop
 
 
 def rows(a):

@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from hapstab.behaviour import CLEAR, assess_nonlinear
+from hapstab.simulation.behaviour import CLEAR, assess_nonlinear
 
 T = 1e-3
 t = np.arange(10001) * T                       # 10 s

@@ -30,7 +30,7 @@ import pytest
 from click.testing import CliRunner
 
 import hapstab as h
-from hapstab.cli import cli
+from hapstab.cli.main import cli
 from references import brute, campaign
 
 #: the default subset: scenario indices 0..299, long delays folded to <= 20 samples

@@ -5,7 +5,7 @@ import json
 import pytest
 from click.testing import CliRunner
 
-from hapstab.cli import cli
+from hapstab.cli.main import cli
 
 
 def run(*args):

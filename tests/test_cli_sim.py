@@ -8,8 +8,8 @@ import pytest
 from click.testing import CliRunner
 
 import hapstab as h
-from hapstab.cli import cli
-from hapstab.exact import stability
+from hapstab.cli.main import cli
+from hapstab.analysis.exact.core import stability
 
 
 def run(args):

@@ -6,7 +6,7 @@ import pytest
 from scipy.integrate import solve_ivp
 
 import hapstab as h
-from hapstab.engine import build
+from hapstab.engine.system import build
 from hapstab.errors import ModelError
 
 from references import brute

@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 
 import hapstab as h
-from hapstab.crossings import Cells
-from hapstab.discs import Jet, geometric_sum_jet, one_minus_delay_jet
-from hapstab.engine import build
-from hapstab.loopfreq import loop_response
+from hapstab.analysis.exact.crossings import Cells
+from hapstab.engine.discs import Jet, geometric_sum_jet, one_minus_delay_jet
+from hapstab.engine.system import build
+from hapstab.engine.frequency import loop_response
 
 P = h.paper_peb(delay_samples=3)
 LOOPS = [h.paper_hve(delay_samples=7), P, P.replace(operator=None, environment=None),

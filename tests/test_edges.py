@@ -9,7 +9,7 @@ import pytest
 from click.testing import CliRunner
 
 import hapstab as h
-from hapstab.cli import cli as main
+from hapstab.cli.main import cli as main
 from references import brute
 
 

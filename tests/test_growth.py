@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from hapstab.growth import assess, dmd_rate
+from hapstab.simulation.growth import assess, dmd_rate
 
 T = 1e-3
 

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from hapstab.errors import AnalysisError, ModelError
-from hapstab.positive_real import RationalMatrix, circle_criterion, positive_real
+from hapstab.analysis.positive_real import RationalMatrix, circle_criterion, positive_real
 
 
 def scalar(num, den):

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import hapstab as h
-from hapstab.simulate import simulate
+from hapstab.simulation.run import simulate
 from references.simref import hve_run, peb_run, quantize
 from test_simulate import rk4_hve_read_delayed, rk4_peb
 

@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 
 import hapstab as h
-from hapstab.engine import build
+from hapstab.engine.system import build
 from hapstab.errors import AnalysisError, ModelError
-from hapstab.exact import exact_critical_stiffness, stability
-from hapstab.simulate import critical_stiffness_simulation, force_samples, simulate
+from hapstab.analysis.exact.core import exact_critical_stiffness, stability
+from hapstab.simulation.run import critical_stiffness_simulation, force_samples, simulate
 
 
 # ------------------------------------------------------------ independent references

@@ -23,8 +23,8 @@ import numpy as np
 import pytest
 
 import hapstab as h
-from hapstab.exact import exact_critical_stiffness
-from hapstab.simulate import simulate
+from hapstab.analysis.exact.core import exact_critical_stiffness
+from hapstab.simulation.run import simulate
 from references import brute, simref
 
 SEED = int(os.environ.get("HAPSTAB_VERDICT_SEED", "20261124"))

@@ -10,8 +10,8 @@ import pytest
 from click.testing import CliRunner
 
 import hapstab as h
-from hapstab.cli import cli
-from hapstab.simulate import quantize, simulate
+from hapstab.cli.main import cli
+from hapstab.simulation.run import quantize, simulate
 
 CONFIDENT = ("high", "medium")
 

@@ -5,19 +5,39 @@ Reference: N. Miandashti and M. Tavakoli, "Stability of Sampled-Data, Delayed
 Haptic Interaction and Teleoperation", IEEE Haptics Symposium 2014.
 """
 
-from .analysis import boundary, critical_stiffness, methods_for
-from .closed_forms import colgate, eq18, eq29, eq34, gil, gil2004
-from .engine import SampledSystem, build
-from .errors import AnalysisError, HapstabError, ModelError
-from .exact import stability
-from .models import (NO_IMPEDANCE, Device, DiscreteController, HapticLoop, Impedance, SpringDamper,
-                     TeleoperationLoop, mass_spring_damper, paper_hve, paper_peb, parse_impedance,
-                     spring)
-from .results import BoundaryResult, CriticalStiffnessResult, StabilityResult
-from .positive_real import PositiveRealResult, RationalMatrix, circle_criterion, positive_real
-from .circle import circle_test, loop_inverse
-from .passivity import PassivityResult, sampled_passivity
-from .audit import AuditResult, audit
+from hapstab.analysis.audit import AuditResult, audit
+from hapstab.analysis.circle import circle_test, loop_inverse
+from hapstab.analysis.closed_forms import colgate, eq18, eq29, eq34, gil, gil2004
+from hapstab.analysis.exact.core import stability
+from hapstab.analysis.methods import boundary, critical_stiffness, methods_for
+from hapstab.analysis.passivity import PassivityResult, sampled_passivity
+from hapstab.analysis.positive_real import (
+    PositiveRealResult,
+    RationalMatrix,
+    circle_criterion,
+    positive_real,
+)
+from hapstab.analysis.regions import (
+    BestDampingResult,
+    RegionResult,
+    best_damping,
+    stability_region,
+)
+from hapstab.engine.system import SampledSystem, build
+from hapstab.errors import AnalysisError, HapstabError, ModelError
+from hapstab.models.controllers import DiscreteController, SpringDamper
+from hapstab.models.loops import HapticLoop, TeleoperationLoop
+from hapstab.models.parts import (
+    NO_IMPEDANCE,
+    Device,
+    Impedance,
+    mass_spring_damper,
+    parse_impedance,
+    spring,
+)
+from hapstab.paper.loops import paper_hve, paper_peb
+from hapstab.results import BoundaryResult, CriticalStiffnessResult, StabilityResult
+from hapstab.simulation import SimulationResult, critical_stiffness_simulation, simulate
 
 __version__ = "0.1.0"
 
@@ -29,4 +49,6 @@ __all__ = [
     "ModelError", "AnalysisError", "StabilityResult", "CriticalStiffnessResult", "BoundaryResult",
     "RationalMatrix", "positive_real", "circle_criterion", "PositiveRealResult", "circle_test",
     "loop_inverse", "sampled_passivity", "PassivityResult", "audit", "AuditResult",
+    "stability_region", "RegionResult", "best_damping", "BestDampingResult", "simulate",
+    "SimulationResult", "critical_stiffness_simulation",
 ]

@@ -78,7 +78,7 @@ class StabilityResult:
         })
 
     def plot(self, ax: Any = None) -> Any:
-        from .plotting import plot_poles
+        from hapstab.plotting import plot_poles
         return plot_poles(self, ax=ax)
 
 
@@ -157,5 +157,5 @@ class BoundaryResult:
             w.writerows(self.rows())
 
     def plot(self, ax: Any = None) -> Any:
-        from .plotting import plot_boundary
+        from hapstab.plotting import plot_boundary
         return plot_boundary(self, ax=ax)

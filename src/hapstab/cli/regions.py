@@ -6,8 +6,16 @@ from typing import Any
 
 import click
 
-from .cli import LOOP_KINDS, POS, REAL, cli, emit, fmt, loop_options, rich_table
-from .errors import HapstabError
+from hapstab.cli.options import (
+    LOOP_KINDS,
+    POS,
+    REAL,
+    emit,
+    fmt,
+    loop_options,
+    rich_table,
+)
+from hapstab.errors import HapstabError
 
 
 def _range(spec: str, name: str, signed: bool = False) -> tuple[float, float]:
@@ -54,8 +62,8 @@ def _region_command(kind: str) -> None:
                   help="Write every grid point: stiffness, virtual_damping, stable_exact, stable_grid.")
     def _cmd(K_spec: str, B_spec: str, resolution: int, overlays: str, plot_path: str | None,
              csv_path: str | None, as_json: bool, **kw: Any) -> None:
-        from .analysis import METHODS
-        from .regions import stability_region
+        from hapstab.analysis.methods import METHODS
+        from hapstab.analysis.regions import stability_region
 
         _equal_controllers(kw)
         K, B = _range(K_spec, "--K"), _range(B_spec, "--B", signed=True)
@@ -98,7 +106,7 @@ def _best_command(kind: str) -> None:
                   help="Smallest B to search, <= 0 (default: where K_max falls to 0 going "
                        "down; 0 searches B >= 0 only).")
     def _cmd(B_max: float | None, B_min: float | None, as_json: bool, **kw: Any) -> None:
-        from .regions import best_damping
+        from hapstab.analysis.regions import best_damping
 
         _equal_controllers(kw)
         if B_min is not None and B_min > 0:
@@ -114,12 +122,12 @@ def _best_command(kind: str) -> None:
     _cmd.__doc__ = f"The virtual damping B that maximises K_max of the {kind.upper()} loop."
 
 
-@cli.group()
+@click.group()
 def region() -> None:
     """Exact K-B stability region (stable set shaded, boundary by D-decomposition)."""
 
 
-@cli.group("best-damping")
+@click.group("best-damping")
 def best() -> None:
     """The virtual damping B* that maximises K_max, and K* = K_max(B*)."""
 

@@ -29,13 +29,14 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from .engine import build
-from .errors import AnalysisError, check_real
-from .crossings import analyse, winding
-from .exact import rigid_body_modes
-from .loopfreq import loop_response, stack_responses
-from .models import HapticLoop, SpringDamper, TeleoperationLoop
-from .results import jsonable
+from hapstab.analysis.exact.core import rigid_body_modes
+from hapstab.analysis.exact.crossings import analyse, winding
+from hapstab.engine.frequency import loop_response, stack_responses
+from hapstab.engine.system import build
+from hapstab.errors import AnalysisError, check_real
+from hapstab.models.controllers import SpringDamper
+from hapstab.models.loops import HapticLoop, TeleoperationLoop
+from hapstab.results import jsonable
 
 __all__ = ["stability_region", "best_damping", "RegionResult", "BestDampingResult",
            "d_decomposition"]
@@ -246,7 +247,7 @@ class RegionResult:
                                 int(self.stable_grid[i, j])])
 
     def plot(self, ax: Any = None) -> Any:
-        from .plotting import plot_region
+        from hapstab.plotting import plot_region
         return plot_region(self, ax=ax)
 
 
@@ -351,8 +352,8 @@ def stability_region(loop: Loop, K: tuple[float, float], B: tuple[float, float],
 
 
 def _overlay(loop: Loop, name: str, Bs: np.ndarray) -> np.ndarray:
-    from . import closed_forms
-    from .analysis import METHODS, critical_stiffness
+    from hapstab.analysis import closed_forms
+    from hapstab.analysis.methods import METHODS, critical_stiffness
 
     out = np.full(Bs.size, np.nan)
     if name == "paper":

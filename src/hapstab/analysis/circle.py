@@ -32,11 +32,17 @@ from typing import Any
 
 import numpy as np
 
-from .errors import AnalysisError
-from .frequency import psd_limit, refine_minimum, theta_grid
-from .models import HapticLoop, SpringDamper, TeleoperationLoop, whole_delay
-from .positive_real import PositiveRealResult, RationalMatrix, circle_criterion, positive_real
-from .results import CriticalStiffnessResult
+from hapstab.analysis.positive_real import (
+    PositiveRealResult,
+    RationalMatrix,
+    circle_criterion,
+    positive_real,
+)
+from hapstab.analysis.sweeps import psd_limit, refine_minimum, theta_grid
+from hapstab.errors import AnalysisError
+from hapstab.models.controllers import SpringDamper
+from hapstab.models.loops import HapticLoop, TeleoperationLoop, whole_delay
+from hapstab.results import CriticalStiffnessResult
 
 __all__ = ["APPROXIMATIONS", "loop_inverse", "port_scaling", "circle_test",
            "critical_stiffness_circle"]

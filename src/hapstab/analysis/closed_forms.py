@@ -11,9 +11,10 @@ from __future__ import annotations
 
 import math
 
-from .errors import AnalysisError
-from .models import HapticLoop, SpringDamper, TeleoperationLoop
-from .results import CriticalStiffnessResult
+from hapstab.errors import AnalysisError
+from hapstab.models.controllers import SpringDamper
+from hapstab.models.loops import HapticLoop, TeleoperationLoop
+from hapstab.results import CriticalStiffnessResult
 
 __all__ = ["colgate", "gil", "eq18", "eq29", "eq34", "gil2004", "CLOSED_FORMS"]
 

@@ -44,14 +44,14 @@ M. J. Cloud, *Introduction to Interval Analysis*, SIAM 2009, ch. 8.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from .discs import EPS_OP
-from .errors import AnalysisError
-from .loopfreq import LoopResponse
+from hapstab.engine.discs import EPS_OP
+from hapstab.engine.frequency import LoopResponse
+from hapstab.errors import AnalysisError
 
 __all__ = ["analyse", "winding", "U_LO", "U_HI"]
 

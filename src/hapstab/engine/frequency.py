@@ -41,11 +41,20 @@ from typing import Sequence
 
 import numpy as np
 
-from .discs import (Jet, base_jets, delay_jet, geometric_sum_jet, one_minus_delay_jet,
-                    poly_jet, zero)
-from .engine import expm_batched, port_matrices, split_delay, structure_of
-from .errors import AnalysisError
-from .models import HapticLoop, SpringDamper, TeleoperationLoop
+from hapstab.engine.discs import (
+    Jet,
+    base_jets,
+    delay_jet,
+    geometric_sum_jet,
+    one_minus_delay_jet,
+    poly_jet,
+    zero,
+)
+from hapstab.engine.structure import split_delay, structure_of
+from hapstab.engine.zoh import expm_batched, port_matrices
+from hapstab.errors import AnalysisError
+from hapstab.models.controllers import SpringDamper
+from hapstab.models.loops import HapticLoop, TeleoperationLoop
 
 __all__ = ["LoopResponse", "loop_response", "stack_responses"]
 

@@ -11,15 +11,23 @@ from typing import Any, Callable, Iterator
 
 import click
 
-from .cli import LOOP_KINDS, NONNEG, POS, Number, cli, emit, loop_options, parse_periods, rich_table
-
+from hapstab.cli.options import (
+    LOOP_KINDS,
+    NONNEG,
+    POS,
+    Number,
+    emit,
+    loop_options,
+    parse_periods,
+    rich_table,
+)
 
 # ------------------------------------------------------------------ simulate
 #: What ``stability`` describes beside a run: the loop itself, or its linearisation.
 LINEAR_LOOP = {False: "this loop",
                True: "linearised loop (wall always in contact, no saturation or quantisation)"}
 
-@cli.group("simulate")
+@click.group("simulate")
 def simulate_cmd() -> None:
     """Time-domain simulation of the sampled-data loop (exact between samples)."""
 
@@ -60,8 +68,8 @@ def _simulate_command(kind: str) -> None:
              csv_path: str | None, plot_path: str | None, as_json: bool,
              environment_force: str | None = None, wall: float | None = None,
              wall_pulls: bool = False, **kw: Any) -> None:
-        from .exact import stability
-        from .simulate import simulate
+        from hapstab.analysis.exact.core import stability
+        from hapstab.simulation.run import simulate
 
         loop = make(kw, stiffness)
         opts: dict[str, Any] = {}
@@ -144,7 +152,7 @@ def _progress(total: int, quiet: bool) -> Iterator[Callable[[int], None] | None]
         yield lambda k: prog.advance(task, k)
 
 
-@cli.command("reproduce")
+@click.command("reproduce")
 @click.argument("figure", type=click.Choice(["fig5", "fig6", "all"]))
 @click.option("--out", "out_dir", default="out", show_default=True, type=click.Path(file_okay=False),
               help="Directory for figN.png, figN.svg and figN.csv.")
@@ -155,7 +163,12 @@ def _progress(total: int, quiet: bool) -> Iterator[Callable[[int], None] | None]
 def reproduce_cmd(figure: str, out_dir: str, periods: str | None, as_json: bool) -> None:
     """Reproduce the paper's Fig. 5 (HVE) and/or Fig. 6 (PEB): theory lines, simulation
     stars, exact and circle-criterion boundaries; PNG, SVG and CSV files."""
-    from .reproduce import FIGURES, PAPER_PERIODS, reproduce_figure, write_figure
+    from hapstab.paper.reproduce import (
+        FIGURES,
+        PAPER_PERIODS,
+        reproduce_figure,
+        write_figure,
+    )
 
     T = parse_periods(periods) if periods else list(PAPER_PERIODS)
     names = list(FIGURES) if figure == "all" else [figure]

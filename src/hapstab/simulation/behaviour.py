@@ -33,7 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .growth import BoundednessVerdict
+from hapstab.simulation.growth import BoundednessVerdict
 
 __all__ = ["assess_nonlinear"]
 

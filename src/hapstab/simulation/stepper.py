@@ -30,9 +30,10 @@ from typing import Any, Callable
 
 import numpy as np
 
-from .engine import SampledSystem, discretize
-from .errors import ModelError
-from .models import HapticLoop, TeleoperationLoop
+from hapstab.engine.system import SampledSystem
+from hapstab.engine.zoh import discretize
+from hapstab.errors import ModelError
+from hapstab.models.loops import HapticLoop, TeleoperationLoop
 
 __all__ = ["Roles", "roles_of", "initial_state", "step_nonlinear", "dense_output"]
 

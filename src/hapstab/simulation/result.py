@@ -14,9 +14,9 @@ from typing import Any
 
 import numpy as np
 
-from .errors import AnalysisError
-from .growth import BoundednessVerdict
-from .results import jsonable
+from hapstab.errors import AnalysisError
+from hapstab.results import jsonable
+from hapstab.simulation.growth import BoundednessVerdict
 
 __all__ = ["SimulationResult"]
 
@@ -121,5 +121,5 @@ class SimulationResult:
 
     def plot(self, path: str | None = None) -> Any:
         """Position, controller force and port energy against time (matplotlib figure)."""
-        from .plotting import plot_simulation
+        from hapstab.plotting import plot_simulation
         return plot_simulation(self, path)

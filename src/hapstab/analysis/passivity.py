@@ -38,11 +38,12 @@ from typing import Any
 
 import numpy as np
 
-from .circle import port_scaling
-from .errors import AnalysisError
-from .frequency import min_eig, psd_limit, refine_minimum, theta_grid
-from .models import HapticLoop, SpringDamper, TeleoperationLoop, whole_delay
-from .results import CriticalStiffnessResult, jsonable
+from hapstab.analysis.circle import port_scaling
+from hapstab.analysis.sweeps import min_eig, psd_limit, refine_minimum, theta_grid
+from hapstab.errors import AnalysisError
+from hapstab.models.controllers import SpringDamper
+from hapstab.models.loops import HapticLoop, TeleoperationLoop, whole_delay
+from hapstab.results import CriticalStiffnessResult, jsonable
 
 __all__ = ["PassivityResult", "sampled_passivity", "critical_stiffness_passivity"]
 

@@ -10,18 +10,26 @@ from typing import Any
 
 import click
 
-from .cli import LOOP_KINDS, NONNEG, POS, cli, emit, fmt, loop_options, rich_table
-from .errors import HapstabError
+from hapstab.cli.options import (
+    LOOP_KINDS,
+    NONNEG,
+    POS,
+    emit,
+    fmt,
+    loop_options,
+    rich_table,
+)
+from hapstab.errors import HapstabError
 
 _APPROX = ("forward", "backward", "tustin")
 
 
-@cli.group("passivity")
+@click.group("passivity")
 def passivity_cmd() -> None:
     """Positive-real (circle criterion) or sampled-data passivity verdict at a stiffness."""
 
 
-@cli.group("audit")
+@click.group("audit")
 def audit_cmd() -> None:
     """The paper's closed forms beside the circle, passivity and exact results."""
 
@@ -43,7 +51,7 @@ def _passivity_command(kind: str) -> None:
              as_json: bool, **kw: Any) -> None:
         loop = make(kw, stiffness)
         if method == "circle":
-            from .circle import circle_test
+            from hapstab.analysis.circle import circle_test
 
             approx = approximation or "forward"
             if approx not in _APPROX:
@@ -51,7 +59,7 @@ def _passivity_command(kind: str) -> None:
             res = circle_test(loop, approx, sector)
             d = res.to_dict()
         elif method == "passivity":
-            from .passivity import sampled_passivity
+            from hapstab.analysis.passivity import sampled_passivity
 
             if approximation is not None or sector is not None:
                 raise HapstabError("--approximation/--sector: apply to --method circle only; "
@@ -80,7 +88,7 @@ def _audit_command(kind: str) -> None:
     @audit_cmd.command(kind)
     @loop_options(kind)
     def _cmd(as_json: bool, **kw: Any) -> None:
-        from .audit import audit
+        from hapstab.analysis.audit import audit
 
         res = audit(make(kw, 1.0))
         emit(res.to_dict(), as_json, lambda: _audit_table(res))

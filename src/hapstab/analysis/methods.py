@@ -1,32 +1,33 @@
 """Front door of the analyses: ``critical_stiffness(loop, method=...)`` and ``boundary``.
 
 A method is a function ``f(loop, **options) -> CriticalStiffnessResult`` over the
-same models; new methods register here by module path (imported on first use).
+same models; :data:`METHODS` is the one table of them.
 """
 
 from __future__ import annotations
 
-import importlib
 from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from .closed_forms import CLOSED_FORMS
-from .engine import build
-from .errors import AnalysisError, check_delay, check_period
-from .exact import exact_critical_stiffness, exact_kmax_batch
-from .models import HapticLoop, TeleoperationLoop
-from .results import BoundaryResult, CriticalStiffnessResult
+from hapstab.analysis.circle import critical_stiffness_circle
+from hapstab.analysis.closed_forms import CLOSED_FORMS
+from hapstab.analysis.exact.core import exact_critical_stiffness, exact_kmax_batch
+from hapstab.analysis.passivity import critical_stiffness_passivity
+from hapstab.errors import AnalysisError, check_delay, check_period
+from hapstab.models.loops import HapticLoop, TeleoperationLoop
+from hapstab.results import BoundaryResult, CriticalStiffnessResult
+from hapstab.simulation.run import critical_stiffness_simulation
 
 __all__ = ["critical_stiffness", "boundary", "METHODS", "methods_for"]
 
-#: method name -> callable or "module:function" (imported lazily)
-METHODS: dict[str, Callable[..., CriticalStiffnessResult] | str] = {
+#: method name -> function
+METHODS: dict[str, Callable[..., CriticalStiffnessResult]] = {
     "exact": exact_critical_stiffness,
     **CLOSED_FORMS,
-    "circle": "hapstab.circle:critical_stiffness_circle",
-    "passivity": "hapstab.passivity:critical_stiffness_passivity",
-    "simulation": "hapstab.simulate:critical_stiffness_simulation",
+    "circle": critical_stiffness_circle,
+    "passivity": critical_stiffness_passivity,
+    "simulation": critical_stiffness_simulation,
 }
 
 _HVE_ONLY = {"colgate", "gil", "eq18", "gil2004"}
@@ -42,12 +43,7 @@ def methods_for(kind: str) -> list[str]:
 def _resolve(method: str) -> Callable[..., CriticalStiffnessResult]:
     if method not in METHODS:
         raise AnalysisError(f"method = {method!r}: unknown; allowed: {', '.join(METHODS)}")
-    f = METHODS[method]
-    if isinstance(f, str):
-        mod, _, name = f.partition(":")
-        f = getattr(importlib.import_module(mod), name)
-        METHODS[method] = f
-    return f
+    return METHODS[method]
 
 
 def critical_stiffness(loop: HapticLoop | TeleoperationLoop, method: str = "exact",

@@ -17,11 +17,12 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from .crossings import analyse, winding
-from .engine import SampledSystem, build
-from .loopfreq import LoopResponse, loop_response
-from .models import HapticLoop, SpringDamper, TeleoperationLoop
-from .results import CriticalStiffnessResult, StabilityResult
+from hapstab.analysis.exact.crossings import analyse, winding
+from hapstab.engine.frequency import LoopResponse, loop_response
+from hapstab.engine.system import SampledSystem, build
+from hapstab.models.controllers import SpringDamper
+from hapstab.models.loops import HapticLoop, TeleoperationLoop
+from hapstab.results import CriticalStiffnessResult, StabilityResult
 
 __all__ = ["stability", "exact_critical_stiffness", "exact_kmax_batch", "rigid_body_modes",
            "spectral_radius"]

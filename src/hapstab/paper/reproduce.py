@@ -27,11 +27,11 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from .closed_forms import colgate, eq18, eq29, eq34
-from .errors import AnalysisError, HapstabError
-from .exact import exact_critical_stiffness
-from .models import paper_hve, paper_peb
-from .results import CriticalStiffnessResult, jsonable
+from hapstab.analysis.closed_forms import colgate, eq18, eq29, eq34
+from hapstab.analysis.exact.core import exact_critical_stiffness
+from hapstab.errors import AnalysisError, HapstabError
+from hapstab.paper.loops import paper_hve, paper_peb
+from hapstab.results import CriticalStiffnessResult, jsonable
 
 __all__ = ["FIGURES", "PAPER_PERIODS", "FigureSpec", "Reproduction", "reproduce_figure",
            "write_figure", "COLUMNS"]
@@ -92,12 +92,12 @@ class Reproduction:
 
 
 def _circle_available() -> bool:
-    from .analysis import METHODS
+    from hapstab.analysis.methods import METHODS
     return "circle" in METHODS
 
 
 def _circle(loop: Any) -> float:
-    from .analysis import critical_stiffness
+    from hapstab.analysis.methods import critical_stiffness
     try:
         return float(critical_stiffness(loop, method="circle").critical_stiffness)
     except (HapstabError, ImportError):   # the method may not apply or not be installed yet
@@ -128,7 +128,7 @@ def reproduce_figure(name: str, periods: Sequence[float] | None = None, *,
     AnalysisError
         Unknown figure name or invalid periods.
     """
-    from .simulate import critical_stiffness_simulation
+    from hapstab.simulation.run import critical_stiffness_simulation
 
     if name not in FIGURES:
         raise AnalysisError(f"figure = {name!r}: unknown; allowed: {', '.join(FIGURES)}")
@@ -169,7 +169,7 @@ def write_figure(rep: Reproduction, out_dir: str) -> list[str]:
     AnalysisError
         If ``out_dir`` cannot be created or written.
     """
-    from .plotting import plot_reproduction
+    from hapstab.plotting import plot_reproduction
 
     try:
         os.makedirs(out_dir, exist_ok=True)

@@ -26,9 +26,9 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from .errors import AnalysisError, ModelError, check_poly, check_real
-from .frequency import min_eig, refine_minimum, theta_grid
-from .results import jsonable
+from hapstab.analysis.sweeps import min_eig, refine_minimum, theta_grid
+from hapstab.errors import AnalysisError, ModelError, check_poly, check_real
+from hapstab.results import jsonable
 
 __all__ = ["RationalMatrix", "PositiveRealResult", "positive_real", "circle_criterion"]
 
@@ -242,7 +242,7 @@ class PositiveRealResult:
             "period_s": self.period})
 
     def plot(self, ax: Any = None) -> Any:
-        from .plotting import plot_positive_real
+        from hapstab.plotting import plot_positive_real
         return plot_positive_real(self, ax=ax)
 
 

@@ -15,13 +15,13 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
-from .circle import critical_stiffness_circle
-from .closed_forms import colgate, eq18, eq29, eq34, gil, gil2004
-from .errors import AnalysisError
-from .exact import exact_critical_stiffness, stability
-from .models import HapticLoop, TeleoperationLoop
-from .passivity import critical_stiffness_passivity
-from .results import jsonable
+from hapstab.analysis.circle import critical_stiffness_circle
+from hapstab.analysis.closed_forms import colgate, eq18, eq29, eq34, gil, gil2004
+from hapstab.analysis.exact.core import exact_critical_stiffness, stability
+from hapstab.analysis.passivity import critical_stiffness_passivity
+from hapstab.errors import AnalysisError
+from hapstab.models.loops import HapticLoop, TeleoperationLoop
+from hapstab.results import jsonable
 
 __all__ = ["AuditRow", "AuditResult", "audit"]
 

@@ -34,7 +34,7 @@ from typing import Any
 
 import numpy as np
 
-from .results import jsonable
+from hapstab.results import jsonable
 
 __all__ = ["BoundednessVerdict", "assess", "combine", "dmd_rate"]
 

@@ -44,15 +44,17 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from .engine import build, structure_of
-from .errors import AnalysisError, ModelError, check_real
-from .behaviour import assess_nonlinear
-from .engine import port_matrices
-from .growth import BoundednessVerdict, assess, combine
-from .models import HapticLoop, TeleoperationLoop
-from .results import CriticalStiffnessResult
-from .simresult import SimulationResult
-from .stepper import dense_output, initial_state as make_initial_state, roles_of, step_nonlinear
+from hapstab.engine.structure import structure_of
+from hapstab.engine.system import build
+from hapstab.engine.zoh import port_matrices
+from hapstab.errors import AnalysisError, ModelError, check_real
+from hapstab.models.loops import HapticLoop, TeleoperationLoop
+from hapstab.results import CriticalStiffnessResult
+from hapstab.simulation.behaviour import assess_nonlinear
+from hapstab.simulation.growth import BoundednessVerdict, assess, combine
+from hapstab.simulation.result import SimulationResult
+from hapstab.simulation.stepper import dense_output, roles_of, step_nonlinear
+from hapstab.simulation.stepper import initial_state as make_initial_state
 
 __all__ = ["simulate", "SimulationResult", "force_samples", "critical_stiffness_simulation",
            "propagate_linear"]

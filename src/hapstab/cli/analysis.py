@@ -1,0 +1,174 @@
+"""``hapstab kmax | check | boundary hve|peb`` and ``hapstab demo``."""
+
+from __future__ import annotations
+
+import json
+from typing import Any
+
+import click
+import numpy as np
+
+from hapstab.cli.options import (
+    LOOP_KINDS,
+    NONNEG,
+    emit,
+    fmt,
+    loop_options,
+    parse_delays,
+    parse_periods,
+    rich_table,
+)
+from hapstab.errors import HapstabError
+from hapstab.models.loops import HapticLoop
+
+
+@click.group()
+def kmax() -> None:
+    """Critical stiffness K_max: the largest K stable for every K in (0, K_max]."""
+
+
+@click.group()
+def check() -> None:
+    """Stability verdict at a given stiffness."""
+
+
+@click.group("boundary")
+def boundary_cmd() -> None:
+    """K_max over sampling periods and delays (Fig. 5 / Fig. 6 curves)."""
+
+
+def _kmax_command(kind: str) -> None:
+    make = LOOP_KINDS[kind]
+    from hapstab.analysis.methods import methods_for
+
+    @kmax.command(kind)
+    @loop_options(kind)
+    @click.option("--method", default="exact", show_default=True,
+                  help="exact | " + " | ".join(m for m in methods_for(kind) if m != "exact"))
+    @click.option("--approximation", default=None,
+                  help="For --method circle: forward | backward | tustin.")
+    def _cmd(method: str, approximation: str | None, as_json: bool, **kw: Any) -> None:
+        from hapstab.analysis.methods import critical_stiffness, methods_for
+
+        allowed = methods_for(kind)
+        if method not in allowed:
+            raise HapstabError(f"--method = {method!r}: unknown for {kind}; allowed: {', '.join(allowed)}")
+        loop = make(kw, stiffness=1.0)
+        if approximation and method != "circle":
+            raise HapstabError(f"--approximation = {approximation!r}: applies to --method circle only "
+                               f"(got --method {method})")
+        opts = {"approximation": approximation} if approximation else {}
+        res = critical_stiffness(loop, method=method, **opts)
+        rows = [("critical stiffness", f"{fmt(res.critical_stiffness)} N/m"),
+                ("method", res.method),
+                ("stable intervals", ", ".join(f"({fmt(a)}, {fmt(b)}]" for a, b in res.stable_intervals)
+                 or "none"),
+                ("crossing frequency", f"{res.crossing_frequency_hz:.6g} Hz"),
+                ("why", res.reason)]
+        emit(res.to_dict(), as_json, lambda: rich_table(f"K_max, {kind}", rows))
+
+    _cmd.__doc__ = f"K_max of the {kind.upper()} loop."
+
+
+def _check_command(kind: str) -> None:
+    make = LOOP_KINDS[kind]
+
+    @check.command(kind)
+    @loop_options(kind)
+    @click.option("--stiffness", "-K", type=NONNEG, required=True, help="K in N/m.")
+    def _cmd(stiffness: float, as_json: bool, **kw: Any) -> None:
+        from hapstab.analysis.exact.core import stability
+
+        res = stability(make(kw, stiffness))
+        d = res.to_dict()
+        d["stiffness"] = stiffness
+        rows = [("verdict", res.verdict), ("spectral radius", f"{res.spectral_radius:.12g}"),
+                ("dominant pole", f"{res.dominant_pole:.8g}"),
+                ("frequency", f"{res.frequency_hz:.6g} Hz"), ("why", res.reason)]
+        emit(d, as_json, lambda: rich_table(f"stability, {kind}, K = {stiffness:g} N/m", rows))
+
+    _cmd.__doc__ = f"Stability of the {kind.upper()} loop at stiffness K."
+
+
+
+def _boundary_command(kind: str) -> None:
+    make = LOOP_KINDS[kind]
+
+    @boundary_cmd.command(kind)
+    @loop_options(kind, ranges=True)
+    @click.option("--method", default="exact", show_default=True)
+    @click.option("--csv", "csv_path", type=click.Path(dir_okay=False), default=None,
+                  help="Also write the table as CSV.")
+    def _cmd(method: str, csv_path: str | None, as_json: bool, **kw: Any) -> None:
+        from hapstab.analysis.methods import boundary
+
+        periods, delays = parse_periods(kw["period"]), parse_delays(kw["delay"])
+        kw.update(period=periods[0], delay=delays[0])
+        res = boundary(make(kw, 1.0), periods, delays, method=method)
+        if csv_path:
+            res.to_csv(csv_path)
+        emit(res.to_dict(), as_json, lambda: _boundary_table(res))
+
+    _cmd.__doc__ = f"K_max of the {kind.upper()} loop over a range of periods and delays."
+
+
+def _boundary_table(res: Any) -> None:
+    from rich.console import Console
+    from rich.table import Table
+
+    t = Table(title=f"K_max (N/m), {res.loop_kind}, method {res.method}")
+    t.add_column("T (ms)", justify="right")
+    for n in res.delays:
+        t.add_column(f"n = {n}", justify="right")
+    for j, T in enumerate(res.periods):
+        t.add_row(f"{T * 1e3:.4g}", *[fmt(res.critical_stiffness[i, j]) for i in range(len(res.delays))])
+    Console().print(t)
+
+
+for _kind in LOOP_KINDS:
+    _kmax_command(_kind)
+    _check_command(_kind)
+    _boundary_command(_kind)
+
+
+@click.command()
+@click.option("--json", "as_json", is_flag=True)
+def demo(as_json: bool) -> None:
+    """The paper's Fig. 5 and Fig. 6 boundaries: exact K_max beside the paper's lines."""
+
+    from hapstab.analysis.closed_forms import eq18, eq29, eq34
+    from hapstab.analysis.methods import boundary
+    from hapstab.paper.loops import paper_hve, paper_peb
+
+    T = np.linspace(1e-3, 1e-2, 10)
+    figs = [("Fig. 5 (HVE)", paper_hve(), (0, 10), eq18), ("Fig. 6 (PEB)", paper_peb(), (0, 4), None)]
+    data: dict[str, Any] = {}
+    for title, loop, delays, _ in figs:
+        res = boundary(loop, T, delays)
+        rows = []
+        for i, n in enumerate(delays):
+            for j, t in enumerate(T):
+                lp = loop.replace(period=float(t), delay_samples=n)
+                if isinstance(lp, HapticLoop):
+                    theory, eq = eq18(lp).critical_stiffness, "(13)" if n == 0 else "(18)"
+                else:
+                    theory = (eq29(lp) if n == 0 else eq34(lp)).critical_stiffness
+                    eq = "(29)" if n == 0 else "(34)"
+                rows.append({"period_s": float(t), "delay_samples": n, "theory": theory,
+                             "equation": eq, "exact": float(res.critical_stiffness[i, j])})
+        data[title] = rows
+    if as_json:
+        click.echo(json.dumps(data))
+        return
+    from rich.console import Console
+    from rich.table import Table
+
+    con = Console()
+    for title, rows in data.items():
+        t = Table(title=f"{title}: K_max (N/m), paper's condition vs exact sampled-data loop")
+        for c in ("T (ms)", "n", "paper", "eq.", "exact", "exact/paper"):
+            t.add_column(c, justify="right")
+        for r in rows:
+            t.add_row(f"{r['period_s'] * 1e3:.0f}", str(r["delay_samples"]), f"{r['theory']:.6g}",
+                      r["equation"], f"{r['exact']:.6g}", f"{r['exact'] / r['theory']:.5f}")
+        con.print(t)

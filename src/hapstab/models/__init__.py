@@ -1,0 +1,23 @@
+"""What a user describes: devices, impedances, controllers and loops. Frozen,
+validated when built, SI units."""
+
+from hapstab.models.controllers import Controller, DiscreteController, SpringDamper
+from hapstab.models.loops import (
+                                  HapticLoop,
+                                  Loop,
+                                  TeleoperationLoop,
+                                  delay_from_seconds,
+                                  whole_delay,
+)
+from hapstab.models.parts import (
+                                  NO_IMPEDANCE,
+                                  Device,
+                                  Impedance,
+                                  mass_spring_damper,
+                                  parse_impedance,
+                                  spring,
+)
+
+__all__ = ["Device", "Impedance", "NO_IMPEDANCE", "spring", "mass_spring_damper",
+           "parse_impedance", "SpringDamper", "DiscreteController", "Controller", "HapticLoop",
+           "TeleoperationLoop", "Loop", "delay_from_seconds", "whole_delay"]

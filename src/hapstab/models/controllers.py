@@ -1,0 +1,85 @@
+"""The discrete controllers: the spring-damper of eq. (23) and any H(z).
+
+References
+----------
+N. Miandashti and M. Tavakoli, "Stability of Sampled-Data, Delayed Haptic
+Interaction and Teleoperation", IEEE Haptics Symposium 2014 (the paper).
+Equation and figure numbers below are the paper's.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from typing import Union
+
+import numpy as np
+
+from hapstab.errors import ModelError, check_real
+from hapstab.models.parts import _poly
+
+__all__ = ['SpringDamper', 'DiscreteController', 'Controller']
+
+
+# ----------------------------------------------------------------------- controllers
+@dataclass(frozen=True)
+class SpringDamper:
+    """Virtual spring-damper H(z) = K + B (z - 1) / (T z)  (eq. 23).
+
+    Parameters
+    ----------
+    stiffness : float
+        K in N/m, >= 0.
+    damping : float
+        Virtual damping B in N*s/m (backward difference): any finite real.
+        B < 0 is used in practice to cancel a device's own damping or friction;
+        it subtracts from the device's damping (Colgate-Schenkel's passivity
+        condition is b > KT/2 + |B|), and with |B| large enough the loop is
+        unstable for every K > 0, which the analyses report with a reason.
+
+    Raises
+    ------
+    ModelError
+        If K is negative or not finite, or B is not finite.
+    """
+
+    stiffness: float
+    damping: float = 0.0
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "stiffness", check_real("stiffness", self.stiffness, nonnegative=True))
+        object.__setattr__(self, "damping", check_real("virtual damping", self.damping))
+
+    def transfer(self, period: float) -> tuple[np.ndarray, np.ndarray]:
+        """(num, den) of H(z) in z, highest power first."""
+        K, B, T = self.stiffness, self.damping, period
+        return np.array([K * T + B, -B]) / T, np.array([1.0, 0.0])
+
+    def with_stiffness(self, K: float) -> "SpringDamper":
+        return dataclasses.replace(self, stiffness=K)
+
+
+@dataclass(frozen=True)
+class DiscreteController:
+    """Any proper discrete transfer function H(z) = num(z)/den(z) (highest power first).
+    It has no stiffness parameter, so :func:`critical_stiffness` does not apply."""
+
+    num: tuple[float, ...]
+    den: tuple[float, ...]
+
+    def __post_init__(self) -> None:
+        num, den = _poly("controller numerator", self.num), _poly("controller denominator", self.den)
+        if not np.any(den):
+            raise ModelError(f"controller denominator = {list(self.den)}: must not be zero")
+        if num.size > den.size:
+            raise ModelError(
+                f"controller = ({list(self.num)})/({list(self.den)}): must be proper "
+                "(numerator degree <= denominator degree)")
+        object.__setattr__(self, "num", tuple(map(float, num)))
+        object.__setattr__(self, "den", tuple(map(float, den)))
+
+    def transfer(self, period: float) -> tuple[np.ndarray, np.ndarray]:
+        return np.array(self.num), np.array(self.den)
+
+
+Controller = Union[SpringDamper, DiscreteController]

@@ -1,0 +1,252 @@
+"""The two loops of the paper: the HVE (Fig. 2a) and PEB teleoperation (Fig. 3).
+
+References
+----------
+N. Miandashti and M. Tavakoli, "Stability of Sampled-Data, Delayed Haptic
+Interaction and Teleoperation", IEEE Haptics Symposium 2014 (the paper).
+Equation and figure numbers below are the paper's.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from typing import Any, Union
+
+import numpy as np
+
+from hapstab.errors import (
+    AnalysisError,
+    ModelError,
+    check_delay,
+    check_period,
+    check_real,
+)
+from hapstab.models.controllers import Controller, DiscreteController, SpringDamper
+from hapstab.models.parts import Device, Impedance
+
+__all__ = ['HapticLoop', 'TeleoperationLoop', 'delay_from_seconds', 'whole_delay']
+
+
+def _check_fraction(name: str, value: Any) -> float:
+    v = check_real(name, value, nonnegative=True)
+    if not v < 1.0:
+        raise ModelError(f"{name} = {v}: must be in [0, 1) (the part of t_d/T beyond whole samples)")
+    return v
+
+
+def delay_from_seconds(name: str, seconds: Any, period: float) -> tuple[int, float]:
+    """Split a delay in seconds into whole samples and a fraction in [0, 1); a
+    fraction within 1e-9 of a whole sample snaps to it (t_d = nT is exactly integer)."""
+    t = check_real(name, seconds, nonnegative=True)
+    d = t / period
+    n = int(round(d))
+    if abs(d - n) <= 1e-9 * max(1.0, d):
+        return n, 0.0
+    n = int(np.floor(d))
+    return n, min(d - n, np.nextafter(1.0, 0.0))
+
+
+def _check_controller(name: str, c: Any) -> Controller:
+    if not isinstance(c, (SpringDamper, DiscreteController)):
+        raise ModelError(f"{name} = {c!r}: must be a SpringDamper or a DiscreteController")
+    return c
+
+
+# ----------------------------------------------------------------------------- loops
+@dataclass(frozen=True)
+class HapticLoop:
+    """Sampled-data haptic virtual environment (Fig. 2a).
+
+    The device position is sampled every ``period`` seconds, the virtual
+    environment H(z) is computed with ``delay_samples`` samples of delay
+    (t_d = n T) and its force is returned through a zero-order hold.
+
+    Parameters
+    ----------
+    device : Device
+    controller : SpringDamper or DiscreteController
+        H(z), eq. (23).
+    operator : Impedance, str or None
+        Z_h(s), rigidly attached to the handle. ``None`` means no operator.
+    period : float
+        Sampling period T in s, > 0.
+    delay_samples : int
+        n >= 0.
+    """
+
+    device: Device
+    controller: Controller
+    operator: Any = None
+    period: float = 1e-3
+    delay_samples: int = 0
+    fractional_delay: float = 0.0
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.device, Device):
+            raise ModelError(f"device = {self.device!r}: must be a Device")
+        _check_controller("controller", self.controller)
+        object.__setattr__(self, "operator", Impedance.from_any(self.operator, "operator"))
+        object.__setattr__(self, "period", check_period("period", self.period))
+        object.__setattr__(self, "delay_samples", check_delay("delay_samples", self.delay_samples))
+        object.__setattr__(self, "fractional_delay",
+                           _check_fraction("fractional_delay", self.fractional_delay))
+        if self.device.mass + self.operator.mass <= 0:
+            raise ModelError("operator mass: device mass plus operator mass must be > 0")
+
+    @property
+    def delay_in_samples(self) -> float:
+        """t_d / T = n + fractional_delay."""
+        return self.delay_samples + self.fractional_delay
+
+    @property
+    def delay_s(self) -> float:
+        """t_d = (n + fractional_delay) T in seconds."""
+        return self.delay_in_samples * self.period
+
+    def with_delay_s(self, seconds: float) -> "HapticLoop":
+        """The same loop with a delay of ``seconds`` (any t_d >= 0, not only n T)."""
+        n, f = delay_from_seconds("delay_s", seconds, self.period)
+        return dataclasses.replace(self, delay_samples=n, fractional_delay=f)
+
+    def with_stiffness(self, K: float) -> "HapticLoop":
+        if not isinstance(self.controller, SpringDamper):
+            raise ModelError("controller: a SpringDamper is needed to vary the stiffness")
+        return dataclasses.replace(self, controller=self.controller.with_stiffness(K))
+
+    def replace(self, **changes: Any) -> "HapticLoop":
+        return dataclasses.replace(self, **changes)
+
+
+@dataclass(frozen=True)
+class TeleoperationLoop:
+    """Sampled-data position-error-based bilateral teleoperation (Fig. 3, eq. 19-21).
+
+    F_m = C_m(z) [X_m - z^-n X_s],  F_s = C_s(z) [X_s - z^-n X_m]  (eq. 20).
+
+    Parameters
+    ----------
+    master, slave : Device
+    master_controller, slave_controller : SpringDamper or DiscreteController
+        C_m(z), C_s(z) (eq. 23); they may differ.
+    operator, environment : Impedance, str or None
+        Z_h(s) on the master, Z_e(s) on the slave.
+    period : float
+        T in s, > 0.
+    delay_samples : int
+        One-way delay n >= 0 in each direction.
+    """
+
+    master: Device
+    slave: Device
+    master_controller: Controller
+    slave_controller: Controller
+    operator: Any = None
+    environment: Any = None
+    period: float = 1e-3
+    delay_samples: int = 0
+    delay_backward_samples: int | None = None
+    fractional_delay: float = 0.0
+    fractional_delay_backward: float | None = None
+
+    def __post_init__(self) -> None:
+        for nm in ("master", "slave"):
+            if not isinstance(getattr(self, nm), Device):
+                raise ModelError(f"{nm} = {getattr(self, nm)!r}: must be a Device")
+        _check_controller("master_controller", self.master_controller)
+        _check_controller("slave_controller", self.slave_controller)
+        object.__setattr__(self, "operator", Impedance.from_any(self.operator, "operator"))
+        object.__setattr__(self, "environment", Impedance.from_any(self.environment, "environment"))
+        object.__setattr__(self, "period", check_period("period", self.period))
+        object.__setattr__(self, "delay_samples", check_delay("delay_samples", self.delay_samples))
+        object.__setattr__(self, "fractional_delay",
+                           _check_fraction("fractional_delay", self.fractional_delay))
+        if self.delay_backward_samples is not None:
+            object.__setattr__(self, "delay_backward_samples",
+                               check_delay("delay_backward_samples", self.delay_backward_samples))
+        if self.fractional_delay_backward is not None:
+            object.__setattr__(self, "fractional_delay_backward",
+                               _check_fraction("fractional_delay_backward",
+                                               self.fractional_delay_backward))
+        for dev, z, nm in ((self.master, self.operator, "operator"),
+                           (self.slave, self.environment, "environment")):
+            if dev.mass + z.mass <= 0:
+                raise ModelError(f"{nm} mass: device mass plus {nm} mass must be > 0")
+
+    @property
+    def forward_delay_in_samples(self) -> float:
+        """Master -> slave delay / T (the slave's controller sees x_m this late)."""
+        return self.delay_samples + self.fractional_delay
+
+    @property
+    def backward_delay_in_samples(self) -> float:
+        """Slave -> master delay / T (the master's controller sees x_s this late)."""
+        n = self.delay_samples if self.delay_backward_samples is None else self.delay_backward_samples
+        f = self.fractional_delay if self.fractional_delay_backward is None \
+            else self.fractional_delay_backward
+        return n + f
+
+    @property
+    def symmetric_delay(self) -> bool:
+        return self.forward_delay_in_samples == self.backward_delay_in_samples
+
+    @property
+    def delay_in_samples(self) -> float:
+        """The one-way delay / T when both directions are equal (else the forward one)."""
+        return self.forward_delay_in_samples
+
+    @property
+    def delay_s(self) -> float:
+        return self.forward_delay_in_samples * self.period
+
+    @property
+    def delay_backward_s(self) -> float:
+        return self.backward_delay_in_samples * self.period
+
+    def with_delays_s(self, forward_s: float, backward_s: float | None = None) -> "TeleoperationLoop":
+        """The same loop with master->slave and slave->master delays in seconds
+        (any values >= 0; ``backward_s`` defaults to ``forward_s``)."""
+        n, f = delay_from_seconds("delay_forward_s", forward_s, self.period)
+        if backward_s is None:
+            return dataclasses.replace(self, delay_samples=n, fractional_delay=f,
+                                       delay_backward_samples=None, fractional_delay_backward=None)
+        nb, fb = delay_from_seconds("delay_backward_s", backward_s, self.period)
+        return dataclasses.replace(self, delay_samples=n, fractional_delay=f,
+                                   delay_backward_samples=nb, fractional_delay_backward=fb)
+
+    def with_stiffness(self, K: float) -> "TeleoperationLoop":
+        """Master stiffness K; the slave's scales with it, keeping K_s/K_m (equal
+        stiffnesses, the paper's C_m = C_s case, stay equal)."""
+        for nm in ("master_controller", "slave_controller"):
+            if not isinstance(getattr(self, nm), SpringDamper):
+                raise ModelError(f"{nm}: a SpringDamper is needed to vary the stiffness")
+        km, ks = self.master_controller.stiffness, self.slave_controller.stiffness
+        if km == 0 and ks > 0:
+            raise AnalysisError("master_controller: stiffness 0 with a slave stiffness > 0 leaves "
+                                "K_s/K_m undefined; set the master's stiffness to vary K")
+        ratio = ks / km if km > 0 else 1.0
+        return dataclasses.replace(self, master_controller=self.master_controller.with_stiffness(K),
+                                   slave_controller=self.slave_controller.with_stiffness(K * ratio))
+
+    def replace(self, **changes: Any) -> "TeleoperationLoop":
+        return dataclasses.replace(self, **changes)
+
+
+Loop = Union[HapticLoop, TeleoperationLoop]
+
+
+def whole_delay(loop: "HapticLoop | TeleoperationLoop", what: str) -> int:
+    """The delay in whole samples (equal both ways for teleoperation), for methods
+    derived for t_d = nT only; otherwise an :class:`AnalysisError` naming ``what``."""
+    if isinstance(loop, TeleoperationLoop):
+        if not loop.symmetric_delay:
+            raise AnalysisError(f"{what}: derived for equal delays in both directions; this loop has "
+                                f"{loop.forward_delay_in_samples:g} and "
+                                f"{loop.backward_delay_in_samples:g} samples")
+        d = loop.forward_delay_in_samples
+    else:
+        d = loop.delay_in_samples
+    if d != int(d):
+        raise AnalysisError(f"{what}: derived for a whole number of samples of delay "
+                            f"(t_d = nT); this loop has t_d = {d:g} T")
+    return int(d)
