@@ -163,3 +163,39 @@ def test_delay_backward_alone_keeps_delay_for_the_other_side():
     a = json.loads(run("kmax", "peb", "--delay", "4", "--delay-backward", "4", "--json").stdout)
     b = json.loads(run("kmax", "peb", "--delay", "4", "--json").stdout)
     assert a["critical_stiffness"] == b["critical_stiffness"]
+
+
+# ------------------------------------------------ user errors vs bugs (issue #10, 6)
+def _break_stability(monkeypatch, exc):
+    import hapstab.cli.analysis as mod   # noqa: F401 - the command imports stability lazily
+    import hapstab.analysis.exact.core as core
+
+    def boom(*a, **k):
+        raise exc
+    monkeypatch.setattr(core, "stability", boom)
+
+
+@pytest.mark.parametrize("exc", [ValueError("shapes (3,) and (4,) not aligned"),
+                                 ZeroDivisionError("float division by zero"),
+                                 RuntimeError("oops")])
+def test_an_unexpected_exception_is_a_bug_exit_1_one_line(monkeypatch, exc):
+    _break_stability(monkeypatch, exc)
+    r = CliRunner().invoke(cli, ["check", "hve", "-K", "100"])
+    assert r.exit_code == 1
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("hapstab: internal error: ")
+    assert type(exc).__name__ in lines[0] and "please report" in lines[0]
+
+
+def test_debug_shows_the_traceback(monkeypatch):
+    _break_stability(monkeypatch, RuntimeError("oops"))
+    r = CliRunner().invoke(cli, ["--debug", "check", "hve", "-K", "100"])
+    assert r.exit_code == 1 and isinstance(r.exception, RuntimeError)
+
+
+@pytest.mark.parametrize("path", ["o.pgf", "o.xyz", "o"])
+def test_a_plot_format_hapstab_does_not_write_is_a_user_error(tmp_path, path):
+    r = CliRunner().invoke(cli, ["simulate", "hve", "-K", "9", "-t", "0.1",
+                                 "--plot", str(tmp_path / path)])
+    assert r.exit_code == 2 and "allowed: png" in r.stderr
+    assert not (tmp_path / path).exists()

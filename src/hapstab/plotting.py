@@ -19,6 +19,28 @@ def _axes(ax: Any) -> Any:
     return ax
 
 
+#: File formats a figure is written in: matplotlib's own writers, no external
+#: program (pgf needs LaTeX, which a user may not have)
+FORMATS = ("png", "svg", "svgz", "pdf", "eps", "ps", "jpg", "jpeg", "tif", "tiff", "webp")
+
+
+def save_figure(fig: Any, path: str, **kw: Any) -> None:
+    """Write ``fig`` to ``path`` in the format its extension names.
+
+    Raises
+    ------
+    ModelError
+        The extension is not one of :data:`FORMATS`.
+    """
+    from hapstab.errors import ModelError
+
+    ext = path.rsplit(".", 1)[-1].lower() if "." in path.rsplit("/", 1)[-1] else ""
+    if ext not in FORMATS:
+        raise ModelError(f"plot = {path!r}: the extension {ext or '(none)'!r} is not a format "
+                         f"hapstab writes; allowed: {', '.join(FORMATS)}")
+    fig.savefig(path, **kw)
+
+
 def _has_display() -> bool:
     import os
 
@@ -101,10 +123,12 @@ def plot_simulation(res: Any, path: str | None = None) -> Any:
         ax.legend(fontsize=8, loc="best")
     fig.tight_layout()
     if path:
-        fig.savefig(path)
         import matplotlib.pyplot as plt
 
-        plt.close(fig)
+        try:
+            save_figure(fig, path)
+        finally:
+            plt.close(fig)
         return None
     return fig
 
@@ -148,9 +172,11 @@ def plot_reproduction(rows: list[dict[str, Any]], title: str, equations: tuple[s
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=7, ncol=2)
     fig.tight_layout()
-    for p in paths:
-        fig.savefig(p)
-    plt.close(fig)
+    try:
+        for p in paths:
+            save_figure(fig, p)
+    finally:
+        plt.close(fig)
 
 
 def plot_positive_real(res: Any, ax: Any = None) -> Any:

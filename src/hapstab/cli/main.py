@@ -18,15 +18,23 @@ from hapstab.errors import HapstabError
 
 # ------------------------------------------------------------------ error handling
 class HapstabGroup(click.Group):
-    """A click group whose errors are one line on stderr and exit code 2."""
+    """A click group whose user errors are one line on stderr and exit code 2.
+
+    User errors are :class:`~hapstab.errors.HapstabError` (a value the library
+    refuses, with the parameter's name), click's own usage errors and file errors.
+    Anything else is a bug of hapstab's: one line asking for a report and exit
+    code 1; ``--debug`` shows the traceback instead.
+    """
 
     def main(self, args: Any = None, prog_name: str | None = None, complete_var: str | None = None,
              standalone_mode: bool = True, **extra: Any) -> Any:
+        argv = list(sys.argv[1:] if args is None else args)
         try:
-            # extreme inputs overflow inside numpy: say so once, as an error, not as warnings
+            # extreme inputs overflow inside numpy: the library says so once, as an
+            # error, not as warnings
             with np.errstate(all="ignore"), warnings.catch_warnings():
                 warnings.simplefilter("ignore", RuntimeWarning)
-                rv = super().main(args=args, prog_name=prog_name or "hapstab",
+                rv = super().main(args=argv, prog_name=prog_name or "hapstab",
                                   complete_var=complete_var, standalone_mode=False, **extra)
         except click.exceptions.ClickException as e:
             _fail(e.format_message())
@@ -36,14 +44,15 @@ class HapstabGroup(click.Group):
             _fail(f"cannot use {e.filename or 'the file'}: {e.strerror or e}")
         except MemoryError:
             _fail("out of memory: the model is too large for this machine")
-        except ValueError as e:          # a plot format matplotlib does not know, NaN from overflow
-            _fail(f"cannot do this: {e}")
-        except (ArithmeticError, np.linalg.LinAlgError) as e:
-            # parameters so extreme that the matrices overflow: the user's input, in one line
-            _fail(f"cannot compute this: {type(e).__name__}: {e} (check the values: they may be "
-                  "outside the range the model can represent)")
         except click.exceptions.Abort:
             click.echo("hapstab: aborted", err=True)
+            sys.exit(1)
+        except Exception as e:   # noqa: BLE001 - everything else is a bug, said as one
+            if "--debug" in argv:
+                raise
+            click.echo(f"hapstab: internal error: {type(e).__name__}: "
+                       f"{' '.join(str(e).split())[:300]} -- this is a bug in hapstab; please "
+                       "report it with the command line (--debug shows the traceback)", err=True)
             sys.exit(1)
         sys.exit(rv if isinstance(rv, int) else 0)
 
@@ -53,10 +62,11 @@ def _fail(msg: str) -> None:
     sys.exit(2)
 
 
-
 # ------------------------------------------------------------------------- commands
 @click.group(cls=HapstabGroup, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(package_name="hapstab")
+@click.option("--debug", is_flag=True, expose_value=False,
+              help="On an internal error, show the traceback.")
 def cli() -> None:
     """Exact stability and critical stiffness of sampled-data, delayed haptic (hve) and
     PEB teleoperation (peb) loops. Defaults are the paper's simulation study."""
