@@ -60,11 +60,15 @@ def test_passivity_exact_peb():
 
 def test_tables_print():
     # the readable tables carry the same verdicts as the JSON
-    for args, needle in ((("passivity", "peb", "-K", "3", "-n", "4"), "positive real"),
+    verdict = one_json(run("passivity", "peb", "-K", "3", "-n", "4", "--json"))["verdict"]
+    for args, needle in ((("passivity", "peb", "-K", "3", "-n", "4"), verdict),
                          (("audit", "hve", "-n", "10"), "eq. (18)"),
                          (("kmax", "peb", "--method", "passivity"), "20 N/m")):
         res = run(*args)
         assert res.exit_code == 0 and needle in res.stdout and not res.stderr
+    # "positive real" is also inside "not positive real": the table says which one
+    table = run("passivity", "peb", "-K", "3", "-n", "4").stdout
+    assert ("not positive real" in table) == (verdict == "not positive real")
 
 
 def test_audit_json():

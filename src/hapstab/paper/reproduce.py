@@ -91,11 +91,6 @@ class Reproduction:
         return max(errs, default=math.nan)
 
 
-def _circle_available() -> bool:
-    from hapstab.analysis.methods import METHODS
-    return "circle" in METHODS
-
-
 def _circle(loop: Any) -> float:
     from hapstab.analysis.methods import critical_stiffness
     try:
@@ -136,8 +131,7 @@ def reproduce_figure(name: str, periods: Sequence[float] | None = None, *,
     T = PAPER_PERIODS if periods is None else tuple(float(t) for t in periods)
     if not T or not all(math.isfinite(t) and t > 0 for t in T):
         raise AnalysisError(f"periods = {list(T)}: need at least one finite period > 0")
-    with_circle = _circle_available()
-    cols = COLUMNS + (("circle",) if with_circle else ())
+    cols = COLUMNS + ("circle",)
     rows = []
     for i, n in enumerate(spec.delays):
         for t in T:
@@ -147,8 +141,7 @@ def reproduce_figure(name: str, periods: Sequence[float] | None = None, *,
                    "exact": exact_critical_stiffness(loop).critical_stiffness,
                    "simulation": critical_stiffness_simulation(
                        loop, **(simulation_options or {})).critical_stiffness}
-            if with_circle:
-                row["circle"] = _circle(loop)
+            row["circle"] = _circle(loop)
             row["equation"] = spec.equations[i]
             rows.append(row)
             if progress:

@@ -24,8 +24,7 @@ from hapstab.models.controllers import SpringDamper
 from hapstab.models.loops import HapticLoop, TeleoperationLoop
 from hapstab.results import CriticalStiffnessResult, StabilityResult
 
-__all__ = ["stability", "exact_critical_stiffness", "exact_kmax_batch", "rigid_body_modes",
-           "spectral_radius"]
+__all__ = ["stability", "exact_critical_stiffness", "exact_kmax_batch", "rigid_body_modes"]
 
 #: A polished dominant pole with ||z| - 1| below this is on the circle to the
 #: accuracy of the discretised model (coefficients good to ~1e-14 relative; a
@@ -61,18 +60,6 @@ def rigid_body_modes(A0: np.ndarray, A1: np.ndarray) -> int:
     S = np.linalg.svd(np.vstack([np.eye(N) - A0, A1]), compute_uv=False)
     scale = max(1.0, float(S[0]))
     return int(np.sum(S < 1e-10 * scale))
-
-
-def spectral_radius(sysm: SampledSystem, K: np.ndarray | float) -> np.ndarray:
-    """Spectral radius of A(K) for each period (rigid-body modes excluded), from
-    the eigenvalues of the closed-loop matrix."""
-    A = sysm.closed_loop(K)
-    m = rigid_body_modes(sysm.A0[0], sysm.A1()[0]) if sysm.varies_with_K else 0
-    eigs = np.linalg.eigvals(A)
-    if m:
-        order = np.argsort(np.abs(eigs - 1.0), axis=-1)
-        eigs = np.take_along_axis(eigs, order[..., m:], axis=-1)
-    return np.abs(eigs).max(axis=-1)
 
 
 # ---------------------------------------------------------------------- stability
