@@ -50,11 +50,11 @@ from hapstab.engine.discs import (
     poly_jet,
     zero,
 )
-from hapstab.engine.structure import split_delay, structure_of
+from hapstab.engine.structure import structure_of
 from hapstab.engine.zoh import expm_batched, port_matrices
 from hapstab.errors import AnalysisError
 from hapstab.models.controllers import SpringDamper
-from hapstab.models.loops import HapticLoop, TeleoperationLoop
+from hapstab.models.loops import HapticLoop, TeleoperationLoop, split_delay
 
 __all__ = ["LoopResponse", "loop_response", "stack_responses"]
 

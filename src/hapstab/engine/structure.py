@@ -9,10 +9,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import numpy as np
-
 from hapstab.models.controllers import DiscreteController, SpringDamper
-from hapstab.models.loops import HapticLoop, TeleoperationLoop
+from hapstab.models.loops import HapticLoop, TeleoperationLoop, split_delay
 from hapstab.models.parts import Device, Impedance
 
 __all__ = ['Port', 'Channel', 'LoopStructure', 'structure_of', 'split_delay']
@@ -55,13 +53,3 @@ def structure_of(loop: HapticLoop | TeleoperationLoop) -> LoopStructure:
             (Channel(0, loop.master_controller, ((0, 1.0, 0.0), (1, -1.0, bwd))),   # eq. (20)
              Channel(1, loop.slave_controller, ((1, 1.0, 0.0), (0, -1.0, fwd)))))
     raise TypeError(f"not a loop: {loop!r}")
-
-
-def split_delay(d: float) -> tuple[int, float]:
-    """Whole and fractional part of a delay in samples; a fraction within 1e-9 of a
-    whole sample snaps to it, so t_d = nT gives exactly the integer-delay model."""
-    n = int(round(d))
-    if abs(d - n) <= 1e-9:
-        return n, 0.0
-    n = int(np.floor(d))
-    return n, float(d - n)

@@ -25,10 +25,10 @@ from typing import Sequence
 
 import numpy as np
 
-from hapstab.engine.structure import split_delay, structure_of
+from hapstab.engine.structure import structure_of
 from hapstab.engine.zoh import discretize, port_matrices
 from hapstab.models.controllers import DiscreteController, SpringDamper
-from hapstab.models.loops import HapticLoop, TeleoperationLoop
+from hapstab.models.loops import HapticLoop, TeleoperationLoop, split_delay
 
 __all__ = ['SampledSystem', 'build']
 

@@ -25,7 +25,7 @@ from hapstab.errors import (
 from hapstab.models.controllers import Controller, DiscreteController, SpringDamper
 from hapstab.models.parts import Device, Impedance
 
-__all__ = ['HapticLoop', 'TeleoperationLoop', 'delay_from_seconds', 'whole_delay']
+__all__ = ['split_delay', 'DELAY_SNAP', 'HapticLoop', 'TeleoperationLoop', 'delay_from_seconds', 'whole_delay']
 
 
 def _check_fraction(name: str, value: Any) -> float:
@@ -35,16 +35,38 @@ def _check_fraction(name: str, value: Any) -> float:
     return v
 
 
-def delay_from_seconds(name: str, seconds: Any, period: float) -> tuple[int, float]:
-    """Split a delay in seconds into whole samples and a fraction in [0, 1); a
-    fraction within 1e-9 of a whole sample snaps to it (t_d = nT is exactly integer)."""
-    t = check_real(name, seconds, nonnegative=True)
-    d = t / period
+#: A delay within this (relative to max(1, d)) of a whole number of samples is that
+#: whole number: t_d / T carries rounding of ~1e-16 d, and a billionth of a sample
+#: is far below any timing a device has. The one snap rule of hapstab.
+DELAY_SNAP = 1e-9
+
+
+def split_delay(d: float) -> tuple[int, float]:
+    """Whole samples and a fraction in [0, 1) of a delay of ``d`` samples.
+
+    Parameters
+    ----------
+    d : float
+        Delay in samples, >= 0.
+
+    Returns
+    -------
+    (int, float)
+        ``n`` and ``f`` with ``d = n + f``; ``f = 0`` when ``d`` is within
+        :data:`DELAY_SNAP` of a whole number (so t_d = nT gives exactly the
+        integer-delay model).
+    """
     n = int(round(d))
-    if abs(d - n) <= 1e-9 * max(1.0, d):
+    if abs(d - n) <= DELAY_SNAP * max(1.0, d):
         return n, 0.0
     n = int(np.floor(d))
-    return n, min(d - n, np.nextafter(1.0, 0.0))
+    return n, float(min(d - n, np.nextafter(1.0, 0.0)))
+
+
+def delay_from_seconds(name: str, seconds: Any, period: float) -> tuple[int, float]:
+    """Split a delay in seconds into whole samples and a fraction in [0, 1), by
+    the rule of :func:`split_delay`."""
+    return split_delay(check_real(name, seconds, nonnegative=True) / period)
 
 
 def _check_controller(name: str, c: Any) -> Controller:

@@ -19,7 +19,7 @@ import numpy as np
 
 from hapstab.analysis.exact.crossings import analyse, winding
 from hapstab.engine.frequency import LoopResponse, loop_response
-from hapstab.engine.system import SampledSystem, build
+from hapstab.engine.system import build
 from hapstab.models.controllers import SpringDamper
 from hapstab.models.loops import HapticLoop, TeleoperationLoop
 from hapstab.results import CriticalStiffnessResult, StabilityResult
