@@ -66,8 +66,12 @@ def test_a_bound_makes_growth_bounded_and_says_why():
 
 
 def test_drift_settled_exactly_and_overflow():
-    v = judge(0.01 * t)
+    v = judge(0.01 * t, can_drift=True)
     assert v.verdict == "marginal" and v.behaviour == "drifts"
+    # a steady one-way motion where every port has a spring is a slow creep, not a drift
+    assert judge(0.01 * t).verdict == "undecided"
+    # a slow exponential approach to rest is no drift either
+    assert judge(0.01 * np.exp(-t / 12), can_drift=True).verdict == "undecided"
     x = np.exp(-3 * t)
     x[6000:] = x[6000]
     v = judge(x)

@@ -143,8 +143,11 @@ def _check_linear(i: int) -> None:
         return
     if v.confidence in CONFIDENT:
         assert v.bounded == (rho < 1), f"{c.text}: rho = {rho:.12g}, got {v.verdict} ({v.confidence}): {v.reason}"
-    # the loops are exactly linear and the fit noise-free: every verdict is confident
-    assert v.confidence in CONFIDENT, f"{c.text}: rho = {rho:.12g}: {v.reason}"
+    # the loops are exactly linear and the fit noise-free: every verdict is confident,
+    # unless the force itself still grows at the end of the run (a sine slower than
+    # the run, started late, rises like a ramp), which the verdict must then say
+    assert v.confidence in CONFIDENT or "force itself keeps growing" in v.reason, \
+        f"{c.text}: rho = {rho:.12g}: {v.reason}"
 
 
 # --------------------------------------------------------------- nonlinear

@@ -158,3 +158,56 @@ def test_springs_rest_where_the_ports_start():
 def test_rest_position_is_checked():
     with pytest.raises(h.ModelError, match="rest_position"):
         simulate(h.paper_peb(), 0.1, rest_position=[0.0, 1.0, 2.0])
+
+
+# ------------------------------------- the independent review's reproducers
+@pytest.mark.parametrize("args", ["hve -n 100 -K 1 -t 0.068", "hve -n 200 -K 0.47 -t 0.1"])
+def test_a_run_too_short_for_its_fit_is_undecided(args):
+    # fewer snapshots than the state has entries: least squares fits anything
+    d = run_json(args.split())
+    assert d["linear_loop_verdict"] == "stable"
+    assert d["verdict"] == "undecided" and d["confidence"] == "low"
+    assert d["duration_hint_s"] > float(args.split()[-1])
+
+
+def test_a_short_quantised_run_of_an_unstable_loop_is_not_bounded_by_proof():
+    d = run_json("hve -n 20 -K 9.8 --resolution 1e-4 -t 0.022".split())
+    assert d["linear_loop_verdict"] == "unstable"
+    assert d["verdict"] != "bounded"
+
+
+@pytest.mark.parametrize("args", [
+    "hve -K 100 --wall 0 --force sine:1,0.15",                  # a slow force: an excursion
+    "hve -K 100 --wall 0 --x0 0.01 --rest 0 --force none -t 1",  # pushed out, still moving
+    "hve -K 300 --wall 0.001 --x0 0.0043343333 --force step:1 -t 60",   # levels off by 600 s
+])
+def test_slow_or_levelling_motion_is_not_confident_growth(args):
+    d = run_json(args.split())
+    assert not (d["verdict"] == "unbounded" and d["confidence"] in CONFIDENT), d["reason"]
+
+
+def test_slow_creep_is_not_a_drift_and_an_ulp_creep_has_settled():
+    d = run_json("hve -K 5 -B 60 --wall 0 --force step:1".split())
+    assert d["behaviour"] != "drifts"
+    d = run_json("hve -K 100 --operator none --wall 0 --x0 0.01 --force none -t 100".split())
+    assert d["verdict"] == "bounded" and d["behaviour"] == "settles"
+
+
+def test_quantisation_bound_needs_an_asymptotically_stable_loop():
+    # a free pair (rigid-body mode at z = 1) pushed by a step drifts away
+    d = run_json("peb -K 3 --operator none --environment none --resolution 1e-5".split())
+    assert d["linear_loop_verdict"] == "marginal"
+    assert d["verdict"] != "bounded" and d["basis"] != "bound"
+
+
+@pytest.mark.parametrize("sat", [None, 5.0])
+def test_a_growing_force_is_no_bounded_input(sat):
+    res = simulate(h.paper_hve(stiffness=100.0), 20.0, force=lambda t: 0.5 * t, saturation=sat)
+    v = res.verdict
+    assert v.confidence == "low" and "force itself keeps growing" in v.reason
+    assert v.basis != "bound"
+
+
+def test_a_slow_ring_down_is_not_called_a_limit_cycle():
+    d = run_json("hve -K 100 --wall 0.01 --force sine:1,0.08".split())
+    assert d["behaviour"] != "limit cycle"

@@ -38,9 +38,9 @@ from hapstab.simulation.growth import BoundednessVerdict
 __all__ = ["assess_nonlinear"]
 
 #: Motion below this fraction of the run's own peak-to-peak is rounding: settled.
-#: (positions carry ~1e-16 relative rounding per step; 1e-12 leaves room for its
-#: accumulation over 1e4 samples)
-SETTLED_REL = 1e-12
+#: (positions carry ~1e-16 relative rounding per step, and a free position out of
+#: contact creeps by an ulp per sample; 1e-9 leaves room for 1e7 samples of it)
+SETTLED_REL = 1e-9
 #: Cycles the window must hold before a flat envelope is named a limit cycle:
 #: one cycle compared with the next says little; eight show a trend of a few %.
 CYCLES_MIN = 8
@@ -54,6 +54,13 @@ CLEAR = 10.0
 MONOTONE = 0.75
 #: An envelope slope beyond this many standard errors is a trend, not scatter.
 TREND_SE = 3.0
+#: Without enough cycles, a rise by this factor over the window is a runaway (a slow
+#: excursion, one part of a cycle, changes its peak-to-peak by far less: x130 seen
+#: for a 0.15 Hz force on a 5 s run)
+RUNAWAY = 1e6
+#: A drift moves at least this fraction of the run's largest |x| per stretch (less
+#: is a creep of a few ulps per sample, not a motion)
+DRIFT_REL = 1e-6
 #: Stretches the window is cut into (whole cycles each when it oscillates).
 STRETCHES = 8
 
@@ -68,6 +75,8 @@ class Envelope:
     period_s: float | None
     window_s: float
     monotone: bool          # the busiest port moved one way only over the window
+    steps: np.ndarray       # (J,) its net displacement over each stretch, m
+    scale: float            # largest |x| of the run, m
 
     @property
     def ratio(self) -> float:
@@ -80,12 +89,14 @@ class Envelope:
         steps = a[1:] > a[:-1] if up else a[1:] < a[:-1]
         return float(np.mean(steps)) if steps.size else 0.0
 
-    def rate(self) -> tuple[float, float]:
-        """Least-squares slope of log amplitude against time (1/s) and its standard error."""
-        ok = self.amps > 0
+    def rate(self, part: slice = slice(None)) -> tuple[float, float]:
+        """Least-squares slope of log amplitude against time (1/s) and its standard
+        error, over all stretches or ``part`` of them."""
+        amps, centres = self.amps[part], self.centres[part]
+        ok = amps > 0
         if ok.sum() < 3:
             return 0.0, math.inf
-        t, y = self.centres[ok], np.log(self.amps[ok])
+        t, y = centres[ok], np.log(amps[ok])
         A = np.column_stack([t, np.ones_like(t)])
         coef, *_ = np.linalg.lstsq(A, y, rcond=None)
         res = y - A @ coef
@@ -94,7 +105,7 @@ class Envelope:
         return float(coef[0]), se
 
 
-def _envelope(X: np.ndarray, period: float) -> Envelope:
+def _envelope(X: np.ndarray, period: float, scale: float) -> Envelope:
     """Cut the window X (W+1, p) into stretches; whole cycles of its busiest port."""
     W = X.shape[0] - 1
     j = int(np.argmax(np.ptp(X, axis=0)))
@@ -110,7 +121,8 @@ def _envelope(X: np.ndarray, period: float) -> Envelope:
     centres = (cut[:-1] + cut[1:]) / 2 * period
     dy = np.diff(y)
     monotone = bool(np.any(dy)) and (bool(np.all(dy >= 0)) or bool(np.all(dy <= 0)))
-    return Envelope(amps, centres, cycles, P, W * period, monotone)
+    steps = np.array([X[b, j] - X[a, j] for a, b in zip(cut[:-1], cut[1:])])
+    return Envelope(amps, centres, cycles, P, W * period, monotone, steps, scale)
 
 
 def _verdict(verdict: str, behaviour: str, conf: str, basis: str, env: Envelope | None,
@@ -133,8 +145,8 @@ def _hint(env: Envelope, duration_s: float, linear_rate: float | None) -> float:
 
 
 def assess_nonlinear(states: np.ndarray, positions: np.ndarray, period: float, *,
-                     linear_rate: float | None = None,
-                     bound: str | None = None) -> BoundednessVerdict:
+                     linear_rate: float | None = None, bound: str | None = None,
+                     can_drift: bool = False) -> BoundednessVerdict:
     """Settles, limit cycle, grows, drifts or undecided: the verdict on a nonlinear run.
 
     Parameters
@@ -149,6 +161,9 @@ def assess_nonlinear(states: np.ndarray, positions: np.ndarray, period: float, *
         Growth rate of the linearised loop (1/s; > 0 if it is unstable).
     bound : str, optional
         Why the run cannot grow, if the model says so.
+    can_drift : bool
+        Whether some port has nothing pulling it back (no spring to ground), so a
+        steady drift is possible at all.
 
     Returns
     -------
@@ -165,8 +180,8 @@ def assess_nonlinear(states: np.ndarray, positions: np.ndarray, period: float, *
     done = _settled(S, X, W, period)
     if done is not None:
         return done
-    env = _envelope(X[-W - 1:], period)
-    return _classify(env, M * period, linear_rate, bound)
+    env = _envelope(X[-W - 1:], period, float(np.abs(X).max()))
+    return _classify(env, M * period, linear_rate, bound, can_drift)
 
 
 def _settled(S: np.ndarray, X: np.ndarray, W: int, period: float) -> BoundednessVerdict | None:
@@ -188,33 +203,76 @@ def _settled(S: np.ndarray, X: np.ndarray, W: int, period: float) -> Boundedness
 
 
 def _classify(env: Envelope, duration_s: float, linear_rate: float | None,
-              bound: str | None) -> BoundednessVerdict:
-    r, rate = env.ratio, env.rate()[0]
+              bound: str | None, can_drift: bool) -> BoundednessVerdict:
+    r = env.ratio
     span = f"the peak-to-peak position changed x{r:.3g} over the last {env.window_s:.4g} s"
+    if env.cycles < CYCLES_MIN:
+        return _slow(env, duration_s, linear_rate, bound, can_drift, span)
+    rate, se = env.rate()
     if r >= DECISIVE and env.fraction(up=True) >= MONOTONE:
-        if bound:
-            return _verdict("bounded", "undecided", "high", "bound", env,
-                            f"still growing ({span}), but bounded: {bound}; a longer run shows "
-                            "where it levels off", duration_hint_s=_hint(env, duration_s, None))
-        conf = "high" if r >= CLEAR else "medium"
-        return _verdict("unbounded", "grows", conf, "trajectory", env,
-                        f"the motion grows at {rate:.3g} 1/s: {span}")
+        return _growing(env, duration_s, bound, span)
     if r <= 1 / DECISIVE and env.fraction(up=False) >= MONOTONE:
         conf = "high" if r <= 1 / CLEAR else "medium"
         return _verdict("bounded", "settles", conf, "trajectory", env,
-                        f"the motion dies out at {rate:.3g} 1/s: {span}")
+                        f"the oscillation dies out at {rate:.3g} 1/s: {span}")
     flat = env.amps.max() <= FLAT * max(env.amps.min(), 1e-300)
-    rate, se = env.rate()
-    # a flat envelope that still rises steadily (every stretch above the last, the
-    # slope > 3 standard errors) may be a slow growth, not a cycle
+    # a flat envelope that still rises or falls steadily (every stretch beyond the
+    # last, the slope > 3 standard errors) is a slow trend, not yet a cycle
     rising = rate > TREND_SE * se and env.fraction(up=True) >= MONOTONE
-    if flat and env.cycles >= CYCLES_MIN and not rising:
+    falling = rate < -TREND_SE * se and env.fraction(up=False) >= MONOTONE
+    if flat and falling:
+        return _verdict("bounded", "settles", "low", "trajectory", env,
+                        f"the oscillation dies out slowly ({rate:.3g} 1/s: {span}); a longer run "
+                        "shows whether it stops or keeps a smaller cycle",
+                        duration_hint_s=_hint(env, duration_s, None))
+    if flat and not rising:
         return _limit_cycle(env, duration_s, linear_rate, bound, span)
-    if flat and env.monotone and not bound:
-        speed = float(env.amps.mean()) / (env.window_s / STRETCHES)
+    return _undecided(env, duration_s, linear_rate, bound, span)
+
+
+def _growing(env: Envelope, duration_s: float, bound: str | None,
+             span: str) -> BoundednessVerdict:
+    """An oscillation whose envelope rises: growth, unless it is levelling off (its
+    rate over the later stretches under half that over the earlier ones: a wall
+    that loses contact, a saturated actuator) or the model bounds it."""
+    rate = env.rate()[0]
+    half = env.amps.size // 2
+    early, late = env.rate(slice(0, half + 1))[0], env.rate(slice(half, None))[0]
+    hint = _hint(env, duration_s, None)
+    if bound:
+        return _verdict("bounded", "undecided", "high", "bound", env,
+                        f"still growing ({span}), but bounded: {bound}; a longer run shows "
+                        "where it levels off", duration_hint_s=hint)
+    if late < 0.5 * early:
+        return _verdict("undecided", "undecided", "low", "trajectory", env,
+                        f"the oscillation grew ({span}) but ever more slowly ({early:.3g} then "
+                        f"{late:.3g} 1/s): it may level off; try a run of about {hint:.3g} s",
+                        duration_hint_s=hint)
+    conf = "high" if env.ratio >= CLEAR else "medium"
+    return _verdict("unbounded", "grows", conf, "trajectory", env,
+                    f"the oscillation grows at {rate:.3g} 1/s: {span}")
+
+
+def _slow(env: Envelope, duration_s: float, linear_rate: float | None, bound: str | None,
+          can_drift: bool, span: str) -> BoundednessVerdict:
+    """Fewer than CYCLES_MIN cycles in the window: a slow excursion (a slow force,
+    a creep) looks like growth or decay over part of its own cycle, so only a
+    clear monotone decay settles, only an explosive rise grows, a constant speed
+    with nothing pulling back drifts; the rest is undecided."""
+    r = env.ratio
+    if r <= 1 / CLEAR and env.fraction(up=False) >= MONOTONE:
+        return _verdict("bounded", "settles", "medium", "trajectory", env,
+                        f"the motion dies out without oscillating: {span}")
+    if r >= RUNAWAY and env.fraction(up=True) >= MONOTONE and not bound:
+        return _verdict("unbounded", "grows", "medium", "trajectory", env,
+                        f"the motion runs away: {span}")
+    steps = np.abs(env.steps)
+    steady = env.monotone and steps.min() > 0 and steps.max() <= 1.05 * steps.min()
+    if can_drift and steady and steps.min() > DRIFT_REL * env.scale and not bound:
+        speed = float(steps.mean()) / (env.window_s / steps.size)
         return _verdict("marginal", "drifts", "medium", "trajectory", env,
-                        f"the position moves steadily one way at about {speed:.3g} m/s with "
-                        "nothing pulling it back: a drift, bounded in speed but not in position")
+                        f"the position moves one way at a steady {speed:.3g} m/s and a port has "
+                        "no spring to pull it back: a drift, bounded in speed, not in position")
     return _undecided(env, duration_s, linear_rate, bound, span)
 
 

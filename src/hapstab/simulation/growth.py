@@ -123,7 +123,8 @@ class BoundednessVerdict:
                          "fit_residual": self.fit_residual, "reason": self.reason})
 
 
-def dmd_rate(D: np.ndarray, U: np.ndarray | None = None) -> tuple[float, float]:
+def dmd_rate(D: np.ndarray, U: np.ndarray | None = None,
+             with_rank: bool = False) -> tuple[float, ...]:
     """Largest |eigenvalue| of the linear map fitted to snapshots, and the fit residual.
 
     Parameters
@@ -132,6 +133,8 @@ def dmd_rate(D: np.ndarray, U: np.ndarray | None = None) -> tuple[float, float]:
         Snapshots d[0..M-1] (here: state differences).
     U : (M, p) array, optional
         Inputs u[k] acting between d[k] and d[k+1] (DMDc).
+    with_rank : bool
+        Also return the numerical rank of the regression (snapshots and inputs).
 
     Returns
     -------
@@ -140,12 +143,14 @@ def dmd_rate(D: np.ndarray, U: np.ndarray | None = None) -> tuple[float, float]:
         (0 if the snapshots are all zero).
     residual : float
         ||X2 - G Omega|| / ||X2||.
+    rank : int
+        Only with ``with_rank``.
     """
     X1, X2 = D[:-1].T, D[1:].T
     scale = np.sqrt(np.mean(D * D, axis=0))          # similarity scaling: same eigenvalues
     keep = scale > 0
     if not keep.any() or X1.shape[1] < 2:
-        return 0.0, 0.0
+        return (0.0, 0.0, 0) if with_rank else (0.0, 0.0)
     X1, X2, scale = X1[keep] / scale[keep, None], X2[keep] / scale[keep, None], scale[keep]
     n = X1.shape[0]
     Om = X1
@@ -156,7 +161,7 @@ def dmd_rate(D: np.ndarray, U: np.ndarray | None = None) -> tuple[float, float]:
     Uo, So, Vo = np.linalg.svd(Om, full_matrices=False)
     r = int(np.sum(So > SVD_RTOL * So[0])) if So.size and So[0] > 0 else 0
     if r == 0:
-        return 0.0, 0.0
+        return (0.0, 0.0, 0) if with_rank else (0.0, 0.0)
     G = X2 @ Vo[:r].T @ np.diag(1.0 / So[:r]) @ Uo[:, :r].T   # [A_hat, B_hat]
     resid = float(np.linalg.norm(X2 - G @ Om) / max(np.linalg.norm(X2), 1e-300))
     A_hat = G[:, :n]
@@ -164,10 +169,11 @@ def dmd_rate(D: np.ndarray, U: np.ndarray | None = None) -> tuple[float, float]:
     U2, S2, _ = np.linalg.svd(X2, full_matrices=False)
     r2 = int(np.sum(S2 > SVD_RTOL * S2[0])) if S2.size and S2[0] > 0 else 0
     if r2 == 0:
-        return 0.0, resid
+        return (0.0, resid, r) if with_rank else (0.0, resid)
     Q = U2[:, :r2]
     ev = np.linalg.eigvals(Q.T @ A_hat @ Q)
-    return float(np.abs(ev).max()), resid
+    rho = float(np.abs(ev).max())
+    return (rho, resid, r) if with_rank else (rho, resid)
 
 
 def assess(states: np.ndarray, forces: np.ndarray | None, period: float,
@@ -218,7 +224,9 @@ def assess(states: np.ndarray, forces: np.ndarray | None, period: float,
     if np.abs(S).max() > EXPLODE * s0:
         return BoundednessVerdict("unbounded", math.inf, 0.0, "high", "observed", obs, 0.0,
                                   f"the state grew beyond {EXPLODE:.0e} times its initial size")
-    W = min(M, window or min(max(M // 2, 16), 1024))
+    # the last half, at most 1024 snapshots, or 4 per state entry when the state is
+    # larger (long delays): a fit needs several snapshots per unknown
+    W = min(M, window or min(max(M // 2, 16), max(1024, 4 * S.shape[1])))
     Dw = D[-W:]
     Uw = _input_snapshots(forces, M, differences)
     Uw = None if Uw is None else Uw[-W:]
@@ -227,6 +235,13 @@ def assess(states: np.ndarray, forces: np.ndarray | None, period: float,
         return BoundednessVerdict("bounded", -math.inf, 0.0, "high", "observed", obs, 0.0,
                                   f"the state is {what} over the last part of the run")
     return _fitted_verdict(Dw, Uw, period, obs)
+
+
+#: A fit is trusted only with at least this many snapshots per fitted dimension:
+#: with fewer, least squares matches any data exactly (residual ~1e-15) and its
+#: eigenvalues are noise (a 68-sample run of a loop with 100 delay states was
+#: "unbounded, high" at 13.7 1/s while it decays).
+SNAPSHOTS_PER_RANK = 3
 
 
 def _input_snapshots(forces: np.ndarray | None, M: int, differences: bool) -> np.ndarray | None:
@@ -247,7 +262,7 @@ def _fitted_verdict(Dw: np.ndarray, Uw: np.ndarray | None, period: float,
                     obs: float) -> BoundednessVerdict:
     """The DMD(c) rate of the window, its uncertainty from the two halves, the verdict."""
     W = Dw.shape[0]
-    rho, resid = dmd_rate(Dw, Uw)
+    rho, resid, rank = dmd_rate(Dw, Uw, with_rank=True)
     half = W // 2
     rates = []
     for sl in (slice(0, half), slice(half, W)):
@@ -259,7 +274,10 @@ def _fitted_verdict(Dw: np.ndarray, Uw: np.ndarray | None, period: float,
     # |lambda| is not resolved better than rounding (1e-12) nor than the fit itself:
     # a relative residual r leaves |lambda| uncertain by about r
     unc = max(unc, max(1e-12, resid) / period)
-    if not math.isfinite(rate):
+    short = W < SNAPSHOTS_PER_RANK * (rank + 1)
+    if short:
+        conf = "low"
+    elif not math.isfinite(rate):
         conf = "high"
     elif resid < 1e-6 and abs(rate) > 5 * unc:
         conf = "high"
@@ -273,7 +291,15 @@ def _fitted_verdict(Dw: np.ndarray, Uw: np.ndarray | None, period: float,
         verdict, what = "marginal", "neither grows nor decays (a pole on the unit circle)"
     reason = (f"fitted dominant mode {what}: rate {rate:.4g} 1/s (+-{unc:.2g}), linear-fit "
               f"residual {resid:.1e}; observed change over the run x{obs:.3g}")
-    return BoundednessVerdict(verdict, rate, unc, conf, "rate estimate", obs, resid, reason)
+    hint = None
+    if short:
+        verdict = "undecided"
+        need = 2 * SNAPSHOTS_PER_RANK * (rank + 1) * period      # the window is half the run
+        reason += (f"; but {W} snapshots are too few for a fit of rank {rank}: run at least "
+                   f"{need:.3g} s")
+        hint = need
+    return BoundednessVerdict(verdict, rate, unc, conf, "rate estimate", obs, resid, reason,
+                              duration_hint_s=hint)
 
 
 _CONF = ("low", "medium", "high")
@@ -311,6 +337,7 @@ def combine(parts: list[tuple[str, BoundednessVerdict]]) -> BoundednessVerdict:
     reason = "; ".join(f"{w}: {v.reason}" for w, v in moving)
     if top.verdict == "bounded":
         reason = "every motion decays, so the run stays bounded: " + reason
+    hints = [v.duration_hint_s for _, v in moving if v.duration_hint_s]
     return BoundednessVerdict(top.verdict, top.growth_rate, top.growth_rate_uncertainty, conf,
                               top.basis, top.observed_growth, max(v.fit_residual for _, v in moving),
-                              reason, judged_on=judged)
+                              reason, judged_on=judged, duration_hint_s=max(hints, default=None))

@@ -39,6 +39,7 @@ Section 5 (simulation study).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from typing import Any, Sequence
 
@@ -287,7 +288,9 @@ def simulate(loop: HapticLoop | TeleoperationLoop, duration: float, *,
     if not nl:
         verdict = _linear_verdict(roles, s0, Fd, S, T, sysm.labels)
     else:
-        verdict = _nonlinear_verdict(loop, roles, S, X, T, nl)
+        verdict = _nonlinear_verdict(loop, roles, S, X, T, nl, _force_grows(F))
+    if _force_grows(F):
+        verdict = _input_caveat(verdict)
     dt = dx = dv = None
     if dense >= 2 and np.all(np.isfinite(S)):
         dt, dx, dv = dense_output(sysm, S, Fd - U[:-1], T, dense)
@@ -395,28 +398,54 @@ def _linear_verdict(roles: Any, s0: np.ndarray, F: np.ndarray, S: np.ndarray, T:
     return combine(parts)
 
 
+def _force_grows(F: np.ndarray) -> bool:
+    """Whether the exogenous force still grows at the end of the run: its largest
+    size per tenth of the run rises in every tenth of the second half (a ramp, a
+    growing sine; not a step, a pulse or a sine, however late they start)."""
+    M = F.shape[0]
+    if M < 10 or not np.any(F):
+        return False
+    peaks = np.array([np.abs(F[a:b]).max() for a, b in
+                      zip(np.linspace(0, M, 11).astype(int)[:-1], np.linspace(0, M, 11).astype(int)[1:])])
+    return bool(np.all(np.diff(peaks[4:]) > 0))
+
+
+def _input_caveat(v: BoundednessVerdict) -> BoundednessVerdict:
+    """A verdict on a run whose force keeps growing: it speaks of the loop under a
+    bounded force, which this run is not, so it is not confident."""
+    return dataclasses.replace(
+        v, confidence="low",
+        reason=v.reason + "; NOTE: the force itself keeps growing over the run, and the "
+        "verdict is about the loop under a bounded force")
+
+
 def _nonlinear_verdict(loop: HapticLoop | TeleoperationLoop, roles: Any, S: np.ndarray,
-                       X: np.ndarray, T: float, nl: dict[str, Any]) -> BoundednessVerdict:
-    """Judge a nonlinear run on its envelope, told how fast the linearised loop grows
-    and whether the model bounds the run."""
+                       X: np.ndarray, T: float, nl: dict[str, Any],
+                       force_grows: bool) -> BoundednessVerdict:
+    """Judge a nonlinear run on its envelope, told how fast the linearised loop grows,
+    whether the model bounds the run, and whether a port can drift at all."""
     M = S.shape[0] - 1
     s_rand = np.random.default_rng(0).standard_normal(roles.A.shape[0])
-    lin = assess(propagate_linear(roles.A, roles.G, s_rand, None, M), None, T)
-    return assess_nonlinear(S, X, T, linear_rate=lin.growth_rate, bound=_bound(loop, nl, lin))
-
-
-def _bound(loop: HapticLoop | TeleoperationLoop, nl: dict[str, Any],
-           lin: BoundednessVerdict) -> str | None:
-    """Why the run cannot grow, when the model says so; else None."""
+    # on the states, not their differences: a mode at z = 1 (a rigid pair, a free
+    # device) is not "stable" for the bounds below
+    lin = assess(propagate_linear(roles.A, roles.G, s_rand, None, M), None, T, differences=False)
     ports = structure_of(loop).ports
+    can_drift = any(pt.termination.stiffness == 0 for pt in ports)
+    bound = None if force_grows else _bound(ports, nl, lin)
+    return assess_nonlinear(S, X, T, linear_rate=lin.growth_rate, bound=bound,
+                            can_drift=can_drift)
+
+
+def _bound(ports: Sequence[Any], nl: dict[str, Any], lin: BoundednessVerdict) -> str | None:
+    """Why the run cannot grow (under a bounded force), when the model says so; else None."""
     if "saturation" in nl and all(
             np.linalg.eigvals(port_matrices(pt)[0]).real.max() < 0 for pt in ports):
         return (f"the actuator force is limited to +-{nl['saturation']:g} N and every device "
                 "with its operator / environment is stable on its own")
     if set(nl) <= {"resolution", "quantizer"} and lin.bounded and lin.confidence == "high":
         return ("quantisation changes what the controller reads by less than one encoder step, "
-                "a bounded disturbance of the linear loop, which is stable (its free response "
-                f"decays at {lin.growth_rate:.3g} 1/s)")
+                "a bounded disturbance of the linear loop, which is asymptotically stable (its "
+                f"free response decays at {lin.growth_rate:.3g} 1/s)")
     return None
 
 
