@@ -16,7 +16,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from hapstab.analysis.circle import critical_stiffness_circle
-from hapstab.analysis.closed_forms import colgate, eq18, eq29, eq34, gil, gil2004
+from hapstab.analysis.closed_forms import closed_forms_for
 from hapstab.analysis.exact.core import exact_critical_stiffness, stability
 from hapstab.analysis.passivity import critical_stiffness_passivity
 from hapstab.errors import AnalysisError
@@ -28,14 +28,6 @@ __all__ = ["AuditRow", "AuditResult", "audit"]
 _REL = 1e-6  # K_max values agree to ~1e-9; a promise counts as broken beyond 1e-6 relative
 
 #: closed form -> (label, what it claims)
-_CLOSED = {
-    "hve": [("colgate", colgate, "eq. (1)/(13) Colgate-Schenkel", "passivity"),
-            ("gil", gil, "eq. (2) Gil et al.", "stability"),
-            ("eq18", eq18, "eq. (18)", "passivity"),
-            ("gil2004", gil2004, "Gil et al. 2004 (no operator)", "stability")],
-    "peb": [("eq29", eq29, "eq. (29)", "passivity"),
-            ("eq34", eq34, "eq. (34)", "passivity")],
-}
 
 
 @dataclass(frozen=True)
@@ -108,7 +100,6 @@ class AuditResult:
                          "flagged": list(self.flagged), "rows": [r.to_dict() for r in self.rows]})
 
 
-_NO_DELAY_ONLY = {"colgate", "eq29"}
 
 
 def _verdict(loop: Any, K: float) -> str:
@@ -144,7 +135,7 @@ def audit(loop: HapticLoop | TeleoperationLoop) -> AuditResult:
     """
     if not isinstance(loop, (HapticLoop, TeleoperationLoop)):
         raise AnalysisError(f"loop = {loop!r}: must be a HapticLoop or a TeleoperationLoop")
-    kind = "hve" if isinstance(loop, HapticLoop) else "peb"
+    kind = loop.kind
     passive = critical_stiffness_passivity(loop).critical_stiffness  # raises for non-SpringDamper
     exact_res = exact_critical_stiffness(loop)
     exact = exact_res.critical_stiffness
@@ -159,14 +150,14 @@ def audit(loop: HapticLoop | TeleoperationLoop) -> AuditResult:
         rows.append(AuditRow(key, label, float(K), claims, _verdict(loop, K),
                              "; ".join(flags) or None, note))
 
-    for key, f, label, claims in _CLOSED[kind]:
-        if key in _NO_DELAY_ONLY and loop.delay_samples != 0:
+    for c in closed_forms_for(kind):
+        if c.without_delay and loop.delay_samples != 0:
             continue  # derived without delay: not a candidate condition here
         try:
-            r = f(loop)
+            r = c.function(loop)
         except AnalysisError:
             continue  # not applicable to these parameters (e.g. C_m != C_s, operator attached)
-        add(key, label, r.critical_stiffness, claims, r.reason)
+        add(c.key, c.label, r.critical_stiffness, c.claims, r.reason)
     for a in ("forward", "backward", "tustin"):
         r = critical_stiffness_circle(loop, a)
         note = r.reason

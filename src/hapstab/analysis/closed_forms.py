@@ -10,13 +10,16 @@ exact analysis.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
+from typing import Any, Callable
 
 from hapstab.errors import AnalysisError
 from hapstab.models.controllers import SpringDamper
 from hapstab.models.loops import HapticLoop, TeleoperationLoop
 from hapstab.results import CriticalStiffnessResult
 
-__all__ = ["colgate", "gil", "eq18", "eq29", "eq34", "gil2004", "CLOSED_FORMS"]
+__all__ = ["colgate", "gil", "eq18", "eq29", "eq34", "gil2004", "CLOSED_FORMS", "TABLE",
+           "ClosedForm", "PAPER", "EQUATION", "closed_forms_for", "paper_condition"]
 
 
 def _hve(loop, name: str) -> tuple[float, float, float, float]:
@@ -232,5 +235,69 @@ def gil2004(loop: HapticLoop) -> CriticalStiffnessResult:
     return _result(K, "gil2004", f"Gil et al. 2004 exact K_cr (no operator, n = 0, B = 0){note}", loop)
 
 
-CLOSED_FORMS = {"colgate": colgate, "gil": gil, "eq18": eq18, "eq29": eq29, "eq34": eq34,
-                "gil2004": gil2004}
+@dataclass(frozen=True)
+class ClosedForm:
+    """One closed-form condition: what it applies to and what it claims.
+
+    Attributes
+    ----------
+    key : str
+        Method name (``critical_stiffness(loop, method=key)``).
+    function : callable
+        ``f(loop) -> CriticalStiffnessResult``.
+    kind : {"hve", "peb"}
+        The loop it was derived for.
+    label : str
+        Its source, for tables.
+    claims : {"passivity", "stability"}
+        What holding it promises.
+    without_delay : bool
+        Derived for n = 0 only (the paper's non-delayed condition).
+    """
+
+    key: str
+    function: Callable[[Any], CriticalStiffnessResult]
+    kind: str
+    label: str
+    claims: str
+    without_delay: bool = False
+
+
+#: Every closed form hapstab knows: the one table of which applies to which loop.
+TABLE: tuple[ClosedForm, ...] = (
+    ClosedForm("colgate", colgate, "hve", "eq. (1)/(13) Colgate-Schenkel", "passivity", True),
+    ClosedForm("gil", gil, "hve", "eq. (2) Gil et al.", "stability"),
+    ClosedForm("eq18", eq18, "hve", "eq. (18)", "passivity"),
+    ClosedForm("gil2004", gil2004, "hve", "Gil et al. 2004 (no operator)", "stability"),
+    ClosedForm("eq29", eq29, "peb", "eq. (29)", "passivity", True),
+    ClosedForm("eq34", eq34, "peb", "eq. (34)", "passivity"),
+)
+
+CLOSED_FORMS = {c.key: c.function for c in TABLE}
+
+#: The paper's own condition for each loop kind, without and with delay: the solid
+#: lines of Fig. 5 (eq. 13, 18) and Fig. 6 (eq. 29, 34).
+PAPER = {"hve": ("colgate", "eq18"), "peb": ("eq29", "eq34")}
+
+#: Equation numbers of the paper's conditions, for labels.
+EQUATION = {"colgate": "(13)", "eq18": "(18)", "eq29": "(29)", "eq34": "(34)"}
+
+
+def closed_forms_for(kind: str) -> tuple[ClosedForm, ...]:
+    """The closed forms derived for loops of ``kind`` ("hve" or "peb")."""
+    return tuple(c for c in TABLE if c.kind == kind)
+
+
+def paper_condition(loop: Any) -> ClosedForm:
+    """The paper's condition for ``loop``: eq. (13) / (29) without delay, (18) / (34) with.
+
+    Parameters
+    ----------
+    loop : HapticLoop or TeleoperationLoop
+
+    Returns
+    -------
+    ClosedForm
+    """
+    key = PAPER[loop.kind][0 if loop.delay_in_samples == 0 else 1]
+    return next(c for c in TABLE if c.key == key)

@@ -11,7 +11,7 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from hapstab.analysis.circle import critical_stiffness_circle
-from hapstab.analysis.closed_forms import CLOSED_FORMS
+from hapstab.analysis.closed_forms import CLOSED_FORMS, TABLE
 from hapstab.analysis.exact.core import exact_critical_stiffness, exact_kmax_batch
 from hapstab.analysis.passivity import critical_stiffness_passivity
 from hapstab.errors import AnalysisError, check_delay, check_period
@@ -30,13 +30,10 @@ METHODS: dict[str, Callable[..., CriticalStiffnessResult]] = {
     "simulation": critical_stiffness_simulation,
 }
 
-_HVE_ONLY = {"colgate", "gil", "eq18", "gil2004"}
-_PEB_ONLY = {"eq29", "eq34"}
-
-
 def methods_for(kind: str) -> list[str]:
-    """Method names that apply to ``kind`` ("hve" or "peb")."""
-    other = _PEB_ONLY if kind == "hve" else _HVE_ONLY
+    """Method names that apply to loops of ``kind`` ("hve" or "peb"): every method
+    but the closed forms derived for the other kind."""
+    other = {c.key for c in TABLE if c.kind != kind}
     return [m for m in METHODS if m not in other]
 
 
@@ -111,14 +108,11 @@ def boundary(loop: HapticLoop | TeleoperationLoop, periods: Sequence[float] | np
     out = np.empty((len(ns), T.size))
     for i, n in enumerate(ns):
         # the grid's delay replaces the template's, in both directions, whole samples
-        tmpl = loop.replace(delay_samples=n, period=float(T[0]), fractional_delay=0.0)
-        if isinstance(tmpl, TeleoperationLoop):
-            tmpl = tmpl.replace(delay_backward_samples=None, fractional_delay_backward=None)
+        tmpl = loop.with_whole_delay(n, float(T[0]))
         if method == "exact":
             res = exact_kmax_batch(tmpl, T, intervals=False)
             out[i] = [r["kmax"] for r in res]
         else:
             f = _resolve(method)
             out[i] = [f(tmpl.replace(period=float(t)), **options).critical_stiffness for t in T]
-    kind = "hve" if isinstance(loop, HapticLoop) else "peb"
-    return BoundaryResult(T, np.array(ns), out, method, kind)
+    return BoundaryResult(T, np.array(ns), out, method, loop.kind)

@@ -32,6 +32,7 @@ import numpy as np
 from hapstab.analysis.exact.core import rigid_body_modes
 from hapstab.analysis.exact.crossings import analyse, winding
 from hapstab.engine.frequency import loop_response, stack_responses
+from hapstab.engine.structure import structure_of
 from hapstab.engine.system import build
 from hapstab.errors import AnalysisError, check_real
 from hapstab.models.controllers import SpringDamper
@@ -47,24 +48,18 @@ Loop = HapticLoop | TeleoperationLoop
 # ------------------------------------------------------------------------ helpers
 def _check(loop: Loop) -> float:
     """Validate the region's assumptions; return the reference damping b."""
-    if isinstance(loop, HapticLoop):
-        if not isinstance(loop.controller, SpringDamper):
-            raise AnalysisError("controller: a K-B region needs a SpringDamper virtual environment")
-        return loop.device.damping
-    cm, cs = loop.master_controller, loop.slave_controller
-    if not (isinstance(cm, SpringDamper) and isinstance(cs, SpringDamper)):
-        raise AnalysisError("controllers: a K-B region needs SpringDamper controllers")
-    if cm != cs:
+    cs = loop.controllers
+    if not all(isinstance(c, SpringDamper) for c in cs):
+        raise AnalysisError("controller: a K-B region needs SpringDamper controllers (a "
+                            "SpringDamper virtual environment)")
+    if any(c != cs[0] for c in cs):
         raise AnalysisError("controllers: a K-B region is drawn for C_m = C_s (equal K and B)")
-    return min(loop.master.damping, loop.slave.damping)
+    return min(pt.device.damping for pt in structure_of(loop).ports)
 
 
 def with_gains(loop: Loop, K: float, B: float) -> Loop:
     """The loop with stiffness K and virtual damping B on every controller."""
-    c = SpringDamper(K, B)
-    if isinstance(loop, HapticLoop):
-        return loop.replace(controller=c)
-    return loop.replace(master_controller=c, slave_controller=c)
+    return loop.with_controllers(SpringDamper(K, B))
 
 
 def _unit_loop(loop: Loop) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -346,8 +341,7 @@ def stability_region(loop: Loop, K: tuple[float, float], B: tuple[float, float],
     ov: dict[str, np.ndarray] = {}
     for name in overlays:
         ov[name] = _overlay(loop, name, Brows)
-    kind = "hve" if isinstance(loop, HapticLoop) else "peb"
-    return RegionResult(kind, loop.period, loop.delay_in_samples, (K_lo, K_hi), (B_lo, B_hi), Brows,
+    return RegionResult(loop.kind, loop.period, loop.delay_in_samples, (K_lo, K_hi), (B_lo, B_hi), Brows,
                         intervals, d_decomposition(loop), Kg, exact, grid, agreement, ov, bad)
 
 
@@ -357,11 +351,7 @@ def _overlay(loop: Loop, name: str, Bs: np.ndarray) -> np.ndarray:
 
     out = np.full(Bs.size, np.nan)
     if name == "paper":
-        n = loop.delay_in_samples
-        if isinstance(loop, HapticLoop):
-            f = closed_forms.colgate if n == 0 else closed_forms.eq18
-        else:
-            f = closed_forms.eq29 if n == 0 else closed_forms.eq34
+        f = closed_forms.paper_condition(loop).function
         try:
             return np.array([f(with_gains(loop, 1.0, B)).critical_stiffness for B in Bs])
         except AnalysisError:

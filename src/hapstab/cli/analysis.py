@@ -19,7 +19,6 @@ from hapstab.cli.options import (
     rich_table,
 )
 from hapstab.errors import HapstabError
-from hapstab.models.loops import HapticLoop
 
 
 @click.group()
@@ -136,24 +135,21 @@ for _kind in LOOP_KINDS:
 def demo(as_json: bool) -> None:
     """The paper's Fig. 5 and Fig. 6 boundaries: exact K_max beside the paper's lines."""
 
-    from hapstab.analysis.closed_forms import eq18, eq29, eq34
+    from hapstab.analysis.closed_forms import EQUATION, paper_condition
     from hapstab.analysis.methods import boundary
     from hapstab.paper.loops import paper_hve, paper_peb
 
     T = np.linspace(1e-3, 1e-2, 10)
-    figs = [("Fig. 5 (HVE)", paper_hve(), (0, 10), eq18), ("Fig. 6 (PEB)", paper_peb(), (0, 4), None)]
+    figs = [("Fig. 5 (HVE)", paper_hve(), (0, 10)), ("Fig. 6 (PEB)", paper_peb(), (0, 4))]
     data: dict[str, Any] = {}
-    for title, loop, delays, _ in figs:
+    for title, loop, delays in figs:
         res = boundary(loop, T, delays)
         rows = []
         for i, n in enumerate(delays):
             for j, t in enumerate(T):
                 lp = loop.replace(period=float(t), delay_samples=n)
-                if isinstance(lp, HapticLoop):
-                    theory, eq = eq18(lp).critical_stiffness, "(13)" if n == 0 else "(18)"
-                else:
-                    theory = (eq29(lp) if n == 0 else eq34(lp)).critical_stiffness
-                    eq = "(29)" if n == 0 else "(34)"
+                c = paper_condition(lp)
+                theory, eq = c.function(lp).critical_stiffness, EQUATION[c.key]
                 rows.append({"period_s": float(t), "delay_samples": n, "theory": theory,
                              "equation": eq, "exact": float(res.critical_stiffness[i, j])})
         data[title] = rows

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
-from typing import Any, Union
+from typing import Any, ClassVar, Union
 
 import numpy as np
 
@@ -139,6 +139,23 @@ class HapticLoop:
     def replace(self, **changes: Any) -> "HapticLoop":
         return dataclasses.replace(self, **changes)
 
+    #: The loop's kind, as the CLI names it.
+    kind: ClassVar[str] = "hve"
+
+    @property
+    def controllers(self) -> tuple[Controller, ...]:
+        """The controller of each port (one: the virtual environment)."""
+        return (self.controller,)
+
+    def with_controllers(self, controller: Controller) -> "HapticLoop":
+        """The same loop with ``controller`` on every port."""
+        return dataclasses.replace(self, controller=controller)
+
+    def with_whole_delay(self, n: int, period: float | None = None) -> "HapticLoop":
+        """The same loop with a delay of ``n`` whole samples (and period ``period``)."""
+        return dataclasses.replace(self, delay_samples=n, fractional_delay=0.0,
+                                   period=self.period if period is None else period)
+
 
 @dataclass(frozen=True)
 class TeleoperationLoop:
@@ -252,6 +269,25 @@ class TeleoperationLoop:
 
     def replace(self, **changes: Any) -> "TeleoperationLoop":
         return dataclasses.replace(self, **changes)
+
+    #: The loop's kind, as the CLI names it.
+    kind: ClassVar[str] = "peb"
+
+    @property
+    def controllers(self) -> tuple[Controller, ...]:
+        """The controller of each port: master, slave."""
+        return (self.master_controller, self.slave_controller)
+
+    def with_controllers(self, controller: Controller) -> "TeleoperationLoop":
+        """The same loop with ``controller`` on every port (C_m = C_s)."""
+        return dataclasses.replace(self, master_controller=controller, slave_controller=controller)
+
+    def with_whole_delay(self, n: int, period: float | None = None) -> "TeleoperationLoop":
+        """The same loop with ``n`` whole samples of delay in both directions (and
+        period ``period``)."""
+        return dataclasses.replace(self, delay_samples=n, fractional_delay=0.0,
+                                   delay_backward_samples=None, fractional_delay_backward=None,
+                                   period=self.period if period is None else period)
 
 
 Loop = Union[HapticLoop, TeleoperationLoop]

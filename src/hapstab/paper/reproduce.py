@@ -27,11 +27,11 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from hapstab.analysis.closed_forms import colgate, eq18, eq29, eq34
+from hapstab.analysis.closed_forms import EQUATION, PAPER, paper_condition
 from hapstab.analysis.exact.core import exact_critical_stiffness
 from hapstab.errors import AnalysisError, HapstabError
 from hapstab.paper.loops import paper_hve, paper_peb
-from hapstab.results import CriticalStiffnessResult, jsonable
+from hapstab.results import jsonable
 
 __all__ = ["FIGURES", "PAPER_PERIODS", "FigureSpec", "Reproduction", "reproduce_figure",
            "write_figure", "COLUMNS"]
@@ -50,15 +50,19 @@ class FigureSpec:
     title: str
     make: Callable[..., Any]
     delays: tuple[int, int]
-    theory: tuple[Callable[[Any], CriticalStiffnessResult], Callable[[Any], CriticalStiffnessResult]]
-    equations: tuple[str, str]
+
+    @property
+    def equations(self) -> tuple[str, ...]:
+        """The paper's equation for each delay (closed_forms.PAPER)."""
+        keys = PAPER[self.make().kind]
+        return tuple(EQUATION[keys[0 if n == 0 else 1]] for n in self.delays)
 
 
 FIGURES: dict[str, FigureSpec] = {
     "fig5": FigureSpec("fig5", "Fig. 5: HVE, m = 0.15 kg, b = 0.1 Ns/m, operator 1/s, B = 0",
-                       paper_hve, (0, 10), (colgate, eq18), ("(13)", "(18)")),
+                       paper_hve, (0, 10)),
     "fig6": FigureSpec("fig6", "Fig. 6: PEB, m = 0.015 kg, b = 0.02 Ns/m, terminations 1/s, B = 0",
-                       paper_peb, (0, 4), (eq29, eq34), ("(29)", "(34)")),
+                       paper_peb, (0, 4)),
 }
 
 
@@ -137,12 +141,12 @@ def reproduce_figure(name: str, periods: Sequence[float] | None = None, *,
         for t in T:
             loop = spec.make(t, n, 1.0)
             row = {"period_s": t, "delay_samples": n,
-                   "theory": spec.theory[i](loop).critical_stiffness,
+                   "theory": paper_condition(loop).function(loop).critical_stiffness,
                    "exact": exact_critical_stiffness(loop).critical_stiffness,
                    "simulation": critical_stiffness_simulation(
                        loop, **(simulation_options or {})).critical_stiffness}
             row["circle"] = _circle(loop)
-            row["equation"] = spec.equations[i]
+            row["equation"] = EQUATION[paper_condition(loop).key]
             rows.append(row)
             if progress:
                 progress(1)

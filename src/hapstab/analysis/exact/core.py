@@ -64,8 +64,7 @@ def rigid_body_modes(A0: np.ndarray, A1: np.ndarray) -> int:
 
 # ---------------------------------------------------------------------- stability
 def _spring_dampers(loop: HapticLoop | TeleoperationLoop) -> bool:
-    cs = [loop.controller] if isinstance(loop, HapticLoop) else \
-        [loop.master_controller, loop.slave_controller]
+    cs = loop.controllers
     if not all(isinstance(c, SpringDamper) for c in cs):
         return False
     return not (cs[0].stiffness == 0 and any(c.stiffness > 0 for c in cs))
