@@ -32,6 +32,7 @@ from click.testing import CliRunner
 import hapstab as h
 from hapstab.cli.main import cli
 from references import brute, campaign
+from reference_data import ref
 
 #: the default subset: scenario indices 0..299, long delays folded to <= 20 samples
 DEFAULT = [campaign.scenario(i, max_delay=20) for i in range(300)]
@@ -97,7 +98,8 @@ def test_reference_reproduces_known_values():
     # the paper's delayed HVE (README: 9.536097554689, also checked against a 40-digit
     # mpmath solution in test_exact.py), to the scan's 1e-10 bisection
     s = brute.stable_intervals(brute.hve_loop(0.15, 0.1, 1e-3, 10, 0.0, "spring:1"))
-    assert s.kmax == pytest.approx(9.536097554689, rel=1e-9)
+    v, rel = ref("paper_hve_n10_kmax")
+    assert s.kmax == pytest.approx(v, rel=rel)
     # the operator-free device without delay, B = 0: Colgate's b > K T/2, which the
     # exact limit approaches to O(bT/m) = 7e-5 relative here (1e-3 leaves margin)
     s = brute.stable_intervals(brute.hve_loop(0.15, 0.01, 1e-3, 0))
@@ -110,15 +112,17 @@ def test_issue8_true_values_by_brute_force():
     peb30, unequal, free = (s.brute_loop() for s in campaign.ISSUE_8)
     s1 = brute.stable_intervals(peb30)
     # stable set (0, 19.4668] U (279.158, 1295.01]: the issue's "(288, 1295]" is 279.158
-    assert [len(s1.intervals), s1.kmax] == [2, pytest.approx(19.4668, rel=1e-5)]
-    assert s1.intervals[1] == (pytest.approx(279.1575, rel=1e-6), pytest.approx(1295.0125, rel=1e-6))
+    ivs, rel = ref("issue8_peb30_intervals")
+    assert [len(s1.intervals), s1.kmax] == [2, pytest.approx(ivs[0][1], rel=rel)]
+    assert s1.intervals[1] == (pytest.approx(ivs[1][0], rel=rel), pytest.approx(ivs[1][1], rel=rel))
     s2 = brute.stable_intervals(unequal)
-    assert s2.kmax == pytest.approx(2.84221, rel=1e-5)
+    assert s2.kmax == pytest.approx(ref("issue8_unequal_kmax")[0], rel=ref("issue8_unequal_kmax")[1])
     assert [(round(a, 1), round(b, 2)) for a, b in s2.intervals] == [
         (0.0, 2.84), (15.6, 45.69), (127.3, 191.45)]
-    assert brute.stable_intervals(free).kmax == pytest.approx(1.0810478, rel=1e-7)
+    k_free, rel = ref("issue8_free_kmax")
+    assert brute.stable_intervals(free).kmax == pytest.approx(k_free, rel=rel)
     # each boundary is a flip for the 50-digit referee at K (1 -+ 1e-6)
-    for L, K in ((peb30, s1.kmax), (unequal, s2.kmax), (free, 1.0810478172782)):
+    for L, K in ((peb30, s1.kmax), (unequal, s2.kmax), (free, k_free)):
         assert brute.robust(L, K * (1 - 1e-6)).stable is True
         assert brute.robust(L, K * (1 + 1e-6)).stable is False
 
