@@ -22,15 +22,15 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("MKL_NUM_THREADS", "1")
 
-import statistics  # noqa: E402
-import time  # noqa: E402
-import tracemalloc  # noqa: E402
+import statistics
+import time
+import tracemalloc
 
-import numpy as np  # noqa: E402
+import numpy as np
 
-import hapstab as h  # noqa: E402
-from hapstab.engine.system import build
+import hapstab as h
 from hapstab.analysis.exact.core import exact_kmax_batch
+from hapstab.engine.system import build
 
 DELAYS = (10, 100, 300, 1000)
 SCAN = 400          # geometric scan points of the naive method over 1e-3 ... 1e7 N/m

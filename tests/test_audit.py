@@ -8,9 +8,9 @@ import pytest
 import hapstab as h
 from hapstab.analysis.audit import audit
 from hapstab.errors import AnalysisError
-from hapstab.models.parts import Device
 from hapstab.models.controllers import DiscreteController, SpringDamper
 from hapstab.models.loops import HapticLoop, TeleoperationLoop
+from hapstab.models.parts import Device
 
 
 def rows(a):

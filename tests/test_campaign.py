@@ -21,7 +21,6 @@ The failures are real: they are hapstab's, kept visible on purpose (no xfail).
 from __future__ import annotations
 
 import json
-import math
 import os
 
 import mpmath

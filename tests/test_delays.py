@@ -8,7 +8,6 @@ from scipy.integrate import solve_ivp
 import hapstab as h
 from hapstab.engine.system import build
 from hapstab.errors import ModelError
-
 from references import brute
 
 

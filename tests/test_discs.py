@@ -8,8 +8,8 @@ import pytest
 import hapstab as h
 from hapstab.analysis.exact.crossings import Cells
 from hapstab.engine.discs import Jet, geometric_sum_jet, one_minus_delay_jet
-from hapstab.engine.system import build
 from hapstab.engine.frequency import loop_response
+from hapstab.engine.system import build
 
 P = h.paper_peb(delay_samples=3)
 LOOPS = [h.paper_hve(delay_samples=7), P, P.replace(operator=None, environment=None),

@@ -13,7 +13,6 @@ from hypothesis import strategies as st
 
 import hapstab as h
 from hapstab.errors import AnalysisError
-
 from references import brute
 
 PERIODS = np.arange(1, 11) * 1e-3

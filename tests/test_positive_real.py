@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from hapstab.errors import AnalysisError, ModelError
 from hapstab.analysis.positive_real import RationalMatrix, circle_criterion, positive_real
+from hapstab.errors import AnalysisError, ModelError
 
 
 def scalar(num, den):

@@ -4,10 +4,9 @@ import numpy as np
 import pytest
 
 import hapstab as h
+from hapstab.analysis.regions import best_damping, d_decomposition, stability_region, with_gains
 from hapstab.engine.system import build
 from hapstab.errors import AnalysisError
-from hapstab.analysis.regions import best_damping, d_decomposition, stability_region, with_gains
-
 from references import brute
 
 HVE10 = h.paper_hve(delay_samples=10)

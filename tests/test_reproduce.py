@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 import hapstab as h
+from hapstab.analysis.exact.core import exact_critical_stiffness
 from hapstab.analysis.methods import METHODS, critical_stiffness
 from hapstab.errors import AnalysisError
-from hapstab.analysis.exact.core import exact_critical_stiffness
 from hapstab.paper.reproduce import FIGURES, PAPER_PERIODS, reproduce_figure, write_figure
 
 

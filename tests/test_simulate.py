@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 
 import hapstab as h
+from hapstab.analysis.exact.core import exact_critical_stiffness, stability
 from hapstab.engine.system import build
 from hapstab.errors import AnalysisError, ModelError
-from hapstab.analysis.exact.core import exact_critical_stiffness, stability
 from hapstab.simulation.run import critical_stiffness_simulation, force_samples, simulate
 
 

@@ -56,11 +56,11 @@ def test_sine_forcing_on_an_unstable_loop_grows():
 
 # ------------------------------------------- 3. quantisation on an unstable loop
 def test_quantised_unstable_loop_is_never_called_bounded():
-    long = run_json("hve -K 210 --resolution 0.001 -t 100".split())
+    long = run_json(["hve", "-K", "210", "--resolution", "0.001", "-t", "100"])
     assert long["linear_loop_verdict"] == "unstable"
     assert long["verdict"] == "unbounded" and long["behaviour"] == "grows"
     assert long["confidence"] in CONFIDENT and long["growth_rate_per_s"] > 0
-    short = run_json("hve -K 210 --resolution 0.001 -t 5".split())
+    short = run_json(["hve", "-K", "210", "--resolution", "0.001", "-t", "5"])
     # 5 s cannot show growth at the linearised rate (~0.017 1/s): say so, and how long
     assert short["verdict"] == "undecided" and short["confidence"] == "low"
     assert short["duration_hint_s"] >= 100
@@ -68,12 +68,12 @@ def test_quantised_unstable_loop_is_never_called_bounded():
 
 # ------------------------------------------------ 4. nonlinear runs in words
 def test_a_run_that_settles_exactly_settles():
-    d = run_json("hve -K 100 -n 3 -b 2 -B 0.5 --wall 0.001".split())
+    d = run_json(["hve", "-K", "100", "-n", "3", "-b", "2", "-B", "0.5", "--wall", "0.001"])
     assert d["verdict"] == "bounded" and d["behaviour"] == "settles" and d["confidence"] == "high"
 
 
 def test_bouncing_on_an_unstable_wall_is_a_limit_cycle_and_the_exact_verdict_says_linearised():
-    d = run_json("hve -K 800 -n 5 -b 2 --wall 0.001".split())
+    d = run_json(["hve", "-K", "800", "-n", "5", "-b", "2", "--wall", "0.001"])
     assert d["verdict"] == "bounded" and d["behaviour"] == "limit cycle"
     assert d["limit_cycle_amplitude_m"] > 0 and 0 < d["limit_cycle_period_s"] < 5
     assert d["linear_loop_verdict"] == "unstable" and "linearised" in d["linear_loop"]
@@ -81,7 +81,7 @@ def test_bouncing_on_an_unstable_wall_is_a_limit_cycle_and_the_exact_verdict_say
 
 
 def test_linear_run_names_its_exact_verdict_for_this_loop():
-    d = run_json("hve -K 100".split())
+    d = run_json(["hve", "-K", "100"])
     assert d["linear_loop"] == "this loop"
 
 
@@ -94,7 +94,7 @@ def test_nonlinear_reasons_do_not_speak_of_poles(args):
 
 
 def test_table_shows_behaviour_limit_cycle_and_linearised_label():
-    r = CliRunner().invoke(cli, "simulate hve -K 800 -n 5 -b 2 --wall 0.001".split())
+    r = CliRunner().invoke(cli, ["simulate", "hve", "-K", "800", "-n", "5", "-b", "2", "--wall", "0.001"])
     assert r.exit_code == 0
     assert "limit cycle" in r.output and "linearised" in r.output
 

@@ -101,7 +101,7 @@ def check_period(name: str, value: Any) -> float:
     return v
 
 
-def check_poly(name: str, coeffs: Any) -> "np.ndarray":
+def check_poly(name: str, coeffs: Any) -> np.ndarray:
     """Finite real polynomial coefficients, highest power first, leading zeros
     dropped (all-zero gives [0.]); else :class:`ModelError` naming ``name``."""
     import numpy as np

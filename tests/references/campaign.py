@@ -60,7 +60,7 @@ MARGINAL_BAND = 1e-9
 VERDICT_MARGIN = 1e-14
 
 #: every outcome of :func:`check` in this process (the conftest prints a summary)
-RESULTS: list["Outcome"] = []
+RESULTS: list[Outcome] = []
 
 
 def _fmt(x: float) -> str:
@@ -370,7 +370,7 @@ def check(s: Scenario, verdicts: bool = True) -> Outcome:
     t0 = time.perf_counter()
     try:
         return _check(s, verdicts, t0)
-    except Exception as e:   # noqa: BLE001 - the reference failed: report it as such
+    except Exception as e:   # the reference failed: report it as such
         out = Outcome(s, problems=[f"[reference error] {type(e).__name__}: {e}"],
                       categories={"reference error"}, worst_rel=math.inf,
                       seconds=time.perf_counter() - t0)
@@ -393,7 +393,7 @@ def _check(s: Scenario, verdicts: bool, t0: float) -> Outcome:
 
     try:
         res = h.critical_stiffness(s.hapstab_loop())
-    except Exception as e:   # noqa: BLE001 - any exception is a finding
+    except Exception as e:   # any exception is a finding
         problem("critical_stiffness raised", f"{type(e).__name__}: {e}", math.inf)
         out.seconds = time.perf_counter() - t0
         RESULTS.append(out)
@@ -469,7 +469,7 @@ def _check(s: Scenario, verdicts: bool, t0: float) -> Outcome:
             v = brute.robust(L, K)
             try:
                 got = h.stability(s.hapstab_loop(K)).verdict
-            except Exception as exc:   # noqa: BLE001
+            except Exception as exc:
                 problem("stability raised", f"K = {K!r}: {type(exc).__name__}: {exc}")
                 continue
             bad = _bad_verdict(got, v, s.rigid)

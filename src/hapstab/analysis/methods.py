@@ -6,7 +6,8 @@ same models; :data:`METHODS` is the one table of them.
 
 from __future__ import annotations
 
-from typing import Any, Callable, Sequence
+from collections.abc import Callable, Sequence
+from typing import Any
 
 import numpy as np
 

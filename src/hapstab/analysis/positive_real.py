@@ -21,8 +21,9 @@ functions and their application to system stability", Proc. IEE 116(1), 1969
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -52,7 +53,7 @@ class _Element:
     poles: np.ndarray
 
     @classmethod
-    def from_poly(cls, num: np.ndarray, den: np.ndarray) -> "_Element":
+    def from_poly(cls, num: np.ndarray, den: np.ndarray) -> _Element:
         if not np.any(num):
             return cls(0.0, np.zeros(0, complex), np.zeros(0, complex))
         zs, ps = list(_snap(np.roots(num))), list(_snap(np.roots(den)))
@@ -123,7 +124,7 @@ class RationalMatrix:
                          for i in range(m)]
 
     @classmethod
-    def scalar(cls, num: Any, den: Any) -> "RationalMatrix":
+    def scalar(cls, num: Any, den: Any) -> RationalMatrix:
         return cls([[num]], [[den]])
 
     def __call__(self, theta: np.ndarray | float) -> np.ndarray:
@@ -158,14 +159,14 @@ class RationalMatrix:
     def degree(self) -> int:
         return max(max(d.size for d in row) for row in self.den) - 1
 
-    def add_diagonal(self, values: Sequence[float]) -> "RationalMatrix":
+    def add_diagonal(self, values: Sequence[float]) -> RationalMatrix:
         """G + diag(values) (e.g. K^{-1} + G of Theorem 2.1)."""
         nums = [[self.num[i][j].copy() for j in range(self.m)] for i in range(self.m)]
         for i, v in enumerate(values):
             nums[i][i] = np.polyadd(nums[i][i], v * self.den[i][i])
         return RationalMatrix(nums, self.den)
 
-    def inverse(self) -> "RationalMatrix":
+    def inverse(self) -> RationalMatrix:
         """G^{-1} for m = 1 or 2 (polynomial adjugate over the determinant).
 
         Raises

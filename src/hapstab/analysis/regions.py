@@ -24,8 +24,9 @@ the paper, eq. (23) for H(z) and (13), (18), (29), (34) for the overlaid lines.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 

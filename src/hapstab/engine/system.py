@@ -20,8 +20,8 @@ The paper, Fig. 2a (HVE) and Fig. 3 / eq. (19)-(21) (PEB); H(z) of eq. (23).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Sequence
 
 import numpy as np
 

@@ -55,7 +55,7 @@ class SpringDamper:
         K, B, T = self.stiffness, self.damping, period
         return np.array([K * T + B, -B]) / T, np.array([1.0, 0.0])
 
-    def with_stiffness(self, K: float) -> "SpringDamper":
+    def with_stiffness(self, K: float) -> SpringDamper:
         return dataclasses.replace(self, stiffness=K)
 
 

@@ -126,17 +126,17 @@ class HapticLoop:
         """t_d = (n + fractional_delay) T in seconds."""
         return self.delay_in_samples * self.period
 
-    def with_delay_s(self, seconds: float) -> "HapticLoop":
+    def with_delay_s(self, seconds: float) -> HapticLoop:
         """The same loop with a delay of ``seconds`` (any t_d >= 0, not only n T)."""
         n, f = delay_from_seconds("delay_s", seconds, self.period)
         return dataclasses.replace(self, delay_samples=n, fractional_delay=f)
 
-    def with_stiffness(self, K: float) -> "HapticLoop":
+    def with_stiffness(self, K: float) -> HapticLoop:
         if not isinstance(self.controller, SpringDamper):
             raise ModelError("controller: a SpringDamper is needed to vary the stiffness")
         return dataclasses.replace(self, controller=self.controller.with_stiffness(K))
 
-    def replace(self, **changes: Any) -> "HapticLoop":
+    def replace(self, **changes: Any) -> HapticLoop:
         return dataclasses.replace(self, **changes)
 
 
@@ -225,7 +225,7 @@ class TeleoperationLoop:
     def delay_backward_s(self) -> float:
         return self.backward_delay_in_samples * self.period
 
-    def with_delays_s(self, forward_s: float, backward_s: float | None = None) -> "TeleoperationLoop":
+    def with_delays_s(self, forward_s: float, backward_s: float | None = None) -> TeleoperationLoop:
         """The same loop with master->slave and slave->master delays in seconds
         (any values >= 0; ``backward_s`` defaults to ``forward_s``)."""
         n, f = delay_from_seconds("delay_forward_s", forward_s, self.period)
@@ -236,7 +236,7 @@ class TeleoperationLoop:
         return dataclasses.replace(self, delay_samples=n, fractional_delay=f,
                                    delay_backward_samples=nb, fractional_delay_backward=fb)
 
-    def with_stiffness(self, K: float) -> "TeleoperationLoop":
+    def with_stiffness(self, K: float) -> TeleoperationLoop:
         """Master stiffness K; the slave's scales with it, keeping K_s/K_m (equal
         stiffnesses, the paper's C_m = C_s case, stay equal)."""
         for nm in ("master_controller", "slave_controller"):
@@ -250,14 +250,14 @@ class TeleoperationLoop:
         return dataclasses.replace(self, master_controller=self.master_controller.with_stiffness(K),
                                    slave_controller=self.slave_controller.with_stiffness(K * ratio))
 
-    def replace(self, **changes: Any) -> "TeleoperationLoop":
+    def replace(self, **changes: Any) -> TeleoperationLoop:
         return dataclasses.replace(self, **changes)
 
 
 Loop = Union[HapticLoop, TeleoperationLoop]
 
 
-def whole_delay(loop: "HapticLoop | TeleoperationLoop", what: str) -> int:
+def whole_delay(loop: HapticLoop | TeleoperationLoop, what: str) -> int:
     """The delay in whole samples (equal both ways for teleoperation), for methods
     derived for t_d = nT only; otherwise an :class:`AnalysisError` naming ``what``."""
     if isinstance(loop, TeleoperationLoop):

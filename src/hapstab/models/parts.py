@@ -143,7 +143,7 @@ class Impedance:
         return np.polyval(self.num, s) / np.polyval(self.den, s)
 
     @classmethod
-    def from_any(cls, obj: Any, name: str = "impedance") -> "Impedance":
+    def from_any(cls, obj: Any, name: str = "impedance") -> Impedance:
         """Accept an :class:`Impedance`, ``None`` (nothing attached), a spec string
         (see :func:`parse_impedance`), a ``(num, den)`` pair or a python-control
         continuous SISO ``TransferFunction``."""

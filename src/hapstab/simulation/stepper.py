@@ -25,8 +25,9 @@ The paper, Fig. 2a and Fig. 3 (sampler, ZOH, delay, discrete controller).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
