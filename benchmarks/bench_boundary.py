@@ -22,7 +22,7 @@ import hapstab as h
 try:
     import control
 except ImportError:  # pragma: no cover
-    raise SystemExit("python-control is the baseline: pip install control (make bench does)")
+    raise SystemExit("python-control is the baseline: pip install control (make bench does)") from None
 
 PERIODS = np.arange(1, 11) * 1e-3
 

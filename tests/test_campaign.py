@@ -73,7 +73,7 @@ def test_characteristic_function_vanishes_at_the_eigenvalues():
     # refined at 50 digits, each root moves by no more than the double eigenvalue's error
     roots = brute.aberth(L, 7.0, ev)
     assert roots is not None
-    assert max(abs(complex(r) - e) for r, e in zip(roots, ev)) < 1e-10
+    assert max(abs(complex(r) - e) for r, e in zip(roots, ev, strict=True)) < 1e-10
 
 
 def test_rigid_mode_is_deflated_exactly():

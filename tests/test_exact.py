@@ -51,7 +51,7 @@ def _mp_plant(m, b, k, T):
 def _mp_kmax(chi, theta0, K0):
     """Solve chi(e^{j theta}, K) = 0 for real (theta, K) near hapstab's answer."""
     f = lambda th, K: [mp.re(chi(mp.exp(1j * th), K)), mp.im(chi(mp.exp(1j * th), K))]  # noqa: E731
-    th, K = mp.findroot(f, (mp.mpf(theta0), mp.mpf(K0)))
+    _th, K = mp.findroot(f, (mp.mpf(theta0), mp.mpf(K0)))
     return K
 
 

@@ -157,17 +157,17 @@ def test_unit_circle_poles_at_any_degree(n):
     zn, one = [1.0] + [0.0] * n, [1.0] + [0.0] * (n - 1)
     # G = 1/(z^n - 1): Re G = -1/2 on the circle, so G + G^H = -1 (issue: degree 10
     # was "positive real" with "min eig -4.2 >= 0": the refinement walked onto a pole)
-    r = positive_real(scalar([1.0], one + [-1.0]))
+    r = positive_real(scalar([1.0], [*one, -1.0]))
     assert not r.positive_real and r.failed_conditions == ("hermitian part",)
     # G + G^H = -1 exactly; within 1e-9 rad of the n poles rounding adds ~1e-6
     assert r.margin == pytest.approx(-1.0, abs=1e-5)
     # (z^n + 1)/(z^n - 1) = -j cot(n w / 2): lossless, residues 2/n > 0 -> PR, margin 0
-    r = positive_real(scalar(one + [1.0], one + [-1.0]))
+    r = positive_real(scalar([*one, 1.0], [*one, -1.0]))
     assert r.positive_real and abs(r.margin) < 1e-7
     # z^n/(z^n - 1) = 1/2 + lossless part: PR with margin 1
-    r = positive_real(scalar(zn, one + [-1.0]))
+    r = positive_real(scalar(zn, [*one, -1.0]))
     assert r.positive_real and r.margin == pytest.approx(1.0, abs=1e-5)
     # 1/(z^n + 1): Re = 1/2, but the normalised residues are -1/n: (ii) fails
-    r = positive_real(scalar([1.0], one + [1.0]))
+    r = positive_real(scalar([1.0], [*one, 1.0]))
     assert not r.positive_real and r.failed_condition == "unit-circle poles"
 

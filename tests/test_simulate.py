@@ -80,7 +80,7 @@ def rk4_peb(mm, bm, ms, bs, kh, ke, K, T, n, xm0, f_h, M, sub=100):
         us = K * (y[2] - lm[0])
         f = f_h[k]
 
-        def rhs(z):
+        def rhs(z, f=f, um=um, us=us):   # this sample's held forces
             return np.array([z[1], (f - um - bm * z[1] - kh * z[0]) / mm,
                              z[3], (-us - bs * z[3] - ke * z[2]) / ms])
         for _ in range(sub):

@@ -28,6 +28,7 @@ import math
 import os
 import time
 from dataclasses import dataclass, field
+from itertools import pairwise
 
 import numpy as np
 
@@ -328,7 +329,7 @@ def _probe_points(ivs, s_lo: float) -> list[float]:
             pts += [math.sqrt(a * b), (a + b) / 2]
         else:
             pts += [2 * a, 1e2 * a]
-    for (_, b), (a, _) in zip(ivs, ivs[1:]):
+    for (_, b), (a, _) in pairwise(ivs):
         pts += [math.sqrt(a * b), (a + b) / 2]
     last = ivs[-1][1]
     if math.isfinite(last):

@@ -23,6 +23,7 @@ the paper, eq. (23) for H(z) and (13), (18), (29), (34) for the overlaid lines.
 
 from __future__ import annotations
 
+import contextlib
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -77,7 +78,7 @@ def _unit_loop(loop: Loop) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 def _mu(A0: np.ndarray, B1: np.ndarray, C1: np.ndarray, z: np.ndarray) -> np.ndarray:
     """Eigenvalues of G(z) for each z, shape (len(z), p), branches kept continuous."""
     N = A0.shape[0]
-    X = np.linalg.solve(z[:, None, None] * np.eye(N) - A0, np.broadcast_to(B1, (z.size,) + B1.shape))
+    X = np.linalg.solve(z[:, None, None] * np.eye(N) - A0, np.broadcast_to(B1, (z.size, *B1.shape)))
     G = C1 @ X
     mu = np.linalg.eigvals(G)
     if mu.shape[1] == 2:   # follow each branch: swap where that is nearer the previous point
@@ -231,7 +232,7 @@ class RegionResult:
             "loop": self.kind, "period_s": self.period, "delay_samples": self.delay_samples,
             "K_range": self.K_range, "B_range": self.B_range,
             "rows": [{"virtual_damping": b, "stable_intervals": [list(x) for x in iv]}
-                     for b, iv in zip(self.B_rows, self.intervals)],
+                     for b, iv in zip(self.B_rows, self.intervals, strict=True)],
             "crossings_z1_K": self.boundary["z1"], "crossings_zm1_K_plus_2B_over_T": self.boundary["zm1"],
             "agreement": self.agreement,
             "overlays": {k: v for k, v in self.overlays.items()},
@@ -371,10 +372,9 @@ def _overlay(loop: Loop, name: str, Bs: np.ndarray) -> np.ndarray:
         raise AnalysisError(f"overlay = {name!r}: unknown; allowed: paper, "
                             + ", ".join(m for m in ("passivity", "circle") if m in METHODS))
     for i, B in enumerate(Bs):
-        try:
-            out[i] = critical_stiffness(with_gains(loop, 1.0, float(B)), method=name).critical_stiffness
-        except AnalysisError:
-            pass                      # the method does not apply at this B: leave a gap
+        with contextlib.suppress(AnalysisError):   # does not apply at this B: leave a gap
+            out[i] = critical_stiffness(with_gains(loop, 1.0, float(B)),
+                                        method=name).critical_stiffness
     return out
 
 

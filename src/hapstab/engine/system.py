@@ -62,7 +62,7 @@ def _controller_parts(c: SpringDamper | DiscreteController, periods: np.ndarray
     if q:
         Bh[0, 0] = 1.0
     Ch = r[None, :]
-    rep = lambda a: np.broadcast_to(a, (P,) + a.shape).copy()  # noqa: E731
+    rep = lambda a: np.broadcast_to(a, (P, *a.shape)).copy()  # noqa: E731
     return rep(Ah), rep(Bh), rep(Ch), np.full(P, d), np.zeros(P)
 
 
@@ -209,7 +209,7 @@ def build(loop: HapticLoop | TeleoperationLoop,
     Fu0 = np.zeros((P, p, N))
     Fu1 = np.zeros((P, p, N))
     A0 = np.zeros((P, N, N))
-    for ch, (Ah, Bh, Ch, Dfix, Dk) in zip(st.channels, parts):
+    for ch, (Ah, Bh, Ch, Dfix, Dk) in zip(st.channels, parts, strict=True):
         i = ch.port
         cs = slice(off_c[i], off_c[i + 1])
         Fu0[:, i, cs] = Ch[:, 0, :]
@@ -222,8 +222,8 @@ def build(loop: HapticLoop | TeleoperationLoop,
     for j in range(p):
         if depth[j]:
             A0[:, off_r[j], :] = pos[j]
-            for l in range(1, depth[j]):
-                A0[:, off_r[j] + l, off_r[j] + l - 1] = 1.0
+            for step in range(1, depth[j]):
+                A0[:, off_r[j] + step, off_r[j] + step - 1] = 1.0
     B_ext = np.zeros((P, N, p))
     B_ext[:, :n_plant, :] = Bd
     B1 = np.zeros((P, N, p))
@@ -238,8 +238,8 @@ def build(loop: HapticLoop | TeleoperationLoop,
         B_ext[:, r0, j] = Gam[:, 0, 0]
         B1[:, r0, j] = -Gam[:, 0, 0]
         Gam_of[(j, f)] = Gam[:, 0, 0]
-        for l in range(1, frac[(j, f)] + 1):
-            A0[:, r0 + l, r0 + l - 1] = 1.0
+        for step in range(1, frac[(j, f)] + 1):
+            A0[:, r0 + step, r0 + step - 1] = 1.0
     # C1 rows: the K-part of each port's force; same for every period
     C1 = Fu1.copy()
     ks = [ch.controller.stiffness if isinstance(ch.controller, SpringDamper) else 0.0

@@ -56,13 +56,13 @@ def expm_batched(M: np.ndarray) -> np.ndarray:
         s = np.maximum(0, np.ceil(np.log2(np.maximum(norm, 1e-300) / _THETA13))).astype(int)
     X = M / (2.0 ** s)[:, None, None]
     b = _PADE13
-    I = np.broadcast_to(np.eye(n), X.shape)
+    Id = np.broadcast_to(np.eye(n), X.shape)
     X2 = X @ X
     X4 = X2 @ X2
     X6 = X4 @ X2
     U = X @ (X6 @ (b[13] * X6 + b[11] * X4 + b[9] * X2) + b[7] * X6 + b[5] * X4 + b[3] * X2
-             + b[1] * I)
-    V = X6 @ (b[12] * X6 + b[10] * X4 + b[8] * X2) + b[6] * X6 + b[4] * X4 + b[2] * X2 + b[0] * I
+             + b[1] * Id)
+    V = X6 @ (b[12] * X6 + b[10] * X4 + b[8] * X2) + b[6] * X6 + b[4] * X4 + b[2] * X2 + b[0] * Id
     R = np.linalg.solve(V - U, V + U)
     for k in range(int(s.max()) if s.size else 0):
         sq = s > k

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
-from typing import Union
 
 import numpy as np
 
@@ -82,4 +81,4 @@ class DiscreteController:
         return np.array(self.num), np.array(self.den)
 
 
-Controller = Union[SpringDamper, DiscreteController]
+Controller = SpringDamper | DiscreteController

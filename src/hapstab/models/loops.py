@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
-from typing import Any, Union
+from typing import Any
 
 import numpy as np
 
@@ -254,7 +254,7 @@ class TeleoperationLoop:
         return dataclasses.replace(self, **changes)
 
 
-Loop = Union[HapticLoop, TeleoperationLoop]
+Loop = HapticLoop | TeleoperationLoop
 
 
 def whole_delay(loop: HapticLoop | TeleoperationLoop, what: str) -> int:

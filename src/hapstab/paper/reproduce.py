@@ -132,7 +132,7 @@ def reproduce_figure(name: str, periods: Sequence[float] | None = None, *,
     T = PAPER_PERIODS if periods is None else tuple(float(t) for t in periods)
     if not T or not all(math.isfinite(t) and t > 0 for t in T):
         raise AnalysisError(f"periods = {list(T)}: need at least one finite period > 0")
-    cols = COLUMNS + ("circle",)
+    cols = (*COLUMNS, "circle")
     rows = []
     for i, n in enumerate(spec.delays):
         for t in T:
