@@ -83,7 +83,8 @@ def main() -> int:
     t0 = time.perf_counter()
     stars = [critical_stiffness_simulation(lp).critical_stiffness for lp in loops]
     t_stars = time.perf_counter() - t0
-    worst = max(abs(s / h.critical_stiffness(lp).critical_stiffness - 1) for s, lp in zip(stars, loops, strict=True))
+    worst = max(abs(s / h.critical_stiffness(lp).critical_stiffness - 1)
+                for s, lp in zip(stars, loops, strict=True))
     print(f"Fig. 5 + Fig. 6 simulation stars: {len(stars)} in {t_stars:.2f} s (target < 10 s); "
           f"worst |sim/exact - 1| = {worst:.1e}")
     ok &= t_stars < 10 and len(stars) == 40

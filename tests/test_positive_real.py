@@ -86,7 +86,8 @@ def test_narrow_dip_is_found(depth):
     assert r.positive_real == (depth < 1)
     # the brute grid spacing (6e-10 rad) bounds its error far below this
     assert r.margin == pytest.approx(brute, abs=1e-7)
-    assert r.worst_frequency_rad_s == pytest.approx(th[np.argmin(np.real(np.polyval(num, z) / np.polyval(rd, z)))], abs=1e-6)
+    worst = th[np.argmin(np.real(np.polyval(num, z) / np.polyval(rd, z)))]
+    assert r.worst_frequency_rad_s == pytest.approx(worst, abs=1e-6)
 
 
 # ------------------------------------------------------------------ matrices

@@ -207,7 +207,8 @@ def _hermitian_parts(loop: HapticLoop | TeleoperationLoop, a: str, D: tuple[floa
     N = theta.size
     A = np.zeros((N, 2, 2), complex)
     C = np.zeros((N, 2, 2), complex)
-    A[:, 0, 0], A[:, 1, 1] = s1 * (loop.master.damping + cm.damping * Y), s2 * (loop.slave.damping + cs.damping * Y)
+    A[:, 0, 0] = s1 * (loop.master.damping + cm.damping * Y)
+    A[:, 1, 1] = s2 * (loop.slave.damping + cs.damping * Y)
     A[:, 0, 1], A[:, 1, 0] = -s1 * d * cm.damping * Y, -s2 * d * cs.damping * Y
     C[:, 0, 0], C[:, 1, 1] = s1 * X, s2 * r * X
     C[:, 0, 1], C[:, 1, 0] = -s1 * d * X, -s2 * r * d * X

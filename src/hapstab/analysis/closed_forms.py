@@ -30,7 +30,8 @@ def _hve(loop, name: str) -> tuple[float, float, float, float]:
 
 def _peb(loop, name: str) -> tuple[float, float, float, float]:
     if not isinstance(loop, TeleoperationLoop):
-        raise AnalysisError(f"method = {name!r}: applies to a TeleoperationLoop (peb), not {type(loop).__name__}")
+        raise AnalysisError(f"method = {name!r}: applies to a TeleoperationLoop (peb), "
+                            f"not {type(loop).__name__}")
     cm, cs = loop.master_controller, loop.slave_controller
     if not (isinstance(cm, SpringDamper) and isinstance(cs, SpringDamper)):
         raise AnalysisError(f"method = {name!r}: needs SpringDamper controllers")

@@ -240,7 +240,8 @@ def critical_stiffness_passivity(loop: HapticLoop | TeleoperationLoop,
                          f"already missing at w = {th[i] / T:.6g} rad/s (the virtual damping "
                          "takes more than the device damping provides)")
     return CriticalStiffnessResult(
-        float(K), "passivity", ((0.0, float(K)),) if K > 0 else (), reason, T, whole_delay(loop, "sampled-data passivity"),
+        float(K), "passivity", ((0.0, float(K)),) if K > 0 else (), reason, T,
+        whole_delay(loop, "sampled-data passivity"),
         t_min / (2 * math.pi * T) if fin else float("nan"),
         {"worst_frequency_rad_s": t_min / T if fin else float("nan"),
          "port_scaling": list(port_scaling(loop, scaling))})

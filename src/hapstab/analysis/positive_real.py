@@ -33,7 +33,8 @@ from hapstab.results import jsonable
 
 __all__ = ["RationalMatrix", "PositiveRealResult", "positive_real", "circle_criterion"]
 
-_ON_CIRCLE = 1e-9    # | |p| - 1 | below this: a unit-circle root (np.roots is ~1e-15 accurate for simple roots)
+# | |p| - 1 | below this: a unit-circle root (np.roots is ~1e-15 accurate for simple roots)
+_ON_CIRCLE = 1e-9
 _CANCEL = 1e-7       # a pole and a zero closer than this (relative) cancel: sqrt(eps)-level root errors
 _SIMPLE = 1e-6       # two unit-circle poles closer than this are one multiple pole (double roots split ~1e-8)
 _RTOL = 1e-9         # eigenvalue slack relative to the matrix scale: eigvalsh/roundoff is ~1e-13 of it

@@ -24,7 +24,8 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["Jet", "EPS_OP", "base_jets", "delay_jet", "poly_jet", "geometric_sum_jet", "one_minus_delay_jet", "const", "zero"]
+__all__ = ["Jet", "EPS_OP", "base_jets", "delay_jet", "poly_jet", "geometric_sum_jet",
+           "one_minus_delay_jet", "const", "zero"]
 
 #: Rounding allowance per operation: 4 unit round-offs covers a complex product
 #: (at most sqrt(5) u) or sum (at most sqrt(2) u) and the product of the radii.

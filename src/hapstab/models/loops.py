@@ -25,7 +25,8 @@ from hapstab.errors import (
 from hapstab.models.controllers import Controller, DiscreteController, SpringDamper
 from hapstab.models.parts import Device, Impedance
 
-__all__ = ['split_delay', 'DELAY_SNAP', 'HapticLoop', 'TeleoperationLoop', 'delay_from_seconds', 'whole_delay']
+__all__ = ["split_delay", "DELAY_SNAP", "HapticLoop", "TeleoperationLoop", "delay_from_seconds",
+           "whole_delay"]
 
 
 def _check_fraction(name: str, value: Any) -> float:

@@ -447,8 +447,9 @@ def critical_stiffness_simulation(loop: HapticLoop | TeleoperationLoop, *,
     log K to relative width ``rtol``. If the loop is unbounded already at the
     start (e.g. a negative virtual damping B that nearly cancels the device
     damping b leaves K_max ~ (b + B)/(T/2 + t_d), arbitrarily small), K is
-    lowered by ``ratio`` down to ``1e-10 m/T^2`` before K_max = 0 is reported. Each verdict is :func:`hapstab.growth.assess`
-    on ``n_samples`` samples (observed explosion, else the fitted growth rate).
+    lowered by ``ratio`` down to ``1e-10 m/T^2`` before K_max = 0 is reported. Each verdict
+    is :func:`hapstab.growth.assess` on ``n_samples`` samples (observed explosion, else the
+    fitted growth rate).
 
     Parameters
     ----------
