@@ -12,6 +12,7 @@ matters for a given design.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -20,15 +21,17 @@ from hapstab.analysis.closed_forms import colgate, eq18, eq29, eq34, gil, gil200
 from hapstab.analysis.exact.core import exact_critical_stiffness, stability
 from hapstab.analysis.passivity import critical_stiffness_passivity
 from hapstab.errors import AnalysisError
+from hapstab.models.controllers import spring_damper
 from hapstab.models.loops import HapticLoop, TeleoperationLoop
-from hapstab.results import jsonable
+from hapstab.results import CriticalStiffnessResult, jsonable
 
 __all__ = ["AuditRow", "AuditResult", "audit"]
 
 _REL = 1e-6  # K_max values agree to ~1e-9; a promise counts as broken beyond 1e-6 relative
 
 #: closed form -> (label, what it claims)
-_CLOSED = {
+#: kind -> (key, closed form, label, what it claims)
+_CLOSED: dict[str, list[tuple[str, Callable[[Any], CriticalStiffnessResult], str, str]]] = {
     "hve": [("colgate", colgate, "eq. (1)/(13) Colgate-Schenkel", "passivity"),
             ("gil", gil, "eq. (2) Gil et al.", "stability"),
             ("eq18", eq18, "eq. (18)", "passivity"),
@@ -176,6 +179,7 @@ def audit(loop: HapticLoop | TeleoperationLoop) -> AuditResult:
         "passive terminations")
     rows.append(AuditRow("exact", "exact sampled-data stability", float(exact), "exact",
                          _verdict(loop, exact), None, exact_res.reason))
-    B = loop.controller.damping if kind == "hve" else loop.master_controller.damping
+    B = (spring_damper(loop.controller).damping if isinstance(loop, HapticLoop)
+         else spring_damper(loop.master_controller, "master_controller").damping)
     return AuditResult(kind, loop.period, loop.delay_samples, B, tuple(rows), float(exact),
                        float(passive))

@@ -10,6 +10,7 @@ exact analysis.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 from hapstab.errors import AnalysisError
 from hapstab.models.controllers import SpringDamper
@@ -233,5 +234,5 @@ def gil2004(loop: HapticLoop) -> CriticalStiffnessResult:
     return _result(K, "gil2004", f"Gil et al. 2004 exact K_cr (no operator, n = 0, B = 0){note}", loop)
 
 
-CLOSED_FORMS = {"colgate": colgate, "gil": gil, "eq18": eq18, "eq29": eq29, "eq34": eq34,
-                "gil2004": gil2004}
+CLOSED_FORMS: dict[str, Callable[..., CriticalStiffnessResult]] = {
+    "colgate": colgate, "gil": gil, "eq18": eq18, "eq29": eq29, "eq34": eq34, "gil2004": gil2004}

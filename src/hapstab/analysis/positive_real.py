@@ -184,7 +184,7 @@ class RationalMatrix:
             raise AnalysisError(f"G(z) is {self.m}x{self.m}: inversion is implemented for 1x1 and 2x2")
         pm = np.polymul
         den_all = pm(pm(d[0][0], d[1][1]), pm(d[0][1], d[1][0]))
-        det_num = np.polysub(pm(pm(n[0][0], n[1][1]), pm(d[0][1], d[1][0])),
+        det_num: np.ndarray = np.polysub(pm(pm(n[0][0], n[1][1]), pm(d[0][1], d[1][0])),
                              pm(pm(n[0][1], n[1][0]), pm(d[0][0], d[1][1])))
         if not np.any(np.abs(det_num) > 1e-14 * np.abs(det_num).max(initial=0.0)):
             raise AnalysisError("G(z) is singular: not invertible")

@@ -128,11 +128,11 @@ def d_decomposition(loop: Loop, n_theta: int = 4000) -> dict[str, Any]:
     return {"curves": curves, "z1": lines["z1"], "zm1": lines["zm1"], "period": T}
 
 
-def kmax_over_B(loop: Loop, Bs: Sequence[float], intervals: bool = False) -> list[dict[str, Any]]:
+def kmax_over_B(loop: Loop, Bs: Sequence[float] | np.ndarray,
+                intervals: bool = False) -> list[dict[str, Any]]:
     """Exact crossing analysis for each virtual damping in ``Bs`` (batched)."""
-    Bs = np.asarray(Bs, float)
     # one structure for every B (B enters only as beta = B/T): one batched analysis
-    resps = [loop_response(with_gains(loop, 1.0, float(B))) for B in Bs]
+    resps = [loop_response(with_gains(loop, 1.0, float(B))) for B in np.asarray(Bs, float)]
     return analyse(stack_responses(resps), full=intervals)
 
 
@@ -354,16 +354,15 @@ def stability_region(loop: Loop, K: tuple[float, float], B: tuple[float, float],
 
 
 def _overlay(loop: Loop, name: str, Bs: np.ndarray) -> np.ndarray:
-    from hapstab.analysis import closed_forms
     from hapstab.analysis.methods import METHODS, critical_stiffness
 
     out = np.full(Bs.size, np.nan)
     if name == "paper":
         n = loop.delay_in_samples
         if isinstance(loop, HapticLoop):
-            f = closed_forms.colgate if n == 0 else closed_forms.eq18
+            f = METHODS["colgate" if n == 0 else "eq18"]
         else:
-            f = closed_forms.eq29 if n == 0 else closed_forms.eq34
+            f = METHODS["eq29" if n == 0 else "eq34"]
         try:
             return np.array([f(with_gains(loop, 1.0, B)).critical_stiffness for B in Bs])
         except AnalysisError:

@@ -19,7 +19,7 @@ from hapstab.cli.options import (
     rich_table,
 )
 from hapstab.errors import HapstabError
-from hapstab.models.loops import HapticLoop
+from hapstab.models.loops import HapticLoop, TeleoperationLoop
 
 
 @click.group()
@@ -141,7 +141,8 @@ def demo(as_json: bool) -> None:
     from hapstab.paper.loops import paper_hve, paper_peb
 
     T = np.linspace(1e-3, 1e-2, 10)
-    figs = [("Fig. 5 (HVE)", paper_hve(), (0, 10), eq18), ("Fig. 6 (PEB)", paper_peb(), (0, 4), None)]
+    figs: list[tuple[str, HapticLoop | TeleoperationLoop, tuple[int, int], Any]] = [
+        ("Fig. 5 (HVE)", paper_hve(), (0, 10), eq18), ("Fig. 6 (PEB)", paper_peb(), (0, 4), None)]
     data: dict[str, Any] = {}
     for title, loop, delays, _ in figs:
         res = boundary(loop, T, delays)

@@ -39,7 +39,8 @@ class Jet:
 
     def __init__(self, vc: np.ndarray, vr: np.ndarray, dc: np.ndarray, dr: np.ndarray) -> None:
         self.vc, self.vr, self.dc, self.dr = vc, vr, dc, dr
-        self._va = self._da = None
+        self._va: np.ndarray | None = None
+        self._da: np.ndarray | None = None
 
     @property
     def va(self) -> np.ndarray:

@@ -289,8 +289,8 @@ def loop_response(loop: HapticLoop | TeleoperationLoop,
     """
     st = structure_of(loop)
     T = np.atleast_1d(np.asarray(loop.period if periods is None else periods, float))
-    ctrls = [ch.controller for ch in st.channels]
-    if not all(isinstance(c, SpringDamper) for c in ctrls):
+    ctrls = [ch.controller for ch in st.channels if isinstance(ch.controller, SpringDamper)]
+    if len(ctrls) != len(st.channels):
         raise AnalysisError("controller: critical stiffness needs SpringDamper controllers "
                             "(a general H(z) has no stiffness K to vary)")
     ks = np.array([c.stiffness for c in ctrls], float)

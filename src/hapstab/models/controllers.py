@@ -17,7 +17,7 @@ import numpy as np
 from hapstab.errors import ModelError, check_real
 from hapstab.models.parts import _poly
 
-__all__ = ['SpringDamper', 'DiscreteController', 'Controller']
+__all__ = ['SpringDamper', 'DiscreteController', 'Controller', 'spring_damper']
 
 
 # ----------------------------------------------------------------------- controllers
@@ -82,3 +82,24 @@ class DiscreteController:
 
 
 Controller = SpringDamper | DiscreteController
+
+
+def spring_damper(controller: Controller, name: str = "controller") -> SpringDamper:
+    """``controller`` itself if it is a :class:`SpringDamper` (the only controller with a
+    stiffness K to vary).
+
+    Parameters
+    ----------
+    controller : SpringDamper or DiscreteController
+        The controller to vary K of.
+    name : str
+        Its name in the error message (``"controller"``, ``"master_controller"``, ...).
+
+    Raises
+    ------
+    ModelError
+        If it is not a :class:`SpringDamper`.
+    """
+    if not isinstance(controller, SpringDamper):
+        raise ModelError(f"{name}: a SpringDamper is needed to vary the stiffness")
+    return controller

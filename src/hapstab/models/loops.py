@@ -22,7 +22,12 @@ from hapstab.errors import (
     check_period,
     check_real,
 )
-from hapstab.models.controllers import Controller, DiscreteController, SpringDamper
+from hapstab.models.controllers import (
+    Controller,
+    DiscreteController,
+    SpringDamper,
+    spring_damper,
+)
 from hapstab.models.parts import Device, Impedance
 
 __all__ = ["split_delay", "DELAY_SNAP", "HapticLoop", "TeleoperationLoop", "delay_from_seconds",
@@ -133,9 +138,7 @@ class HapticLoop:
         return dataclasses.replace(self, delay_samples=n, fractional_delay=f)
 
     def with_stiffness(self, K: float) -> HapticLoop:
-        if not isinstance(self.controller, SpringDamper):
-            raise ModelError("controller: a SpringDamper is needed to vary the stiffness")
-        return dataclasses.replace(self, controller=self.controller.with_stiffness(K))
+        return dataclasses.replace(self, controller=spring_damper(self.controller).with_stiffness(K))
 
     def replace(self, **changes: Any) -> HapticLoop:
         return dataclasses.replace(self, **changes)
@@ -240,16 +243,15 @@ class TeleoperationLoop:
     def with_stiffness(self, K: float) -> TeleoperationLoop:
         """Master stiffness K; the slave's scales with it, keeping K_s/K_m (equal
         stiffnesses, the paper's C_m = C_s case, stay equal)."""
-        for nm in ("master_controller", "slave_controller"):
-            if not isinstance(getattr(self, nm), SpringDamper):
-                raise ModelError(f"{nm}: a SpringDamper is needed to vary the stiffness")
-        km, ks = self.master_controller.stiffness, self.slave_controller.stiffness
+        cm = spring_damper(self.master_controller, "master_controller")
+        cs = spring_damper(self.slave_controller, "slave_controller")
+        km, ks = cm.stiffness, cs.stiffness
         if km == 0 and ks > 0:
             raise AnalysisError("master_controller: stiffness 0 with a slave stiffness > 0 leaves "
                                 "K_s/K_m undefined; set the master's stiffness to vary K")
         ratio = ks / km if km > 0 else 1.0
-        return dataclasses.replace(self, master_controller=self.master_controller.with_stiffness(K),
-                                   slave_controller=self.slave_controller.with_stiffness(K * ratio))
+        return dataclasses.replace(self, master_controller=cm.with_stiffness(K),
+                                   slave_controller=cs.with_stiffness(K * ratio))
 
     def replace(self, **changes: Any) -> TeleoperationLoop:
         return dataclasses.replace(self, **changes)

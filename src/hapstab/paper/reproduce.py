@@ -137,11 +137,12 @@ def reproduce_figure(name: str, periods: Sequence[float] | None = None, *,
     for i, n in enumerate(spec.delays):
         for t in T:
             loop = spec.make(t, n, 1.0)
-            row = {"period_s": t, "delay_samples": n,
-                   "theory": spec.theory[i](loop).critical_stiffness,
-                   "exact": exact_critical_stiffness(loop).critical_stiffness,
-                   "simulation": critical_stiffness_simulation(
-                       loop, **(simulation_options or {})).critical_stiffness}
+            row: dict[str, Any] = {
+                "period_s": t, "delay_samples": n,
+                "theory": spec.theory[i](loop).critical_stiffness,
+                "exact": exact_critical_stiffness(loop).critical_stiffness,
+                "simulation": critical_stiffness_simulation(
+                    loop, **(simulation_options or {})).critical_stiffness}
             row["circle"] = _circle(loop)
             row["equation"] = spec.equations[i]
             rows.append(row)

@@ -95,12 +95,13 @@ class SimulationResult:
 
     def _columns(self, dense: bool = False) -> dict[str, np.ndarray]:
         if dense:
-            if self.dense_time is None:
+            pos, vel = self.dense_position, self.dense_velocity
+            if self.dense_time is None or pos is None or vel is None:
                 raise AnalysisError("dense output was not requested: simulate(..., dense=m)")
             cols = {"time_s": self.dense_time}
             for j, lab in enumerate(self.labels):
-                cols[f"x_{lab}_m"] = self.dense_position[:, j]
-                cols[f"v_{lab}_m_per_s"] = self.dense_velocity[:, j]
+                cols[f"x_{lab}_m"] = pos[:, j]
+                cols[f"v_{lab}_m_per_s"] = vel[:, j]
             return cols
         cols = {"time_s": self.time}
         for j, lab in enumerate(self.labels):

@@ -158,7 +158,7 @@ def propagate_linear(A: np.ndarray, B: np.ndarray, s0: np.ndarray, F: np.ndarray
         H = np.empty((m, N, p))                      # H[j] = A^j B
         H[0] = B
         H[1:] = pw[:-1] @ B
-        Toe = np.zeros((m, N, m, p))
+        Toe: np.ndarray = np.zeros((m, N, m, p))
         for i in range(m):
             Toe[i:, :, i, :] = H[:m - i]             # s[k+1+j] gets A^(j-i) B f[k+i]
         Toe = Toe.reshape(m * N, m * p)
@@ -175,7 +175,7 @@ def propagate_linear(A: np.ndarray, B: np.ndarray, s0: np.ndarray, F: np.ndarray
         k = b = 0
         while k < n_samples:
             blk = (Pw @ s).reshape(m, N)
-            if forced:
+            if Fc is not None:                       # forced
                 blk += Fc[b]
             take = min(m, n_samples - k)
             S[k + 1:k + 1 + take] = blk[:take]
@@ -296,8 +296,9 @@ def simulate(loop: HapticLoop | TeleoperationLoop, duration: float, *,
     for a in arrays:
         a.setflags(write=False)
     K = float(sysm.stiffness[0])
-    return SimulationResult(*arrays, verdict, tuple(sysm.labels), T, loop.delay_in_samples, K,
-                            nl, contact, dt, dx, dv, rest=tuple(float(r) for r in rest))
+    return SimulationResult(t, X, V, U, Fx, pe, ee, S, verdict, tuple(sysm.labels), T,
+                            loop.delay_in_samples, K, nl, contact, dt, dx, dv,
+                            rest=tuple(float(r) for r in rest))
 
 
 def _samples(duration: float, T: float, dense: Any) -> int:
@@ -391,7 +392,7 @@ def _linear_verdict(roles: Any, s0: np.ndarray, F: np.ndarray, S: np.ndarray, T:
     for j in np.flatnonzero(np.any(F != 0, axis=0)):
         g = roles.G[:, j] / np.abs(roles.G[:, j]).max()
         imp = propagate_linear(roles.A, roles.G, g, None, M)
-        parts.append((f"response to a force impulse on the {labels[j]}",
+        parts.append((f"response to a force impulse on the {labels[int(j)]}",
                       assess(imp, None, T, differences=False)))
     return combine(parts)
 
@@ -538,6 +539,7 @@ def critical_stiffness_simulation(loop: HapticLoop | TeleoperationLoop, *,
             lo, v_lo = mid, v
         else:
             hi, v_hi = mid, v
+    assert v_hi is not None                             # set together with hi
     reason = (f"largest K whose simulated free response ({n_samples} samples) stays bounded; "
               f"at K = {lo:.6g}: {v_lo.reason}; at K = {hi:.6g}: {v_hi.reason}")
     return CriticalStiffnessResult(

@@ -145,7 +145,7 @@ def step_nonlinear(roles: Roles, s0: np.ndarray, F: np.ndarray, M: int,
         S[k] = s
         sm = measure(s)
         u = Fu @ sm
-        if has_wall:
+        if C is not None:                # has_wall
             C[k] = c = bool(E0 @ sm > 0)   # the wall pushes only on penetration it sees
             if not c:
                 u[0] = 0.0

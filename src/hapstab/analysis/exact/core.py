@@ -67,9 +67,10 @@ def rigid_body_modes(A0: np.ndarray, A1: np.ndarray) -> int:
 def _spring_dampers(loop: HapticLoop | TeleoperationLoop) -> bool:
     cs = [loop.controller] if isinstance(loop, HapticLoop) else \
         [loop.master_controller, loop.slave_controller]
-    if not all(isinstance(c, SpringDamper) for c in cs):
+    sds = [c for c in cs if isinstance(c, SpringDamper)]
+    if len(sds) != len(cs):
         return False
-    return not (cs[0].stiffness == 0 and any(c.stiffness > 0 for c in cs))
+    return not (sds[0].stiffness == 0 and any(c.stiffness > 0 for c in sds))
 
 
 def _polish_pole(resp: LoopResponse, u: float, z0: complex) -> complex:

@@ -90,6 +90,18 @@ class Cells:
 
     _ONE = ("item", "th", "rho", "kind")
     _THREE = ("pc", "pr", "pd", "vc", "vr", "dc", "dr")
+    # the views, set by _views()
+    item: np.ndarray
+    th: np.ndarray
+    rho: np.ndarray
+    kind: np.ndarray
+    pc: np.ndarray
+    pr: np.ndarray
+    pd: np.ndarray
+    vc: np.ndarray
+    vr: np.ndarray
+    dc: np.ndarray
+    dr: np.ndarray
 
     def __init__(self) -> None:
         self.size = 0
@@ -102,7 +114,7 @@ class Cells:
         dt = {"item": int, "kind": int, "pc": complex, "pd": complex, "vc": complex, "dc": complex}
         for name in self._ONE + self._THREE:
             shape = (cap,) if name in self._ONE else (3, cap)
-            new = np.zeros(shape, dt.get(name, float))
+            new: np.ndarray = np.zeros(shape, dt.get(name, float))
             if name in self._buf:
                 new[..., :self.size] = self._buf[name][..., :self.size]
             self._buf[name] = new
@@ -266,12 +278,15 @@ def _trim(c: Cells, cell: np.ndarray, ua: np.ndarray, ub: np.ndarray
         pt_ok &= (val <= 0) if sgn > 0 else (val >= 0)
     # merge feasible pieces: a piece is [lo, hi] if ok; isolated feasible breakpoints
     # become tiny pieces. Breakpoints carry rounding: widen by a few ulps (relative).
-    pieces_c, pieces_a, pieces_b = [], [], []
     rows, cols = np.nonzero(ok)
-    pieces_c.append(rows), pieces_a.append(lo[rows, cols]), pieces_b.append(hi[rows, cols])
+    pieces_c: list[np.ndarray] = [rows]
+    pieces_a: list[np.ndarray] = [lo[rows, cols]]
+    pieces_b: list[np.ndarray] = [hi[rows, cols]]
     rows, cols = np.nonzero(pt_ok & ~np.concatenate([ok, np.zeros((ok.shape[0], 1), bool)], axis=1)
                             & ~np.concatenate([np.zeros((ok.shape[0], 1), bool), ok], axis=1))
-    pieces_c.append(rows), pieces_a.append(br[rows, cols]), pieces_b.append(br[rows, cols])
+    pieces_c.append(rows)
+    pieces_a.append(br[rows, cols])
+    pieces_b.append(br[rows, cols])
     r = np.concatenate(pieces_c)
     a = np.concatenate(pieces_a)
     b = np.concatenate(pieces_b)
@@ -586,7 +601,9 @@ def winding(resp: LoopResponse, items: np.ndarray, u: np.ndarray) -> np.ndarray:
         fc, fr = _dpoly(np.array([v[0] for v in vd]), np.array([v[1] for v in vd]), u[row],
                         np.zeros(row.size))
         ok = np.abs(fc) > fr
-        done_a.append(a[ok]), done_b.append(b[ok]), done_row.append(row[ok])
+        done_a.append(a[ok])
+        done_b.append(b[ok])
+        done_row.append(row[ok])
         a, b, row = a[~ok], b[~ok], row[~ok]
         floor = (b - a) <= THETA_FLOOR * (1.0 + a)
         bad_rows[row[floor]] = True
@@ -668,7 +685,7 @@ def _classify(resp: LoopResponse, i: int, anchor: int, cross, unsure, full: bool
             raise AnalysisError("crossing analysis: the first crossing points inwards while no "
                                 "pole is outside; please report this loop")
         kmax = a * s
-        uncertain = ((a * s, b * s),) if m == 0 else ()
+        uncertain: tuple[tuple[float, float], ...] = ((a * s, b * s),) if m == 0 else ()
         return {**base, "kmax": kmax, "intervals": ((0.0, kmax),) if kmax > 0 else (),
                 "theta": t, "uncertain": uncertain}
     counts: list[int | None] = [anchor]
@@ -689,7 +706,9 @@ def _classify(resp: LoopResponse, i: int, anchor: int, cross, unsure, full: bool
     edges_lo = [0.0] + [b * s for a, b, *_ in events]
     edges_hi = [a * s for a, b, *_ in events] + [math.inf]
     thetas = [t for _, _, t, _, _ in events]
-    intervals, upper, kmax, theta = [], [], 0.0, math.nan
+    intervals: list[tuple[float, float]] = []
+    upper: list[int] = []
+    kmax, theta = 0.0, math.nan
     for g, cnt in enumerate(counts):
         if cnt == 0:
             lo, hi = edges_lo[g], edges_hi[g]
