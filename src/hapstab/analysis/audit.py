@@ -83,8 +83,17 @@ class AuditResult:
     Attributes
     ----------
     kind : {"hve", "peb"}
+        The loop kind.
+    period : float
+        Sampling period T in s.
+    delay_samples : int
+        Delay n in samples.
+    virtual_damping : float
+        B in N*s/m (the master's for a teleoperator).
     rows : tuple of AuditRow
+        One per condition, ending with the exact limit.
     exact_kmax : float
+        The exact K_max in N/m.
     passivity_kmax : float
         Exact sampled-data passivity limit (= forward circle limit).
     flagged : tuple of str

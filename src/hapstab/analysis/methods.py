@@ -36,7 +36,18 @@ _PEB_ONLY = {"eq29", "eq34"}
 
 
 def methods_for(kind: str) -> list[str]:
-    """Method names that apply to ``kind`` ("hve" or "peb")."""
+    """Method names that apply to ``kind``.
+
+    Parameters
+    ----------
+    kind : {"hve", "peb"}
+        The loop kind: haptic virtual environment or position-error-based teleoperator.
+
+    Returns
+    -------
+    list of str
+        Names accepted by :func:`critical_stiffness` for that kind.
+    """
     other = _PEB_ONLY if kind == "hve" else _HVE_ONLY
     return [m for m in METHODS if m not in other]
 
@@ -95,6 +106,9 @@ def boundary(loop: HapticLoop | TeleoperationLoop, periods: Sequence[float] | np
         Delays n in samples (t_d = n T at each T).
     method : str
         As for :func:`critical_stiffness`; ``"exact"`` is vectorised over T.
+    **options
+        Passed to the method at every grid point (e.g. ``approximation`` for
+        ``"circle"``); ``"exact"`` takes none and ignores them.
 
     Returns
     -------

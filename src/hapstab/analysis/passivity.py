@@ -63,6 +63,9 @@ class PassivityResult:
     failed_condition : str or None
         ``"colgate-schenkel"`` when not passive.
     reason : str
+        The verdict in words.
+    period : float
+        Sampling period T in s (converts rad/sample to rad/s).
     """
 
     passive: bool

@@ -216,6 +216,12 @@ class PositiveRealResult:
         In words, naming the condition.
     period : float
         T used to convert rad/sample to rad/s (1 if none was given).
+    poles : tuple of complex
+        The poles of G(z).
+    frequencies_rad_s : array
+        The frequencies (rad/s) of the sweep for condition (iii).
+    min_eigenvalues : array
+        The smallest eigenvalue of G + G^H at each of them (for plotting).
     """
 
     positive_real: bool

@@ -192,7 +192,14 @@ class RegionResult:
 
     Attributes
     ----------
+    kind : {"hve", "peb"}
+        The loop kind.
+    period : float
+        Sampling period T in s.
+    delay_samples : float
+        The delay in samples (t_d / T).
     K_range, B_range : (float, float)
+        The window in N/m and N*s/m.
     B_rows : array
         Virtual dampings of the rows.
     intervals : tuple
@@ -202,10 +209,15 @@ class RegionResult:
     K_grid : array
         K values of the cross-check grid; ``stable_grid[i, j]`` is the Schur-Cohn
         verdict at (K_grid[j], B_rows[i]) and ``stable_exact`` the exact one.
+    stable_exact, stable_grid : (len(B_rows), len(K_grid)) bool arrays
+        The two verdicts on the grid.
     agreement : dict
         Cross-check counts: points compared, disagreements beyond ``margin``.
     overlays : dict
         name -> K_max on each row (passivity, circle, the paper's line).
+    disagreement : bool array or None
+        Grid points where the verdicts differ away from the boundary (None: not
+        compared).
     """
 
     kind: str
@@ -265,8 +277,10 @@ class BestDampingResult:
         K* = K_max(B*) in N/m.
     critical_stiffness_at_zero_damping : float
         K_max(0), for comparison.
+    reason : str
+        How B* was found, in words.
     B_curve, K_curve : arrays
-        K_max over the scanned dampings.
+        K_max over the scanned dampings (N*s/m, N/m).
     """
 
     damping: float

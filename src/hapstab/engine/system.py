@@ -80,14 +80,26 @@ class SampledSystem:
         The loops' own K; ``A_cl = A0 + stiffness * B1 @ C1``.
     B_ext : (P, N, p)
         Exogenous force on each port, held over the sample.
-    F_u : (P, p, N)
-        Controller force of each port from the state (``u = F_u s``).
+    F_u0, F_u1 : (P, p, N)
+        Controller force of each port from the state, ``u = (F_u0 + K F_u1) s``
+        (:meth:`force_matrix`), in N.
     pos, vel : (p, N)
         Selectors of each port's position and velocity.
-    E : (p, N)
-        The controller input of each port, ``e_i = E_i s`` (delays included).
     Ac, Bc : (np, np), (np, p)
         Continuous plant (all ports), state = the first ``np`` closed-loop states.
+    Cf : (p, np)
+        Each port's termination force (N) from the plant state.
+    n_plant : int
+        ``np``, the number of plant states.
+    labels : list of str
+        The ports' names (``device``; ``master``, ``slave``).
+    varies_with_K : bool
+        False when K cannot be varied (a controller without a stiffness, or a master
+        stiffness of 0 with a slave's > 0): then ``B1 @ C1`` is zero.
+    E : (p, N) or None
+        The controller input of each port, ``e_i = E_i s`` (delays included).
+    fixed_reason : str
+        Why K cannot be varied (empty when it can).
     """
 
     periods: np.ndarray

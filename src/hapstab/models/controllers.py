@@ -61,7 +61,21 @@ class SpringDamper:
 @dataclass(frozen=True)
 class DiscreteController:
     """Any proper discrete transfer function H(z) = num(z)/den(z) (highest power first).
-    It has no stiffness parameter, so :func:`critical_stiffness` does not apply."""
+    It has no stiffness parameter, so :func:`critical_stiffness` does not apply.
+
+    Parameters
+    ----------
+    num : sequence of float
+        Numerator coefficients in z, highest power first; force in N per m of input.
+    den : sequence of float
+        Denominator coefficients in z, highest power first, not all zero; the degree
+        of ``num`` must not exceed that of ``den`` (proper).
+
+    Raises
+    ------
+    ModelError
+        If a coefficient is not finite, the denominator is zero or H is improper.
+    """
 
     num: tuple[float, ...]
     den: tuple[float, ...]

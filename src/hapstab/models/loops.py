@@ -71,7 +71,27 @@ def split_delay(d: float) -> tuple[int, float]:
 
 def delay_from_seconds(name: str, seconds: Any, period: float) -> tuple[int, float]:
     """Split a delay in seconds into whole samples and a fraction in [0, 1), by
-    the rule of :func:`split_delay`."""
+    the rule of :func:`split_delay`.
+
+    Parameters
+    ----------
+    name : str
+        The delay's name in the error message (e.g. ``"delay_s"``).
+    seconds : float
+        The delay t_d in s, finite and >= 0.
+    period : float
+        The sampling period T in s.
+
+    Returns
+    -------
+    (int, float)
+        n and f with t_d = (n + f) T, 0 <= f < 1.
+
+    Raises
+    ------
+    ModelError
+        If ``seconds`` is negative or not finite.
+    """
     return split_delay(check_real(name, seconds, nonnegative=True) / period)
 
 
@@ -93,6 +113,7 @@ class HapticLoop:
     Parameters
     ----------
     device : Device
+        The haptic device (mass in kg, damping in N*s/m).
     controller : SpringDamper or DiscreteController
         H(z), eq. (23).
     operator : Impedance, str or None
@@ -100,7 +121,10 @@ class HapticLoop:
     period : float
         Sampling period T in s, > 0.
     delay_samples : int
-        n >= 0.
+        n >= 0, the whole samples of delay.
+    fractional_delay : float
+        The part of the delay below one sample, in [0, 1) of T: t_d = (n + f) T.
+        Usually set through :meth:`with_delay_s`.
     """
 
     device: Device
@@ -153,6 +177,7 @@ class TeleoperationLoop:
     Parameters
     ----------
     master, slave : Device
+        The two robots (mass in kg, damping in N*s/m).
     master_controller, slave_controller : SpringDamper or DiscreteController
         C_m(z), C_s(z) (eq. 23); they may differ.
     operator, environment : Impedance, str or None
@@ -160,7 +185,15 @@ class TeleoperationLoop:
     period : float
         T in s, > 0.
     delay_samples : int
-        One-way delay n >= 0 in each direction.
+        One-way delay n >= 0 in each direction (master -> slave; also slave -> master
+        unless ``delay_backward_samples`` is given).
+    delay_backward_samples : int or None
+        Slave -> master delay in whole samples; ``None``: the same as ``delay_samples``.
+    fractional_delay : float
+        The part of the master -> slave delay below one sample, in [0, 1) of T.
+    fractional_delay_backward : float or None
+        The same for slave -> master; ``None``: the same as ``fractional_delay``.
+        Usually set through :meth:`with_delays_s`.
     """
 
     master: Device
@@ -262,7 +295,20 @@ Loop = HapticLoop | TeleoperationLoop
 
 def whole_delay(loop: HapticLoop | TeleoperationLoop, what: str) -> int:
     """The delay in whole samples (equal both ways for teleoperation), for methods
-    derived for t_d = nT only; otherwise an :class:`AnalysisError` naming ``what``."""
+    derived for t_d = nT only; otherwise an :class:`AnalysisError` naming ``what``.
+
+    Parameters
+    ----------
+    loop : HapticLoop or TeleoperationLoop
+        The loop whose delay is needed.
+    what : str
+        The method that needs it, named in the error (e.g. ``"the circle criterion"``).
+
+    Returns
+    -------
+    int
+        n, the delay in samples (t_d = n T).
+    """
     if isinstance(loop, TeleoperationLoop):
         if not loop.symmetric_delay:
             raise AnalysisError(f"{what}: derived for equal delays in both directions; this loop has "

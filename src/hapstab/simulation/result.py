@@ -42,6 +42,18 @@ class SimulationResult:
     states : (M+1, N)
         Full closed-loop state (plant, delay registers, controller).
     verdict : BoundednessVerdict
+        Bounded or not, from the run (see :mod:`hapstab.simulation.growth`).
+    labels : tuple of str
+        The ports' names (``device``; ``master``, ``slave``).
+    period : float
+        Sampling period T in s.
+    delay_samples : float
+        The delay in samples (t_d / T).
+    stiffness : float
+        The loop's K in N/m (the master's for a teleoperator).
+    nonlinear : dict
+        The nonlinear elements of the run (``wall``, ``saturation``, ``resolution``,
+        ...); empty for a linear run.
     contact : (M+1,) bool or None
         Wall engaged at each sample (with ``wall``).
     dense_time, dense_position, dense_velocity : arrays or None

@@ -133,7 +133,12 @@ def propagate_linear(A: np.ndarray, B: np.ndarray, s0: np.ndarray, F: np.ndarray
 
     Parameters
     ----------
-    A : (N, N), B : (N, p), s0 : (N,)
+    A : (N, N) array
+        One-sample state transition.
+    B : (N, p) array
+        Input matrix of the held forces.
+    s0 : (N,) array
+        Initial state.
     F : (M, p) array or None
         Held inputs (None: free response).
     n_samples : int
@@ -346,7 +351,22 @@ QUANTIZERS = ("floor", "nearest")
 
 def quantize(x: np.ndarray, resolution: float, quantizer: str = "floor") -> np.ndarray:
     """The encoder's reading of ``x``: ``Δ floor(x/Δ)`` or the nearest multiple of Δ
-    (ties away from zero, not to even)."""
+    (ties away from zero, not to even).
+
+    Parameters
+    ----------
+    x : array
+        Positions in m.
+    resolution : float
+        Δ, the encoder's resolution in m (> 0).
+    quantizer : {"floor", "nearest"}
+        ``"floor"`` (an incremental encoder) or anything else for the nearest multiple.
+
+    Returns
+    -------
+    array
+        The readings, multiples of Δ in m.
+    """
     if quantizer == "floor":
         return resolution * np.floor(x / resolution)
     return resolution * np.sign(x) * np.floor(np.abs(x) / resolution + 0.5)
