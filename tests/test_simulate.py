@@ -323,7 +323,7 @@ def rk4_hve_read_delayed(m, b, k_op, K, B, T, d, x0, f_ext, M, sub, q=None, sat=
     controller reads x(kT - dT) from the fine trajectory, quantises it (q), acts on
     the penetration beyond ``wall`` only while positive, clips to ``sat``."""
     h_ = T / sub
-    lag = int(round(d * sub))            # d * sub must be whole: reading on the grid
+    lag = round(d * sub)            # d * sub must be whole: reading on the grid
     xs, x, v = [x0], x0, 0.0
     e_prev = None
     us = []

@@ -70,7 +70,7 @@ def check_delay(name: str, value: Any) -> int:
     if isinstance(value, Integral):
         v = int(value)
     elif isinstance(value, Real) and math.isfinite(float(value)) and float(value).is_integer():
-        v = int(math.trunc(value))
+        v = int(math.trunc(value))   # noqa: RUF046 - a Real's __trunc__ may give any Integral
     else:
         raise ModelError(
             f"{name} = {_fmt(value)}: must be a whole number of samples >= 0 "

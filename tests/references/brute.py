@@ -430,7 +430,7 @@ def stable_intervals(loop: Loop, lo: float | None = None, hi: float | None = Non
     s_lo, s_hi = scale(loop)
     lo = SCAN_LO * s_lo if lo is None else lo
     hi = SCAN_HI * s_hi if hi is None else hi
-    Ks = np.geomspace(lo, hi, int(math.ceil(per_decade * math.log10(hi / lo))) + 1)
+    Ks = np.geomspace(lo, hi, math.ceil(per_decade * math.log10(hi / lo)) + 1)
     rho = radius(loop, Ks)
     st = rho < 1.0
     idx = np.flatnonzero(st[1:] != st[:-1])

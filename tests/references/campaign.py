@@ -202,7 +202,7 @@ def _delay(rng: np.random.Generator, max_delay: int) -> int:
         return int(rng.integers(0, 5))
     if u < 0.98 or max_delay <= 20:
         return int(rng.integers(5, 21))
-    return int(round(_logu(rng, 21, max_delay)))
+    return round(_logu(rng, 21, max_delay))
 
 
 def _termination(rng: np.random.Generator, env: bool) -> str:

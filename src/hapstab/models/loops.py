@@ -62,7 +62,7 @@ def split_delay(d: float) -> tuple[int, float]:
         :data:`DELAY_SNAP` of a whole number (so t_d = nT gives exactly the
         integer-delay model).
     """
-    n = int(round(d))
+    n = round(d)
     if abs(d - n) <= DELAY_SNAP * max(1.0, d):
         return n, 0.0
     n = int(np.floor(d))

@@ -309,7 +309,7 @@ def simulate(loop: HapticLoop | TeleoperationLoop, duration: float, *,
 def _samples(duration: float, T: float, dense: Any) -> int:
     """Number of samples of the run; checks ``duration`` and ``dense``."""
     dur = check_real("duration", duration, positive=True)
-    M = int(round(dur / T))
+    M = round(dur / T)
     if M < 8:
         raise ModelError(f"duration = {duration}: gives {M} samples at T = {T:g} s; need >= 8")
     if M > 50_000_000:
