@@ -16,7 +16,10 @@ demo: $(STAMP)
 	$(BIN)/hapstab reproduce all --out out/
 	@echo "Fig. 5 and Fig. 6 written to $(CURDIR)/out/: fig5.png fig5.svg fig5.csv fig6.png fig6.svg fig6.csv"
 
+# lint (ruff), types (mypy on src/), then the suite (warnings are errors: pyproject)
 test: $(STAMP)
+	$(BIN)/ruff check src tests benchmarks
+	$(BIN)/mypy src
 	$(BIN)/python -m pytest
 
 bench: $(STAMP)

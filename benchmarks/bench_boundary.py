@@ -12,17 +12,17 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")          # one core, as the target
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("MKL_NUM_THREADS", "1")
 
-import statistics  # noqa: E402
-import time  # noqa: E402
+import statistics
+import time
 
-import numpy as np  # noqa: E402
+import numpy as np
 
-import hapstab as h  # noqa: E402
+import hapstab as h
 
 try:
-    import control  # noqa: E402
+    import control
 except ImportError:  # pragma: no cover
-    raise SystemExit("python-control is the baseline: pip install control (make bench does)")
+    raise SystemExit("python-control is the baseline: pip install control (make bench does)") from None
 
 PERIODS = np.arange(1, 11) * 1e-3
 

@@ -29,8 +29,9 @@ def main() -> None:
     ks = [critical_stiffness_circle(lp).critical_stiffness for *_, lp in loops]
     total = time.perf_counter() - t0
     worst = 0.0
-    print(f"{'figure':<11} {'n':>3} {'T (ms)':>7} {'K_max circle':>14} {'closed form':>14} {'eq.':>5} {'rel. err':>9}")
-    for (fig, n, eq, line, lp), K in zip(loops, ks):
+    print(f"{'figure':<11} {'n':>3} {'T (ms)':>7} {'K_max circle':>14} {'closed form':>14} "
+          f"{'eq.':>5} {'rel. err':>9}")
+    for (fig, n, eq, line, lp), K in zip(loops, ks, strict=True):
         ref = line(lp).critical_stiffness
         err = abs(K - ref) / ref
         worst = max(worst, err)

@@ -22,15 +22,16 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("MKL_NUM_THREADS", "1")
 
-import statistics  # noqa: E402
-import time  # noqa: E402
-import tracemalloc  # noqa: E402
+import statistics
+import time
+import tracemalloc
+from functools import partial
 
-import numpy as np  # noqa: E402
+import numpy as np
 
-import hapstab as h  # noqa: E402
-from hapstab.engine.system import build
+import hapstab as h
 from hapstab.analysis.exact.core import exact_kmax_batch
+from hapstab.engine.system import build
 
 DELAYS = (10, 100, 300, 1000)
 SCAN = 400          # geometric scan points of the naive method over 1e-3 ... 1e7 N/m
@@ -89,8 +90,8 @@ def main() -> None:
             N = build(loop).order
             rep = 5 if n <= 300 else 3
             k = exact_kmax_batch(loop, intervals=False)[0]["kmax"]
-            t_fast = median_time(lambda: exact_kmax_batch(loop, intervals=False), rep)
-            t_full = median_time(lambda: h.critical_stiffness(loop), max(1, rep // 2))
+            t_fast = median_time(partial(exact_kmax_batch, loop, intervals=False), rep)
+            t_full = median_time(partial(h.critical_stiffness, loop), max(1, rep // 2))
             tracemalloc.start()
             exact_kmax_batch(loop, intervals=False)
             peak = tracemalloc.get_traced_memory()[1] / 2**20
@@ -102,7 +103,7 @@ def main() -> None:
                   f"{t_full * 1e3:10.0f} ms | {agree}", flush=True)
     T = np.linspace(1e-4, 2e-2, 10_000)
     for name, loop, n in (("hve", h.paper_hve(), 10), ("peb", h.paper_peb(), 4)):
-        t = median_time(lambda: h.boundary(loop, T, [n]), 3)
+        t = median_time(partial(h.boundary, loop, T, [n]), 3)
         print(f"10,000 boundary points, paper {name} (n = {n}): {t:.2f} s "
               f"({t / T.size * 1e6:.0f} us per point)", flush=True)
 

@@ -10,14 +10,14 @@ import os
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-import statistics  # noqa: E402
-import time  # noqa: E402
+import statistics
+import time
 
-import numpy as np  # noqa: E402
+import numpy as np
 
-import hapstab as h  # noqa: E402
-from hapstab.engine.system import build
+import hapstab as h
 from hapstab.analysis.regions import stability_region, with_gains
+from hapstab.engine.system import build
 
 LOOP = h.paper_hve(delay_samples=10)
 K, B, RES = (0.0, 900.0), (0.0, 20.0), 200

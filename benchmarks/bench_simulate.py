@@ -12,8 +12,10 @@ Run: .venv/bin/python benchmarks/bench_simulate.py
 
 import os
 
-for _v in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(_v, "1")      # "one core": set before numpy is imported
+# "one core": set before numpy is imported
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+os.environ.setdefault("MKL_NUM_THREADS", "1")
 
 import sys
 import time
@@ -43,8 +45,8 @@ def scipy_user_loop(n_samples: int) -> np.ndarray:
         u = K * e + B_VIRT * (e - e_prev) / T
         e_prev = e
         f = F_OP - u
-        sol = solve_ivp(lambda t, z: [z[1], (f - B_DEV * z[1] - K_OP * z[0]) / M_DEV],
-                        (k * T, (k + 1) * T), y, rtol=1e-10, atol=1e-13)
+        sol = solve_ivp(lambda t, z, f: [z[1], (f - B_DEV * z[1] - K_OP * z[0]) / M_DEV],
+                        (k * T, (k + 1) * T), y, args=(f,), rtol=1e-10, atol=1e-13)
         y = sol.y[:, -1]
         xs.append(y[0])
     return np.array(xs)
@@ -81,7 +83,8 @@ def main() -> int:
     t0 = time.perf_counter()
     stars = [critical_stiffness_simulation(lp).critical_stiffness for lp in loops]
     t_stars = time.perf_counter() - t0
-    worst = max(abs(s / h.critical_stiffness(lp).critical_stiffness - 1) for s, lp in zip(stars, loops))
+    worst = max(abs(s / h.critical_stiffness(lp).critical_stiffness - 1)
+                for s, lp in zip(stars, loops, strict=True))
     print(f"Fig. 5 + Fig. 6 simulation stars: {len(stars)} in {t_stars:.2f} s (target < 10 s); "
           f"worst |sim/exact - 1| = {worst:.1e}")
     ok &= t_stars < 10 and len(stars) == 40

@@ -37,7 +37,7 @@ def _one_blas_thread() -> None:
 _one_blas_thread()
 
 
-def pytest_terminal_summary(terminalreporter, exitstatus, config):  # noqa: ARG001
+def pytest_terminal_summary(terminalreporter, exitstatus, config):
     """Print the campaign's failure summary (and write it to out/campaign-report[-shard].json)."""
     from references import campaign
 

@@ -8,9 +8,9 @@ import pytest
 import hapstab as h
 from hapstab.analysis.audit import audit
 from hapstab.errors import AnalysisError
-from hapstab.models.parts import Device
 from hapstab.models.controllers import DiscreteController, SpringDamper
 from hapstab.models.loops import HapticLoop, TeleoperationLoop
+from hapstab.models.parts import Device
 
 
 def rows(a):
@@ -38,7 +38,7 @@ def test_negative_b_closed_forms_keep_their_promise(loop, keys):
     a = audit(loop)
     r = rows(a)
     assert a.virtual_damping < 0
-    for k in keys + ("circle-forward", "passivity"):
+    for k in (*keys, "circle-forward", "passivity"):
         assert r[k].flag is None
         assert r[k].critical_stiffness == pytest.approx(a.passivity_kmax, rel=1e-9)
         assert h.stability(loop.with_stiffness(r[k].critical_stiffness * (1 - 1e-6))).stable

@@ -21,7 +21,6 @@ The failures are real: they are hapstab's, kept visible on purpose (no xfail).
 from __future__ import annotations
 
 import json
-import math
 import os
 
 import mpmath
@@ -31,8 +30,8 @@ from click.testing import CliRunner
 
 import hapstab as h
 from hapstab.cli.main import cli
-from references import brute, campaign
 from reference_data import ref
+from references import brute, campaign
 
 #: the default subset: scenario indices 0..299, long delays folded to <= 20 samples
 DEFAULT = [campaign.scenario(i, max_delay=20) for i in range(300)]
@@ -75,7 +74,7 @@ def test_characteristic_function_vanishes_at_the_eigenvalues():
     # refined at 50 digits, each root moves by no more than the double eigenvalue's error
     roots = brute.aberth(L, 7.0, ev)
     assert roots is not None
-    assert max(abs(complex(r) - e) for r, e in zip(roots, ev)) < 1e-10
+    assert max(abs(complex(r) - e) for r, e in zip(roots, ev, strict=True)) < 1e-10
 
 
 def test_rigid_mode_is_deflated_exactly():

@@ -10,11 +10,16 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import hapstab as h
-from hapstab.analysis.circle import (APPROXIMATIONS, circle_test, critical_stiffness_circle, loop_inverse)
+from hapstab.analysis.circle import (
+    APPROXIMATIONS,
+    circle_test,
+    critical_stiffness_circle,
+    loop_inverse,
+)
 from hapstab.errors import AnalysisError
-from hapstab.models.parts import Device
 from hapstab.models.controllers import DiscreteController, SpringDamper
 from hapstab.models.loops import HapticLoop, TeleoperationLoop
+from hapstab.models.parts import Device
 
 PERIODS = np.arange(1, 11) * 1e-3
 

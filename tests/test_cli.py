@@ -169,8 +169,8 @@ def test_delay_backward_alone_keeps_delay_for_the_other_side():
 
 # ------------------------------------------------ user errors vs bugs (issue #10, 6)
 def _break_stability(monkeypatch, exc):
-    import hapstab.cli.analysis as mod   # noqa: F401 - the command imports stability lazily
     import hapstab.analysis.exact.core as core
+    import hapstab.cli.analysis as mod  # noqa: F401 - the command imports stability lazily
 
     def boom(*a, **k):
         raise exc

@@ -8,8 +8,8 @@ import pytest
 from click.testing import CliRunner
 
 import hapstab as h
-from hapstab.cli.main import cli
 from hapstab.analysis.exact.core import stability
+from hapstab.cli.main import cli
 
 
 def run(args):

@@ -9,7 +9,6 @@ from click.testing import CliRunner
 
 import hapstab as h
 from hapstab.cli.main import cli
-
 from references import brute
 
 UNEQUAL = ("--slave-stiffness-ratio", "2", "--slave-virtual-damping", "-0.003")

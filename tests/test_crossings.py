@@ -7,10 +7,9 @@ import pytest
 
 import hapstab as h
 from hapstab.analysis.exact.crossings import U_LO, analyse, winding
-from hapstab.engine.system import build
 from hapstab.engine.frequency import loop_response
+from hapstab.engine.system import build
 from reference_data import ref
-
 
 
 @pytest.mark.parametrize("loop", [h.paper_hve(delay_samples=10), h.paper_peb(delay_samples=4),
@@ -91,7 +90,14 @@ def test_a_crossing_inside_an_unresolved_zone_is_not_counted_twice():
     # (from the independent review) an unresolved box of one theta-cell can span a
     # crossing proved in another cell: the stable set must end at the zone, safely,
     # and the intervals above must survive
-    from hapstab.analysis.exact.crossings import (Cells, _boxes, _classify, _dedupe, _initial_cells, _winding_cells)
+    from hapstab.analysis.exact.crossings import (
+        Cells,
+        _boxes,
+        _classify,
+        _dedupe,
+        _initial_cells,
+        _winding_cells,
+    )
     resp = loop_response(ISSUE1B)
     c = Cells()
     first = c.add(resp, *_initial_cells(resp, np.arange(1)))

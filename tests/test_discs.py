@@ -8,8 +8,8 @@ import pytest
 import hapstab as h
 from hapstab.analysis.exact.crossings import Cells
 from hapstab.engine.discs import Jet, geometric_sum_jet, one_minus_delay_jet
-from hapstab.engine.system import build
 from hapstab.engine.frequency import loop_response
+from hapstab.engine.system import build
 
 P = h.paper_peb(delay_samples=3)
 LOOPS = [h.paper_hve(delay_samples=7), P, P.replace(operator=None, environment=None),
@@ -33,11 +33,11 @@ def test_cell_discs_enclose_every_sampled_value(loop):
             c.add(r, [item], [th], [rho], kind)
             ts = th + rho * np.linspace(-1, 1, 41)
             F = r.coefficients(np.full(ts.size, item), ts, np.zeros(ts.size))
-            for l in range(3):
-                dv = np.abs(F[l].vc - c.vc[l, 0])
-                dd = np.abs(F[l].dc - c.dc[l, 0])
-                assert np.all(dv <= c.vr[l, 0] * (1 + 1e-9) + 1e-300), (l, th, rho)
-                assert np.all(dd <= c.dr[l, 0] * (1 + 1e-9) + 1e-300), (l, th, rho)
+            for deg in range(3):
+                dv = np.abs(F[deg].vc - c.vc[deg, 0])
+                dd = np.abs(F[deg].dc - c.dc[deg, 0])
+                assert np.all(dv <= c.vr[deg, 0] * (1 + 1e-9) + 1e-300), (deg, th, rho)
+                assert np.all(dd <= c.dr[deg, 0] * (1 + 1e-9) + 1e-300), (deg, th, rho)
 
 
 @pytest.mark.parametrize("loop", LOOPS)

@@ -6,10 +6,9 @@ import pytest
 from scipy.integrate import solve_ivp
 
 import hapstab as h
+from hapstab.engine.structure import structure_of
 from hapstab.engine.system import build
 from hapstab.engine.zoh import discretize, port_matrices
-from hapstab.engine.structure import structure_of
-
 from references import brute
 
 

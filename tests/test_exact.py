@@ -13,7 +13,6 @@ from hypothesis import strategies as st
 
 import hapstab as h
 from hapstab.errors import AnalysisError
-
 from references import brute
 
 PERIODS = np.arange(1, 11) * 1e-3
@@ -52,7 +51,7 @@ def _mp_plant(m, b, k, T):
 def _mp_kmax(chi, theta0, K0):
     """Solve chi(e^{j theta}, K) = 0 for real (theta, K) near hapstab's answer."""
     f = lambda th, K: [mp.re(chi(mp.exp(1j * th), K)), mp.im(chi(mp.exp(1j * th), K))]  # noqa: E731
-    th, K = mp.findroot(f, (mp.mpf(theta0), mp.mpf(K0)))
+    _th, K = mp.findroot(f, (mp.mpf(theta0), mp.mpf(K0)))
     return K
 
 

@@ -27,7 +27,7 @@ def modal(lams, k, rng, offset=None):
                                          ((-0.001, -0.5), (35.0, 1.0))])
 def test_rate_of_known_modes(rates, freqs):
     rng = np.random.default_rng(1)
-    lams = [np.exp((r + 2j * np.pi * f) * T) for r, f in zip(rates, freqs)]
+    lams = [np.exp((r + 2j * np.pi * f) * T) for r, f in zip(rates, freqs, strict=True)]
     S = modal(lams, np.arange(3000), rng, offset=rng.standard_normal(6))
     v = assess(S, None, T)
     # noise-free data: the fitted eigenvalue is the true one to rounding, so the rate

@@ -1,5 +1,6 @@
 """Models: validation at construction, impedance decomposition, spec parsing."""
 
+import dataclasses
 import math
 
 import numpy as np
@@ -44,7 +45,7 @@ def test_integral_float_delay_is_accepted():
 
 def test_loops_are_frozen():
     loop = h.paper_hve()
-    with pytest.raises(Exception):
+    with pytest.raises(dataclasses.FrozenInstanceError):
         loop.period = 2e-3  # type: ignore[misc]
 
 

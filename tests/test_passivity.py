@@ -11,11 +11,11 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import hapstab as h
+from hapstab.analysis.passivity import critical_stiffness_passivity, sampled_passivity
 from hapstab.errors import AnalysisError
-from hapstab.models.parts import Device, mass_spring_damper, spring
 from hapstab.models.controllers import DiscreteController, SpringDamper
 from hapstab.models.loops import HapticLoop, TeleoperationLoop
-from hapstab.analysis.passivity import critical_stiffness_passivity, sampled_passivity
+from hapstab.models.parts import Device, mass_spring_damper, spring
 
 
 def kmax(loop, method="passivity", **kw):

@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from hapstab.errors import AnalysisError, ModelError
 from hapstab.analysis.positive_real import RationalMatrix, circle_criterion, positive_real
+from hapstab.errors import AnalysisError, ModelError
 
 
 def scalar(num, den):
@@ -86,7 +86,8 @@ def test_narrow_dip_is_found(depth):
     assert r.positive_real == (depth < 1)
     # the brute grid spacing (6e-10 rad) bounds its error far below this
     assert r.margin == pytest.approx(brute, abs=1e-7)
-    assert r.worst_frequency_rad_s == pytest.approx(th[np.argmin(np.real(np.polyval(num, z) / np.polyval(rd, z)))], abs=1e-6)
+    worst = th[np.argmin(np.real(np.polyval(num, z) / np.polyval(rd, z)))]
+    assert r.worst_frequency_rad_s == pytest.approx(worst, abs=1e-6)
 
 
 # ------------------------------------------------------------------ matrices
@@ -157,17 +158,17 @@ def test_unit_circle_poles_at_any_degree(n):
     zn, one = [1.0] + [0.0] * n, [1.0] + [0.0] * (n - 1)
     # G = 1/(z^n - 1): Re G = -1/2 on the circle, so G + G^H = -1 (issue: degree 10
     # was "positive real" with "min eig -4.2 >= 0": the refinement walked onto a pole)
-    r = positive_real(scalar([1.0], one + [-1.0]))
+    r = positive_real(scalar([1.0], [*one, -1.0]))
     assert not r.positive_real and r.failed_conditions == ("hermitian part",)
     # G + G^H = -1 exactly; within 1e-9 rad of the n poles rounding adds ~1e-6
     assert r.margin == pytest.approx(-1.0, abs=1e-5)
     # (z^n + 1)/(z^n - 1) = -j cot(n w / 2): lossless, residues 2/n > 0 -> PR, margin 0
-    r = positive_real(scalar(one + [1.0], one + [-1.0]))
+    r = positive_real(scalar([*one, 1.0], [*one, -1.0]))
     assert r.positive_real and abs(r.margin) < 1e-7
     # z^n/(z^n - 1) = 1/2 + lossless part: PR with margin 1
-    r = positive_real(scalar(zn, one + [-1.0]))
+    r = positive_real(scalar(zn, [*one, -1.0]))
     assert r.positive_real and r.margin == pytest.approx(1.0, abs=1e-5)
     # 1/(z^n + 1): Re = 1/2, but the normalised residues are -1/n: (ii) fails
-    r = positive_real(scalar([1.0], one + [1.0]))
+    r = positive_real(scalar([1.0], [*one, 1.0]))
     assert not r.positive_real and r.failed_condition == "unit-circle poles"
 

@@ -4,10 +4,9 @@ import numpy as np
 import pytest
 
 import hapstab as h
+from hapstab.analysis.regions import best_damping, d_decomposition, stability_region, with_gains
 from hapstab.engine.system import build
 from hapstab.errors import AnalysisError
-from hapstab.analysis.regions import best_damping, d_decomposition, stability_region, with_gains
-
 from references import brute
 
 HVE10 = h.paper_hve(delay_samples=10)
@@ -37,7 +36,7 @@ def _inner_points_match_brute_force(res, K_hi):
 
 def test_region_rows_equal_exact_kmax():
     res = stability_region(HVE10, (0, 2000), (0, 20), resolution=6)
-    for B, iv in zip(res.B_rows, res.intervals):
+    for B, iv in zip(res.B_rows, res.intervals, strict=True):
         K = h.critical_stiffness(with_gains(HVE10, 1.0, B)).critical_stiffness
         assert iv[0][0] == 0.0 and iv[0][1] == pytest.approx(min(K, 2000), rel=1e-12)
 
@@ -153,7 +152,7 @@ def test_best_damping_searches_negative_b_and_can_find_it_best():
 
 
 def test_best_damping_bounds_are_validated():
-    with pytest.raises(AnalysisError, match="B_min = 0.5: must be <= 0"):
+    with pytest.raises(AnalysisError, match=r"B_min = 0\.5: must be <= 0"):
         best_damping(HVE10, B_min=0.5)
     with pytest.raises(h.ModelError, match="B_max"):
         best_damping(HVE10, B_max=-1.0)

@@ -3,14 +3,15 @@ simulation stars against the exact K_max; files written."""
 
 import csv
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 import hapstab as h
+from hapstab.analysis.exact.core import exact_critical_stiffness
 from hapstab.analysis.methods import METHODS, critical_stiffness
 from hapstab.errors import AnalysisError
-from hapstab.analysis.exact.core import exact_critical_stiffness
 from hapstab.paper.reproduce import FIGURES, PAPER_PERIODS, reproduce_figure, write_figure
 
 
@@ -68,8 +69,8 @@ def test_csv_columns_match_library(full, fig):
         with open(p, "rb") as fh:
             head = fh.read(200)
         assert len(head) == 200
-    assert open(png, "rb").read(8) == b"\x89PNG\r\n\x1a\n"
-    assert b"<svg" in open(svg, "rb").read()
+    assert Path(png).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert b"<svg" in Path(svg).read_bytes()
 
 
 def test_reduced_grid_and_progress(tmp_path):

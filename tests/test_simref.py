@@ -65,7 +65,7 @@ def test_wall_does_not_pull():
     # B (e - e_prev)/T is large and negative while the penetration is still > 0
     kw = dict(DEV, K=50.0, B=2.0, delay=1, x0=0.011, wall=0.01, n_samples=300,
               force=np.full(300, -3.0))
-    xp, up = hve_run(**kw, wall_pulls=True)
+    _xp, up = hve_run(**kw, wall_pulls=True)
     x, u = hve_run(**kw)
     e = np.r_[kw["x0"], x[:-2]] - 0.01          # delay 1: e[k] = x[k-1] - wall
     pd = 50.0 * e + 2.0 * np.diff(np.r_[e[0], e]) / T

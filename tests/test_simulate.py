@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 
 import hapstab as h
+from hapstab.analysis.exact.core import exact_critical_stiffness, stability
 from hapstab.engine.system import build
 from hapstab.errors import AnalysisError, ModelError
-from hapstab.analysis.exact.core import exact_critical_stiffness, stability
 from hapstab.simulation.run import critical_stiffness_simulation, force_samples, simulate
 
 
@@ -80,7 +80,7 @@ def rk4_peb(mm, bm, ms, bs, kh, ke, K, T, n, xm0, f_h, M, sub=100):
         us = K * (y[2] - lm[0])
         f = f_h[k]
 
-        def rhs(z):
+        def rhs(z, f=f, um=um, us=us):   # this sample's held forces
             return np.array([z[1], (f - um - bm * z[1] - kh * z[0]) / mm,
                              z[3], (-us - bs * z[3] - ke * z[2]) / ms])
         for _ in range(sub):
@@ -323,7 +323,7 @@ def rk4_hve_read_delayed(m, b, k_op, K, B, T, d, x0, f_ext, M, sub, q=None, sat=
     controller reads x(kT - dT) from the fine trajectory, quantises it (q), acts on
     the penetration beyond ``wall`` only while positive, clips to ``sat``."""
     h_ = T / sub
-    lag = int(round(d * sub))            # d * sub must be whole: reading on the grid
+    lag = round(d * sub)            # d * sub must be whole: reading on the grid
     xs, x, v = [x0], x0, 0.0
     e_prev = None
     us = []

@@ -142,7 +142,8 @@ def _check_linear(i: int) -> None:
         assert v.verdict in ("bounded", "marginal"), f"{c.text}: {v.reason}"
         return
     if v.confidence in CONFIDENT:
-        assert v.bounded == (rho < 1), f"{c.text}: rho = {rho:.12g}, got {v.verdict} ({v.confidence}): {v.reason}"
+        assert v.bounded == (rho < 1), (f"{c.text}: rho = {rho:.12g}, "
+                                        f"got {v.verdict} ({v.confidence}): {v.reason}")
     # the loops are exactly linear and the fit noise-free: every verdict is confident,
     # unless the force itself still grows at the end of the run (a sine slower than
     # the run, started late, rises like a ramp), which the verdict must then say

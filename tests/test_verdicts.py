@@ -56,11 +56,11 @@ def test_sine_forcing_on_an_unstable_loop_grows():
 
 # ------------------------------------------- 3. quantisation on an unstable loop
 def test_quantised_unstable_loop_is_never_called_bounded():
-    long = run_json("hve -K 210 --resolution 0.001 -t 100".split())
+    long = run_json(["hve", "-K", "210", "--resolution", "0.001", "-t", "100"])
     assert long["linear_loop_verdict"] == "unstable"
     assert long["verdict"] == "unbounded" and long["behaviour"] == "grows"
     assert long["confidence"] in CONFIDENT and long["growth_rate_per_s"] > 0
-    short = run_json("hve -K 210 --resolution 0.001 -t 5".split())
+    short = run_json(["hve", "-K", "210", "--resolution", "0.001", "-t", "5"])
     # 5 s cannot show growth at the linearised rate (~0.017 1/s): say so, and how long
     assert short["verdict"] == "undecided" and short["confidence"] == "low"
     assert short["duration_hint_s"] >= 100
@@ -68,12 +68,12 @@ def test_quantised_unstable_loop_is_never_called_bounded():
 
 # ------------------------------------------------ 4. nonlinear runs in words
 def test_a_run_that_settles_exactly_settles():
-    d = run_json("hve -K 100 -n 3 -b 2 -B 0.5 --wall 0.001".split())
+    d = run_json(["hve", "-K", "100", "-n", "3", "-b", "2", "-B", "0.5", "--wall", "0.001"])
     assert d["verdict"] == "bounded" and d["behaviour"] == "settles" and d["confidence"] == "high"
 
 
 def test_bouncing_on_an_unstable_wall_is_a_limit_cycle_and_the_exact_verdict_says_linearised():
-    d = run_json("hve -K 800 -n 5 -b 2 --wall 0.001".split())
+    d = run_json(["hve", "-K", "800", "-n", "5", "-b", "2", "--wall", "0.001"])
     assert d["verdict"] == "bounded" and d["behaviour"] == "limit cycle"
     assert d["limit_cycle_amplitude_m"] > 0 and 0 < d["limit_cycle_period_s"] < 5
     assert d["linear_loop_verdict"] == "unstable" and "linearised" in d["linear_loop"]
@@ -81,7 +81,7 @@ def test_bouncing_on_an_unstable_wall_is_a_limit_cycle_and_the_exact_verdict_say
 
 
 def test_linear_run_names_its_exact_verdict_for_this_loop():
-    d = run_json("hve -K 100".split())
+    d = run_json(["hve", "-K", "100"])
     assert d["linear_loop"] == "this loop"
 
 
@@ -94,7 +94,7 @@ def test_nonlinear_reasons_do_not_speak_of_poles(args):
 
 
 def test_table_shows_behaviour_limit_cycle_and_linearised_label():
-    r = CliRunner().invoke(cli, "simulate hve -K 800 -n 5 -b 2 --wall 0.001".split())
+    r = CliRunner().invoke(cli, ["simulate", "hve", "-K", "800", "-n", "5", "-b", "2", "--wall", "0.001"])
     assert r.exit_code == 0
     assert "limit cycle" in r.output and "linearised" in r.output
 
@@ -171,7 +171,7 @@ def test_a_run_too_short_for_its_fit_is_undecided(args):
 
 
 def test_a_short_quantised_run_of_an_unstable_loop_is_not_bounded_by_proof():
-    d = run_json("hve -n 20 -K 9.8 --resolution 1e-4 -t 0.022".split())
+    d = run_json(["hve", "-n", "20", "-K", "9.8", "--resolution", "1e-4", "-t", "0.022"])
     assert d["linear_loop_verdict"] == "unstable"
     assert d["verdict"] != "bounded"
 
@@ -187,15 +187,16 @@ def test_slow_or_levelling_motion_is_not_confident_growth(args):
 
 
 def test_slow_creep_is_not_a_drift_and_an_ulp_creep_has_settled():
-    d = run_json("hve -K 5 -B 60 --wall 0 --force step:1".split())
+    d = run_json(["hve", "-K", "5", "-B", "60", "--wall", "0", "--force", "step:1"])
     assert d["behaviour"] != "drifts"
-    d = run_json("hve -K 100 --operator none --wall 0 --x0 0.01 --force none -t 100".split())
+    d = run_json(["hve", "-K", "100", "--operator", "none", "--wall", "0", "--x0", "0.01",
+                  "--force", "none", "-t", "100"])
     assert d["verdict"] == "bounded" and d["behaviour"] == "settles"
 
 
 def test_quantisation_bound_needs_an_asymptotically_stable_loop():
     # a free pair (rigid-body mode at z = 1) pushed by a step drifts away
-    d = run_json("peb -K 3 --operator none --environment none --resolution 1e-5".split())
+    d = run_json(["peb", "-K", "3", "--operator", "none", "--environment", "none", "--resolution", "1e-5"])
     assert d["linear_loop_verdict"] == "marginal"
     assert d["verdict"] != "bounded" and d["basis"] != "bound"
 
@@ -209,5 +210,5 @@ def test_a_growing_force_is_no_bounded_input(sat):
 
 
 def test_a_slow_ring_down_is_not_called_a_limit_cycle():
-    d = run_json("hve -K 100 --wall 0.01 --force sine:1,0.08".split())
+    d = run_json(["hve", "-K", "100", "--wall", "0.01", "--force", "sine:1,0.08"])
     assert d["behaviour"] != "limit cycle"

@@ -70,7 +70,7 @@ def check_delay(name: str, value: Any) -> int:
     if isinstance(value, Integral):
         v = int(value)
     elif isinstance(value, Real) and math.isfinite(float(value)) and float(value).is_integer():
-        v = int(value)
+        v = int(math.trunc(value))   # noqa: RUF046 - a Real's __trunc__ may give any Integral
     else:
         raise ModelError(
             f"{name} = {_fmt(value)}: must be a whole number of samples >= 0 "
@@ -101,7 +101,7 @@ def check_period(name: str, value: Any) -> float:
     return v
 
 
-def check_poly(name: str, coeffs: Any) -> "np.ndarray":
+def check_poly(name: str, coeffs: Any) -> np.ndarray:
     """Finite real polynomial coefficients, highest power first, leading zeros
     dropped (all-zero gives [0.]); else :class:`ModelError` naming ``name``."""
     import numpy as np

@@ -50,6 +50,8 @@ class StabilityResult:
         |arg(dominant_pole)| / (2 pi T).
     reason : str
         Why, in words.
+    period : float
+        Sampling period T in s.
     poles : tuple of complex
         All closed-loop poles at the sampling instants.
     rigid_body_modes : int
@@ -98,9 +100,16 @@ class CriticalStiffnessResult:
         one interval).
     reason : str
         Which condition says so.
+    period : float
+        Sampling period T in s.
+    delay_samples : int or float
+        The delay in samples (t_d / T).
     crossing_frequency_hz : float
         Frequency of the closed-loop pole that reaches |z| = 1 at K_max (nan if
         not applicable).
+    details : dict
+        Method-specific extras (e.g. the simulation's bracket), added to
+        :meth:`to_dict`.
     """
 
     critical_stiffness: float
@@ -131,6 +140,9 @@ class BoundaryResult:
     delays : (nd,) array, samples
     critical_stiffness : (nd, nT) array, N/m
     method : str
+        The method that computed it.
+    loop_kind : {"hve", "peb"}
+        The loop kind.
     """
 
     periods: np.ndarray

@@ -37,8 +37,12 @@ characteristic function the same mode is the factor (z - 1), divided out.
 from __future__ import annotations
 
 import functools
+import math
+from dataclasses import dataclass
 
+import mpmath
 import numpy as np
+from scipy import linalg as sla
 from scipy import signal
 
 
@@ -67,7 +71,7 @@ def _zoh_block(m: float, b: float, zn: tuple, zd: tuple, T: float):
     same plant for every K)."""
     num, den = _plant_tf(m, b, zn, zd)
     A, Bm, C, D = signal.tf2ss(num, den)
-    Ad, Bd, Cd, Dd, _ = signal.cont2discrete((A, Bm, C, D), T, method="zoh")
+    Ad, Bd, Cd, _Dd, _ = signal.cont2discrete((A, Bm, C, D), T, method="zoh")
     for M in (Ad, Bd, Cd):
         M.setflags(write=False)
     return Ad, Bd, Cd
@@ -113,8 +117,8 @@ def closed_loop_matrix(ports: list[tuple[float, float, tuple, tuple]], channels,
     for j in range(p):
         if depth[j]:
             M[off_r[j]] = pos_row(j)
-            for l in range(1, depth[j]):
-                M[off_r[j] + l, off_r[j] + l - 1] = 1.0
+            for step in range(1, depth[j]):
+                M[off_r[j] + step, off_r[j] + step - 1] = 1.0
     for i, terms in enumerate(channels):
         u = np.zeros(N)
         for j, sgn, n in terms:
@@ -168,12 +172,6 @@ def kmax(make, lo: float = 1e-6, hi: float = 1e7, grid: int = 800) -> float:
 # =============================================================================
 # Campaign reference: any pair of controllers, any B, integer delays both ways
 # =============================================================================
-import functools
-import math
-from dataclasses import dataclass
-
-import mpmath
-from scipy import linalg as sla
 
 _EPS = np.finfo(float).eps
 
@@ -342,9 +340,9 @@ def matrices(loop: Loop) -> tuple[np.ndarray, np.ndarray]:
 
     A0, A1 = np.zeros((N, N)), np.zeros((N, N))
     for j in range(p):
-        for l in range(depth[j]):   # shift registers
-            A0[off_r[j] + l, 2 * j if l == 0 else off_r[j] + l - 1] = 1.0
-    for i, (port, c) in enumerate(zip(loop.ports, loop.controls)):
+        for step in range(depth[j]):   # shift registers
+            A0[off_r[j] + step, 2 * j if step == 0 else off_r[j] + step - 1] = 1.0
+    for i, (port, c) in enumerate(zip(loop.ports, loop.controls, strict=True)):
         Ad, bd = _zoh(port, T)
         u0, u1 = np.zeros(N), np.zeros(N)
         for j, s, d in c.terms:
@@ -432,7 +430,7 @@ def stable_intervals(loop: Loop, lo: float | None = None, hi: float | None = Non
     s_lo, s_hi = scale(loop)
     lo = SCAN_LO * s_lo if lo is None else lo
     hi = SCAN_HI * s_hi if hi is None else hi
-    Ks = np.geomspace(lo, hi, int(math.ceil(per_decade * math.log10(hi / lo))) + 1)
+    Ks = np.geomspace(lo, hi, math.ceil(per_decade * math.log10(hi / lo)) + 1)
     rho = radius(loop, Ks)
     st = rho < 1.0
     idx = np.flatnonzero(st[1:] != st[:-1])
@@ -444,7 +442,7 @@ def stable_intervals(loop: Loop, lo: float | None = None, hi: float | None = Non
         same = sm == sa
         a, b = np.where(same, mid, a), np.where(same, b, mid)
     bounds = list(np.sqrt(a * b))
-    edges = [0.0] + bounds + [math.inf]
+    edges = [0.0, *bounds, math.inf]
     intervals = []
     stable_now = bool(st[0])
     for g in range(len(edges) - 1):
@@ -524,20 +522,20 @@ def aberth(loop: Loop, K: float, z0, dps: int = MP_DPS, iters: int = 200):
             for i, zi in enumerate(z):
                 if loop.rigid and zi == 1:   # on the divided-out rigid root: step off it
                     zi = z[i] = zi - mpmath.mpf(10) ** (-(dps // 2))
-                g, r = char_fn(loop, K, zi, dps + 10)
+                _g, r = char_fn(loop, K, zi, dps + 10)
                 if r is None:
                     w.append(mpmath.mpc(0))
                     continue
                 N = 1 / r
                 s = mpmath.fsum(1 / (zi - zk) for k, zk in enumerate(z) if k != i)
                 w.append(N / (1 - N * s))
-            z = [zi - wi for zi, wi in zip(z, w)]
+            z = [zi - wi for zi, wi in zip(z, w, strict=True)]
             if max(abs(wi) for wi in w) <= tol:
                 break
         else:
             return None
         start = [complex(v) for v in z0]
-        if any(abs(complex(zi) - s) > 1e-5 for zi, s in zip(z, start)):
+        if any(abs(complex(zi) - s) > 1e-5 for zi, s in zip(z, start, strict=True)):
             return None
         if any(abs(z[i] - z[k]) < 1e-30 for i in range(len(z)) for k in range(i)):
             return None
@@ -628,7 +626,7 @@ def char_poly_mp(loop: Loop, K, dps: int = 40) -> list:
             n = max(len(a), len(b))
             a = [mpmath.mpf(0)] * (n - len(a)) + list(a)
             b = [mpmath.mpf(0)] * (n - len(b)) + list(b)
-            return [x + y for x, y in zip(a, b)]
+            return [x + y for x, y in zip(a, b, strict=True)]
 
         def pmul(a, b):
             out = [mpmath.mpf(0)] * (len(a) + len(b) - 1)

@@ -28,6 +28,7 @@ import math
 import os
 import time
 from dataclasses import dataclass, field
+from itertools import pairwise
 
 import numpy as np
 
@@ -60,7 +61,7 @@ MARGINAL_BAND = 1e-9
 VERDICT_MARGIN = 1e-14
 
 #: every outcome of :func:`check` in this process (the conftest prints a summary)
-RESULTS: list["Outcome"] = []
+RESULTS: list[Outcome] = []
 
 
 def _fmt(x: float) -> str:
@@ -201,7 +202,7 @@ def _delay(rng: np.random.Generator, max_delay: int) -> int:
         return int(rng.integers(0, 5))
     if u < 0.98 or max_delay <= 20:
         return int(rng.integers(5, 21))
-    return int(round(_logu(rng, 21, max_delay)))
+    return round(_logu(rng, 21, max_delay))
 
 
 def _termination(rng: np.random.Generator, env: bool) -> str:
@@ -328,7 +329,7 @@ def _probe_points(ivs, s_lo: float) -> list[float]:
             pts += [math.sqrt(a * b), (a + b) / 2]
         else:
             pts += [2 * a, 1e2 * a]
-    for (_, b), (a, _) in zip(ivs, ivs[1:]):
+    for (_, b), (a, _) in pairwise(ivs):
         pts += [math.sqrt(a * b), (a + b) / 2]
     last = ivs[-1][1]
     if math.isfinite(last):
@@ -370,7 +371,7 @@ def check(s: Scenario, verdicts: bool = True) -> Outcome:
     t0 = time.perf_counter()
     try:
         return _check(s, verdicts, t0)
-    except Exception as e:   # noqa: BLE001 - the reference failed: report it as such
+    except Exception as e:   # the reference failed: report it as such
         out = Outcome(s, problems=[f"[reference error] {type(e).__name__}: {e}"],
                       categories={"reference error"}, worst_rel=math.inf,
                       seconds=time.perf_counter() - t0)
@@ -393,7 +394,7 @@ def _check(s: Scenario, verdicts: bool, t0: float) -> Outcome:
 
     try:
         res = h.critical_stiffness(s.hapstab_loop())
-    except Exception as e:   # noqa: BLE001 - any exception is a finding
+    except Exception as e:   # any exception is a finding
         problem("critical_stiffness raised", f"{type(e).__name__}: {e}", math.inf)
         out.seconds = time.perf_counter() - t0
         RESULTS.append(out)
@@ -469,7 +470,7 @@ def _check(s: Scenario, verdicts: bool, t0: float) -> Outcome:
             v = brute.robust(L, K)
             try:
                 got = h.stability(s.hapstab_loop(K)).verdict
-            except Exception as exc:   # noqa: BLE001
+            except Exception as exc:
                 problem("stability raised", f"K = {K!r}: {type(exc).__name__}: {exc}")
                 continue
             bad = _bad_verdict(got, v, s.rigid)

@@ -99,7 +99,7 @@ def _forces(force, n: int, name: str) -> list[float]:
 def _finish(cols: list[list[float]], lengths: tuple[int, ...]) -> list[np.ndarray]:
     """Lists to arrays, padded with inf to ``lengths`` after an early stop."""
     out = []
-    for c, ln in zip(cols, lengths):
+    for c, ln in zip(cols, lengths, strict=True):
         a = np.full(ln, np.inf)
         a[:len(c)] = c
         out.append(a)

@@ -20,6 +20,7 @@ from hapstab.analysis.closed_forms import closed_forms_for
 from hapstab.analysis.exact.core import exact_critical_stiffness, stability
 from hapstab.analysis.passivity import critical_stiffness_passivity
 from hapstab.errors import AnalysisError
+from hapstab.models.controllers import spring_damper
 from hapstab.models.loops import HapticLoop, TeleoperationLoop
 from hapstab.results import jsonable
 
@@ -72,8 +73,17 @@ class AuditResult:
     Attributes
     ----------
     kind : {"hve", "peb"}
+        The loop kind.
+    period : float
+        Sampling period T in s.
+    delay_samples : int
+        Delay n in samples.
+    virtual_damping : float
+        B in N*s/m (the master's for a teleoperator).
     rows : tuple of AuditRow
+        One per condition, ending with the exact limit.
     exact_kmax : float
+        The exact K_max in N/m.
     passivity_kmax : float
         Exact sampled-data passivity limit (= forward circle limit).
     flagged : tuple of str
@@ -167,6 +177,7 @@ def audit(loop: HapticLoop | TeleoperationLoop) -> AuditResult:
         "passive terminations")
     rows.append(AuditRow("exact", "exact sampled-data stability", float(exact), "exact",
                          _verdict(loop, exact), None, exact_res.reason))
-    B = loop.controller.damping if kind == "hve" else loop.master_controller.damping
+    B = (spring_damper(loop.controller).damping if isinstance(loop, HapticLoop)
+         else spring_damper(loop.master_controller, "master_controller").damping)
     return AuditResult(kind, loop.period, loop.delay_samples, B, tuple(rows), float(exact),
                        float(passive))

@@ -40,7 +40,7 @@ from hapstab.analysis.positive_real import (
 )
 from hapstab.analysis.sweeps import psd_limit, refine_minimum, theta_grid
 from hapstab.errors import AnalysisError
-from hapstab.models.controllers import SpringDamper
+from hapstab.models.controllers import SpringDamper, spring_damper
 from hapstab.models.loops import HapticLoop, TeleoperationLoop, whole_delay
 from hapstab.results import CriticalStiffnessResult
 
@@ -199,15 +199,17 @@ def _hermitian_parts(loop: HapticLoop | TeleoperationLoop, a: str, D: tuple[floa
     X, Y = _x_y(a, theta, T)
     d = np.exp(-1j * n * theta)
     if isinstance(loop, HapticLoop):
-        B = loop.controller.damping
+        B = spring_damper(loop.controller).damping
         return 2 * (loop.device.damping + B * np.real(d * Y)), 2 * np.real(d * X)
-    cm, cs = loop.master_controller, loop.slave_controller
+    cm = spring_damper(loop.master_controller, "master_controller")
+    cs = spring_damper(loop.slave_controller, "slave_controller")
     r = cs.stiffness / cm.stiffness if cm.stiffness > 0 else 1.0  # as with_stiffness keeps it
     s1, s2 = D
     N = theta.size
     A = np.zeros((N, 2, 2), complex)
     C = np.zeros((N, 2, 2), complex)
-    A[:, 0, 0], A[:, 1, 1] = s1 * (loop.master.damping + cm.damping * Y), s2 * (loop.slave.damping + cs.damping * Y)
+    A[:, 0, 0] = s1 * (loop.master.damping + cm.damping * Y)
+    A[:, 1, 1] = s2 * (loop.slave.damping + cs.damping * Y)
     A[:, 0, 1], A[:, 1, 0] = -s1 * d * cm.damping * Y, -s2 * d * cs.damping * Y
     C[:, 0, 0], C[:, 1, 1] = s1 * X, s2 * r * X
     C[:, 0, 1], C[:, 1, 0] = -s1 * d * X, -s2 * r * d * X
@@ -284,9 +286,11 @@ def critical_stiffness_circle(loop: HapticLoop | TeleoperationLoop, approximatio
     D = port_scaling(loop, scaling)
     if sector is not None:
         return _sector_kmax(loop, a, sector, scaling)
-    km_ks = (isinstance(loop, TeleoperationLoop)
-             and loop.master_controller.stiffness != loop.slave_controller.stiffness
-             and D == (1.0, 1.0) and loop.master_controller.stiffness > 0)
+    km_ks = False
+    if isinstance(loop, TeleoperationLoop):
+        km = spring_damper(loop.master_controller, "master_controller").stiffness
+        ks = spring_damper(loop.slave_controller, "slave_controller").stiffness
+        km_ks = km != ks and D == (1.0, 1.0) and km > 0
     if km_ks:
         K, th = 0.0, 0.0
         why = "residue (25) at z = 1 is not Hermitian for K_m != K_s (no port scaling)"

@@ -10,8 +10,9 @@ exact analysis.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Any
 
 from hapstab.errors import AnalysisError
 from hapstab.models.controllers import SpringDamper
@@ -33,7 +34,8 @@ def _hve(loop, name: str) -> tuple[float, float, float, float]:
 
 def _peb(loop, name: str) -> tuple[float, float, float, float]:
     if not isinstance(loop, TeleoperationLoop):
-        raise AnalysisError(f"method = {name!r}: applies to a TeleoperationLoop (peb), not {type(loop).__name__}")
+        raise AnalysisError(f"method = {name!r}: applies to a TeleoperationLoop (peb), "
+                            f"not {type(loop).__name__}")
     cm, cs = loop.master_controller, loop.slave_controller
     if not (isinstance(cm, SpringDamper) and isinstance(cs, SpringDamper)):
         raise AnalysisError(f"method = {name!r}: needs SpringDamper controllers")
@@ -72,6 +74,17 @@ def colgate(loop: HapticLoop) -> CriticalStiffnessResult:
     (the paper's (13) writes ``+ B`` with B >= 0 in mind). ``|B| >= b`` gives
     K_max = 0 with the reason.
 
+    Parameters
+    ----------
+    loop : HapticLoop
+        With a :class:`~hapstab.models.SpringDamper` controller (its own stiffness is
+        ignored: the result is a K_max); device damping b in N*s/m, period T in s.
+
+    Returns
+    -------
+    CriticalStiffnessResult
+        K_max in N/m, ``method = "colgate"``.
+
     References
     ----------
     Colgate & Schenkel 1997; the paper, eq. (1) and (13).
@@ -94,6 +107,17 @@ def gil(loop: HapticLoop) -> CriticalStiffnessResult:
     damping subtracts from the device's). For B <= 0 the line is exactly the
     sampled-data passivity limit (see :func:`eq18`), so it is a sufficient
     stability bound with a passive operator; ``b + B <= 0`` gives K_max = 0.
+
+    Parameters
+    ----------
+    loop : HapticLoop
+        With a :class:`~hapstab.models.SpringDamper` controller (its own stiffness is
+        ignored: the result is a K_max); device damping b in N*s/m, period T in s.
+
+    Returns
+    -------
+    CriticalStiffnessResult
+        K_max in N/m, ``method = "gil"``.
 
     References
     ----------
@@ -120,6 +144,17 @@ def eq18(loop: HapticLoop) -> CriticalStiffnessResult:
     sufficient stability bound with a passive operator; ``b + B <= 0`` gives
     K_max = 0. At n = 0 it reduces to (1)/(13) for B <= 0 only; for B > 0 it
     gives 2(b + B)/T, above (1)'s 2(b - B)/T.
+
+    Parameters
+    ----------
+    loop : HapticLoop
+        With a :class:`~hapstab.models.SpringDamper` controller (its own stiffness is
+        ignored: the result is a K_max); device damping b in N*s/m, period T in s.
+
+    Returns
+    -------
+    CriticalStiffnessResult
+        K_max in N/m, ``method = "eq18"``.
     """
     b, B, T, n = _hve(loop, "eq18")
     K = (b + B) / (T / 2 + n * T)
@@ -138,6 +173,17 @@ def eq29(loop: TeleoperationLoop) -> CriticalStiffnessResult:
     B < 0), so negative virtual damping enters through |B|:
     ``K_max = (b - 2|B|)/T``, 0 when ``2|B| >= b``. With b_m = b_s this is the exact
     two-port sampled-data passivity limit for either sign of B.
+
+    Parameters
+    ----------
+    loop : TeleoperationLoop
+        With equal :class:`~hapstab.models.SpringDamper` controllers C_m = C_s (their own
+        stiffness is ignored: the result is a K_max); dampings b_m, b_s in N*s/m.
+
+    Returns
+    -------
+    CriticalStiffnessResult
+        K_max in N/m, ``method = "eq29"``.
     """
     b, B, T, n = _peb(loop, "eq29")
     K = (b - 2 * abs(B)) / T
@@ -159,6 +205,17 @@ def eq34(loop: TeleoperationLoop) -> CriticalStiffnessResult:
     negative B, (34) reads ``K < (b - 2|B|)/(T + t_d)``, is the exact two-port
     passivity limit for b_m = b_s (sufficient, conservative otherwise), reduces
     to (29) at n = 0, and gives K_max = 0 when ``b + 2B <= 0``.
+
+    Parameters
+    ----------
+    loop : TeleoperationLoop
+        With equal :class:`~hapstab.models.SpringDamper` controllers C_m = C_s (their own
+        stiffness is ignored: the result is a K_max); dampings b_m, b_s in N*s/m.
+
+    Returns
+    -------
+    CriticalStiffnessResult
+        K_max in N/m, ``method = "eq34"``.
     """
     b, B, T, n = _peb(loop, "eq34")
     K = (b + 2 * B) / (T + n * T)

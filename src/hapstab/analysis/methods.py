@@ -6,7 +6,8 @@ same models; :data:`METHODS` is the one table of them.
 
 from __future__ import annotations
 
-from typing import Any, Callable, Sequence
+from collections.abc import Callable, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -31,8 +32,19 @@ METHODS: dict[str, Callable[..., CriticalStiffnessResult]] = {
 }
 
 def methods_for(kind: str) -> list[str]:
-    """Method names that apply to loops of ``kind`` ("hve" or "peb"): every method
-    but the closed forms derived for the other kind."""
+    """Method names that apply to loops of ``kind``: every method but the closed
+    forms derived for the other kind.
+
+    Parameters
+    ----------
+    kind : {"hve", "peb"}
+        The loop kind: haptic virtual environment or position-error-based teleoperator.
+
+    Returns
+    -------
+    list of str
+        Names accepted by :func:`critical_stiffness` for that kind.
+    """
     other = {c.key for c in TABLE if c.kind != kind}
     return [m for m in METHODS if m not in other]
 
@@ -91,6 +103,9 @@ def boundary(loop: HapticLoop | TeleoperationLoop, periods: Sequence[float] | np
         Delays n in samples (t_d = n T at each T).
     method : str
         As for :func:`critical_stiffness`; ``"exact"`` is vectorised over T.
+    **options
+        Passed to the method at every grid point (e.g. ``approximation`` for
+        ``"circle"``); ``"exact"`` takes none and ignores them.
 
     Returns
     -------

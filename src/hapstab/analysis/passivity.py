@@ -41,7 +41,7 @@ import numpy as np
 from hapstab.analysis.circle import port_scaling
 from hapstab.analysis.sweeps import min_eig, psd_limit, refine_minimum, theta_grid
 from hapstab.errors import AnalysisError
-from hapstab.models.controllers import SpringDamper
+from hapstab.models.controllers import SpringDamper, spring_damper
 from hapstab.models.loops import HapticLoop, TeleoperationLoop, whole_delay
 from hapstab.results import CriticalStiffnessResult, jsonable
 
@@ -63,6 +63,9 @@ class PassivityResult:
     failed_condition : str or None
         ``"colgate-schenkel"`` when not passive.
     reason : str
+        The verdict in words.
+    period : float
+        Sampling period T in s (converts rad/sample to rad/s).
     """
 
     passive: bool
@@ -115,7 +118,8 @@ def _parts(loop: HapticLoop | TeleoperationLoop, theta: np.ndarray, scaling: str
     cm, cs = loop.master_controller, loop.slave_controller
     hm, hs = _h_of(cm, theta, T, unit), _h_of(cs, theta, T, unit)
     if unit == "K" and isinstance(cm, SpringDamper):  # per unit master K, K_s/K_m kept
-        hs = hs * (cs.stiffness / cm.stiffness if cm.stiffness > 0 else 1.0)
+        ks = spring_damper(cs, "slave_controller").stiffness
+        hs = hs * (ks / cm.stiffness if cm.stiffness > 0 else 1.0)
     H = np.zeros((theta.size, 2, 2), complex)
     H[:, 0, 0], H[:, 0, 1] = D[0] * hm, -D[0] * d * hm
     H[:, 1, 0], H[:, 1, 1] = -D[1] * d * hs, D[1] * hs
@@ -240,7 +244,8 @@ def critical_stiffness_passivity(loop: HapticLoop | TeleoperationLoop,
                          f"already missing at w = {th[i] / T:.6g} rad/s (the virtual damping "
                          "takes more than the device damping provides)")
     return CriticalStiffnessResult(
-        float(K), "passivity", ((0.0, float(K)),) if K > 0 else (), reason, T, whole_delay(loop, "sampled-data passivity"),
+        float(K), "passivity", ((0.0, float(K)),) if K > 0 else (), reason, T,
+        whole_delay(loop, "sampled-data passivity"),
         t_min / (2 * math.pi * T) if fin else float("nan"),
         {"worst_frequency_rad_s": t_min / T if fin else float("nan"),
          "port_scaling": list(port_scaling(loop, scaling))})

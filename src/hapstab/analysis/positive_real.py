@@ -21,8 +21,9 @@ functions and their application to system stability", Proc. IEE 116(1), 1969
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -32,7 +33,8 @@ from hapstab.results import jsonable
 
 __all__ = ["RationalMatrix", "PositiveRealResult", "positive_real", "circle_criterion"]
 
-_ON_CIRCLE = 1e-9    # | |p| - 1 | below this: a unit-circle root (np.roots is ~1e-15 accurate for simple roots)
+# | |p| - 1 | below this: a unit-circle root (np.roots is ~1e-15 accurate for simple roots)
+_ON_CIRCLE = 1e-9
 _CANCEL = 1e-7       # a pole and a zero closer than this (relative) cancel: sqrt(eps)-level root errors
 _SIMPLE = 1e-6       # two unit-circle poles closer than this are one multiple pole (double roots split ~1e-8)
 _RTOL = 1e-9         # eigenvalue slack relative to the matrix scale: eigvalsh/roundoff is ~1e-13 of it
@@ -52,7 +54,7 @@ class _Element:
     poles: np.ndarray
 
     @classmethod
-    def from_poly(cls, num: np.ndarray, den: np.ndarray) -> "_Element":
+    def from_poly(cls, num: np.ndarray, den: np.ndarray) -> _Element:
         if not np.any(num):
             return cls(0.0, np.zeros(0, complex), np.zeros(0, complex))
         zs, ps = list(_snap(np.roots(num))), list(_snap(np.roots(den)))
@@ -123,7 +125,7 @@ class RationalMatrix:
                          for i in range(m)]
 
     @classmethod
-    def scalar(cls, num: Any, den: Any) -> "RationalMatrix":
+    def scalar(cls, num: Any, den: Any) -> RationalMatrix:
         return cls([[num]], [[den]])
 
     def __call__(self, theta: np.ndarray | float) -> np.ndarray:
@@ -158,14 +160,14 @@ class RationalMatrix:
     def degree(self) -> int:
         return max(max(d.size for d in row) for row in self.den) - 1
 
-    def add_diagonal(self, values: Sequence[float]) -> "RationalMatrix":
+    def add_diagonal(self, values: Sequence[float]) -> RationalMatrix:
         """G + diag(values) (e.g. K^{-1} + G of Theorem 2.1)."""
         nums = [[self.num[i][j].copy() for j in range(self.m)] for i in range(self.m)]
         for i, v in enumerate(values):
             nums[i][i] = np.polyadd(nums[i][i], v * self.den[i][i])
         return RationalMatrix(nums, self.den)
 
-    def inverse(self) -> "RationalMatrix":
+    def inverse(self) -> RationalMatrix:
         """G^{-1} for m = 1 or 2 (polynomial adjugate over the determinant).
 
         Raises
@@ -182,7 +184,7 @@ class RationalMatrix:
             raise AnalysisError(f"G(z) is {self.m}x{self.m}: inversion is implemented for 1x1 and 2x2")
         pm = np.polymul
         den_all = pm(pm(d[0][0], d[1][1]), pm(d[0][1], d[1][0]))
-        det_num = np.polysub(pm(pm(n[0][0], n[1][1]), pm(d[0][1], d[1][0])),
+        det_num: np.ndarray = np.polysub(pm(pm(n[0][0], n[1][1]), pm(d[0][1], d[1][0])),
                              pm(pm(n[0][1], n[1][0]), pm(d[0][0], d[1][1])))
         if not np.any(np.abs(det_num) > 1e-14 * np.abs(det_num).max(initial=0.0)):
             raise AnalysisError("G(z) is singular: not invertible")
@@ -214,6 +216,12 @@ class PositiveRealResult:
         In words, naming the condition.
     period : float
         T used to convert rad/sample to rad/s (1 if none was given).
+    poles : tuple of complex
+        The poles of G(z).
+    frequencies_rad_s : array
+        The frequencies (rad/s) of the sweep for condition (iii).
+    min_eigenvalues : array
+        The smallest eigenvalue of G + G^H at each of them (for plotting).
     """
 
     positive_real: bool

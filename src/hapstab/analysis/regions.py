@@ -23,9 +23,11 @@ the paper, eq. (23) for H(z) and (13), (18), (29), (34) for the overlaid lines.
 
 from __future__ import annotations
 
+import contextlib
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -71,7 +73,7 @@ def _unit_loop(loop: Loop) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 def _mu(A0: np.ndarray, B1: np.ndarray, C1: np.ndarray, z: np.ndarray) -> np.ndarray:
     """Eigenvalues of G(z) for each z, shape (len(z), p), branches kept continuous."""
     N = A0.shape[0]
-    X = np.linalg.solve(z[:, None, None] * np.eye(N) - A0, np.broadcast_to(B1, (z.size,) + B1.shape))
+    X = np.linalg.solve(z[:, None, None] * np.eye(N) - A0, np.broadcast_to(B1, (z.size, *B1.shape)))
     G = C1 @ X
     mu = np.linalg.eigvals(G)
     if mu.shape[1] == 2:   # follow each branch: swap where that is nearer the previous point
@@ -121,11 +123,11 @@ def d_decomposition(loop: Loop, n_theta: int = 4000) -> dict[str, Any]:
     return {"curves": curves, "z1": lines["z1"], "zm1": lines["zm1"], "period": T}
 
 
-def kmax_over_B(loop: Loop, Bs: Sequence[float], intervals: bool = False) -> list[dict[str, Any]]:
+def kmax_over_B(loop: Loop, Bs: Sequence[float] | np.ndarray,
+                intervals: bool = False) -> list[dict[str, Any]]:
     """Exact crossing analysis for each virtual damping in ``Bs`` (batched)."""
-    Bs = np.asarray(Bs, float)
     # one structure for every B (B enters only as beta = B/T): one batched analysis
-    resps = [loop_response(with_gains(loop, 1.0, float(B))) for B in Bs]
+    resps = [loop_response(with_gains(loop, 1.0, float(B))) for B in np.asarray(Bs, float)]
     return analyse(stack_responses(resps), full=intervals)
 
 
@@ -185,7 +187,14 @@ class RegionResult:
 
     Attributes
     ----------
+    kind : {"hve", "peb"}
+        The loop kind.
+    period : float
+        Sampling period T in s.
+    delay_samples : float
+        The delay in samples (t_d / T).
     K_range, B_range : (float, float)
+        The window in N/m and N*s/m.
     B_rows : array
         Virtual dampings of the rows.
     intervals : tuple
@@ -195,10 +204,15 @@ class RegionResult:
     K_grid : array
         K values of the cross-check grid; ``stable_grid[i, j]`` is the Schur-Cohn
         verdict at (K_grid[j], B_rows[i]) and ``stable_exact`` the exact one.
+    stable_exact, stable_grid : (len(B_rows), len(K_grid)) bool arrays
+        The two verdicts on the grid.
     agreement : dict
         Cross-check counts: points compared, disagreements beyond ``margin``.
     overlays : dict
         name -> K_max on each row (passivity, circle, the paper's line).
+    disagreement : bool array or None
+        Grid points where the verdicts differ away from the boundary (None: not
+        compared).
     """
 
     kind: str
@@ -225,7 +239,7 @@ class RegionResult:
             "loop": self.kind, "period_s": self.period, "delay_samples": self.delay_samples,
             "K_range": self.K_range, "B_range": self.B_range,
             "rows": [{"virtual_damping": b, "stable_intervals": [list(x) for x in iv]}
-                     for b, iv in zip(self.B_rows, self.intervals)],
+                     for b, iv in zip(self.B_rows, self.intervals, strict=True)],
             "crossings_z1_K": self.boundary["z1"], "crossings_zm1_K_plus_2B_over_T": self.boundary["zm1"],
             "agreement": self.agreement,
             "overlays": {k: v for k, v in self.overlays.items()},
@@ -258,8 +272,10 @@ class BestDampingResult:
         K* = K_max(B*) in N/m.
     critical_stiffness_at_zero_damping : float
         K_max(0), for comparison.
+    reason : str
+        How B* was found, in words.
     B_curve, K_curve : arrays
-        K_max over the scanned dampings.
+        K_max over the scanned dampings (N*s/m, N/m).
     """
 
     damping: float
@@ -360,10 +376,9 @@ def _overlay(loop: Loop, name: str, Bs: np.ndarray) -> np.ndarray:
         raise AnalysisError(f"overlay = {name!r}: unknown; allowed: paper, "
                             + ", ".join(m for m in ("passivity", "circle") if m in METHODS))
     for i, B in enumerate(Bs):
-        try:
-            out[i] = critical_stiffness(with_gains(loop, 1.0, float(B)), method=name).critical_stiffness
-        except AnalysisError:
-            pass                      # the method does not apply at this B: leave a gap
+        with contextlib.suppress(AnalysisError):   # does not apply at this B: leave a gap
+            out[i] = critical_stiffness(with_gains(loop, 1.0, float(B)),
+                                        method=name).critical_stiffness
     return out
 
 

@@ -9,7 +9,7 @@ criterion (:mod:`hapstab.circle`) and sampled-data passivity
 
 from __future__ import annotations
 
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 

@@ -137,10 +137,12 @@ def demo(as_json: bool) -> None:
 
     from hapstab.analysis.closed_forms import EQUATION, paper_condition
     from hapstab.analysis.methods import boundary
+    from hapstab.models.loops import Loop
     from hapstab.paper.loops import paper_hve, paper_peb
 
     T = np.linspace(1e-3, 1e-2, 10)
-    figs = [("Fig. 5 (HVE)", paper_hve(), (0, 10)), ("Fig. 6 (PEB)", paper_peb(), (0, 4))]
+    figs: list[tuple[str, Loop, tuple[int, int]]] = [
+        ("Fig. 5 (HVE)", paper_hve(), (0, 10)), ("Fig. 6 (PEB)", paper_peb(), (0, 4))]
     data: dict[str, Any] = {}
     for title, loop, delays in figs:
         res = boundary(loop, T, delays)
@@ -148,8 +150,8 @@ def demo(as_json: bool) -> None:
         for i, n in enumerate(delays):
             for j, t in enumerate(T):
                 lp = loop.replace(period=float(t), delay_samples=n)
-                c = paper_condition(lp)
-                theory, eq = c.function(lp).critical_stiffness, EQUATION[c.key]
+                cond = paper_condition(lp)
+                theory, eq = cond.function(lp).critical_stiffness, EQUATION[cond.key]
                 rows.append({"period_s": float(t), "delay_samples": n, "theory": theory,
                              "equation": eq, "exact": float(res.critical_stiffness[i, j])})
         data[title] = rows

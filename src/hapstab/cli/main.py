@@ -47,7 +47,7 @@ class HapstabGroup(click.Group):
         except click.exceptions.Abort:
             click.echo("hapstab: aborted", err=True)
             sys.exit(1)
-        except Exception as e:   # noqa: BLE001 - everything else is a bug, said as one
+        except Exception as e:   # everything else is a bug, said as one
             if "--debug" in argv:
                 raise
             click.echo(f"hapstab: internal error: {type(e).__name__}: "

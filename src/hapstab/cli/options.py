@@ -5,7 +5,8 @@ from __future__ import annotations
 
 import json
 import math
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import click
 
@@ -185,7 +186,9 @@ def peb_loop(kw: dict[str, Any], stiffness: float = 0.0) -> TeleoperationLoop:
     return loop
 
 
-LOOP_KINDS = {"hve": hve_loop, "peb": peb_loop}
+#: loop kind -> its builder from the command's options
+LOOP_KINDS: dict[str, Callable[..., HapticLoop | TeleoperationLoop]] = {
+    "hve": hve_loop, "peb": peb_loop}
 
 
 def emit(data: dict[str, Any], as_json: bool, table: Callable[[], None]) -> None:

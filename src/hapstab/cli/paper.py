@@ -6,7 +6,7 @@ circle|passivity`` comes from the registration in :mod:`hapstab.analysis`.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import click
 
@@ -20,6 +20,9 @@ from hapstab.cli.options import (
     rich_table,
 )
 from hapstab.errors import HapstabError
+
+if TYPE_CHECKING:
+    from rich.console import JustifyMethod
 
 _APPROX = ("forward", "backward", "tustin")
 
@@ -56,16 +59,14 @@ def _passivity_command(kind: str) -> None:
             approx = approximation or "forward"
             if approx not in _APPROX:
                 raise HapstabError(f"--approximation = {approximation!r}: allowed: {', '.join(_APPROX)}")
-            res = circle_test(loop, approx, sector)
-            d = res.to_dict()
+            d = circle_test(loop, approx, sector).to_dict()
         elif method == "passivity":
             from hapstab.analysis.passivity import sampled_passivity
 
             if approximation is not None or sector is not None:
                 raise HapstabError("--approximation/--sector: apply to --method circle only; "
                                    "'passivity' is exact")
-            res, approx = sampled_passivity(loop), None
-            d = res.to_dict()
+            d, approx = sampled_passivity(loop).to_dict(), None
         else:
             raise HapstabError(f"--method = {method!r}: allowed: circle, passivity")
         d.update(stiffness=stiffness, method=method, approximation=approx, sector=sector)
@@ -103,8 +104,10 @@ def _audit_table(res: Any) -> None:
 
     t = Table(title=f"audit, {res.kind}: T = {res.period * 1e3:.4g} ms, n = {res.delay_samples}, "
                     f"B = {res.virtual_damping:g} N*s/m")
-    for c, j in (("condition", "left"), ("K_max (N/m)", "right"), ("claims", "left"),
-                 ("exact just below", "left"), ("flag", "left")):
+    columns: tuple[tuple[str, JustifyMethod], ...] = (
+        ("condition", "left"), ("K_max (N/m)", "right"), ("claims", "left"),
+        ("exact just below", "left"), ("flag", "left"))
+    for c, j in columns:
         t.add_column(c, justify=j)
     for r in res.rows:
         t.add_row(r.label, fmt(r.critical_stiffness), r.claims, r.exact_verdict,

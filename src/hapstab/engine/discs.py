@@ -24,7 +24,8 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["Jet", "EPS_OP", "base_jets", "delay_jet", "poly_jet", "geometric_sum_jet", "one_minus_delay_jet", "const", "zero"]
+__all__ = ["Jet", "EPS_OP", "base_jets", "delay_jet", "poly_jet", "geometric_sum_jet",
+           "one_minus_delay_jet", "const", "zero"]
 
 #: Rounding allowance per operation: 4 unit round-offs covers a complex product
 #: (at most sqrt(5) u) or sum (at most sqrt(2) u) and the product of the radii.
@@ -34,11 +35,12 @@ EPS_OP = 4.0 * np.finfo(float).eps
 class Jet:
     """Discs enclosing a function's values (vc, vr) and derivatives (dc, dr) on cells."""
 
-    __slots__ = ("vc", "vr", "dc", "dr", "_va", "_da")
+    __slots__ = ("_da", "_va", "dc", "dr", "vc", "vr")
 
     def __init__(self, vc: np.ndarray, vr: np.ndarray, dc: np.ndarray, dr: np.ndarray) -> None:
         self.vc, self.vr, self.dc, self.dr = vc, vr, dc, dr
-        self._va = self._da = None
+        self._va: np.ndarray | None = None
+        self._da: np.ndarray | None = None
 
     @property
     def va(self) -> np.ndarray:
@@ -54,21 +56,21 @@ class Jet:
             self._da = np.abs(self.dc)
         return self._da
 
-    def __add__(self, o: "Jet") -> "Jet":
+    def __add__(self, o: Jet) -> Jet:
         vc, dc = self.vc + o.vc, self.dc + o.dc
         vr = self.vr + o.vr + EPS_OP * (self.va + o.va)
         dr = self.dr + o.dr + EPS_OP * (self.da + o.da)
         return Jet(vc, vr, dc, dr)
 
-    def __neg__(self) -> "Jet":
+    def __neg__(self) -> Jet:
         out = Jet(-self.vc, self.vr, -self.dc, self.dr)
         out._va, out._da = self._va, self._da
         return out
 
-    def __sub__(self, o: "Jet") -> "Jet":
+    def __sub__(self, o: Jet) -> Jet:
         return self + (-o)
 
-    def __mul__(self, o: "Jet") -> "Jet":
+    def __mul__(self, o: Jet) -> Jet:
         a, b = self, o
         av, bv, ad, bd = a.va, b.va, a.da, b.da
         vc = a.vc * b.vc
@@ -78,14 +80,14 @@ class Jet:
               + EPS_OP * (ad * bv + av * bd))
         return Jet(vc, vr, dc, dr)
 
-    def scale(self, s: np.ndarray | complex) -> "Jet":
+    def scale(self, s: np.ndarray | complex) -> Jet:
         """Multiply by exactly known numbers ``s``."""
         s = np.asarray(s)
         a = np.abs(s)
         return Jet(s * self.vc, a * self.vr + EPS_OP * a * np.abs(self.vc),
                    s * self.dc, a * self.dr + EPS_OP * a * np.abs(self.dc))
 
-    def reciprocal(self) -> "Jet":
+    def reciprocal(self) -> Jet:
         """1/f, an enclosure where the value disc excludes 0 (else infinite radii)."""
         c, r = self.vc, self.vr
         with np.errstate(all="ignore"):
@@ -100,10 +102,10 @@ class Jet:
         dc, dr = _dmul(self.dc, self.dr, sc, sr)
         return Jet(vc, vr, -dc, dr)
 
-    def __truediv__(self, o: "Jet") -> "Jet":
+    def __truediv__(self, o: Jet) -> Jet:
         return self * o.reciprocal()
 
-    def value_disc(self, rho: np.ndarray, point: "Jet") -> tuple[np.ndarray, np.ndarray]:
+    def value_disc(self, rho: np.ndarray, point: Jet) -> tuple[np.ndarray, np.ndarray]:
         """Centred form: f(cell) lies in f(theta_m) + [-rho, rho] f'(cell). ``point`` is
         the same function evaluated at the cell centres (rho = 0). Returns the
         tighter of this and the jet's own value disc (both are enclosures)."""

@@ -36,8 +36,8 @@ z-transform).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
 
 import numpy as np
 
@@ -224,7 +224,7 @@ def _port_poly(A: np.ndarray, Bv: np.ndarray, free: bool, T: np.ndarray,
                fractions: Sequence[float]) -> PortPoly:
     """Polynomials of one port (state [x, v, rest...], position = state 0)."""
     L, q = T.size, A.shape[0]
-    Phi, S = _zoh(A, T)
+    _Phi, S = _zoh(A, T)
     E = A[None] @ S                                  # Phi - I, accurate for small T
     G = S @ Bv[None]                                 # (L, q, 1)
     # d(y) = prod (y - expm1(lambda T)): a free port's lambda = 0 is structural
@@ -289,8 +289,8 @@ def loop_response(loop: HapticLoop | TeleoperationLoop,
     """
     st = structure_of(loop)
     T = np.atleast_1d(np.asarray(loop.period if periods is None else periods, float))
-    ctrls = [ch.controller for ch in st.channels]
-    if not all(isinstance(c, SpringDamper) for c in ctrls):
+    ctrls = [ch.controller for ch in st.channels if isinstance(ch.controller, SpringDamper)]
+    if len(ctrls) != len(st.channels):
         raise AnalysisError("controller: critical stiffness needs SpringDamper controllers "
                             "(a general H(z) has no stiffness K to vary)")
     ks = np.array([c.stiffness for c in ctrls], float)
@@ -319,7 +319,7 @@ def loop_response(loop: HapticLoop | TeleoperationLoop,
         masses.append(pt.device.mass + pt.termination.mass)
         ports.append(_port_poly(A, Bm, fr, T, sorted(fracs[j])))
     for j, pp in enumerate(ports):
-        arrays = [pp.d, pp.N] + list(pp.Nt.values()) + list(pp.D.values())
+        arrays = [pp.d, pp.N, *list(pp.Nt.values()), *list(pp.D.values())]
         if not all(np.all(np.isfinite(a)) for a in arrays) or not np.any(pp.N):
             pt = st.ports[j]
             raise AnalysisError(
@@ -354,7 +354,7 @@ def _check_finite(resp: LoopResponse, ctrls) -> None:
     idx = np.repeat(np.arange(resp.size), th.size)
     F = resp.coefficients(idx, np.tile(th, resp.size), np.zeros(idx.size))
     with np.errstate(all="ignore"):
-        top = [np.abs(f.vc) * u for f, u in zip(F, (1.0, 1e10, 1e20))]   # up to u = U_HI
+        top = [np.abs(f.vc) * u for f, u in zip(F, (1.0, 1e10, 1e20), strict=True)]   # up to u = U_HI
     if not all(np.all(np.isfinite(t)) for t in top):
         raise AnalysisError(f"virtual damping = {[c.damping for c in ctrls]} N*s/m: cannot analyse "
                             "these parameters, the loop's characteristic function overflows "

@@ -18,7 +18,17 @@ __all__ = ['Port', 'Channel', 'LoopStructure', 'structure_of', 'split_delay']
 
 @dataclass(frozen=True)
 class Port:
-    """A device and the impedance rigidly attached to it."""
+    """A device and the impedance rigidly attached to it.
+
+    Parameters
+    ----------
+    device : Device
+        The robot at this port (mass in kg, damping in N*s/m).
+    termination : Impedance
+        The operator or environment Z(s) attached to it (:data:`NO_IMPEDANCE` if none).
+    name : str
+        Its label in results and columns (``"device"``, ``"master"``, ``"slave"``).
+    """
 
     device: Device
     termination: Impedance
@@ -27,7 +37,18 @@ class Port:
 
 @dataclass(frozen=True)
 class Channel:
-    """The controller acting on one port: ``u_port = H(z) * sum_j sign_j z^-delay_j x_j``."""
+    """The controller acting on one port: ``u_port = H(z) * sum_j sign_j z^-delay_j x_j``.
+
+    Parameters
+    ----------
+    port : int
+        Index of the port the force acts on.
+    controller : SpringDamper or DiscreteController
+        H(z).
+    terms : tuple of (int, float, float)
+        ``(j, sign_j, delay_j)``: the measured port, its sign and its delay in samples
+        (may be fractional).
+    """
 
     port: int
     controller: SpringDamper | DiscreteController
@@ -36,12 +57,39 @@ class Channel:
 
 @dataclass(frozen=True)
 class LoopStructure:
+    """A loop as the engine sees it: ports and one controller channel per port.
+
+    Parameters
+    ----------
+    ports : tuple of Port
+        The devices with their terminations.
+    channels : tuple of Channel
+        The controllers and what each one measures.
+    """
+
     ports: tuple[Port, ...]
     channels: tuple[Channel, ...]
 
 
 def structure_of(loop: HapticLoop | TeleoperationLoop) -> LoopStructure:
-    """The HVE and PEB builders: both are a :class:`LoopStructure` for one engine."""
+    """The HVE and PEB builders: both are a :class:`LoopStructure` for one engine.
+
+    Parameters
+    ----------
+    loop : HapticLoop or TeleoperationLoop
+        The loop to describe.
+
+    Returns
+    -------
+    LoopStructure
+        One port for a haptic loop (``device``), two for a teleoperator (``master``,
+        ``slave``, with eq. (20)'s channels).
+
+    Raises
+    ------
+    TypeError
+        If ``loop`` is neither kind.
+    """
     if isinstance(loop, HapticLoop):
         return LoopStructure(
             (Port(loop.device, loop.operator, "device"),),

@@ -20,8 +20,8 @@ The paper, Fig. 2a (HVE) and Fig. 3 / eq. (19)-(21) (PEB); H(z) of eq. (23).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Sequence
 
 import numpy as np
 
@@ -62,7 +62,7 @@ def _controller_parts(c: SpringDamper | DiscreteController, periods: np.ndarray
     if q:
         Bh[0, 0] = 1.0
     Ch = r[None, :]
-    rep = lambda a: np.broadcast_to(a, (P,) + a.shape).copy()  # noqa: E731
+    rep = lambda a: np.broadcast_to(a, (P, *a.shape)).copy()  # noqa: E731
     return rep(Ah), rep(Bh), rep(Ch), np.full(P, d), np.zeros(P)
 
 
@@ -80,14 +80,26 @@ class SampledSystem:
         The loops' own K; ``A_cl = A0 + stiffness * B1 @ C1``.
     B_ext : (P, N, p)
         Exogenous force on each port, held over the sample.
-    F_u : (P, p, N)
-        Controller force of each port from the state (``u = F_u s``).
+    F_u0, F_u1 : (P, p, N)
+        Controller force of each port from the state, ``u = (F_u0 + K F_u1) s``
+        (:meth:`force_matrix`), in N.
     pos, vel : (p, N)
         Selectors of each port's position and velocity.
-    E : (p, N)
-        The controller input of each port, ``e_i = E_i s`` (delays included).
     Ac, Bc : (np, np), (np, p)
         Continuous plant (all ports), state = the first ``np`` closed-loop states.
+    Cf : (p, np)
+        Each port's termination force (N) from the plant state.
+    n_plant : int
+        ``np``, the number of plant states.
+    labels : list of str
+        The ports' names (``device``; ``master``, ``slave``).
+    varies_with_K : bool
+        False when K cannot be varied (a controller without a stiffness, or a master
+        stiffness of 0 with a slave's > 0): then ``B1 @ C1`` is zero.
+    E : (p, N) or None
+        The controller input of each port, ``e_i = E_i s`` (delays included).
+    fixed_reason : str
+        Why K cannot be varied (empty when it can).
     """
 
     periods: np.ndarray
@@ -209,7 +221,7 @@ def build(loop: HapticLoop | TeleoperationLoop,
     Fu0 = np.zeros((P, p, N))
     Fu1 = np.zeros((P, p, N))
     A0 = np.zeros((P, N, N))
-    for ch, (Ah, Bh, Ch, Dfix, Dk) in zip(st.channels, parts):
+    for ch, (Ah, Bh, Ch, Dfix, Dk) in zip(st.channels, parts, strict=True):
         i = ch.port
         cs = slice(off_c[i], off_c[i + 1])
         Fu0[:, i, cs] = Ch[:, 0, :]
@@ -222,8 +234,8 @@ def build(loop: HapticLoop | TeleoperationLoop,
     for j in range(p):
         if depth[j]:
             A0[:, off_r[j], :] = pos[j]
-            for l in range(1, depth[j]):
-                A0[:, off_r[j] + l, off_r[j] + l - 1] = 1.0
+            for step in range(1, depth[j]):
+                A0[:, off_r[j] + step, off_r[j] + step - 1] = 1.0
     B_ext = np.zeros((P, N, p))
     B_ext[:, :n_plant, :] = Bd
     B1 = np.zeros((P, N, p))
@@ -238,8 +250,8 @@ def build(loop: HapticLoop | TeleoperationLoop,
         B_ext[:, r0, j] = Gam[:, 0, 0]
         B1[:, r0, j] = -Gam[:, 0, 0]
         Gam_of[(j, f)] = Gam[:, 0, 0]
-        for l in range(1, frac[(j, f)] + 1):
-            A0[:, r0 + l, r0 + l - 1] = 1.0
+        for step in range(1, frac[(j, f)] + 1):
+            A0[:, r0 + step, r0 + step - 1] = 1.0
     # C1 rows: the K-part of each port's force; same for every period
     C1 = Fu1.copy()
     ks = [ch.controller.stiffness if isinstance(ch.controller, SpringDamper) else 0.0

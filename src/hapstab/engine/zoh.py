@@ -17,6 +17,19 @@ def port_matrices(port: Port) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     ``Cf`` gives the termination's force from the state (without its mass term).
     The termination ``Z = m_z s + d_z + k_z/s + Z_r(s)`` acts on the device's own
     position and velocity, so no redundant integrator appears.
+
+    Parameters
+    ----------
+    port : Port
+        The device and its termination.
+
+    Returns
+    -------
+    A : (q, q) array
+    B : (q, 1) array
+        Input of the net force in N (state in m, m/s, ...).
+    Cf : (1, q) array
+        The termination's force in N.
     """
     dev, z = port.device, port.termination
     M = dev.mass + z.mass
@@ -48,7 +61,18 @@ _THETA13 = 5.371920351148152
 def expm_batched(M: np.ndarray) -> np.ndarray:
     """exp of each matrix of a stack (P, n, n): scaling and squaring with the (13, 13)
     Pade approximant (N. J. Higham, SIAM J. Matrix Anal. Appl. 26 (2005) 1179-1193),
-    vectorised over the stack (scipy's expm loops over it in Python)."""
+    vectorised over the stack (scipy's expm loops over it in Python).
+
+    Parameters
+    ----------
+    M : (P, n, n) array
+        The matrices (dimensionless: A T for a sampled system).
+
+    Returns
+    -------
+    (P, n, n) array
+        e^M for each.
+    """
     M = np.asarray(M, float)
     n = M.shape[-1]
     norm = np.abs(M).sum(axis=-2).max(axis=-1)                   # 1-norm per matrix
@@ -56,13 +80,13 @@ def expm_batched(M: np.ndarray) -> np.ndarray:
         s = np.maximum(0, np.ceil(np.log2(np.maximum(norm, 1e-300) / _THETA13))).astype(int)
     X = M / (2.0 ** s)[:, None, None]
     b = _PADE13
-    I = np.broadcast_to(np.eye(n), X.shape)
+    Id = np.broadcast_to(np.eye(n), X.shape)
     X2 = X @ X
     X4 = X2 @ X2
     X6 = X4 @ X2
     U = X @ (X6 @ (b[13] * X6 + b[11] * X4 + b[9] * X2) + b[7] * X6 + b[5] * X4 + b[3] * X2
-             + b[1] * I)
-    V = X6 @ (b[12] * X6 + b[10] * X4 + b[8] * X2) + b[6] * X6 + b[4] * X4 + b[2] * X2 + b[0] * I
+             + b[1] * Id)
+    V = X6 @ (b[12] * X6 + b[10] * X4 + b[8] * X2) + b[6] * X6 + b[4] * X4 + b[2] * X2 + b[0] * Id
     R = np.linalg.solve(V - U, V + U)
     for k in range(int(s.max()) if s.size else 0):
         sq = s > k
@@ -74,6 +98,20 @@ def discretize(A: np.ndarray, B: np.ndarray, periods: np.ndarray) -> tuple[np.nd
     """Exact zero-order-hold discretisation for each period (batched matrix exponential).
 
     Returns Ad (P, n, n) and Bd (P, n, m): ``Ad = e^{AT}``, ``Bd = int_0^T e^{At} dt B``.
+
+    Parameters
+    ----------
+    A : (n, n) array
+        Continuous state matrix (1/s).
+    B : (n, m) array
+        Continuous input matrix.
+    periods : (P,) array
+        Sampling periods T in s.
+
+    Returns
+    -------
+    Ad : (P, n, n) array
+    Bd : (P, n, m) array
     """
     n, m = B.shape
     M = np.zeros((n + m, n + m))

@@ -11,14 +11,13 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
-from typing import Union
 
 import numpy as np
 
 from hapstab.errors import ModelError, check_real
 from hapstab.models.parts import _poly
 
-__all__ = ['SpringDamper', 'DiscreteController', 'Controller']
+__all__ = ['SpringDamper', 'DiscreteController', 'Controller', 'spring_damper']
 
 
 # ----------------------------------------------------------------------- controllers
@@ -55,14 +54,28 @@ class SpringDamper:
         K, B, T = self.stiffness, self.damping, period
         return np.array([K * T + B, -B]) / T, np.array([1.0, 0.0])
 
-    def with_stiffness(self, K: float) -> "SpringDamper":
+    def with_stiffness(self, K: float) -> SpringDamper:
         return dataclasses.replace(self, stiffness=K)
 
 
 @dataclass(frozen=True)
 class DiscreteController:
     """Any proper discrete transfer function H(z) = num(z)/den(z) (highest power first).
-    It has no stiffness parameter, so :func:`critical_stiffness` does not apply."""
+    It has no stiffness parameter, so :func:`critical_stiffness` does not apply.
+
+    Parameters
+    ----------
+    num : sequence of float
+        Numerator coefficients in z, highest power first; force in N per m of input.
+    den : sequence of float
+        Denominator coefficients in z, highest power first, not all zero; the degree
+        of ``num`` must not exceed that of ``den`` (proper).
+
+    Raises
+    ------
+    ModelError
+        If a coefficient is not finite, the denominator is zero or H is improper.
+    """
 
     num: tuple[float, ...]
     den: tuple[float, ...]
@@ -82,4 +95,25 @@ class DiscreteController:
         return np.array(self.num), np.array(self.den)
 
 
-Controller = Union[SpringDamper, DiscreteController]
+Controller = SpringDamper | DiscreteController
+
+
+def spring_damper(controller: Controller, name: str = "controller") -> SpringDamper:
+    """``controller`` itself if it is a :class:`SpringDamper` (the only controller with a
+    stiffness K to vary).
+
+    Parameters
+    ----------
+    controller : SpringDamper or DiscreteController
+        The controller to vary K of.
+    name : str
+        Its name in the error message (``"controller"``, ``"master_controller"``, ...).
+
+    Raises
+    ------
+    ModelError
+        If it is not a :class:`SpringDamper`.
+    """
+    if not isinstance(controller, SpringDamper):
+        raise ModelError(f"{name}: a SpringDamper is needed to vary the stiffness")
+    return controller

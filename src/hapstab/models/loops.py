@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
-from typing import Any, ClassVar, Union
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -22,10 +22,16 @@ from hapstab.errors import (
     check_period,
     check_real,
 )
-from hapstab.models.controllers import Controller, DiscreteController, SpringDamper
+from hapstab.models.controllers import (
+    Controller,
+    DiscreteController,
+    SpringDamper,
+    spring_damper,
+)
 from hapstab.models.parts import Device, Impedance
 
-__all__ = ['split_delay', 'DELAY_SNAP', 'HapticLoop', 'TeleoperationLoop', 'delay_from_seconds', 'whole_delay']
+__all__ = ["split_delay", "DELAY_SNAP", "HapticLoop", "TeleoperationLoop", "delay_from_seconds",
+           "whole_delay"]
 
 
 def _check_fraction(name: str, value: Any) -> float:
@@ -56,7 +62,7 @@ def split_delay(d: float) -> tuple[int, float]:
         :data:`DELAY_SNAP` of a whole number (so t_d = nT gives exactly the
         integer-delay model).
     """
-    n = int(round(d))
+    n = round(d)
     if abs(d - n) <= DELAY_SNAP * max(1.0, d):
         return n, 0.0
     n = int(np.floor(d))
@@ -65,7 +71,27 @@ def split_delay(d: float) -> tuple[int, float]:
 
 def delay_from_seconds(name: str, seconds: Any, period: float) -> tuple[int, float]:
     """Split a delay in seconds into whole samples and a fraction in [0, 1), by
-    the rule of :func:`split_delay`."""
+    the rule of :func:`split_delay`.
+
+    Parameters
+    ----------
+    name : str
+        The delay's name in the error message (e.g. ``"delay_s"``).
+    seconds : float
+        The delay t_d in s, finite and >= 0.
+    period : float
+        The sampling period T in s.
+
+    Returns
+    -------
+    (int, float)
+        n and f with t_d = (n + f) T, 0 <= f < 1.
+
+    Raises
+    ------
+    ModelError
+        If ``seconds`` is negative or not finite.
+    """
     return split_delay(check_real(name, seconds, nonnegative=True) / period)
 
 
@@ -87,6 +113,7 @@ class HapticLoop:
     Parameters
     ----------
     device : Device
+        The haptic device (mass in kg, damping in N*s/m).
     controller : SpringDamper or DiscreteController
         H(z), eq. (23).
     operator : Impedance, str or None
@@ -94,7 +121,10 @@ class HapticLoop:
     period : float
         Sampling period T in s, > 0.
     delay_samples : int
-        n >= 0.
+        n >= 0, the whole samples of delay.
+    fractional_delay : float
+        The part of the delay below one sample, in [0, 1) of T: t_d = (n + f) T.
+        Usually set through :meth:`with_delay_s`.
     """
 
     device: Device
@@ -126,17 +156,15 @@ class HapticLoop:
         """t_d = (n + fractional_delay) T in seconds."""
         return self.delay_in_samples * self.period
 
-    def with_delay_s(self, seconds: float) -> "HapticLoop":
+    def with_delay_s(self, seconds: float) -> HapticLoop:
         """The same loop with a delay of ``seconds`` (any t_d >= 0, not only n T)."""
         n, f = delay_from_seconds("delay_s", seconds, self.period)
         return dataclasses.replace(self, delay_samples=n, fractional_delay=f)
 
-    def with_stiffness(self, K: float) -> "HapticLoop":
-        if not isinstance(self.controller, SpringDamper):
-            raise ModelError("controller: a SpringDamper is needed to vary the stiffness")
-        return dataclasses.replace(self, controller=self.controller.with_stiffness(K))
+    def with_stiffness(self, K: float) -> HapticLoop:
+        return dataclasses.replace(self, controller=spring_damper(self.controller).with_stiffness(K))
 
-    def replace(self, **changes: Any) -> "HapticLoop":
+    def replace(self, **changes: Any) -> HapticLoop:
         return dataclasses.replace(self, **changes)
 
     #: The loop's kind, as the CLI names it.
@@ -147,11 +175,11 @@ class HapticLoop:
         """The controller of each port (one: the virtual environment)."""
         return (self.controller,)
 
-    def with_controllers(self, controller: Controller) -> "HapticLoop":
+    def with_controllers(self, controller: Controller) -> HapticLoop:
         """The same loop with ``controller`` on every port."""
         return dataclasses.replace(self, controller=controller)
 
-    def with_whole_delay(self, n: int, period: float | None = None) -> "HapticLoop":
+    def with_whole_delay(self, n: int, period: float | None = None) -> HapticLoop:
         """The same loop with a delay of ``n`` whole samples (and period ``period``)."""
         return dataclasses.replace(self, delay_samples=n, fractional_delay=0.0,
                                    period=self.period if period is None else period)
@@ -166,6 +194,7 @@ class TeleoperationLoop:
     Parameters
     ----------
     master, slave : Device
+        The two robots (mass in kg, damping in N*s/m).
     master_controller, slave_controller : SpringDamper or DiscreteController
         C_m(z), C_s(z) (eq. 23); they may differ.
     operator, environment : Impedance, str or None
@@ -173,7 +202,15 @@ class TeleoperationLoop:
     period : float
         T in s, > 0.
     delay_samples : int
-        One-way delay n >= 0 in each direction.
+        One-way delay n >= 0 in each direction (master -> slave; also slave -> master
+        unless ``delay_backward_samples`` is given).
+    delay_backward_samples : int or None
+        Slave -> master delay in whole samples; ``None``: the same as ``delay_samples``.
+    fractional_delay : float
+        The part of the master -> slave delay below one sample, in [0, 1) of T.
+    fractional_delay_backward : float or None
+        The same for slave -> master; ``None``: the same as ``fractional_delay``.
+        Usually set through :meth:`with_delays_s`.
     """
 
     master: Device
@@ -242,7 +279,7 @@ class TeleoperationLoop:
     def delay_backward_s(self) -> float:
         return self.backward_delay_in_samples * self.period
 
-    def with_delays_s(self, forward_s: float, backward_s: float | None = None) -> "TeleoperationLoop":
+    def with_delays_s(self, forward_s: float, backward_s: float | None = None) -> TeleoperationLoop:
         """The same loop with master->slave and slave->master delays in seconds
         (any values >= 0; ``backward_s`` defaults to ``forward_s``)."""
         n, f = delay_from_seconds("delay_forward_s", forward_s, self.period)
@@ -253,21 +290,20 @@ class TeleoperationLoop:
         return dataclasses.replace(self, delay_samples=n, fractional_delay=f,
                                    delay_backward_samples=nb, fractional_delay_backward=fb)
 
-    def with_stiffness(self, K: float) -> "TeleoperationLoop":
+    def with_stiffness(self, K: float) -> TeleoperationLoop:
         """Master stiffness K; the slave's scales with it, keeping K_s/K_m (equal
         stiffnesses, the paper's C_m = C_s case, stay equal)."""
-        for nm in ("master_controller", "slave_controller"):
-            if not isinstance(getattr(self, nm), SpringDamper):
-                raise ModelError(f"{nm}: a SpringDamper is needed to vary the stiffness")
-        km, ks = self.master_controller.stiffness, self.slave_controller.stiffness
+        cm = spring_damper(self.master_controller, "master_controller")
+        cs = spring_damper(self.slave_controller, "slave_controller")
+        km, ks = cm.stiffness, cs.stiffness
         if km == 0 and ks > 0:
             raise AnalysisError("master_controller: stiffness 0 with a slave stiffness > 0 leaves "
                                 "K_s/K_m undefined; set the master's stiffness to vary K")
         ratio = ks / km if km > 0 else 1.0
-        return dataclasses.replace(self, master_controller=self.master_controller.with_stiffness(K),
-                                   slave_controller=self.slave_controller.with_stiffness(K * ratio))
+        return dataclasses.replace(self, master_controller=cm.with_stiffness(K),
+                                   slave_controller=cs.with_stiffness(K * ratio))
 
-    def replace(self, **changes: Any) -> "TeleoperationLoop":
+    def replace(self, **changes: Any) -> TeleoperationLoop:
         return dataclasses.replace(self, **changes)
 
     #: The loop's kind, as the CLI names it.
@@ -278,11 +314,11 @@ class TeleoperationLoop:
         """The controller of each port: master, slave."""
         return (self.master_controller, self.slave_controller)
 
-    def with_controllers(self, controller: Controller) -> "TeleoperationLoop":
+    def with_controllers(self, controller: Controller) -> TeleoperationLoop:
         """The same loop with ``controller`` on every port (C_m = C_s)."""
         return dataclasses.replace(self, master_controller=controller, slave_controller=controller)
 
-    def with_whole_delay(self, n: int, period: float | None = None) -> "TeleoperationLoop":
+    def with_whole_delay(self, n: int, period: float | None = None) -> TeleoperationLoop:
         """The same loop with ``n`` whole samples of delay in both directions (and
         period ``period``)."""
         return dataclasses.replace(self, delay_samples=n, fractional_delay=0.0,
@@ -290,12 +326,25 @@ class TeleoperationLoop:
                                    period=self.period if period is None else period)
 
 
-Loop = Union[HapticLoop, TeleoperationLoop]
+Loop = HapticLoop | TeleoperationLoop
 
 
-def whole_delay(loop: "HapticLoop | TeleoperationLoop", what: str) -> int:
+def whole_delay(loop: HapticLoop | TeleoperationLoop, what: str) -> int:
     """The delay in whole samples (equal both ways for teleoperation), for methods
-    derived for t_d = nT only; otherwise an :class:`AnalysisError` naming ``what``."""
+    derived for t_d = nT only; otherwise an :class:`AnalysisError` naming ``what``.
+
+    Parameters
+    ----------
+    loop : HapticLoop or TeleoperationLoop
+        The loop whose delay is needed.
+    what : str
+        The method that needs it, named in the error (e.g. ``"the circle criterion"``).
+
+    Returns
+    -------
+    int
+        n, the delay in samples (t_d = n T).
+    """
     if isinstance(loop, TeleoperationLoop):
         if not loop.symmetric_delay:
             raise AnalysisError(f"{what}: derived for equal delays in both directions; this loop has "

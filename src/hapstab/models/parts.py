@@ -143,7 +143,7 @@ class Impedance:
         return np.polyval(self.num, s) / np.polyval(self.den, s)
 
     @classmethod
-    def from_any(cls, obj: Any, name: str = "impedance") -> "Impedance":
+    def from_any(cls, obj: Any, name: str = "impedance") -> Impedance:
         """Accept an :class:`Impedance`, ``None`` (nothing attached), a spec string
         (see :func:`parse_impedance`), a ``(num, den)`` pair or a python-control
         continuous SISO ``TransferFunction``."""
@@ -175,13 +175,37 @@ NO_IMPEDANCE = Impedance((0.0,), (1.0,), label="none")
 
 
 def spring(stiffness: float) -> Impedance:
-    """Spring termination Z(s) = k/s (the paper's "1/s" operator is k = 1)."""
+    """Spring termination Z(s) = k/s (the paper's "1/s" operator is k = 1).
+
+    Parameters
+    ----------
+    stiffness : float
+        k in N/m, >= 0.
+
+    Returns
+    -------
+    Impedance
+    """
     k = check_real("spring stiffness", stiffness, nonnegative=True)
     return Impedance((k,), (1.0, 0.0), label=f"spring k={k:g} N/m")
 
 
 def mass_spring_damper(mass: float, damping: float, stiffness: float) -> Impedance:
-    """Z(s) = m s + b + k/s: a limb or object rigidly attached to the device."""
+    """Z(s) = m s + b + k/s: a limb or object rigidly attached to the device.
+
+    Parameters
+    ----------
+    mass : float
+        m in kg, >= 0 (added to the device's mass).
+    damping : float
+        b in N*s/m, >= 0.
+    stiffness : float
+        k in N/m, >= 0.
+
+    Returns
+    -------
+    Impedance
+    """
     m = check_real("termination mass", mass, nonnegative=True)
     b = check_real("termination damping", damping, nonnegative=True)
     k = check_real("termination stiffness", stiffness, nonnegative=True)
@@ -190,6 +214,18 @@ def mass_spring_damper(mass: float, damping: float, stiffness: float) -> Impedan
 
 def parse_impedance(spec: str, name: str = "--operator") -> Impedance:
     """Parse ``none``, ``spring:k`` or ``msd:m,b,k``.
+
+    Parameters
+    ----------
+    spec : str
+        ``none`` (or empty), ``spring:k`` (k in N/m) or ``msd:m,b,k`` (kg, N*s/m, N/m).
+    name : str
+        What the spec is for, named in the error message (e.g. ``"--operator"``).
+
+    Returns
+    -------
+    Impedance
+        :data:`NO_IMPEDANCE` for ``none``.
 
     Raises
     ------

@@ -22,8 +22,9 @@ from __future__ import annotations
 import csv
 import math
 import os
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Any, Callable, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -52,10 +53,10 @@ class FigureSpec:
     delays: tuple[int, int]
 
     @property
-    def equations(self) -> tuple[str, ...]:
-        """The paper's equation for each delay (closed_forms.PAPER)."""
+    def equations(self) -> tuple[str, str]:
+        """The paper's equation without and with delay (closed_forms.PAPER)."""
         keys = PAPER[self.make().kind]
-        return tuple(EQUATION[keys[0 if n == 0 else 1]] for n in self.delays)
+        return EQUATION[keys[0]], EQUATION[keys[1]]
 
 
 FIGURES: dict[str, FigureSpec] = {
@@ -135,16 +136,17 @@ def reproduce_figure(name: str, periods: Sequence[float] | None = None, *,
     T = PAPER_PERIODS if periods is None else tuple(float(t) for t in periods)
     if not T or not all(math.isfinite(t) and t > 0 for t in T):
         raise AnalysisError(f"periods = {list(T)}: need at least one finite period > 0")
-    cols = COLUMNS + ("circle",)
+    cols = (*COLUMNS, "circle")
     rows = []
-    for i, n in enumerate(spec.delays):
+    for n in spec.delays:
         for t in T:
             loop = spec.make(t, n, 1.0)
-            row = {"period_s": t, "delay_samples": n,
-                   "theory": paper_condition(loop).function(loop).critical_stiffness,
-                   "exact": exact_critical_stiffness(loop).critical_stiffness,
-                   "simulation": critical_stiffness_simulation(
-                       loop, **(simulation_options or {})).critical_stiffness}
+            row: dict[str, Any] = {
+                "period_s": t, "delay_samples": n,
+                "theory": paper_condition(loop).function(loop).critical_stiffness,
+                "exact": exact_critical_stiffness(loop).critical_stiffness,
+                "simulation": critical_stiffness_simulation(
+                    loop, **(simulation_options or {})).critical_stiffness}
             row["circle"] = _circle(loop)
             row["equation"] = EQUATION[paper_condition(loop).key]
             rows.append(row)

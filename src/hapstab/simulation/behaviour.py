@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from itertools import pairwise
 
 import numpy as np
 
@@ -117,11 +118,11 @@ def _envelope(X: np.ndarray, period: float, scale: float) -> Envelope:
         cut = up[np.round(np.linspace(0, cycles, min(STRETCHES, cycles) + 1)).astype(int)]
     else:
         cut = np.round(np.linspace(0, W, STRETCHES + 1)).astype(int)
-    amps = np.array([np.ptp(X[a:b + 1], axis=0).max() for a, b in zip(cut[:-1], cut[1:])])
+    amps = np.array([np.ptp(X[a:b + 1], axis=0).max() for a, b in pairwise(cut)])
     centres = (cut[:-1] + cut[1:]) / 2 * period
     dy = np.diff(y)
     monotone = bool(np.any(dy)) and (bool(np.all(dy >= 0)) or bool(np.all(dy <= 0)))
-    steps = np.array([X[b, j] - X[a, j] for a, b in zip(cut[:-1], cut[1:])])
+    steps = np.array([X[b, j] - X[a, j] for a, b in pairwise(cut)])
     return Envelope(amps, centres, cycles, P, W * period, monotone, steps, scale)
 
 

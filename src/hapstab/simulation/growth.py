@@ -331,7 +331,7 @@ def combine(parts: list[tuple[str, BoundednessVerdict]]) -> BoundednessVerdict:
         return BoundednessVerdict("bounded", -math.inf, 0.0, "high", "observed", 1.0, 0.0,
                                   "nothing moves: the loop stays at rest", "at rest",
                                   judged_on=judged)
-    what, top = max(moving, key=lambda wv: wv[1].growth_rate)
+    _what, top = max(moving, key=lambda wv: wv[1].growth_rate)
     conf = top.confidence if top.verdict != "bounded" else min(
         (v.confidence for _, v in moving), key=_CONF.index)
     reason = "; ".join(f"{w}: {v.reason}" for w, v in moving)

@@ -42,6 +42,18 @@ class SimulationResult:
     states : (M+1, N)
         Full closed-loop state (plant, delay registers, controller).
     verdict : BoundednessVerdict
+        Bounded or not, from the run (see :mod:`hapstab.simulation.growth`).
+    labels : tuple of str
+        The ports' names (``device``; ``master``, ``slave``).
+    period : float
+        Sampling period T in s.
+    delay_samples : float
+        The delay in samples (t_d / T).
+    stiffness : float
+        The loop's K in N/m (the master's for a teleoperator).
+    nonlinear : dict
+        The nonlinear elements of the run (``wall``, ``saturation``, ``resolution``,
+        ...); empty for a linear run.
     contact : (M+1,) bool or None
         Wall engaged at each sample (with ``wall``).
     dense_time, dense_position, dense_velocity : arrays or None
@@ -95,12 +107,13 @@ class SimulationResult:
 
     def _columns(self, dense: bool = False) -> dict[str, np.ndarray]:
         if dense:
-            if self.dense_time is None:
+            pos, vel = self.dense_position, self.dense_velocity
+            if self.dense_time is None or pos is None or vel is None:
                 raise AnalysisError("dense output was not requested: simulate(..., dense=m)")
             cols = {"time_s": self.dense_time}
             for j, lab in enumerate(self.labels):
-                cols[f"x_{lab}_m"] = self.dense_position[:, j]
-                cols[f"v_{lab}_m_per_s"] = self.dense_velocity[:, j]
+                cols[f"x_{lab}_m"] = pos[:, j]
+                cols[f"v_{lab}_m_per_s"] = vel[:, j]
             return cols
         cols = {"time_s": self.time}
         for j, lab in enumerate(self.labels):

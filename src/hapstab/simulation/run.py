@@ -41,7 +41,9 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Any, Sequence
+from collections.abc import Sequence
+from itertools import pairwise
+from typing import Any
 
 import numpy as np
 
@@ -133,7 +135,12 @@ def propagate_linear(A: np.ndarray, B: np.ndarray, s0: np.ndarray, F: np.ndarray
 
     Parameters
     ----------
-    A : (N, N), B : (N, p), s0 : (N,)
+    A : (N, N) array
+        One-sample state transition.
+    B : (N, p) array
+        Input matrix of the held forces.
+    s0 : (N,) array
+        Initial state.
     F : (M, p) array or None
         Held inputs (None: free response).
     n_samples : int
@@ -158,7 +165,7 @@ def propagate_linear(A: np.ndarray, B: np.ndarray, s0: np.ndarray, F: np.ndarray
         H = np.empty((m, N, p))                      # H[j] = A^j B
         H[0] = B
         H[1:] = pw[:-1] @ B
-        Toe = np.zeros((m, N, m, p))
+        Toe: np.ndarray = np.zeros((m, N, m, p))
         for i in range(m):
             Toe[i:, :, i, :] = H[:m - i]             # s[k+1+j] gets A^(j-i) B f[k+i]
         Toe = Toe.reshape(m * N, m * p)
@@ -175,7 +182,7 @@ def propagate_linear(A: np.ndarray, B: np.ndarray, s0: np.ndarray, F: np.ndarray
         k = b = 0
         while k < n_samples:
             blk = (Pw @ s).reshape(m, N)
-            if forced:
+            if Fc is not None:                       # forced
                 blk += Fc[b]
             take = min(m, n_samples - k)
             S[k + 1:k + 1 + take] = blk[:take]
@@ -298,14 +305,15 @@ def simulate(loop: HapticLoop | TeleoperationLoop, duration: float, *,
     for a in arrays:
         a.setflags(write=False)
     K = float(sysm.stiffness[0])
-    return SimulationResult(*arrays, verdict, tuple(sysm.labels), T, loop.delay_in_samples, K,
-                            nl, contact, dt, dx, dv, rest=tuple(float(r) for r in rest))
+    return SimulationResult(t, X, V, U, Fx, pe, ee, S, verdict, tuple(sysm.labels), T,
+                            loop.delay_in_samples, K, nl, contact, dt, dx, dv,
+                            rest=tuple(float(r) for r in rest))
 
 
 def _samples(duration: float, T: float, dense: Any) -> int:
     """Number of samples of the run; checks ``duration`` and ``dense``."""
     dur = check_real("duration", duration, positive=True)
-    M = int(round(dur / T))
+    M = round(dur / T)
     if M < 8:
         raise ModelError(f"duration = {duration}: gives {M} samples at T = {T:g} s; need >= 8")
     if M > 50_000_000:
@@ -347,7 +355,22 @@ QUANTIZERS = ("floor", "nearest")
 
 def quantize(x: np.ndarray, resolution: float, quantizer: str = "floor") -> np.ndarray:
     """The encoder's reading of ``x``: ``Δ floor(x/Δ)`` or the nearest multiple of Δ
-    (ties away from zero, not to even)."""
+    (ties away from zero, not to even).
+
+    Parameters
+    ----------
+    x : array
+        Positions in m.
+    resolution : float
+        Δ, the encoder's resolution in m (> 0).
+    quantizer : {"floor", "nearest"}
+        ``"floor"`` (an incremental encoder) or anything else for the nearest multiple.
+
+    Returns
+    -------
+    array
+        The readings, multiples of Δ in m.
+    """
     if quantizer == "floor":
         return resolution * np.floor(x / resolution)
     return resolution * np.sign(x) * np.floor(np.abs(x) / resolution + 0.5)
@@ -393,7 +416,7 @@ def _linear_verdict(roles: Any, s0: np.ndarray, F: np.ndarray, S: np.ndarray, T:
     for j in np.flatnonzero(np.any(F != 0, axis=0)):
         g = roles.G[:, j] / np.abs(roles.G[:, j]).max()
         imp = propagate_linear(roles.A, roles.G, g, None, M)
-        parts.append((f"response to a force impulse on the {labels[j]}",
+        parts.append((f"response to a force impulse on the {labels[int(j)]}",
                       assess(imp, None, T, differences=False)))
     return combine(parts)
 
@@ -405,8 +428,8 @@ def _force_grows(F: np.ndarray) -> bool:
     M = F.shape[0]
     if M < 10 or not np.any(F):
         return False
-    peaks = np.array([np.abs(F[a:b]).max() for a, b in
-                      zip(np.linspace(0, M, 11).astype(int)[:-1], np.linspace(0, M, 11).astype(int)[1:])])
+    tenths = np.linspace(0, M, 11).astype(int)
+    peaks = np.array([np.abs(F[a:b]).max() for a, b in pairwise(tenths)])
     return bool(np.all(np.diff(peaks[4:]) > 0))
 
 
@@ -475,8 +498,9 @@ def critical_stiffness_simulation(loop: HapticLoop | TeleoperationLoop, *,
     log K to relative width ``rtol``. If the loop is unbounded already at the
     start (e.g. a negative virtual damping B that nearly cancels the device
     damping b leaves K_max ~ (b + B)/(T/2 + t_d), arbitrarily small), K is
-    lowered by ``ratio`` down to ``1e-10 m/T^2`` before K_max = 0 is reported. Each verdict is :func:`hapstab.growth.assess`
-    on ``n_samples`` samples (observed explosion, else the fitted growth rate).
+    lowered by ``ratio`` down to ``1e-10 m/T^2`` before K_max = 0 is reported. Each verdict
+    is :func:`hapstab.growth.assess` on ``n_samples`` samples (observed explosion, else the
+    fitted growth rate).
 
     Parameters
     ----------
@@ -565,6 +589,7 @@ def critical_stiffness_simulation(loop: HapticLoop | TeleoperationLoop, *,
             lo, v_lo = mid, v
         else:
             hi, v_hi = mid, v
+    assert v_hi is not None                             # set together with hi
     reason = (f"largest K whose simulated free response ({n_samples} samples) stays bounded; "
               f"at K = {lo:.6g}: {v_lo.reason}; at K = {hi:.6g}: {v_hi.reason}")
     return CriticalStiffnessResult(

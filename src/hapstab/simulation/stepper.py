@@ -25,8 +25,9 @@ The paper, Fig. 2a and Fig. 3 (sampler, ZOH, delay, discrete controller).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
@@ -144,7 +145,7 @@ def step_nonlinear(roles: Roles, s0: np.ndarray, F: np.ndarray, M: int,
         S[k] = s
         sm = measure(s)
         u = Fu @ sm
-        if has_wall:
+        if C is not None:                # has_wall
             C[k] = c = bool(E0 @ sm > 0)   # the wall pushes only on penetration it sees
             if not c:
                 u[0] = 0.0

@@ -13,7 +13,8 @@ never as unstable.
 from __future__ import annotations
 
 import math
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
@@ -65,9 +66,10 @@ def rigid_body_modes(A0: np.ndarray, A1: np.ndarray) -> int:
 # ---------------------------------------------------------------------- stability
 def _spring_dampers(loop: HapticLoop | TeleoperationLoop) -> bool:
     cs = loop.controllers
-    if not all(isinstance(c, SpringDamper) for c in cs):
+    sds = [c for c in cs if isinstance(c, SpringDamper)]
+    if len(sds) != len(cs):
         return False
-    return not (cs[0].stiffness == 0 and any(c.stiffness > 0 for c in cs))
+    return not (sds[0].stiffness == 0 and any(c.stiffness > 0 for c in sds))
 
 
 def _polish_pole(resp: LoopResponse, u: float, z0: complex) -> complex:

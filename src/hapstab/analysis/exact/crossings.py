@@ -90,6 +90,18 @@ class Cells:
 
     _ONE = ("item", "th", "rho", "kind")
     _THREE = ("pc", "pr", "pd", "vc", "vr", "dc", "dr")
+    # the views, set by _views()
+    item: np.ndarray
+    th: np.ndarray
+    rho: np.ndarray
+    kind: np.ndarray
+    pc: np.ndarray
+    pr: np.ndarray
+    pd: np.ndarray
+    vc: np.ndarray
+    vr: np.ndarray
+    dc: np.ndarray
+    dr: np.ndarray
 
     def __init__(self) -> None:
         self.size = 0
@@ -102,7 +114,7 @@ class Cells:
         dt = {"item": int, "kind": int, "pc": complex, "pd": complex, "vc": complex, "dc": complex}
         for name in self._ONE + self._THREE:
             shape = (cap,) if name in self._ONE else (3, cap)
-            new = np.zeros(shape, dt.get(name, float))
+            new: np.ndarray = np.zeros(shape, dt.get(name, float))
             if name in self._buf:
                 new[..., :self.size] = self._buf[name][..., :self.size]
             self._buf[name] = new
@@ -120,7 +132,7 @@ class Cells:
                                  np.concatenate([np.zeros_like(rho), rho]))
         pts = [_half(j, slice(0, n)) for j in both]
         cel = [_half(j, slice(n, 2 * n)) for j in both]
-        vd = [c.value_disc(rho, p) for c, p in zip(cel, pts)]
+        vd = [c.value_disc(rho, p) for c, p in zip(cel, pts, strict=True)]
         start = self.size
         if start + n > self._cap:
             self._grow(start + n)
@@ -128,10 +140,10 @@ class Cells:
         b = self._buf
         b["item"][sl], b["th"][sl], b["rho"][sl] = item, th, rho
         b["kind"][sl] = np.broadcast_to(kind, th.shape)
-        for l in range(3):
-            b["pc"][l, sl], b["pr"][l, sl], b["pd"][l, sl] = pts[l].vc, pts[l].vr, pts[l].dc
-            b["vc"][l, sl], b["vr"][l, sl] = vd[l]
-            b["dc"][l, sl], b["dr"][l, sl] = cel[l].dc, cel[l].dr
+        for deg in range(3):
+            b["pc"][deg, sl], b["pr"][deg, sl], b["pd"][deg, sl] = pts[deg].vc, pts[deg].vr, pts[deg].dc
+            b["vc"][deg, sl], b["vr"][deg, sl] = vd[deg]
+            b["dc"][deg, sl], b["dr"][deg, sl] = cel[deg].dc, cel[deg].dr
         self.size = start + n
         self._views()
         return np.arange(start, self.size)
@@ -195,10 +207,10 @@ def _dmul(ac, ar, bc, br):
 def _dpoly(c: np.ndarray, r: np.ndarray, uc: np.ndarray, ur: np.ndarray):
     """Disc enclosure of c0 + c1 u + c2 u^2 over the real disc (uc, ur)."""
     ac, ar = c[2], r[2]
-    for l in (1, 0):
+    for deg in (1, 0):
         ac, ar = _dmul(ac, ar, uc, ur)
-        ar = ar + r[l] + EPS_OP * (np.abs(ac) + np.abs(c[l]))
-        ac = ac + c[l]
+        ar = ar + r[deg] + EPS_OP * (np.abs(ac) + np.abs(c[deg]))
+        ac = ac + c[deg]
     return ac, ar
 
 
@@ -266,12 +278,15 @@ def _trim(c: Cells, cell: np.ndarray, ua: np.ndarray, ub: np.ndarray
         pt_ok &= (val <= 0) if sgn > 0 else (val >= 0)
     # merge feasible pieces: a piece is [lo, hi] if ok; isolated feasible breakpoints
     # become tiny pieces. Breakpoints carry rounding: widen by a few ulps (relative).
-    pieces_c, pieces_a, pieces_b = [], [], []
     rows, cols = np.nonzero(ok)
-    pieces_c.append(rows), pieces_a.append(lo[rows, cols]), pieces_b.append(hi[rows, cols])
+    pieces_c: list[np.ndarray] = [rows]
+    pieces_a: list[np.ndarray] = [lo[rows, cols]]
+    pieces_b: list[np.ndarray] = [hi[rows, cols]]
     rows, cols = np.nonzero(pt_ok & ~np.concatenate([ok, np.zeros((ok.shape[0], 1), bool)], axis=1)
                             & ~np.concatenate([np.zeros((ok.shape[0], 1), bool), ok], axis=1))
-    pieces_c.append(rows), pieces_a.append(br[rows, cols]), pieces_b.append(br[rows, cols])
+    pieces_c.append(rows)
+    pieces_a.append(br[rows, cols])
+    pieces_b.append(br[rows, cols])
     r = np.concatenate(pieces_c)
     a = np.concatenate(pieces_a)
     b = np.concatenate(pieces_b)
@@ -334,8 +349,8 @@ def _krawczyk(c: Cells, cell, uc, ur, rho, tc, tr, kc, kr) -> np.ndarray:
         Jr = np.array([[tr, kr], [tr, kr]])
         rad = np.array([rho, ur])
         out = np.full(uc.shape, 2)
-        half = np.zeros((2,) + uc.shape)
-        shift = np.zeros((2,) + uc.shape)
+        half = np.zeros((2, *uc.shape))
+        shift = np.zeros((2, *uc.shape))
         for i in range(2):
             # (Y F)_i for F in its disc
             shift[i] = Y[i, 0] * f.real + Y[i, 1] * f.imag
@@ -391,7 +406,7 @@ def _boxes(resp: LoopResponse, items: np.ndarray, u_cap: np.ndarray, polish: boo
                                         for i in range(L)])
             if not ran_dry.any() or not deferred:
                 break
-            dc_, da_, db_ = (np.concatenate(x) for x in zip(*deferred))
+            dc_, da_, db_ = (np.concatenate(x) for x in zip(*deferred, strict=True))
             deferred = []
             back = ran_dry[c.item[dc_]]
             cap = np.where(ran_dry, np.where(cap * 16 < U_HI, cap * 16, U_HI), cap)
@@ -516,7 +531,7 @@ def _polish(resp: LoopResponse, c: Cells, cell: np.ndarray, ua: np.ndarray, ub: 
     fu = F[1].vc + 2 * u * F[2].vc
     det = ft.real * fu.imag - fu.real * ft.imag
     th = np.where(c.kind[cell] == 1, 0.0, np.where(c.kind[cell] == 2, np.pi, th))
-    return [(float(uu), float(tt), int(np.sign(dd))) for uu, tt, dd in zip(u, th, det)]
+    return [(float(uu), float(tt), int(np.sign(dd))) for uu, tt, dd in zip(u, th, det, strict=True)]
 
 
 # ------------------------------------------------------------------ the winding
@@ -582,11 +597,13 @@ def winding(resp: LoopResponse, items: np.ndarray, u: np.ndarray) -> np.ndarray:
         mid, rho = 0.5 * (a + b), 0.5 * (b - a)
         pts = resp.coefficients(items[row], mid, np.zeros_like(mid))
         cel = resp.coefficients(items[row], mid, rho)
-        vd = [cc.value_disc(rho, p) for cc, p in zip(cel, pts)]
+        vd = [cc.value_disc(rho, p) for cc, p in zip(cel, pts, strict=True)]
         fc, fr = _dpoly(np.array([v[0] for v in vd]), np.array([v[1] for v in vd]), u[row],
                         np.zeros(row.size))
         ok = np.abs(fc) > fr
-        done_a.append(a[ok]), done_b.append(b[ok]), done_row.append(row[ok])
+        done_a.append(a[ok])
+        done_b.append(b[ok])
+        done_row.append(row[ok])
         a, b, row = a[~ok], b[~ok], row[~ok]
         floor = (b - a) <= THETA_FLOOR * (1.0 + a)
         bad_rows[row[floor]] = True
@@ -668,11 +685,11 @@ def _classify(resp: LoopResponse, i: int, anchor: int, cross, unsure, full: bool
             raise AnalysisError("crossing analysis: the first crossing points inwards while no "
                                 "pole is outside; please report this loop")
         kmax = a * s
-        uncertain = ((a * s, b * s),) if m == 0 else ()
+        uncertain: tuple[tuple[float, float], ...] = ((a * s, b * s),) if m == 0 else ()
         return {**base, "kmax": kmax, "intervals": ((0.0, kmax),) if kmax > 0 else (),
                 "theta": t, "uncertain": uncertain}
     counts: list[int | None] = [anchor]
-    for g, (a, b, t, d, m) in enumerate(events):
+    for g, (_a, b, _t, d, m) in enumerate(events):
         prev = counts[-1]
         if m == 0 or prev is None:
             # after an unresolved zone: count in the next gap by the argument principle
@@ -689,7 +706,9 @@ def _classify(resp: LoopResponse, i: int, anchor: int, cross, unsure, full: bool
     edges_lo = [0.0] + [b * s for a, b, *_ in events]
     edges_hi = [a * s for a, b, *_ in events] + [math.inf]
     thetas = [t for _, _, t, _, _ in events]
-    intervals, upper, kmax, theta = [], [], 0.0, math.nan
+    intervals: list[tuple[float, float]] = []
+    upper: list[int] = []
+    kmax, theta = 0.0, math.nan
     for g, cnt in enumerate(counts):
         if cnt == 0:
             lo, hi = edges_lo[g], edges_hi[g]
@@ -721,7 +740,7 @@ def _verify(resp: LoopResponse, i: int, events, counts) -> None:
         hi = events[g][0] if g < len(events) else lo * 4
         us.append(math.sqrt(lo * hi) if hi > lo else lo)
     got = winding(resp, np.full(len(us), i), np.array(us))
-    for g, c in zip(gaps, got):
+    for g, c in zip(gaps, got, strict=True):
         if c >= 0 and counts[g] is not None and c != counts[g]:
             raise AnalysisError(f"crossing analysis: the pole count {counts[g]} from crossing "
                                 f"directions disagrees with the argument principle ({c}) at "
