@@ -26,7 +26,7 @@ from scipy.integrate import solve_ivp
 
 import hapstab as h
 from hapstab.paper.reproduce import FIGURES, PAPER_PERIODS
-from hapstab.simulation.run import critical_stiffness_simulation, simulate
+from hapstab.simulation import critical_stiffness_simulation, simulate
 
 M_DEV, B_DEV, K_OP = 0.15, 0.1, 1.0       # Fig. 5 device and 1/s operator
 T, N_DELAY, K, B_VIRT, F_OP, DURATION = 1e-3, 10, 8.0, 0.0, 1.0, 10.0

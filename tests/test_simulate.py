@@ -14,7 +14,7 @@ import hapstab as h
 from hapstab.analysis.exact.core import exact_critical_stiffness, stability
 from hapstab.engine.system import build
 from hapstab.errors import AnalysisError, ModelError
-from hapstab.simulation.run import critical_stiffness_simulation, force_samples, simulate
+from hapstab.simulation import critical_stiffness_simulation, force_samples, simulate
 
 
 # ------------------------------------------------------------ independent references

@@ -18,7 +18,7 @@ from hapstab.analysis.passivity import critical_stiffness_passivity
 from hapstab.errors import AnalysisError, check_delay, check_period
 from hapstab.models.loops import HapticLoop, TeleoperationLoop
 from hapstab.results import BoundaryResult, CriticalStiffnessResult
-from hapstab.simulation.run import critical_stiffness_simulation
+from hapstab.simulation.search import critical_stiffness_simulation
 
 __all__ = ["critical_stiffness", "boundary", "METHODS", "methods_for"]
 

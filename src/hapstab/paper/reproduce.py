@@ -128,7 +128,7 @@ def reproduce_figure(name: str, periods: Sequence[float] | None = None, *,
     AnalysisError
         Unknown figure name or invalid periods.
     """
-    from hapstab.simulation.run import critical_stiffness_simulation
+    from hapstab.simulation.search import critical_stiffness_simulation
 
     if name not in FIGURES:
         raise AnalysisError(f"figure = {name!r}: unknown; allowed: {', '.join(FIGURES)}")

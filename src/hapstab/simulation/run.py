@@ -40,9 +40,7 @@ Section 5 (simulation study).
 from __future__ import annotations
 
 import dataclasses
-import math
 from collections.abc import Sequence
-from itertools import pairwise
 from typing import Any
 
 import numpy as np
@@ -50,149 +48,23 @@ import numpy as np
 from hapstab.engine.structure import structure_of
 from hapstab.engine.system import build
 from hapstab.engine.zoh import port_matrices
-from hapstab.errors import AnalysisError, ModelError, check_real
+from hapstab.errors import ModelError, check_real
 from hapstab.models.loops import HapticLoop, TeleoperationLoop
-from hapstab.results import CriticalStiffnessResult
 from hapstab.simulation.behaviour import assess_nonlinear
 from hapstab.simulation.growth import BoundednessVerdict, assess, combine
+from hapstab.simulation.inputs import ForceSpec, force_grows, force_samples
+from hapstab.simulation.propagate import propagate_linear
 from hapstab.simulation.result import SimulationResult
 from hapstab.simulation.stepper import dense_output, roles_of, step_nonlinear
 from hapstab.simulation.stepper import initial_state as make_initial_state
 
-__all__ = ["simulate", "SimulationResult", "force_samples", "critical_stiffness_simulation",
-           "propagate_linear"]
-
-ForceSpec = Any  # None | float | "step:F[,t0]" | "pulse:F,width[,t0]" | "sine:F,Hz" | callable | array
+__all__ = ["simulate", "quantize", "QUANTIZERS"]
 
 
 # ------------------------------------------------------------------ inputs
-def force_samples(spec: ForceSpec, times: np.ndarray, name: str = "force") -> np.ndarray:
-    """Exogenous force at each sampling instant, held over the sample (ZOH).
-
-    Parameters
-    ----------
-    spec : None, float, str, callable or array
-        ``None`` (no force); a number F (step of F N at t = 0); ``"step:F[,t0]"``;
-        ``"pulse:F,width[,t0]"`` (F N for ``width`` s from ``t0``); ``"sine:F,Hz"``;
-        a callable ``f(t)``; or an array with one value per sample.
-    times : (M,) array
-        Sampling instants t_k = k T.
-    name : str
-        Parameter name for messages.
-
-    Returns
-    -------
-    (M,) array
-
-    Raises
-    ------
-    ModelError
-        A malformed spec or an array of the wrong length.
-
-    Notes
-    -----
-    The force is sampled at t_k and held, like the controller's output; a sine is
-    therefore seen with the hold's half-sample lag.
-    """
-    M = times.size
-    allowed = "allowed: a number, step:F[,t0], pulse:F,width[,t0], sine:F,Hz, a callable or an array"
-    if spec is None:
-        return np.zeros(M)
-    if isinstance(spec, (int, float, np.floating, np.integer)) and not isinstance(spec, bool):
-        return np.full(M, check_real(name, spec))
-    if isinstance(spec, str):
-        kind, _, args = spec.strip().lower().partition(":")
-        try:
-            v = [float(a) for a in args.split(",")] if args else []
-        except ValueError:
-            raise ModelError(f"{name} = {spec!r}: malformed number; {allowed}") from None
-        if not all(math.isfinite(x) for x in v):
-            raise ModelError(f"{name} = {spec!r}: numbers must be finite; {allowed}")
-        if kind == "step" and len(v) in (1, 2):
-            t0 = v[1] if len(v) == 2 else 0.0
-            return np.where(times >= t0 - 1e-12, v[0], 0.0)
-        if kind == "pulse" and len(v) in (2, 3) and v[1] > 0:
-            t0 = v[2] if len(v) == 3 else 0.0
-            return np.where((times >= t0 - 1e-12) & (times < t0 + v[1] - 1e-12), v[0], 0.0)
-        if kind == "sine" and len(v) == 2 and v[1] >= 0:
-            return v[0] * np.sin(2 * np.pi * v[1] * times)
-        raise ModelError(f"{name} = {spec!r}: not understood; {allowed}")
-    if callable(spec):
-        return np.array([float(spec(t)) for t in times])
-    try:
-        a = np.asarray(spec, dtype=float).ravel()
-    except (TypeError, ValueError):
-        raise ModelError(f"{name} = {spec!r}: {allowed}") from None
-    if a.size != M or not np.all(np.isfinite(a)):
-        raise ModelError(f"{name}: array of {a.size} values; need {M} finite values (one per sample)")
-    return a
 
 
 # ------------------------------------------------------------ linear engine
-def propagate_linear(A: np.ndarray, B: np.ndarray, s0: np.ndarray, F: np.ndarray | None,
-                     n_samples: int, block: int = 64) -> np.ndarray:
-    """The exact recurrence ``s[k+1] = A s[k] + B f[k]``, ``block`` samples per product.
-
-    Parameters
-    ----------
-    A : (N, N) array
-        One-sample state transition.
-    B : (N, p) array
-        Input matrix of the held forces.
-    s0 : (N,) array
-        Initial state.
-    F : (M, p) array or None
-        Held inputs (None: free response).
-    n_samples : int
-        M.
-    block : int
-        Samples per block; powers A^1..A^block are formed once.
-
-    Returns
-    -------
-    (M+1, N) array of states; rows after an overflow are inf/nan.
-    """
-    N = A.shape[0]
-    m = max(1, min(block, n_samples))
-    pw = np.empty((m, N, N))
-    pw[0] = A
-    for j in range(1, m):
-        pw[j] = A @ pw[j - 1]
-    Pw = pw.reshape(m * N, N)
-    forced = F is not None and np.any(F)
-    if forced:
-        p = B.shape[1]
-        H = np.empty((m, N, p))                      # H[j] = A^j B
-        H[0] = B
-        H[1:] = pw[:-1] @ B
-        Toe: np.ndarray = np.zeros((m, N, m, p))
-        for i in range(m):
-            Toe[i:, :, i, :] = H[:m - i]             # s[k+1+j] gets A^(j-i) B f[k+i]
-        Toe = Toe.reshape(m * N, m * p)
-        nb = -(-n_samples // m)
-        Fp = np.zeros((nb * m, p))
-        Fp[:n_samples] = F
-        Fb = Fp.reshape(nb, m * p)
-    S = np.empty((n_samples + 1, N))
-    S[0] = s0
-    s = np.asarray(s0, float)
-    with np.errstate(over="ignore", invalid="ignore"):
-        # the forced part of every block at once; only the free part is sequential
-        Fc = (Fb @ Toe.T).reshape(-1, m, N) if forced else None
-        k = b = 0
-        while k < n_samples:
-            blk = (Pw @ s).reshape(m, N)
-            if Fc is not None:                       # forced
-                blk += Fc[b]
-            take = min(m, n_samples - k)
-            S[k + 1:k + 1 + take] = blk[:take]
-            s = blk[take - 1]
-            k += take
-            b += 1
-            if not np.isfinite(s).all():
-                S[k + 1:] = np.inf
-                break
-    return S
 
 
 # --------------------------------------------------------------- simulate
@@ -295,8 +167,8 @@ def simulate(loop: HapticLoop | TeleoperationLoop, duration: float, *,
     if not nl:
         verdict = _linear_verdict(roles, s0, Fd, S, T, sysm.labels)
     else:
-        verdict = _nonlinear_verdict(loop, roles, S, X, T, nl, _force_grows(F))
-    if _force_grows(F):
+        verdict = _nonlinear_verdict(loop, roles, S, X, T, nl, force_grows(F))
+    if force_grows(F):
         verdict = _input_caveat(verdict)
     dt = dx = dv = None
     if dense >= 2 and np.all(np.isfinite(S)):
@@ -421,18 +293,6 @@ def _linear_verdict(roles: Any, s0: np.ndarray, F: np.ndarray, S: np.ndarray, T:
     return combine(parts)
 
 
-def _force_grows(F: np.ndarray) -> bool:
-    """Whether the exogenous force still grows at the end of the run: its largest
-    size per tenth of the run rises in every tenth of the second half (a ramp, a
-    growing sine; not a step, a pulse or a sine, however late they start)."""
-    M = F.shape[0]
-    if M < 10 or not np.any(F):
-        return False
-    tenths = np.linspace(0, M, 11).astype(int)
-    peaks = np.array([np.abs(F[a:b]).max() for a, b in pairwise(tenths)])
-    return bool(np.all(np.diff(peaks[4:]) > 0))
-
-
 def _input_caveat(v: BoundednessVerdict) -> BoundednessVerdict:
     """A verdict on a run whose force keeps growing: it speaks of the loop under a
     bounded force, which this run is not, so it is not confident."""
@@ -473,127 +333,5 @@ def _bound(ports: Sequence[Any], nl: dict[str, Any], lin: BoundednessVerdict) ->
 
 
 # ------------------------------------------------- the paper's K_max procedure
-def _stiffness_scale(loop: HapticLoop | TeleoperationLoop) -> float:
-    """m/T^2 of the lightest port: the stiffness that moves a mass by its own
-    sample-scale motion, the natural unit of K."""
-    st = structure_of(loop)
-    m = min(pt.device.mass + pt.termination.mass for pt in st.ports)
-    return m / loop.period ** 2
 
 
-#: The downward scan of :func:`critical_stiffness_simulation` stops at this many m/T^2:
-#: the exact analysis resolves K from 1e-6 of its own scale (about 2 m/T^2), and a
-#: stiffness this small moves the poles by less than the 2000-sample growth fit sees.
-_K_FLOOR = 1e-10
-
-
-def critical_stiffness_simulation(loop: HapticLoop | TeleoperationLoop, *,
-                                  n_samples: int = 2000, window: int = 500, rtol: float = 1e-4,
-                                  seed: int = 0, ratio: float = 4.0) -> CriticalStiffnessResult:
-    """The paper's procedure: the largest K for which the simulated loop stays bounded.
-
-    K is raised from ``1e-6 m/T^2`` by factors of ``ratio`` until the simulated
-    free response (from a seeded random initial state, which excites every mode)
-    is unbounded, then the last bounded / first unbounded pair is bisected in
-    log K to relative width ``rtol``. If the loop is unbounded already at the
-    start (e.g. a negative virtual damping B that nearly cancels the device
-    damping b leaves K_max ~ (b + B)/(T/2 + t_d), arbitrarily small), K is
-    lowered by ``ratio`` down to ``1e-10 m/T^2`` before K_max = 0 is reported. Each verdict
-    is :func:`hapstab.growth.assess` on ``n_samples`` samples (observed explosion, else the
-    fitted growth rate).
-
-    Parameters
-    ----------
-    loop : HapticLoop or TeleoperationLoop
-        Spring-damper controller(s); K is varied as in :meth:`with_stiffness`.
-    n_samples : int
-        Samples per simulated run.
-    window : int
-        Final samples the growth rate is fitted on.
-    rtol : float
-        Relative width of the final bracket.
-    seed : int
-        Seed of the initial state.
-    ratio : float
-        Step of the upward scan (> 1); like the paper, a stable island between two
-        scan points could be missed.
-
-    Returns
-    -------
-    CriticalStiffnessResult
-        ``method="simulation"``; ``details`` has the number of runs, the horizon
-        and the verdicts at the final bracket.
-
-    Raises
-    ------
-    AnalysisError
-        If a controller is not a spring-damper.
-
-    References
-    ----------
-    The paper, Section 5 and the stars of Fig. 5 / Fig. 6.
-    """
-    sysm = build(loop)
-    if not sysm.varies_with_K:
-        raise AnalysisError("method = 'simulation': needs SpringDamper controller(s) to vary K")
-    if not (isinstance(n_samples, (int, np.integer)) and n_samples >= 64):
-        raise AnalysisError(f"n_samples = {n_samples!r}: must be a whole number >= 64")
-    if not (isinstance(window, (int, np.integer)) and 16 <= window <= n_samples):
-        raise AnalysisError(f"window = {window!r}: must be a whole number in [16, n_samples]")
-    if not (0 < rtol < 0.1) or not ratio > 1:
-        raise AnalysisError(f"rtol = {rtol}, ratio = {ratio}: need 0 < rtol < 0.1 and ratio > 1")
-    T = loop.period
-    s0 = np.random.default_rng(seed).standard_normal(sysm.order)
-    Bz = np.zeros((sysm.order, 1))
-    runs = 0
-
-    def verdict(K: float) -> BoundednessVerdict:
-        nonlocal runs
-        runs += 1
-        S = propagate_linear(sysm.closed_loop(K)[0], Bz, s0, None, n_samples, block=128)
-        return assess(S, None, T, window=window)
-
-    Ks = _stiffness_scale(loop)
-    lo, hi = 1e-6 * Ks, None
-    v_lo = verdict(lo)
-    v_hi = None
-    if not v_lo.bounded:
-        # a negative virtual damping that nearly cancels the device's leaves K_max far
-        # below the usual start: scan down before concluding that no K is stable
-        hi, v_hi = lo, v_lo
-        while not v_lo.bounded and lo > _K_FLOOR * Ks:
-            hi, v_hi = lo, v_lo
-            lo /= ratio
-            v_lo = verdict(lo)
-        if not v_lo.bounded:
-            return CriticalStiffnessResult(
-                0.0, "simulation", (), f"unbounded already at K = {lo:.4g} N/m: {v_lo.reason}", T,
-                loop.delay_in_samples, details={"runs": runs, "horizon_samples": n_samples})
-    K = lo
-    while hi is None and K < 1e4 * Ks:
-        K *= ratio
-        v = verdict(K)
-        if not v.bounded:
-            hi, v_hi = K, v
-            break
-        lo, v_lo = K, v
-    if hi is None:
-        return CriticalStiffnessResult(
-            math.inf, "simulation", ((0.0, math.inf),),
-            f"bounded for every K tried up to {lo:.4g} N/m", T, loop.delay_in_samples,
-            details={"runs": runs, "horizon_samples": n_samples})
-    while hi / lo - 1 > rtol:
-        mid = math.sqrt(lo * hi)
-        v = verdict(mid)
-        if v.bounded:
-            lo, v_lo = mid, v
-        else:
-            hi, v_hi = mid, v
-    assert v_hi is not None                             # set together with hi
-    reason = (f"largest K whose simulated free response ({n_samples} samples) stays bounded; "
-              f"at K = {lo:.6g}: {v_lo.reason}; at K = {hi:.6g}: {v_hi.reason}")
-    return CriticalStiffnessResult(
-        lo, "simulation", ((0.0, lo),), reason, T, loop.delay_in_samples,
-        details={"runs": runs, "horizon_samples": n_samples, "bracket": [lo, hi],
-                 "confidence": min((v_lo.confidence, v_hi.confidence),
-                                   key=["low", "medium", "high"].index)})
