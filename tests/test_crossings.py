@@ -90,14 +90,8 @@ def test_a_crossing_inside_an_unresolved_zone_is_not_counted_twice():
     # (from the independent review) an unresolved box of one theta-cell can span a
     # crossing proved in another cell: the stable set must end at the zone, safely,
     # and the intervals above must survive
-    from hapstab.analysis.exact.crossings import (
-        Cells,
-        _boxes,
-        _classify,
-        _dedupe,
-        _initial_cells,
-        _winding_cells,
-    )
+    from hapstab.analysis.exact.boxes import Cells, _initial_cells
+    from hapstab.analysis.exact.crossings import _boxes, _classify, _dedupe, _winding_cells
     resp = loop_response(ISSUE1B)
     c = Cells()
     first = c.add(resp, *_initial_cells(resp, np.arange(1)))

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import hapstab as h
-from hapstab.analysis.exact.crossings import Cells
+from hapstab.analysis.exact.boxes import Cells
 from hapstab.engine.discs import Jet, geometric_sum_jet, one_minus_delay_jet
 from hapstab.engine.frequency import loop_response
 from hapstab.engine.system import build
