@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from hapstab.engine.structure import structure_of
+from hapstab.engine.structure import LoopStructure, structure_of
 from hapstab.engine.zoh import discretize, port_matrices
 from hapstab.models.controllers import DiscreteController, SpringDamper
 from hapstab.models.loops import HapticLoop, TeleoperationLoop, split_delay
@@ -143,43 +143,45 @@ class SampledSystem:
         return self.F_u0 + K[:, None, None] * self.F_u1
 
 
-def build(loop: HapticLoop | TeleoperationLoop,
-          periods: Sequence[float] | np.ndarray | None = None) -> SampledSystem:
-    """Assemble the exact closed loop of ``loop`` for each sampling period.
+@dataclass(frozen=True)
+class _Layout:
+    """Where each part of the closed-loop state lives (see :func:`build`)."""
 
-    Parameters
-    ----------
-    loop : HapticLoop or TeleoperationLoop
-    periods : array of float, optional
-        Sampling periods (s); defaults to ``[loop.period]``. Everything else
-        (devices, impedances, controllers, delays in samples) is the loop's.
+    off_p: np.ndarray                       # plant block of each port
+    n_plant: int
+    depth: list[int]                        # whole-sample registers of each port
+    off_r: np.ndarray                       # first register of each port
+    off_c: np.ndarray                       # controller states of each channel
+    frac: dict[tuple[int, float], int]      # (port, fraction) -> registers after it
+    off_f: dict[tuple[int, float], int]     # (port, fraction) -> its state
+    N: int
 
-    Returns
-    -------
-    SampledSystem
-    """
-    st = structure_of(loop)
-    T = np.atleast_1d(np.asarray(loop.period if periods is None else periods, float))
-    P, p = T.size, len(st.ports)
 
-    # --- plant: exact ZOH per port
+def _plant(st: LoopStructure, T: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Continuous (Ac, Bc, Cf) of all ports, block-diagonal, their ZOH (Ad, Bd)
+    for each period, and the offset of each port's block."""
     cont = [port_matrices(pt) for pt in st.ports]
-    sizes = [a.shape[0] for a, _, _ in cont]
-    off_p = np.concatenate([[0], np.cumsum(sizes)])
-    n_plant = int(off_p[-1])
-    Ac = np.zeros((n_plant, n_plant))
-    Bc = np.zeros((n_plant, p))
-    Cf = np.zeros((p, n_plant))
+    off_p = np.concatenate([[0], np.cumsum([a.shape[0] for a, _, _ in cont])]).astype(int)
+    n_plant, p = int(off_p[-1]), len(st.ports)
+    Ac, Bc, Cf = np.zeros((n_plant, n_plant)), np.zeros((n_plant, p)), np.zeros((p, n_plant))
     for i, (a, b, cf) in enumerate(cont):
         sl = slice(off_p[i], off_p[i + 1])
         Ac[sl, sl], Bc[sl, i], Cf[i, sl] = a, b[:, 0], cf[0]
     Ad, Bd = discretize(Ac, Bc, T)
+    return Ac, Bc, Cf, Ad, Bd, off_p
 
-    # --- delays: a term's delay is d = n + f samples. The whole part is shift
-    # registers of x_j (register l of port j holds x_j[k-1-l]). A fractional part
-    # f > 0 is a state r = x_j(kT - fT), exact from the previous sample and the
-    # force held over it (ZOH), with its own registers (after the controller states,
-    # so the layout of integer-delay loops is unchanged).
+
+def _layout(st: LoopStructure, off_p: np.ndarray, qs: list[int]) -> _Layout:
+    """Offsets of the delay registers, the controller states (``qs`` per channel)
+    and the fractional-delay states.
+
+    A term's delay is d = n + f samples. The whole part is shift registers of x_j
+    (register l of port j holds x_j[k-1-l]). A fractional part f > 0 is a state
+    r = x_j(kT - fT), exact from the previous sample and the force held over it
+    (ZOH), with its own registers (after the controller states, so the layout of
+    integer-delay loops is unchanged).
+    """
+    p, n_plant = len(st.ports), int(off_p[-1])
     depth = [0] * p
     frac: dict[tuple[int, float], int] = {}
     for ch in st.channels:
@@ -190,96 +192,165 @@ def build(loop: HapticLoop | TeleoperationLoop,
             else:
                 frac[(j, f)] = max(frac.get((j, f), 0), n)
     off_r = n_plant + np.concatenate([[0], np.cumsum(depth)]).astype(int)
-
-    # --- controller states
-    parts = [_controller_parts(ch.controller, T) for ch in st.channels]
-    qs = [pa[0].shape[1] for pa in parts]
     off_c = int(off_r[-1]) + np.concatenate([[0], np.cumsum(qs)]).astype(int)
     off_f: dict[tuple[int, float], int] = {}
     N = int(off_c[-1])
     for key in sorted(frac):
         off_f[key] = N
         N += 1 + frac[key]
+    return _Layout(off_p, n_plant, depth, off_r, off_c, frac, off_f, N)
 
-    pos = np.zeros((p, N))
-    vel = np.zeros((p, N))
+
+def _selectors(st: LoopStructure, lay: _Layout) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Position and velocity selectors (p, N), and the error selectors E (p, N):
+    e_i = E_i s, the signed sum of delayed positions each controller acts on."""
+    p, N = len(st.ports), lay.N
+    pos, vel = np.zeros((p, N)), np.zeros((p, N))
     for i in range(p):
-        pos[i, off_p[i]], vel[i, off_p[i] + 1] = 1.0, 1.0
-
-    # error selectors E (p, N): e_i = E_i s
+        pos[i, lay.off_p[i]], vel[i, lay.off_p[i] + 1] = 1.0, 1.0
     E = np.zeros((p, N))
     for ch in st.channels:
         for j, sgn, d in ch.terms:
             n, f = split_delay(d)
             if f:
-                E[ch.port, off_f[(j, f)] + n] += sgn     # r itself (n = 0) or its register n-1
+                E[ch.port, lay.off_f[(j, f)] + n] += sgn     # r itself (n = 0) or register n-1
             elif n == 0:
                 E[ch.port] += sgn * pos[j]
             else:
-                E[ch.port, off_r[j] + n - 1] += sgn
-    # u = F_u0 s + K F_u1 s
-    Fu0 = np.zeros((P, p, N))
-    Fu1 = np.zeros((P, p, N))
-    A0 = np.zeros((P, N, N))
+                E[ch.port, lay.off_r[j] + n - 1] += sgn
+    return pos, vel, E
+
+
+def _controllers(st: LoopStructure, parts: Sequence[tuple[np.ndarray, ...]], lay: _Layout,
+                 E: np.ndarray, P: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The controllers' forces u = F_u0 s + K F_u1 s and their own state updates
+    (the controller rows of A0)."""
+    p, N = len(st.ports), lay.N
+    Fu0, Fu1, A0 = np.zeros((P, p, N)), np.zeros((P, p, N)), np.zeros((P, N, N))
     for ch, (Ah, Bh, Ch, Dfix, Dk) in zip(st.channels, parts, strict=True):
         i = ch.port
-        cs = slice(off_c[i], off_c[i + 1])
+        cs = slice(lay.off_c[i], lay.off_c[i + 1])
         Fu0[:, i, cs] = Ch[:, 0, :]
         Fu0[:, i, :] += Dfix[:, None] * E[i]
         Fu1[:, i, :] = Dk[:, None] * E[i]
         A0[:, cs, cs] = Ah
         A0[:, cs, :] += Bh[:, :, :1] * E[i][None, None, :]
-    A0[:, :n_plant, :n_plant] = Ad
-    A0[:, :n_plant, :] -= Bd @ Fu0
-    for j in range(p):
-        if depth[j]:
-            A0[:, off_r[j], :] = pos[j]
-            for step in range(1, depth[j]):
-                A0[:, off_r[j] + step, off_r[j] + step - 1] = 1.0
-    B_ext = np.zeros((P, N, p))
-    B_ext[:, :n_plant, :] = Bd
-    B1 = np.zeros((P, N, p))
-    B1[:, :n_plant, :] = -Bd
-    Gam_of: dict[tuple[int, float], np.ndarray] = {}
-    for (j, f), r0 in off_f.items():
+    return Fu0, Fu1, A0
+
+
+def _registers(A0: np.ndarray, pos: np.ndarray, lay: _Layout) -> None:
+    """The whole-sample shift registers of each port's position (in place)."""
+    for j, depth in enumerate(lay.depth):
+        if depth:
+            A0[:, lay.off_r[j], :] = pos[j]
+            for step in range(1, depth):
+                A0[:, lay.off_r[j] + step, lay.off_r[j] + step - 1] = 1.0
+
+
+def _fractional(A0: np.ndarray, B_ext: np.ndarray, B1: np.ndarray, Fu0: np.ndarray,
+                Ac: np.ndarray, Bc: np.ndarray, T: np.ndarray,
+                lay: _Layout) -> dict[tuple[int, float], np.ndarray]:
+    """The fractional-delay states and their registers (in place); returns the
+    held force's gain Gamma of each, for the K-part."""
+    gam_of: dict[tuple[int, float], np.ndarray] = {}
+    for (j, f), r0 in lay.off_f.items():
         # r[k+1] = x_j((k+1)T - fT) = C (Phi x_j[k] + Gamma (f_ext - u)[k]) over (1 - f)T
-        pl = slice(off_p[j], off_p[j + 1])
+        pl = slice(lay.off_p[j], lay.off_p[j + 1])
         Phi, Gam = discretize(Ac[pl, pl], Bc[pl, j:j + 1], (1.0 - f) * T)
         A0[:, r0, pl] = Phi[:, 0, :]
         A0[:, r0, :] -= Gam[:, 0, 0][:, None] * Fu0[:, j, :]
         B_ext[:, r0, j] = Gam[:, 0, 0]
         B1[:, r0, j] = -Gam[:, 0, 0]
-        Gam_of[(j, f)] = Gam[:, 0, 0]
-        for step in range(1, frac[(j, f)] + 1):
+        gam_of[(j, f)] = Gam[:, 0, 0]
+        for step in range(1, lay.frac[(j, f)] + 1):
             A0[:, r0 + step, r0 + step - 1] = 1.0
-    # C1 rows: the K-part of each port's force; same for every period
-    C1 = Fu1.copy()
+    return gam_of
+
+
+@dataclass
+class _KPart:
+    """The stiffness part of the loop: u = F_u0 s + K F_u1 s, A(K) = A0 + K B1 C1."""
+
+    A0: np.ndarray
+    Fu0: np.ndarray
+    Fu1: np.ndarray
+    C1: np.ndarray
+    K_own: np.ndarray
+    varies: bool
+    fixed_reason: str
+
+
+def _stiffness(st: LoopStructure, k: _KPart, Bd: np.ndarray, lay: _Layout,
+               gam_of: dict[tuple[int, float], np.ndarray]) -> _KPart:
+    """Which K the loop varies: the (master's) stiffness, with K_s/K_m kept; or none
+    (a general H(z), or K_m = 0 < K_s, whose own stiffnesses are folded in)."""
     ks = [ch.controller.stiffness if isinstance(ch.controller, SpringDamper) else 0.0
           for ch in st.channels]
-    varies = all(isinstance(ch.controller, SpringDamper) for ch in st.channels)
-    fixed_reason = "" if varies else ("controller: critical stiffness needs SpringDamper "
-                                      "controllers (a general H(z) has no stiffness K to vary)")
-    K_own = np.full(P, ks[0] if varies else 0.0)
-    if varies and len(set(ks)) > 1:
-        if ks[0] > 0:
-            # unequal K_m, K_s: K is the master's stiffness, K_s/K_m is kept fixed
-            scale = np.array(ks) / ks[0]
-            C1 = C1 * scale[None, :, None]
-            Fu1 = Fu1 * scale[None, :, None]
-        else:
-            # K_m = 0 < K_s: no ratio to keep; the loop is exact with every port's own K
-            # folded into the fixed part, and K cannot be varied
-            own = np.array(ks)[None, :, None] * Fu1
-            Fu0 = Fu0 + own
-            A0[:, :n_plant, :] -= Bd @ own
-            for (j, f), r0 in off_f.items():
-                A0[:, r0, :] -= Gam_of[(j, f)][:, None] * own[:, j, :]
-            Fu1 = np.zeros_like(Fu1)
-            C1 = np.zeros_like(C1)
-            K_own = np.zeros(P)
-            varies = False
-            fixed_reason = ("controllers: the master's stiffness is 0 and the slave's is not, so "
-                            "K_s/K_m is undefined; give the master a stiffness > 0 to vary K")
-    labels = [pt.name for pt in st.ports]
-    return SampledSystem(T, A0, B1, C1, K_own, B_ext, Fu0, Fu1, pos, vel, Ac, Bc, Cf,
-                         n_plant, labels, varies, E, fixed_reason)
+    if not all(isinstance(ch.controller, SpringDamper) for ch in st.channels):
+        k.varies, k.K_own[:] = False, 0.0
+        k.fixed_reason = ("controller: critical stiffness needs SpringDamper controllers (a "
+                          "general H(z) has no stiffness K to vary)")
+        return k
+    k.K_own[:] = ks[0]
+    if len(set(ks)) == 1:
+        return k
+    if ks[0] > 0:
+        # unequal K_m, K_s: K is the master's stiffness, K_s/K_m is kept fixed
+        scale = np.array(ks) / ks[0]
+        k.C1, k.Fu1 = k.C1 * scale[None, :, None], k.Fu1 * scale[None, :, None]
+        return k
+    # K_m = 0 < K_s: no ratio to keep; the loop is exact with every port's own K
+    # folded into the fixed part, and K cannot be varied
+    own = np.array(ks)[None, :, None] * k.Fu1
+    k.Fu0 = k.Fu0 + own
+    k.A0[:, :lay.n_plant, :] -= Bd @ own
+    for (j, f), r0 in lay.off_f.items():
+        k.A0[:, r0, :] -= gam_of[(j, f)][:, None] * own[:, j, :]
+    k.Fu1, k.C1, k.K_own = np.zeros_like(k.Fu1), np.zeros_like(k.C1), np.zeros_like(k.K_own)
+    k.varies = False
+    k.fixed_reason = ("controllers: the master's stiffness is 0 and the slave's is not, so "
+                      "K_s/K_m is undefined; give the master a stiffness > 0 to vary K")
+    return k
+
+
+def build(loop: HapticLoop | TeleoperationLoop,
+          periods: Sequence[float] | np.ndarray | None = None) -> SampledSystem:
+    """Assemble the exact closed loop of ``loop`` for each sampling period.
+
+    The state is: each port's plant (ZOH), the whole-sample delay registers, the
+    controller states, then the fractional-delay states with their registers.
+
+    Parameters
+    ----------
+    loop : HapticLoop or TeleoperationLoop
+        The loop; its structure (:func:`~hapstab.engine.structure.structure_of`)
+        is all the engine reads.
+    periods : array of float, optional
+        Sampling periods (s); defaults to ``[loop.period]``. Everything else
+        (devices, impedances, controllers, delays in samples) is the loop's.
+
+    Returns
+    -------
+    SampledSystem
+    """
+    st = structure_of(loop)
+    T = np.atleast_1d(np.asarray(loop.period if periods is None else periods, float))
+    P = T.size
+    Ac, Bc, Cf, Ad, Bd, off_p = _plant(st, T)
+    parts = [_controller_parts(ch.controller, T) for ch in st.channels]
+    lay = _layout(st, off_p, [pa[0].shape[1] for pa in parts])
+    pos, vel, E = _selectors(st, lay)
+    Fu0, Fu1, A0 = _controllers(st, parts, lay, E, P)
+    n, p = lay.n_plant, len(st.ports)
+    A0[:, :n, :n] = Ad
+    A0[:, :n, :] -= Bd @ Fu0
+    _registers(A0, pos, lay)
+    B_ext, B1 = np.zeros((P, lay.N, p)), np.zeros((P, lay.N, p))
+    B_ext[:, :n, :], B1[:, :n, :] = Bd, -Bd
+    gam_of = _fractional(A0, B_ext, B1, Fu0, Ac, Bc, T, lay)
+    # C1 rows: the K-part of each port's force; same for every period
+    k = _stiffness(st, _KPart(A0, Fu0, Fu1, Fu1.copy(), np.zeros(P), True, ""), Bd, lay, gam_of)
+    return SampledSystem(periods=T, A0=k.A0, B1=B1, C1=k.C1, stiffness=k.K_own, B_ext=B_ext,
+                         F_u0=k.Fu0, F_u1=k.Fu1, pos=pos, vel=vel, Ac=Ac, Bc=Bc, Cf=Cf,
+                         n_plant=n, labels=[pt.name for pt in st.ports], varies_with_K=k.varies,
+                         E=E, fixed_reason=k.fixed_reason)
