@@ -427,3 +427,12 @@ def test_simulation_kmax_finds_the_first_boundary_of_a_split_stable_set():
     assert len(ex.stable_intervals) == 2
     sim = critical_stiffness_simulation(loop)
     assert abs(sim.critical_stiffness / ex.critical_stiffness - 1) < 0.01
+
+
+def test_simulation_kmax_with_a_long_delay_sizes_its_window_to_the_state():
+    # n = 100: 103 states, more than the default 500-snapshot window can fit three
+    # times over; the search widens it (4 per state) and stays within its rtol 1e-4
+    loop = h.paper_hve(1e-3, 100)
+    exact = exact_critical_stiffness(loop).critical_stiffness
+    r = critical_stiffness_simulation(loop)
+    assert 0 <= 1 - r.critical_stiffness / exact < 1e-4

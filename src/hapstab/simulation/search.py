@@ -9,11 +9,12 @@ The paper, Fig. 2a, Fig. 3 and Section 5.
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 
 from hapstab.engine.structure import structure_of
-from hapstab.engine.system import build
+from hapstab.engine.system import SampledSystem, build
 from hapstab.errors import AnalysisError
 from hapstab.models.loops import HapticLoop, TeleoperationLoop
 from hapstab.results import CriticalStiffnessResult
@@ -84,6 +85,45 @@ def critical_stiffness_simulation(loop: HapticLoop | TeleoperationLoop, *,
     The paper, Section 5 and the stars of Fig. 5 / Fig. 6.
     """
     sysm = build(loop)
+    _check_options(sysm, n_samples, window, rtol, ratio)
+    # a fit needs several snapshots per state entry (growth.SNAPSHOTS_PER_RANK): long
+    # delays get a longer window and run
+    window = max(window, 4 * sysm.order)
+    n_samples = max(n_samples, 2 * window)
+    T, Ks = loop.period, _stiffness_scale(loop)
+    run = _Runs(sysm, np.random.default_rng(seed).standard_normal(sysm.order), n_samples,
+                window, T)
+    lo, v_lo, hi, v_hi = _bracket(run, Ks, ratio)
+    details: dict[str, Any] = {"runs": run.count, "horizon_samples": n_samples}
+    if v_lo is None:
+        assert v_hi is not None
+        return CriticalStiffnessResult(
+            0.0, "simulation", (), f"unbounded already at K = {hi:.4g} N/m: {v_hi.reason}", T,
+            loop.delay_in_samples, details=details)
+    if v_hi is None:
+        return CriticalStiffnessResult(
+            math.inf, "simulation", ((0.0, math.inf),),
+            f"bounded for every K tried up to {lo:.4g} N/m", T, loop.delay_in_samples,
+            details=details)
+    while hi / lo - 1 > rtol:
+        mid = math.sqrt(lo * hi)
+        v = run(mid)
+        if v.bounded:
+            lo, v_lo = mid, v
+        else:
+            hi, v_hi = mid, v
+    reason = (f"largest K whose simulated free response ({n_samples} samples) stays bounded; "
+              f"at K = {lo:.6g}: {v_lo.reason}; at K = {hi:.6g}: {v_hi.reason}")
+    details.update(runs=run.count, bracket=[lo, hi],
+                   confidence=min((v_lo.confidence, v_hi.confidence),
+                                  key=["low", "medium", "high"].index))
+    return CriticalStiffnessResult(lo, "simulation", ((0.0, lo),), reason, T,
+                                   loop.delay_in_samples, details=details)
+
+
+def _check_options(sysm: SampledSystem, n_samples: Any, window: Any, rtol: float,
+                   ratio: float) -> None:
+    """The options of :func:`critical_stiffness_simulation`, checked."""
     if not sysm.varies_with_K:
         raise AnalysisError("method = 'simulation': needs SpringDamper controller(s) to vary K")
     if not (isinstance(n_samples, (int, np.integer)) and n_samples >= 64):
@@ -92,21 +132,34 @@ def critical_stiffness_simulation(loop: HapticLoop | TeleoperationLoop, *,
         raise AnalysisError(f"window = {window!r}: must be a whole number in [16, n_samples]")
     if not (0 < rtol < 0.1) or not ratio > 1:
         raise AnalysisError(f"rtol = {rtol}, ratio = {ratio}: need 0 < rtol < 0.1 and ratio > 1")
-    T = loop.period
-    s0 = np.random.default_rng(seed).standard_normal(sysm.order)
-    Bz = np.zeros((sysm.order, 1))
-    runs = 0
 
-    def verdict(K: float) -> BoundednessVerdict:
-        nonlocal runs
-        runs += 1
-        S = propagate_linear(sysm.closed_loop(K)[0], Bz, s0, None, n_samples, block=128)
-        return assess(S, None, T, window=window)
 
-    Ks = _stiffness_scale(loop)
-    lo, hi = 1e-6 * Ks, None
-    v_lo = verdict(lo)
-    v_hi = None
+class _Runs:
+    """The verdict on the free response from one seeded state, at any K; counts runs."""
+
+    def __init__(self, sysm: SampledSystem, s0: np.ndarray, n_samples: int, window: int,
+                 T: float) -> None:
+        self.sysm, self.s0, self.n, self.window, self.T = sysm, s0, n_samples, window, T
+        self.Bz = np.zeros((sysm.order, 1))
+        self.count = 0
+
+    def __call__(self, K: float) -> BoundednessVerdict:
+        self.count += 1
+        S = propagate_linear(self.sysm.closed_loop(K)[0], self.Bz, self.s0, None, self.n,
+                             block=128)
+        v = assess(S, None, self.T, window=self.window)
+        if v.verdict == "undecided":     # cannot happen with the window sized above
+            raise AnalysisError(f"simulation at K = {K:.6g} N/m cannot decide: {v.reason}")
+        return v
+
+
+def _bracket(run: _Runs, Ks: float, ratio: float
+             ) -> tuple[float, BoundednessVerdict | None, float, BoundednessVerdict | None]:
+    """The last bounded and first unbounded K of a geometric scan from 1e-6 Ks:
+    (lo, v_lo, hi, v_hi); v_lo None if unbounded down to the floor, v_hi None if
+    bounded up to 1e4 Ks."""
+    lo = 1e-6 * Ks
+    v_lo = run(lo)
     if not v_lo.bounded:
         # a negative virtual damping that nearly cancels the device's leaves K_max far
         # below the usual start: scan down before concluding that no K is stable
@@ -114,36 +167,15 @@ def critical_stiffness_simulation(loop: HapticLoop | TeleoperationLoop, *,
         while not v_lo.bounded and lo > _K_FLOOR * Ks:
             hi, v_hi = lo, v_lo
             lo /= ratio
-            v_lo = verdict(lo)
+            v_lo = run(lo)
         if not v_lo.bounded:
-            return CriticalStiffnessResult(
-                0.0, "simulation", (), f"unbounded already at K = {lo:.4g} N/m: {v_lo.reason}", T,
-                loop.delay_in_samples, details={"runs": runs, "horizon_samples": n_samples})
+            return lo, None, lo, v_lo
+        return lo, v_lo, hi, v_hi
     K = lo
-    while hi is None and K < 1e4 * Ks:
+    while K < 1e4 * Ks:
         K *= ratio
-        v = verdict(K)
+        v = run(K)
         if not v.bounded:
-            hi, v_hi = K, v
-            break
+            return lo, v_lo, K, v
         lo, v_lo = K, v
-    if hi is None:
-        return CriticalStiffnessResult(
-            math.inf, "simulation", ((0.0, math.inf),),
-            f"bounded for every K tried up to {lo:.4g} N/m", T, loop.delay_in_samples,
-            details={"runs": runs, "horizon_samples": n_samples})
-    while hi / lo - 1 > rtol:
-        mid = math.sqrt(lo * hi)
-        v = verdict(mid)
-        if v.bounded:
-            lo, v_lo = mid, v
-        else:
-            hi, v_hi = mid, v
-    assert v_hi is not None                             # set together with hi
-    reason = (f"largest K whose simulated free response ({n_samples} samples) stays bounded; "
-              f"at K = {lo:.6g}: {v_lo.reason}; at K = {hi:.6g}: {v_hi.reason}")
-    return CriticalStiffnessResult(
-        lo, "simulation", ((0.0, lo),), reason, T, loop.delay_in_samples,
-        details={"runs": runs, "horizon_samples": n_samples, "bracket": [lo, hi],
-                 "confidence": min((v_lo.confidence, v_hi.confidence),
-                                   key=["low", "medium", "high"].index)})
+    return lo, v_lo, math.inf, None
