@@ -69,69 +69,91 @@ def _simulate_command(kind: str) -> None:
              csv_path: str | None, plot_path: str | None, as_json: bool,
              environment_force: str | None = None, wall: float | None = None,
              wall_pulls: bool = False, **kw: Any) -> None:
-        from hapstab.analysis.exact.core import stability
-        from hapstab.simulation.run import simulate
-
         loop = make(kw, stiffness)
-        opts: dict[str, Any] = {}
-        if kind == "peb":
-            opts["environment_force"] = None if environment_force in (None, "none") else environment_force
-            x_init: Any = [x0, 0.0]
-        else:
-            opts.update(wall=wall, wall_pulls=wall_pulls)
-            x_init = x0
-        res = simulate(loop, duration, force=None if force == "none" else force,
-                       initial_position=x_init, saturation=saturation, resolution=resolution,
-                       quantizer=quantizer, dense=dense,
-                       rest_position=None if rest is None else
-                       ([rest, 0.0] if kind == "peb" else rest), **opts)
-        ex = stability(loop)
-        files = []
-        if csv_path:
-            res.to_csv(csv_path)
-            files.append(csv_path)
-        if plot_path:
-            res.plot(plot_path)
-            files.append(plot_path)
-        d = res.summary()
-        # the exact analysis is of the linear loop: this one, or with nonlinear elements
-        # the linearised one (wall always in contact, no saturation or quantisation)
-        d.update(linear_loop=LINEAR_LOOP[bool(res.nonlinear)], linear_loop_verdict=ex.verdict,
-                 linear_loop_spectral_radius=ex.spectral_radius,
-                 linear_loop_growth_rate_per_s=(math.log(ex.spectral_radius) / loop.period
-                                                if ex.spectral_radius > 0 else -math.inf),
-                 files=files)
-        v = res.verdict
-
-        def g(x: Any, spec: str = ".6g") -> str:   # summary values may be "inf"/None after overflow
-            return format(x, spec) if isinstance(x, (int, float)) else str(x)
-
-        def table() -> None:
-            rows = [("simulated", f"{v.verdict}: {v.behaviour} ({v.confidence} confidence, "
-                                  f"{v.basis})"),
-                    ("growth rate", f"{g(v.growth_rate)} 1/s (+- {g(v.growth_rate_uncertainty, '.2g')})")]
-            if v.amplitude_m is not None:
-                rows.append(("limit cycle", f"amplitude {v.amplitude_m:.4g} m, period "
-                                            f"{v.period_s:.4g} s"))
-            if v.duration_hint_s is not None:
-                rows.append(("to decide", f"run about {v.duration_hint_s:.3g} s"))
-            rows += [(f"exact, {d['linear_loop']}",
-                      f"{ex.verdict} (rate {g(d['linear_loop_growth_rate_per_s'])} 1/s)"),
-                     ("samples", f"{d['samples']} x {loop.period:g} s")]
-            for lab in res.labels:
-                rows.append((f"max |x| {lab}", f"{g(d[f'max_abs_position_{lab}'])} m"))
-                rows.append((f"max |u| {lab}", f"{g(d[f'max_abs_force_{lab}'])} N"))
-                rows.append((f"energy into controller from {lab}",
-                             f"{g(d[f'final_port_energy_{lab}'])} J"))
-            rows.extend([("why", v.reason)] + [("wrote", f) for f in files])
-            rich_table(f"simulation, {kind}, K = {stiffness:g} N/m", rows)
-
-        emit(d, as_json, table)
+        res = _run(kind, loop, duration, force, x0, rest, environment_force, wall, wall_pulls,
+                   saturation=saturation, resolution=resolution, quantizer=quantizer,
+                   dense=dense)
+        files = _write(res, csv_path, plot_path)
+        d = _summary(res, loop, files)
+        emit(d, as_json, lambda: _table(kind, stiffness, loop, res, d, files))
 
     for deco in reversed(extra):
         _cmd = deco(_cmd)
     _cmd.__doc__ = (f"Simulate the {kind.upper()} loop at stiffness K: verdict, growth rate, "
                     "CSV and plot of position, force and port energy.")
+
+
+def _run(kind: str, loop: Any, duration: float, force: str, x0: float, rest: float | None,
+         environment_force: str | None, wall: float | None, wall_pulls: bool,
+         **options: Any) -> Any:
+    """The simulation the options ask for: the force on the device / master, the
+    environment force (PEB) or the wall (HVE), initial and rest positions."""
+    from hapstab.simulation.run import simulate
+
+    opts: dict[str, Any] = dict(options)
+    if kind == "peb":
+        opts["environment_force"] = None if environment_force in (None, "none") else environment_force
+        x_init: Any = [x0, 0.0]
+        rest_pos: Any = None if rest is None else [rest, 0.0]
+    else:
+        opts.update(wall=wall, wall_pulls=wall_pulls)
+        x_init, rest_pos = x0, rest
+    return simulate(loop, duration, force=None if force == "none" else force,
+                    initial_position=x_init, rest_position=rest_pos, **opts)
+
+
+def _write(res: Any, csv_path: str | None, plot_path: str | None) -> list[str]:
+    """Write the CSV and the plot asked for; the files written."""
+    files = []
+    if csv_path:
+        res.to_csv(csv_path)
+        files.append(csv_path)
+    if plot_path:
+        res.plot(plot_path)
+        files.append(plot_path)
+    return files
+
+
+def _summary(res: Any, loop: Any, files: list[str]) -> dict[str, Any]:
+    """The run's summary beside the exact verdict of the linear loop: this one, or
+    with nonlinear elements the linearised one (wall always in contact, no
+    saturation or quantisation)."""
+    from hapstab.analysis.exact.core import stability
+
+    ex = stability(loop)
+    d = res.summary()
+    d.update(linear_loop=LINEAR_LOOP[bool(res.nonlinear)], linear_loop_verdict=ex.verdict,
+             linear_loop_spectral_radius=ex.spectral_radius,
+             linear_loop_growth_rate_per_s=(math.log(ex.spectral_radius) / loop.period
+                                            if ex.spectral_radius > 0 else -math.inf),
+             files=files)
+    return d
+
+
+def _g(x: Any, spec: str = ".6g") -> str:
+    """A summary value: a number, or "inf" / None after an overflow."""
+    return format(x, spec) if isinstance(x, (int, float)) else str(x)
+
+
+def _table(kind: str, stiffness: float, loop: Any, res: Any, d: dict[str, Any],
+           files: list[str]) -> None:
+    """The readable table of a run."""
+    v = res.verdict
+    rows = [("simulated", f"{v.verdict}: {v.behaviour} ({v.confidence} confidence, {v.basis})"),
+            ("growth rate", f"{_g(v.growth_rate)} 1/s (+- {_g(v.growth_rate_uncertainty, '.2g')})")]
+    if v.amplitude_m is not None:
+        rows.append(("limit cycle", f"amplitude {v.amplitude_m:.4g} m, period {v.period_s:.4g} s"))
+    if v.duration_hint_s is not None:
+        rows.append(("to decide", f"run about {v.duration_hint_s:.3g} s"))
+    rows += [(f"exact, {d['linear_loop']}",
+              f"{d['linear_loop_verdict']} (rate {_g(d['linear_loop_growth_rate_per_s'])} 1/s)"),
+             ("samples", f"{d['samples']} x {loop.period:g} s")]
+    for lab in res.labels:
+        rows.append((f"max |x| {lab}", f"{_g(d[f'max_abs_position_{lab}'])} m"))
+        rows.append((f"max |u| {lab}", f"{_g(d[f'max_abs_force_{lab}'])} N"))
+        rows.append((f"energy into controller from {lab}", f"{_g(d[f'final_port_energy_{lab}'])} J"))
+    rows.extend([("why", v.reason)] + [("wrote", f) for f in files])
+    rich_table(f"simulation, {kind}, K = {stiffness:g} N/m", rows)
 
 
 for _kind in LOOP_KINDS:
