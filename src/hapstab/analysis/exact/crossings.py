@@ -44,6 +44,7 @@ M. J. Cloud, *Introduction to Interval Analysis*, SIAM 2009, ch. 8.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -81,6 +82,20 @@ MAX_BOXES = 2_000_000
 MAX_ROUNDS = 600
 
 
+@dataclass
+class _Search:
+    """The state of one branch-and-prune search (:func:`_boxes`)."""
+
+    resp: LoopResponse
+    c: Cells
+    found: Found
+    lowest_only: np.ndarray     # (L,) only the lowest crossing is wanted
+    cap: np.ndarray             # (L,) the u above which nothing is of interest (yet)
+    guess: np.ndarray           # (L,) the cap is a guess that may have to be raised
+    deferred: list[tuple[np.ndarray, np.ndarray, np.ndarray]]
+    rounds: int = 0
+
+
 def _boxes(resp: LoopResponse, items: np.ndarray, u_cap: np.ndarray, polish: bool = True,
            estimate: bool = True, start: tuple[Cells, np.ndarray] | None = None) -> Found:
     """Branch and prune over (theta, u) for the given items (see module doc).
@@ -90,110 +105,140 @@ def _boxes(resp: LoopResponse, items: np.ndarray, u_cap: np.ndarray, polish: boo
     ``start``: cells already built (and the indices of a partition of [0, pi] per item).
     """
     L = resp.size
-    lowest_only = np.isfinite(u_cap)
-    found = Found([[] for _ in range(L)], [[] for _ in range(L)])
     if start is None:
         c = Cells()
         cells = c.add(resp, *_initial_cells(resp, items))
     else:
         c, cells = start
         cells = cells[np.isin(c.item[cells], items)]
-    cell = cells
-    ua, ub = np.full(cells.size, U_LO), np.full(cells.size, U_HI)
-    cap = np.where(lowest_only, u_cap, np.inf).astype(float)
-    guess = np.zeros(L, bool)
+    lowest_only = np.isfinite(u_cap)
+    srch = _Search(resp, c, Found([[] for _ in range(L)], [[] for _ in range(L)]), lowest_only,
+                   np.where(lowest_only, u_cap, np.inf).astype(float), np.zeros(L, bool), [])
     if estimate and lowest_only.any():
         # a first cap from the near-real roots u at the cells' centres: with it the
         # high-u boxes are never refined. A cap below the true lowest crossing finds
         # nothing; the boxes above it are then taken up, so the result does not
         # depend on the guess.
         est = _estimate_lowest(c, cells, L)
-        guess = lowest_only & np.isfinite(est) & (est < cap)
-        cap = np.where(guess, est, cap)
-    rounds = 0
-    deferred: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
-    while True:
-        if not cell.size:
-            # every box below the caps is settled: items whose guessed cap found nothing
-            # take up the boxes above it, with a cap 16 times higher (U_HI at last)
-            ran_dry = guess & np.array([not found.cross[i] and not found.unsure[i]
-                                        for i in range(L)])
-            if not ran_dry.any() or not deferred:
-                break
-            dc_, da_, db_ = (np.concatenate(x) for x in zip(*deferred, strict=True))
-            deferred = []
-            back = ran_dry[c.item[dc_]]
-            cap = np.where(ran_dry, np.where(cap * 16 < U_HI, cap * 16, U_HI), cap)
-            guess &= ~(ran_dry & (cap >= U_HI))
-            cell, ua, ub = dc_[back], da_[back], db_[back]
-            continue
-        cp = cap[c.item[cell]]
-        over = ub > cp
-        if over.any():   # the part above a cap waits (it matters only if nothing is below)
-            g = over & guess[c.item[cell]]
-            deferred.append((cell[g], np.maximum(ua[g], cp[g]), ub[g]))
-        keep = ua < cp
-        cell, ua, ub = cell[keep], ua[keep], np.minimum(ub[keep], cp[keep])
-        if not cell.size:
-            continue
-        cell, ua, ub = _trim(c, cell, ua, ub)
-        if not cell.size:
-            continue
-        if cell.size > MAX_BOXES:
-            raise AnalysisError("the crossing analysis needs more than "
-                                f"{MAX_BOXES} boxes; the loop is beyond what it can certify")
-        status, w_th, w_u, f_abs, noise = _box_test(c, cell, ua, ub)
-        one = np.flatnonzero(status == 1)
-        if one.size:
-            res = _polish(resp, c, cell[one], ua[one], ub[one]) if polish else None
-            for j, k in enumerate(one):
-                i = int(c.item[cell[k]])
-                u, t, dirn = res[j] if res is not None else (0.5 * (ua[k] + ub[k]), c.th[cell[k]], 0)
-                mult = 1 if c.kind[cell[k]] else 2
-                found.cross[i].append((u, t, dirn, mult))
-                if lowest_only[i]:
-                    cap[i] = min(cap[i], u)
-        rest = np.flatnonzero(status == 2)
-        if not rest.size:
-            cell = cell[:0]
-            continue
-        cell, ua, ub, w_th, w_u = cell[rest], ua[rest], ub[rest], w_th[rest], w_u[rest]
-        f_abs, noise = f_abs[rest], noise[rest]
-        th_small = _theta_floor(c, cell)
-        u_small = (ub - ua) <= U_FLOOR * ub
-        # at the theta floor, splitting u cannot help once theta alone spans 0; nor
-        # can any split once the box adds less than the error of F itself (the
-        # numerics cannot tell this box from a zero); nor can a non-finite enclosure
-        th_done = th_small | (w_th <= noise)          # theta splits cannot help any more
-        stuck = (th_done & (u_small | (w_u <= noise)) | th_small & (w_th >= f_abs)
-                 | ~np.isfinite(f_abs + w_th + w_u))
-        rounds += 1
-        if rounds > MAX_ROUNDS:
-            stuck[:] = True
-        for k in np.flatnonzero(stuck):
-            i = int(c.item[cell[k]])
-            found.unsure[i].append((float(ua[k]), float(ub[k])))
-            if lowest_only[i]:
-                cap[i] = min(cap[i], ua[k])
-        go = ~stuck
-        cell, ua, ub, w_th, w_u = cell[go], ua[go], ub[go], w_th[go], w_u[go]
-        # u is treated exactly by _trim, so splitting u only helps once theta cannot
-        split_th = ~th_done[go]
-        # u-splits: at the geometric mean of wide intervals, else the midpoint
-        su = np.flatnonzero(~split_th)
-        mid = np.where(ub[su] > 4 * ua[su], np.sqrt(ua[su] * ub[su]), 0.5 * (ua[su] + ub[su]))
-        new_cell = [cell[su], cell[su]]
-        new_ua, new_ub = [ua[su], mid], [mid, ub[su]]
-        st = np.flatnonzero(split_th)
-        if st.size:
-            parents, inv = np.unique(cell[st], return_inverse=True)
-            kids = c.add(resp, *_split_cells(c, parents))
-            left, right = kids[:parents.size], kids[parents.size:]
-            new_cell += [left[inv], right[inv]]
-            new_ua += [ua[st], ua[st]]
-            new_ub += [ub[st], ub[st]]
-        cell, ua, ub = np.concatenate(new_cell), np.concatenate(new_ua), np.concatenate(new_ub)
-    return found
+        srch.guess = lowest_only & np.isfinite(est) & (est < srch.cap)
+        srch.cap = np.where(srch.guess, est, srch.cap)
+    box: tuple[np.ndarray, np.ndarray, np.ndarray] | None = (
+        cells, np.full(cells.size, U_LO), np.full(cells.size, U_HI))
+    while box is not None:
+        cell, ua, ub = box
+        box = _round(srch, cell, ua, ub, polish) if cell.size else _resume(srch)
+    return srch.found
+
+
+def _resume(srch: _Search) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """Every box below the caps is settled: items whose guessed cap found nothing
+    take up the boxes above it, with a cap 16 times higher (U_HI at last); None
+    when nothing is left."""
+    found, c = srch.found, srch.c
+    ran_dry = srch.guess & np.array([not found.cross[i] and not found.unsure[i]
+                                     for i in range(srch.cap.size)])
+    if not ran_dry.any() or not srch.deferred:
+        return None
+    dc_, da_, db_ = (np.concatenate(x) for x in zip(*srch.deferred, strict=True))
+    srch.deferred = []
+    back = ran_dry[c.item[dc_]]
+    srch.cap = np.where(ran_dry, np.where(srch.cap * 16 < U_HI, srch.cap * 16, U_HI), srch.cap)
+    srch.guess &= ~(ran_dry & (srch.cap >= U_HI))
+    return dc_[back], da_[back], db_[back]
+
+
+def _below_caps(srch: _Search, cell: np.ndarray, ua: np.ndarray, ub: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The boxes cut at their item's cap; the part above a guessed cap waits (it
+    matters only if nothing is below)."""
+    cp = srch.cap[srch.c.item[cell]]
+    over = ub > cp
+    if over.any():
+        g = over & srch.guess[srch.c.item[cell]]
+        srch.deferred.append((cell[g], np.maximum(ua[g], cp[g]), ub[g]))
+    keep = ua < cp
+    return cell[keep], ua[keep], np.minimum(ub[keep], cp[keep])
+
+
+def _round(srch: _Search, cell: np.ndarray, ua: np.ndarray, ub: np.ndarray,
+           polish: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """One round: cut at the caps, trim, test every box; record the isolated
+    crossings and the unresolved boxes; split the rest (the next round's boxes)."""
+    cell, ua, ub = _below_caps(srch, cell, ua, ub)
+    if cell.size:
+        cell, ua, ub = _trim(srch.c, cell, ua, ub)
+    if not cell.size:
+        return cell, ua, ub
+    if cell.size > MAX_BOXES:
+        raise AnalysisError("the crossing analysis needs more than "
+                            f"{MAX_BOXES} boxes; the loop is beyond what it can certify")
+    status, w_th, w_u, f_abs, noise = _box_test(srch.c, cell, ua, ub)
+    one = np.flatnonzero(status == 1)
+    if one.size:
+        _record(srch, cell[one], ua[one], ub[one], polish)
+    rest = np.flatnonzero(status == 2)
+    if not rest.size:
+        return cell[:0], ua[:0], ub[:0]
+    cell, ua, ub, w_th, w_u = cell[rest], ua[rest], ub[rest], w_th[rest], w_u[rest]
+    go, split_th = _give_up(srch, cell, ua, ub, w_th, w_u, f_abs[rest], noise[rest])
+    return _split(srch, cell[go], ua[go], ub[go], split_th)
+
+
+def _record(srch: _Search, cell: np.ndarray, ua: np.ndarray, ub: np.ndarray,
+            polish: bool) -> None:
+    """Boxes proved to hold one crossing each: polish it, record it, lower the cap."""
+    c = srch.c
+    res = _polish(srch.resp, c, cell, ua, ub) if polish else None
+    for k in range(cell.size):
+        i = int(c.item[cell[k]])
+        u, t, dirn = res[k] if res is not None else (0.5 * (ua[k] + ub[k]), c.th[cell[k]], 0)
+        srch.found.cross[i].append((u, t, dirn, 1 if c.kind[cell[k]] else 2))
+        if srch.lowest_only[i]:
+            srch.cap[i] = min(srch.cap[i], u)
+
+
+def _give_up(srch: _Search, cell: np.ndarray, ua: np.ndarray, ub: np.ndarray,
+             w_th: np.ndarray, w_u: np.ndarray, f_abs: np.ndarray, noise: np.ndarray
+             ) -> tuple[np.ndarray, np.ndarray]:
+    """Record the boxes no split can resolve as unsure; return which go on and,
+    of those, which are split in theta."""
+    th_small = _theta_floor(srch.c, cell)
+    u_small = (ub - ua) <= U_FLOOR * ub
+    # at the theta floor, splitting u cannot help once theta alone spans 0; nor
+    # can any split once the box adds less than the error of F itself (the
+    # numerics cannot tell this box from a zero); nor can a non-finite enclosure
+    th_done = th_small | (w_th <= noise)          # theta splits cannot help any more
+    stuck = (th_done & (u_small | (w_u <= noise)) | th_small & (w_th >= f_abs)
+             | ~np.isfinite(f_abs + w_th + w_u))
+    srch.rounds += 1
+    if srch.rounds > MAX_ROUNDS:
+        stuck[:] = True
+    for k in np.flatnonzero(stuck):
+        i = int(srch.c.item[cell[k]])
+        srch.found.unsure[i].append((float(ua[k]), float(ub[k])))
+        if srch.lowest_only[i]:
+            srch.cap[i] = min(srch.cap[i], ua[k])
+    go = ~stuck
+    # u is treated exactly by _trim, so splitting u only helps once theta cannot
+    return go, ~th_done[go]
+
+
+def _split(srch: _Search, cell: np.ndarray, ua: np.ndarray, ub: np.ndarray,
+           split_th: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Halve each box: in theta (new cells) where that helps, else in u (at the
+    geometric mean of wide intervals, else the midpoint)."""
+    su = np.flatnonzero(~split_th)
+    mid = np.where(ub[su] > 4 * ua[su], np.sqrt(ua[su] * ub[su]), 0.5 * (ua[su] + ub[su]))
+    new_cell, new_ua, new_ub = [cell[su], cell[su]], [ua[su], mid], [mid, ub[su]]
+    st = np.flatnonzero(split_th)
+    if st.size:
+        parents, inv = np.unique(cell[st], return_inverse=True)
+        kids = srch.c.add(srch.resp, *_split_cells(srch.c, parents))
+        left, right = kids[:parents.size], kids[parents.size:]
+        new_cell += [left[inv], right[inv]]
+        new_ua += [ua[st], ua[st]]
+        new_ub += [ub[st], ub[st]]
+    return np.concatenate(new_cell), np.concatenate(new_ua), np.concatenate(new_ub)
 
 
 def _estimate_lowest(c: Cells, cells: np.ndarray, L: int) -> np.ndarray:
