@@ -20,8 +20,13 @@ import numpy as np
 from hapstab.engine.discs import EPS_OP
 from hapstab.engine.frequency import LoopResponse
 
-__all__ = ["Cells", "Found", "THETA_FLOOR", "U_FLOOR"]
+__all__ = ["Cells", "Found", "THETA_FLOOR", "U_FLOOR", "U_LO", "U_HI"]
 
+#: The analysed range of the dimensionless stiffness u = K T^2 / m (m the lightest
+#: port's mass): below 1e-14 the loop is the continuous one to 1e-14 and nothing
+#: can cross; above 1e10 the loop is far beyond any device (K = 1e10 m/T^2) and poles
+#: approach the circle asymptotically, closer than rounding can resolve.
+U_LO, U_HI = 1e-14, 1e10
 #: A cell narrower than this (relative to theta + 1) cannot be split any more.
 THETA_FLOOR = 64 * np.finfo(float).eps
 #: A u-interval narrower than this (relative) cannot be split any more: 64 unit
@@ -317,3 +322,55 @@ def _krawczyk(c: Cells, cell, uc, ur, rho, tc, tr, kc, kr) -> np.ndarray:
     out[ok & inside] = 1
     out[ok & outside & ~inside] = 0
     return out
+
+
+def _estimate_lowest(c: Cells, cells: np.ndarray, L: int) -> np.ndarray:
+    """Per item, 1.05 times the lowest positive u that is a nearly real root of
+    F(theta_m, u) at some cell centre (inf if none): a guess, never trusted."""
+    p0, p1, p2 = c.pc[0, cells], c.pc[1, cells], c.pc[2, cells]
+    with np.errstate(all="ignore"):
+        sq = np.sqrt(p1 * p1 - 4 * p0 * p2)
+        qq = -0.5 * (p1 + np.where(np.real(np.conj(p1) * sq) >= 0, sq, -sq))
+        roots = [np.where(np.abs(p2) > 0, qq / p2, np.nan), p0 / qq]
+    est = np.full(L, np.inf)
+    for r in roots:
+        ok = np.isfinite(r) & (r.real > U_LO) & (np.abs(r.imag) <= 0.3 * np.abs(r))
+        np.minimum.at(est, c.item[cells[ok]], 1.05 * r.real[ok])
+    return est
+
+
+def _polish(resp: LoopResponse, c: Cells, cell: np.ndarray, ua: np.ndarray, ub: np.ndarray
+            ) -> list[tuple[float, float, int]]:
+    """Newton's method inside boxes proved to hold exactly one zero: (u, theta, direction).
+
+    In an end box (theta = 0 or pi) the zero is real: Newton on Re F in u alone.
+    The iterate is kept in its box; the box's centre is the fallback (the box
+    already pins the zero to within its size)."""
+    th = c.th[cell].copy()
+    end = c.kind[cell] != 0
+    lo_t, hi_t = th - c.rho[cell], th + c.rho[cell]
+    u = 0.5 * (ua + ub)
+    item = c.item[cell]
+    z = np.zeros(th.shape)
+    for _ in range(12):
+        F = resp.coefficients(item, th, z)
+        f = F[0].vc + u * (F[1].vc + u * F[2].vc)
+        ft = F[0].dc + u * (F[1].dc + u * F[2].dc)
+        fu = F[1].vc + 2 * u * F[2].vc
+        a, b, cc, d = ft.real, fu.real, ft.imag, fu.imag
+        det = a * d - b * cc
+        with np.errstate(all="ignore"):
+            dth = np.where(end, 0.0, -(d * f.real - b * f.imag) / det)
+            du = np.where(end, -f.real / b, -(-cc * f.real + a * f.imag) / det)
+        dth = np.where(np.isfinite(dth), dth, 0.0)
+        du = np.where(np.isfinite(du), du, 0.0)
+        th = np.clip(th + dth, lo_t, hi_t)
+        u = np.clip(u + du, ua, ub)
+        if np.all(np.abs(du) <= 4 * np.finfo(float).eps * u) and np.all(np.abs(dth) <= 1e-15 * (1 + th)):
+            break
+    F = resp.coefficients(item, th, z)
+    ft = F[0].dc + u * (F[1].dc + u * F[2].dc)
+    fu = F[1].vc + 2 * u * F[2].vc
+    det = ft.real * fu.imag - fu.real * ft.imag
+    th = np.where(c.kind[cell] == 1, 0.0, np.where(c.kind[cell] == 2, np.pi, th))
+    return [(float(uu), float(tt), int(np.sign(dd))) for uu, tt, dd in zip(u, th, det, strict=True)]
