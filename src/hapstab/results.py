@@ -3,13 +3,14 @@ JSON-ready dict; ``.plot()`` hands off to :mod:`hapstab.plotting`."""
 
 from __future__ import annotations
 
+import html
 import math
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
-__all__ = ["StabilityResult", "CriticalStiffnessResult", "BoundaryResult", "jsonable"]
+__all__ = ["Result", "StabilityResult", "CriticalStiffnessResult", "BoundaryResult", "jsonable"]
 
 
 def jsonable(x: Any) -> Any:
@@ -34,8 +35,47 @@ def jsonable(x: Any) -> Any:
     return x
 
 
+class Result:
+    """What every result object gives: :meth:`to_dict` (JSON-ready, units in the
+    key names) and a table of its scalar values in a notebook (``_repr_html_``)."""
+
+    def to_dict(self) -> dict[str, Any]:
+        """The result as a JSON-ready dict."""
+        raise NotImplementedError
+
+    def _repr_html_(self) -> str:
+        rows = "".join(
+            f"<tr><th style='text-align:left'>{html.escape(str(k))}</th>"
+            f"<td style='text-align:left'>{html.escape(_cell(v))}</td></tr>"
+            for k, v in self.to_dict().items())
+        return f"<table><caption>{html.escape(type(self).__name__)}</caption>{rows}</table>"
+
+
+def _cell(v: Any) -> str:
+    """A value for one table cell: scalars as they are, long lists and tables summed up."""
+    if isinstance(v, dict):
+        return "{" + ", ".join(map(str, v)) + "}" if len(v) <= 6 else f"{{{len(v)} entries}}"
+    if isinstance(v, list):
+        return str(v) if len(str(v)) <= 120 else f"[{len(v)} values]"
+    return str(v)
+
+
+def merged(base: dict[str, Any], details: dict[str, Any], what: str) -> dict[str, Any]:
+    """``base`` with a method's ``details`` added; a detail may not replace a key.
+
+    Raises
+    ------
+    ValueError
+        A detail has the name of a key of ``base`` (a bug of the method, not a user error).
+    """
+    clash = set(base) & set(details)
+    if clash:
+        raise ValueError(f"{what}: details {sorted(clash)} would replace keys of the result")
+    return {**base, **details}
+
+
 @dataclass(frozen=True)
-class StabilityResult:
+class StabilityResult(Result):
     """Stability of a loop at its own parameters.
 
     Attributes
@@ -85,7 +125,7 @@ class StabilityResult:
 
 
 @dataclass(frozen=True)
-class CriticalStiffnessResult:
+class CriticalStiffnessResult(Result):
     """The largest K such that the loop is stable for every K in (0, K_max].
 
     Attributes
@@ -122,16 +162,15 @@ class CriticalStiffnessResult:
     details: dict[str, Any] = field(default_factory=dict, compare=False)
 
     def to_dict(self) -> dict[str, Any]:
-        return jsonable({
+        return jsonable(merged({
             "critical_stiffness": self.critical_stiffness, "method": self.method,
             "stable_intervals": [list(iv) for iv in self.stable_intervals],
             "reason": self.reason, "period_s": self.period, "delay_samples": self.delay_samples,
-            "crossing_frequency_hz": self.crossing_frequency_hz, **self.details,
-        })
+            "crossing_frequency_hz": self.crossing_frequency_hz}, self.details, self.method))
 
 
 @dataclass(frozen=True)
-class BoundaryResult:
+class BoundaryResult(Result):
     """K_max over a grid of sampling periods and delays (Fig. 5 / Fig. 6).
 
     Attributes

@@ -22,7 +22,7 @@ from hapstab.analysis.passivity import critical_stiffness_passivity
 from hapstab.errors import AnalysisError
 from hapstab.models.controllers import spring_damper
 from hapstab.models.loops import HapticLoop, TeleoperationLoop
-from hapstab.results import jsonable
+from hapstab.results import Result, jsonable
 
 __all__ = ["AuditRow", "AuditResult", "audit"]
 
@@ -32,7 +32,7 @@ _REL = 1e-6  # K_max values agree to ~1e-9; a promise counts as broken beyond 1e
 
 
 @dataclass(frozen=True)
-class AuditRow:
+class AuditRow(Result):
     """One condition of the audit.
 
     Attributes
@@ -67,7 +67,7 @@ class AuditRow:
 
 
 @dataclass(frozen=True)
-class AuditResult:
+class AuditResult(Result):
     """All rows for one set of parameters.
 
     Attributes

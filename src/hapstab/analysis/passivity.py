@@ -43,13 +43,13 @@ from hapstab.analysis.sweeps import min_eig, psd_limit, refine_minimum, theta_gr
 from hapstab.errors import AnalysisError
 from hapstab.models.controllers import SpringDamper, spring_damper
 from hapstab.models.loops import HapticLoop, TeleoperationLoop, whole_delay
-from hapstab.results import CriticalStiffnessResult, jsonable
+from hapstab.results import CriticalStiffnessResult, Result, jsonable
 
 __all__ = ["PassivityResult", "sampled_passivity", "critical_stiffness_passivity"]
 
 
 @dataclass(frozen=True)
-class PassivityResult:
+class PassivityResult(Result):
     """Verdict of the exact sampled-data passivity test.
 
     Attributes

@@ -29,7 +29,7 @@ import numpy as np
 
 from hapstab.analysis.sweeps import min_eig, refine_minimum, theta_grid
 from hapstab.errors import AnalysisError, ModelError, check_poly, check_real
-from hapstab.results import jsonable
+from hapstab.results import Result, jsonable
 
 __all__ = ["RationalMatrix", "PositiveRealResult", "positive_real", "circle_criterion"]
 
@@ -196,7 +196,7 @@ class RationalMatrix:
 
 
 @dataclass(frozen=True)
-class PositiveRealResult:
+class PositiveRealResult(Result):
     """Outcome of the positive-real test of Definition 1.
 
     Attributes

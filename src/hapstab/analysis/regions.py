@@ -39,7 +39,7 @@ from hapstab.engine.system import build
 from hapstab.errors import AnalysisError, check_real
 from hapstab.models.controllers import SpringDamper
 from hapstab.models.loops import HapticLoop, TeleoperationLoop
-from hapstab.results import jsonable
+from hapstab.results import Result, jsonable
 
 __all__ = ["stability_region", "best_damping", "RegionResult", "BestDampingResult",
            "d_decomposition"]
@@ -182,7 +182,7 @@ def _schur_cohn(c: np.ndarray) -> np.ndarray:
 
 # --------------------------------------------------------------------- results
 @dataclass(frozen=True)
-class RegionResult:
+class RegionResult(Result):
     """The exact stable region in the (K, B) plane.
 
     Attributes
@@ -261,7 +261,7 @@ class RegionResult:
 
 
 @dataclass(frozen=True)
-class BestDampingResult:
+class BestDampingResult(Result):
     """The virtual damping that maximises K_max: "render at most K* N/m, with B* N*s/m".
 
     Attributes

@@ -32,7 +32,7 @@ from hapstab.analysis.closed_forms import EQUATION, PAPER, paper_condition
 from hapstab.analysis.exact.core import exact_critical_stiffness
 from hapstab.errors import AnalysisError, HapstabError
 from hapstab.paper.loops import paper_hve, paper_peb
-from hapstab.results import jsonable
+from hapstab.results import Result, jsonable
 
 __all__ = ["FIGURES", "PAPER_PERIODS", "FigureSpec", "Reproduction", "reproduce_figure",
            "write_figure", "COLUMNS"]
@@ -68,7 +68,7 @@ FIGURES: dict[str, FigureSpec] = {
 
 
 @dataclass(frozen=True)
-class Reproduction:
+class Reproduction(Result):
     """The points of one figure.
 
     Attributes

@@ -34,7 +34,7 @@ from typing import Any
 
 import numpy as np
 
-from hapstab.results import jsonable
+from hapstab.results import Result, jsonable
 
 __all__ = ["BoundednessVerdict", "assess", "combine", "dmd_rate"]
 
@@ -46,7 +46,7 @@ SVD_RTOL = 1e-9
 
 
 @dataclass(frozen=True)
-class BoundednessVerdict:
+class BoundednessVerdict(Result):
     """Is the simulated loop bounded, how fast does it grow, and how sure is that.
 
     Attributes

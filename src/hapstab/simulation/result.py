@@ -15,14 +15,14 @@ from typing import Any
 import numpy as np
 
 from hapstab.errors import AnalysisError
-from hapstab.results import jsonable
+from hapstab.results import Result, jsonable
 from hapstab.simulation.growth import BoundednessVerdict
 
 __all__ = ["SimulationResult"]
 
 
 @dataclass(frozen=True)
-class SimulationResult:
+class SimulationResult(Result):
     """A simulated run: time series at the sampling instants (and optionally between).
 
     Attributes
