@@ -44,6 +44,7 @@ from hapstab.errors import AnalysisError
 from hapstab.models.controllers import SpringDamper, spring_damper
 from hapstab.models.loops import HapticLoop, TeleoperationLoop, whole_delay
 from hapstab.results import CriticalStiffnessResult, Result, jsonable
+from hapstab.tolerances import ROOT_ON_CIRCLE
 
 __all__ = ["PassivityResult", "sampled_passivity", "critical_stiffness_passivity"]
 
@@ -97,7 +98,7 @@ def _h_of(c: Any, theta: np.ndarray, T: float, unit: str | None = None) -> np.nd
         return k + B * one_minus / T
     num, den = c.transfer(T)
     poles = np.roots(den) if len(den) > 1 else np.zeros(0)
-    if np.any(np.abs(poles) >= 1.0 - 1e-12):
+    if np.any(np.abs(poles) >= 1.0 - ROOT_ON_CIRCLE):     # on the circle to np.roots' accuracy
         raise AnalysisError("passivity: the controller H(z) has a pole on or outside the unit "
                             "circle; the Colgate-Schenkel test needs a stable H(z)")
     z = np.exp(1j * theta)

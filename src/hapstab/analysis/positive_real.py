@@ -30,11 +30,14 @@ import numpy as np
 from hapstab.analysis.sweeps import min_eig, refine_minimum, theta_grid
 from hapstab.errors import AnalysisError, ModelError, check_poly, check_real
 from hapstab.results import Result, jsonable
+from hapstab.tolerances import ROOT_ON_CIRCLE
 
 __all__ = ["RationalMatrix", "PositiveRealResult", "positive_real", "circle_criterion"]
 
-# | |p| - 1 | below this: a unit-circle root (np.roots is ~1e-15 accurate for simple roots)
-_ON_CIRCLE = 1e-9
+# | |p| - 1 | below this: a unit-circle root, put exactly on it (hapstab.tolerances).
+# Every element's poles and zeros are snapped when it is built, so this same
+# tolerance then picks exactly the snapped ones.
+_ON_CIRCLE = ROOT_ON_CIRCLE
 _CANCEL = 1e-7       # a pole and a zero closer than this (relative) cancel: sqrt(eps)-level root errors
 _SIMPLE = 1e-6       # two unit-circle poles closer than this are one multiple pole (double roots split ~1e-8)
 _RTOL = 1e-9         # eigenvalue slack relative to the matrix scale: eigvalsh/roundoff is ~1e-13 of it
@@ -86,7 +89,7 @@ def _factors(theta: np.ndarray, roots: np.ndarray) -> np.ndarray:
     out = np.ones(np.shape(theta), complex)
     z = np.exp(1j * theta)
     for r in roots:
-        if abs(abs(r) - 1.0) <= 1e-12:
+        if abs(abs(r) - 1.0) <= _ON_CIRCLE:
             phi = np.angle(r)
             out *= 2j * np.sin((theta - phi) / 2) * np.exp(0.5j * (theta + phi))
         else:
@@ -265,7 +268,7 @@ def _unit_circle_check(G: RationalMatrix) -> tuple[bool, str]:
     found: list[complex] = []
     for row in G.elements:
         for e in row:
-            on = [p for p in e.poles if abs(abs(p) - 1.0) <= 1e-12]
+            on = [p for p in e.poles if abs(abs(p) - 1.0) <= _ON_CIRCLE]
             for p in on:
                 if sum(abs(p - q) <= _SIMPLE for q in on) > 1:
                     return False, f"pole at z = {p:.6g} is not simple"
@@ -329,7 +332,7 @@ def positive_real(G: RationalMatrix, period: float | None = None, grid: int | No
         fails.append("unit-circle poles")
         reasons.append("(ii) " + why2)
 
-    on_circle = np.abs(np.angle(poles[np.abs(np.abs(poles) - 1.0) <= 1e-12]))
+    on_circle = np.abs(np.angle(poles[np.abs(np.abs(poles) - 1.0) <= _ON_CIRCLE]))
     extra = G.critical_angles()
     th = theta_grid(G.degree() + 1, minimum=grid or 1024, extra=extra)
     # the w -> 0 limit is reached to O(w^2): 1e-6/(deg+1) is within ~1e-12 of it,

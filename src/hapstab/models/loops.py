@@ -29,6 +29,7 @@ from hapstab.models.controllers import (
     spring_damper,
 )
 from hapstab.models.parts import Device, Impedance
+from hapstab.tolerances import DELAY_SNAP
 
 __all__ = ["split_delay", "DELAY_SNAP", "HapticLoop", "TeleoperationLoop", "delay_from_seconds",
            "whole_delay"]
@@ -41,10 +42,7 @@ def _check_fraction(name: str, value: Any) -> float:
     return v
 
 
-#: A delay within this (relative to max(1, d)) of a whole number of samples is that
-#: whole number: t_d / T carries rounding of ~1e-16 d, and a billionth of a sample
-#: is far below any timing a device has. The one snap rule of hapstab.
-DELAY_SNAP = 1e-9
+# the one snap rule of hapstab: split_delay, with DELAY_SNAP (hapstab.tolerances)
 
 
 def split_delay(d: float) -> tuple[int, float]:

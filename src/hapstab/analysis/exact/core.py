@@ -24,13 +24,13 @@ from hapstab.engine.system import build
 from hapstab.models.controllers import SpringDamper
 from hapstab.models.loops import HapticLoop, TeleoperationLoop
 from hapstab.results import CriticalStiffnessResult, StabilityResult
+from hapstab.tolerances import POLE_ON_CIRCLE
 
 __all__ = ["stability", "exact_critical_stiffness", "exact_kmax_batch", "rigid_body_modes"]
 
-#: A polished dominant pole with ||z| - 1| below this is on the circle to the
-#: accuracy of the discretised model (coefficients good to ~1e-14 relative; a
-#: pole's modulus then to ~1e-12 near z = 1, where poles crowd at small T).
-MARGINAL_TOL = 1e-12
+#: A polished dominant pole with ||z| - 1| below this is on the circle
+#: (:data:`hapstab.tolerances.POLE_ON_CIRCLE`, with its reason).
+MARGINAL_TOL = POLE_ON_CIRCLE
 
 
 def exact_kmax_batch(loop: HapticLoop | TeleoperationLoop,
