@@ -177,7 +177,7 @@ def audit(loop: HapticLoop | TeleoperationLoop) -> AuditResult:
         "passive terminations")
     rows.append(AuditRow("exact", "exact sampled-data stability", float(exact), "exact",
                          _verdict(loop, exact), None, exact_res.reason))
-    B = (spring_damper(loop.controller).damping if isinstance(loop, HapticLoop)
-         else spring_damper(loop.master_controller, "master_controller").damping)
+    name = "controller" if loop.kind == "hve" else "master_controller"
+    B = spring_damper(loop.controllers[0], name).damping
     return AuditResult(kind, loop.period, loop.delay_samples, B, tuple(rows), float(exact),
                        float(passive))

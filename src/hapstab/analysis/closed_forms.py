@@ -12,7 +12,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, cast
 
 from hapstab.errors import AnalysisError
 from hapstab.models.controllers import SpringDamper
@@ -25,17 +25,19 @@ __all__ = ["colgate", "gil", "eq18", "eq29", "eq34", "gil2004", "CLOSED_FORMS", 
 
 def _hve(loop, name: str) -> tuple[float, float, float, float]:
     """(b, B, T, t_d/T); t_d may be any delay, the formulas only use t_d."""
-    if not isinstance(loop, HapticLoop):
+    if getattr(loop, "kind", None) != "hve":
         raise AnalysisError(f"method = {name!r}: applies to a HapticLoop (hve), not {type(loop).__name__}")
+    loop = cast(HapticLoop, loop)
     if not isinstance(loop.controller, SpringDamper):
         raise AnalysisError(f"method = {name!r}: needs a SpringDamper virtual environment")
     return loop.device.damping, loop.controller.damping, loop.period, loop.delay_in_samples
 
 
 def _peb(loop, name: str) -> tuple[float, float, float, float]:
-    if not isinstance(loop, TeleoperationLoop):
+    if getattr(loop, "kind", None) != "peb":
         raise AnalysisError(f"method = {name!r}: applies to a TeleoperationLoop (peb), "
                             f"not {type(loop).__name__}")
+    loop = cast(TeleoperationLoop, loop)
     cm, cs = loop.master_controller, loop.slave_controller
     if not (isinstance(cm, SpringDamper) and isinstance(cs, SpringDamper)):
         raise AnalysisError(f"method = {name!r}: needs SpringDamper controllers")

@@ -216,8 +216,7 @@ def critical_stiffness_passivity(loop: HapticLoop | TeleoperationLoop,
     if approximation is not None:
         raise AnalysisError(f"approximation = {approximation!r}: applies to method 'circle' only; "
                             "'passivity' is exact")
-    ctrls = ([loop.controller] if isinstance(loop, HapticLoop)
-             else [loop.master_controller, loop.slave_controller])
+    ctrls = loop.controllers
     if not all(isinstance(c, SpringDamper) for c in ctrls):
         raise AnalysisError("critical stiffness: needs SpringDamper controller(s)")
     T = loop.period
@@ -233,7 +232,7 @@ def critical_stiffness_passivity(loop: HapticLoop | TeleoperationLoop,
     t_min, K = refine_minimum(k_of, th, k_of(th))
     fin = math.isfinite(K)
     head = ("sampled-data passivity (Colgate-Schenkel 1997"
-            + (", multiport" if isinstance(loop, TeleoperationLoop) else "") + "): ")
+            + (", multiport" if loop.kind == "peb" else "") + "): ")
     if K > 0:
         reason = head + "passive for K <= K_max" + (f"; binds at w = {t_min / T:.6g} rad/s" if fin
                                                     else " = inf")

@@ -133,7 +133,7 @@ def simulate(loop: HapticLoop | TeleoperationLoop, duration: float, *,
     """
     T = loop.period
     M = _samples(duration, T, dense)
-    haptic = isinstance(loop, HapticLoop)
+    haptic = loop.kind == "hve"
     nl = _nonlinear_options(haptic, environment_force, wall, wall_pulls, saturation, resolution,
                             quantizer)
     sysm = build(loop)

@@ -369,6 +369,8 @@ def analyse(resp: LoopResponse, full: bool = True) -> list[dict[str, Any]]:
 
 
 def _classify(resp: LoopResponse, i: int, anchor: int, cross, unsure, full: bool) -> dict[str, Any]:
+    """Item i's stable set from the count of poles outside at U_LO (``anchor``, -1:
+    not certified), its crossings and its unresolved zones."""
     s = float(resp.scale[i])
     base = {"rigid": resp.rigid, "outside_small_K": anchor}
     unc = _merge(unsure)
@@ -381,34 +383,54 @@ def _classify(resp: LoopResponse, i: int, anchor: int, cross, unsure, full: bool
     events = sorted([(u, u, t, d, m) for u, t, d, m in cross if not inside(u)] +
                     [(a, b, math.nan, 0, 0) for a, b in unc])
     if not full:
-        if anchor > 0:
-            return {**base, "kmax": 0.0, "intervals": (), "theta": math.nan, "uncertain": ()}
-        if not events:
-            return {**base, "kmax": math.inf, "intervals": ((0.0, math.inf),), "theta": math.nan,
-                    "uncertain": ()}
-        a, b, t, d, m = events[0]
-        if d < 0:
-            raise AnalysisError("crossing analysis: the first crossing points inwards while no "
-                                "pole is outside; please report this loop")
-        kmax = a * s
-        uncertain: tuple[tuple[float, float], ...] = ((a * s, b * s),) if m == 0 else ()
-        return {**base, "kmax": kmax, "intervals": ((0.0, kmax),) if kmax > 0 else (),
-                "theta": t, "uncertain": uncertain}
+        return {**base, **_first_only(events, anchor, s)}
+    counts = _counts(resp, i, events, anchor)
+    _verify(resp, i, events, counts)
+    return {**base, **_stable_set(events, counts, s)}
+
+
+def _first_only(events: list[Any], anchor: int, s: float) -> dict[str, Any]:
+    """K_max alone: the first event above a loop stable at small K."""
+    if anchor > 0:
+        return {"kmax": 0.0, "intervals": (), "theta": math.nan, "uncertain": ()}
+    if not events:
+        return {"kmax": math.inf, "intervals": ((0.0, math.inf),), "theta": math.nan,
+                "uncertain": ()}
+    a, b, t, d, m = events[0]
+    if d < 0:
+        raise AnalysisError("crossing analysis: the first crossing points inwards while no "
+                            "pole is outside; please report this loop")
+    kmax = a * s
+    uncertain: tuple[tuple[float, float], ...] = ((a * s, b * s),) if m == 0 else ()
+    return {"kmax": kmax, "intervals": ((0.0, kmax),) if kmax > 0 else (), "theta": t,
+            "uncertain": uncertain}
+
+
+def _counts(resp: LoopResponse, i: int, events: list[Any],
+            anchor: int) -> list[int | None]:
+    """The number of poles outside in each gap between events: each crossing changes
+    it by its direction times its multiplicity; after an unresolved zone it is
+    counted anew by the argument principle (None: not certifiable either, so that
+    gap is not claimed stable)."""
     counts: list[int | None] = [anchor]
     for g, (_a, b, _t, d, m) in enumerate(events):
         prev = counts[-1]
         if m == 0 or prev is None:
-            # after an unresolved zone: count in the next gap by the argument principle
-            # (None: not certifiable either, so that gap is not claimed stable)
             hi = events[g + 1][0] if g + 1 < len(events) else 4 * b
             nxt = int(winding(resp, np.array([i]), np.array([math.sqrt(b * hi) if hi > b else b]))[0])
             counts.append(nxt if nxt >= 0 else None)
         else:
-            counts.append(prev + d * m)
+            counts.append(prev + int(d * m))
     if min(c for c in counts if c is not None) < 0:
         raise AnalysisError("crossing analysis: a negative count of unstable poles; please "
                             "report this loop")
-    _verify(resp, i, events, counts)
+    return counts
+
+
+def _stable_set(events: list[Any], counts: list[int | None],
+                s: float) -> dict[str, Any]:
+    """The gaps with no pole outside, merged into intervals of K; K_max is the first
+    if it starts at 0; the unresolved zones that border a stable (or unknown) gap."""
     edges_lo = [0.0] + [b * s for a, b, *_ in events]
     edges_hi = [a * s for a, b, *_ in events] + [math.inf]
     thetas = [t for _, _, t, _, _ in events]
@@ -427,10 +449,9 @@ def _classify(resp: LoopResponse, i: int, anchor: int, cross, unsure, full: bool
     if intervals and intervals[0][0] == 0.0:
         kmax = intervals[0][1]
         theta = thetas[upper[0]] if upper[0] < len(thetas) else math.nan
-    # an unresolved zone matters only where it borders a stable (or unknown) gap
     uncertain = tuple((a * s, b * s) for g, (a, b, t, d, m) in enumerate(events)
                       if m == 0 and (counts[g] in (0, None) or counts[g + 1] in (0, None)))
-    return {**base, "kmax": float(kmax), "intervals": tuple(intervals), "theta": theta,
+    return {"kmax": float(kmax), "intervals": tuple(intervals), "theta": theta,
             "uncertain": uncertain}
 
 
