@@ -201,3 +201,11 @@ def test_a_plot_format_hapstab_does_not_write_is_a_user_error(tmp_path, path):
                                  "--plot", str(tmp_path / path)])
     assert r.exit_code == 2 and "allowed: png" in r.stderr
     assert not (tmp_path / path).exists()
+
+
+def test_help_summaries_are_not_cut_at_fig():
+    # click ends a short help at the first ". ": "Fig. 5" cut it to "(Fig." (issue #12)
+    r = CliRunner().invoke(cli, ["--help"])
+    assert r.exit_code == 0 and "(Fig.\n" not in r.output and not r.output.rstrip().endswith("(Fig.")
+    assert all(not line.rstrip().endswith("(Fig.") and not line.rstrip().endswith(" Fig.")
+               for line in r.output.splitlines())

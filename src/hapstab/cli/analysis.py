@@ -31,7 +31,7 @@ def check() -> None:
     """Stability verdict at a given stiffness."""
 
 
-@click.group("boundary")
+@click.group("boundary", short_help="K_max over sampling periods and delays (Fig. 5 / 6 curves).")
 def boundary_cmd() -> None:
     """K_max over sampling periods and delays (Fig. 5 / Fig. 6 curves)."""
 
@@ -130,7 +130,7 @@ for _kind in LOOP_KINDS:
     _boundary_command(_kind)
 
 
-@click.command()
+@click.command(short_help="The paper's Fig. 5 and Fig. 6 boundaries: exact beside the paper.")
 @click.option("--json", "as_json", is_flag=True)
 def demo(as_json: bool) -> None:
     """The paper's Fig. 5 and Fig. 6 boundaries: exact K_max beside the paper's lines."""

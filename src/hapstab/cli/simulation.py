@@ -175,7 +175,7 @@ def _progress(total: int, quiet: bool) -> Iterator[Callable[[int], None] | None]
         yield lambda k: prog.advance(task, k)
 
 
-@click.command("reproduce")
+@click.command("reproduce", short_help="Reproduce the paper's Fig. 5 / Fig. 6 (PNG, SVG, CSV).")
 @click.argument("figure", type=click.Choice(["fig5", "fig6", "all"]))
 @click.option("--out", "out_dir", default="out", show_default=True, type=click.Path(file_okay=False),
               help="Directory for figN.png, figN.svg and figN.csv.")
