@@ -41,6 +41,10 @@ __all__ = ["BoundednessVerdict", "assess", "combine", "dmd_rate"]
 #: |state| beyond this (relative to the initial scale) is "observed unbounded".
 EXPLODE = 1e12
 
+#: The default window holds at least this many snapshots per state entry (long
+#: delays): comfortably above SNAPSHOTS_PER_RANK, which a fit needs to be trusted.
+SNAPSHOTS_PER_STATE = 4
+
 #: singular values below this (relative) are rounding, not modes
 SVD_RTOL = 1e-9
 
@@ -226,7 +230,7 @@ def assess(states: np.ndarray, forces: np.ndarray | None, period: float,
                                   f"the state grew beyond {EXPLODE:.0e} times its initial size")
     # the last half, at most 1024 snapshots, or 4 per state entry when the state is
     # larger (long delays): a fit needs several snapshots per unknown
-    W = min(M, window or min(max(M // 2, 16), max(1024, 4 * S.shape[1])))
+    W = min(M, window or min(max(M // 2, 16), max(1024, SNAPSHOTS_PER_STATE * S.shape[1])))
     Dw = D[-W:]
     Uw = _input_snapshots(forces, M, differences)
     Uw = None if Uw is None else Uw[-W:]

@@ -164,11 +164,12 @@ def simulate(loop: HapticLoop | TeleoperationLoop, duration: float, *,
         pe = np.vstack([np.zeros(p), np.cumsum(U[:-1] * dX, axis=0)])
         ee = np.vstack([np.zeros(p), np.cumsum(F * dX, axis=0)])
     Fx = np.vstack([F, F[-1:]])
+    growing = force_grows(F)
     if not nl:
         verdict = _linear_verdict(roles, s0, Fd, S, T, sysm.labels)
     else:
-        verdict = _nonlinear_verdict(loop, roles, S, X, T, nl, force_grows(F))
-    if force_grows(F):
+        verdict = _nonlinear_verdict(loop, roles, S, X, T, nl, growing)
+    if growing:
         verdict = _input_caveat(verdict)
     dt = dx = dv = None
     if dense >= 2 and np.all(np.isfinite(S)):
@@ -304,7 +305,7 @@ def _input_caveat(v: BoundednessVerdict) -> BoundednessVerdict:
 
 def _nonlinear_verdict(loop: HapticLoop | TeleoperationLoop, roles: Any, S: np.ndarray,
                        X: np.ndarray, T: float, nl: dict[str, Any],
-                       force_grows: bool) -> BoundednessVerdict:
+                       growing_force: bool) -> BoundednessVerdict:
     """Judge a nonlinear run on its envelope, told how fast the linearised loop grows,
     whether the model bounds the run, and whether a port can drift at all."""
     M = S.shape[0] - 1
@@ -314,7 +315,7 @@ def _nonlinear_verdict(loop: HapticLoop | TeleoperationLoop, roles: Any, S: np.n
     lin = assess(propagate_linear(roles.A, roles.G, s_rand, None, M), None, T, differences=False)
     ports = structure_of(loop).ports
     can_drift = any(pt.termination.stiffness == 0 for pt in ports)
-    bound = None if force_grows else _bound(ports, nl, lin)
+    bound = None if growing_force else _bound(ports, nl, lin)
     return assess_nonlinear(S, X, T, linear_rate=lin.growth_rate, bound=bound,
                             can_drift=can_drift)
 

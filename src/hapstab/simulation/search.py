@@ -18,7 +18,7 @@ from hapstab.engine.system import SampledSystem, build
 from hapstab.errors import AnalysisError
 from hapstab.models.loops import HapticLoop, TeleoperationLoop
 from hapstab.results import CriticalStiffnessResult
-from hapstab.simulation.growth import BoundednessVerdict, assess
+from hapstab.simulation.growth import SNAPSHOTS_PER_STATE, BoundednessVerdict, assess
 from hapstab.simulation.propagate import propagate_linear
 
 __all__ = ['critical_stiffness_simulation']
@@ -88,7 +88,7 @@ def critical_stiffness_simulation(loop: HapticLoop | TeleoperationLoop, *,
     _check_options(sysm, n_samples, window, rtol, ratio)
     # a fit needs several snapshots per state entry (growth.SNAPSHOTS_PER_RANK): long
     # delays get a longer window and run
-    window = max(window, 4 * sysm.order)
+    window = max(window, SNAPSHOTS_PER_STATE * sysm.order)
     n_samples = max(n_samples, 2 * window)
     T, Ks = loop.period, _stiffness_scale(loop)
     run = _Runs(sysm, np.random.default_rng(seed).standard_normal(sysm.order), n_samples,
