@@ -21,7 +21,7 @@ from hapstab.analysis.exact.core import exact_critical_stiffness, stability
 from hapstab.analysis.passivity import critical_stiffness_passivity
 from hapstab.errors import AnalysisError
 from hapstab.models.controllers import spring_damper
-from hapstab.models.loops import HapticLoop, TeleoperationLoop
+from hapstab.models.loops import HapticLoop, TeleoperationLoop, require_loop
 from hapstab.results import Result, jsonable
 
 __all__ = ["AuditRow", "AuditResult", "audit"]
@@ -143,8 +143,7 @@ def audit(loop: HapticLoop | TeleoperationLoop) -> AuditResult:
     ----------
     The paper, eq. (1), (2), (13), (18), (29), (34); Colgate and Schenkel 1997.
     """
-    if not isinstance(loop, (HapticLoop, TeleoperationLoop)):
-        raise AnalysisError(f"loop = {loop!r}: must be a HapticLoop or a TeleoperationLoop")
+    require_loop(loop)
     kind = loop.kind
     passive = critical_stiffness_passivity(loop).critical_stiffness  # raises for non-SpringDamper
     exact_res = exact_critical_stiffness(loop)

@@ -32,6 +32,7 @@ from typing import Any
 
 import numpy as np
 
+from hapstab.analysis.closed_forms import G_INVERSE
 from hapstab.analysis.positive_real import (
     PositiveRealResult,
     RationalMatrix,
@@ -39,9 +40,10 @@ from hapstab.analysis.positive_real import (
     positive_real,
 )
 from hapstab.analysis.sweeps import psd_limit, refine_minimum, theta_grid
+from hapstab.engine.device_side import DeviceSide, device_side
 from hapstab.errors import AnalysisError
-from hapstab.models.controllers import SpringDamper, spring_damper
-from hapstab.models.loops import HapticLoop, TeleoperationLoop, whole_delay
+from hapstab.models.controllers import SpringDamper
+from hapstab.models.loops import HapticLoop, TeleoperationLoop, require_loop, whole_delay
 from hapstab.results import CriticalStiffnessResult
 
 __all__ = ["APPROXIMATIONS", "loop_inverse", "port_scaling", "circle_test",
@@ -64,100 +66,87 @@ def _x_poly(a: str, T: float) -> tuple[np.ndarray, np.ndarray]:
     return np.array(num), np.array([1.0, -1.0])
 
 
-def _x_y(a: str, theta: np.ndarray, T: float) -> tuple[np.ndarray, np.ndarray]:
-    """X(e^{jw}) and Y = X (z-1)/(T z) (the B-term factor), without cancellation:
-    z - 1 = 2j sin(w/2) e^{jw/2}, never cos(w) - 1."""
+def _x(a: str, theta: np.ndarray, T: float) -> np.ndarray:
+    """X(e^{jw}) without cancellation: z - 1 = 2j sin(w/2) e^{jw/2}, never cos(w) - 1."""
     s = np.sin(theta / 2)
     if a == "forward":
-        return T * np.exp(-0.5j * theta) / (2j * s), np.exp(-1j * theta)
+        return T * np.exp(-0.5j * theta) / (2j * s)
     if a == "backward":
-        return T * np.exp(0.5j * theta) / (2j * s), np.ones_like(theta, dtype=complex)
-    return -0.5j * T * np.cos(theta / 2) / s + 0j, (1.0 + np.exp(-1j * theta)) / 2
+        return T * np.exp(0.5j * theta) / (2j * s)
+    return -0.5j * T * np.cos(theta / 2) / s + 0j
 
 
-def _check_kind(loop: Any) -> None:
-    if not isinstance(loop, (HapticLoop, TeleoperationLoop)):
-        raise AnalysisError(f"loop = {loop!r}: must be a HapticLoop or a TeleoperationLoop")
+def _side(loop: Any) -> DeviceSide:
+    require_loop(loop)
+    whole_delay(loop, "the circle criterion")  # the paper's t_d = nT, equal both ways
+    return device_side(loop, "the circle criterion")
 
 
 def port_scaling(loop: HapticLoop | TeleoperationLoop, scaling: str | None = "auto"
                  ) -> tuple[float, ...]:
-    """Diagonal port weights D used as D G^{-1}(z) (PEB only).
+    """Diagonal port weights D used as D G^{-1}(z).
 
     With C_m != C_s the residue (25) at z = 1, ``T [[K_m, -K_m], [-K_s, K_s]]``,
-    is not Hermitian and G^{-1} is never PR for K > 0. Weighting the master port
-    by K_s/K_m makes it Hermitian; stability still follows, because D times a
-    diagonal passive termination is passive (the multiplier K of Theorem 2.1
-    plays the same role). Equal controllers give D = I, the paper's test.
+    is not Hermitian and G^{-1} is never PR for K > 0. Weighting port i by
+    k_last / k_i (k_i its stiffness per unit K, :func:`~hapstab.models.stiffness_ratios`;
+    for PEB the master by K_s/K_m) makes it Hermitian; stability still follows,
+    because D times a diagonal passive termination is passive (the multiplier K of
+    Theorem 2.1 plays the same role). Equal controllers give D = I, the paper's test.
 
     Parameters
     ----------
+    loop : HapticLoop or TeleoperationLoop
+        The loop.
     scaling : {"auto", None}
         ``None``: the paper's literal test (no weighting).
+
+    Returns
+    -------
+    tuple of float
+        One weight per port (a haptic loop: ``(1.0,)``).
     """
-    if isinstance(loop, HapticLoop):
-        return (1.0,)
-    if scaling not in ("auto", None, "none"):
-        raise AnalysisError(f"scaling = {scaling!r}: allowed: 'auto' or None")
-    km, ks = _stiffness(loop.master_controller), _stiffness(loop.slave_controller)
-    if scaling == "auto" and km > 0 and ks > 0 and km != ks:
-        return (ks / km, 1.0)
-    return (1.0, 1.0)
-
-
-def _stiffness(c: Any) -> float:
-    return c.stiffness if isinstance(c, SpringDamper) else 0.0
-
-
-def _h_poly(c: Any, T: float) -> tuple[np.ndarray, np.ndarray]:
-    num, den = c.transfer(T)
-    return np.asarray(num, float), np.asarray(den, float)
+    return device_side(loop, "port scaling").port_weights(scaling)
 
 
 def loop_inverse(loop: HapticLoop | TeleoperationLoop, approximation: str = "forward",
                  scaling: str | None = "auto") -> RationalMatrix:
     """G^{-1}(z): force to velocity inverse of the loop without its terminations.
 
-    HVE, eq. (15) generalised: ``b + z^{-n} H(z) X(z)``. PEB, eq. (24)/(30)
-    generalised: ``diag(b_m, b_s) + H(z) X(z)`` with H of eq. (21), any
-    C_m, C_s (also :class:`~hapstab.models.DiscreteController`), any n, and the
-    port weighting of :func:`port_scaling`.
+    ``G^{-1}(z) = D (diag(b) + Hc(z) X(z))`` with Hc the engine's controller matrix
+    (:class:`~hapstab.engine.device_side.DeviceSide`): for the HVE eq. (15)
+    generalised, ``b + z^{-n} H(z) X(z)``; for PEB eq. (24)/(30) generalised, with
+    any C_m, C_s (also :class:`~hapstab.models.DiscreteController`), any n, and the
+    port weighting D of :func:`port_scaling`.
 
     Parameters
     ----------
     loop : HapticLoop or TeleoperationLoop
+        The loop (delays a whole number of samples).
     approximation : {"forward", "backward", "tustin"}
+        X(z), the approximation of Z{v/s}.
     scaling : {"auto", None}
+        Port weighting (see :func:`port_scaling`).
 
     Returns
     -------
     RationalMatrix
     """
-    _check_kind(loop)
-    a, T, n = _approx(approximation), loop.period, whole_delay(loop, "the circle criterion")
-    xn, xd = _x_poly(a, T)
-    zn = np.concatenate([[1.0], np.zeros(n)])  # z^n: the delay z^{-n} moves to the denominator
-
-    def term(c: Any, delayed: bool, sign: float, weight: float) -> tuple[np.ndarray, np.ndarray]:
-        hn, hd = _h_poly(c, T)
-        num = sign * weight * np.polymul(hn, xn)
-        den = np.polymul(hd, xd)
-        return num, (np.polymul(den, zn) if delayed else den)
-
-    def plus(b: float, nd: tuple[np.ndarray, np.ndarray], weight: float) -> tuple[np.ndarray, np.ndarray]:
-        num, den = nd
-        return np.polyadd(weight * b * den, num), den
-
-    if isinstance(loop, HapticLoop):
-        num, den = plus(loop.device.damping, term(loop.controller, True, 1.0, 1.0), 1.0)
-        return RationalMatrix([[num]], [[den]])
-    s1, s2 = port_scaling(loop, scaling)
-    cm, cs = loop.master_controller, loop.slave_controller
-    g11 = plus(loop.master.damping, term(cm, False, 1.0, s1), s1)
-    g22 = plus(loop.slave.damping, term(cs, False, 1.0, s2), s2)
-    g12, g21 = term(cm, True, -1.0, s1), term(cs, True, -1.0, s2)
-    return RationalMatrix([[g11[0], g12[0]], [g21[0], g22[0]]],
-                          [[g11[1], g12[1]], [g21[1], g22[1]]])
+    side = _side(loop)
+    xn, xd = _x_poly(_approx(approximation), side.period_s)
+    D = side.port_weights(scaling)
+    hn, hd = side.controller_polynomials()
+    nums: list[list[np.ndarray]] = []
+    dens: list[list[np.ndarray]] = []
+    for i in range(side.ports):
+        nums.append([])
+        dens.append([])
+        for j in range(side.ports):
+            num, den = D[i] * np.polymul(hn[i][j], xn), np.polymul(hd[i][j], xd)
+            if i == j:
+                num = np.polyadd(D[i] * side.damping[i] * den, num)
+            nums[i].append(num)
+            dens[i].append(den)
+    return RationalMatrix(nums, dens)
 
 
 def circle_test(loop: HapticLoop | TeleoperationLoop, approximation: str = "forward",
@@ -183,7 +172,7 @@ def circle_test(loop: HapticLoop | TeleoperationLoop, approximation: str = "forw
     Ginv = loop_inverse(loop, approximation, scaling)
     if sector is None:
         return positive_real(Ginv, loop.period)
-    if isinstance(loop, TeleoperationLoop):
+    if Ginv.m > 1:
         # inverting the 2x2 G^-1 leaves uncancelled factors at z = 1, which root-finding
         # splits into spurious poles off the circle: refuse rather than answer wrongly
         raise AnalysisError("sector: a finite sector is supported for the HVE only; for PEB use the "
@@ -192,33 +181,18 @@ def circle_test(loop: HapticLoop | TeleoperationLoop, approximation: str = "forw
 
 
 # ----------------------------------------------------------------- K_max, fast path
-def _hermitian_parts(loop: HapticLoop | TeleoperationLoop, a: str, D: tuple[float, ...],
-                     theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Hermitian parts of G^{-1} = A + K C at K = 0 (A) and per unit master K (C)."""
-    T, n = loop.period, whole_delay(loop, "the circle criterion")
-    X, Y = _x_y(a, theta, T)
-    d = np.exp(-1j * n * theta)
-    if isinstance(loop, HapticLoop):
-        B = spring_damper(loop.controller).damping
-        return 2 * (loop.device.damping + B * np.real(d * Y)), 2 * np.real(d * X)
-    cm = spring_damper(loop.master_controller, "master_controller")
-    cs = spring_damper(loop.slave_controller, "slave_controller")
-    r = cs.stiffness / cm.stiffness if cm.stiffness > 0 else 1.0  # as with_stiffness keeps it
-    s1, s2 = D
-    N = theta.size
-    A = np.zeros((N, 2, 2), complex)
-    C = np.zeros((N, 2, 2), complex)
-    A[:, 0, 0] = s1 * (loop.master.damping + cm.damping * Y)
-    A[:, 1, 1] = s2 * (loop.slave.damping + cs.damping * Y)
-    A[:, 0, 1], A[:, 1, 0] = -s1 * d * cm.damping * Y, -s2 * d * cs.damping * Y
-    C[:, 0, 0], C[:, 1, 1] = s1 * X, s2 * r * X
-    C[:, 0, 1], C[:, 1, 0] = -s1 * d * X, -s2 * r * d * X
+def _hermitian_parts(side: DeviceSide, a: str, D: tuple[float, ...], theta: np.ndarray
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """Hermitian parts of D G^{-1} = A + K C at K = 0 (A) and per unit K (C)."""
+    X = _x(a, theta, side.period_s)[:, None, None]
+    w = np.asarray(D)[None, :, None]
+    A = w * (np.diag(side.damping)[None] + X * side.controller_matrix(theta, "B"))
+    C = w * X * side.controller_matrix(theta, "K")
     herm = lambda M: M + np.conj(np.swapaxes(M, 1, 2))  # noqa: E731
     return herm(A), herm(C)
 
 
-def _affine_kmax(loop: HapticLoop | TeleoperationLoop, parts: Any, oscillations: int
-                 ) -> tuple[float, float]:
+def _affine_kmax(parts: Any, oscillations: int) -> tuple[float, float]:
     """min over w of the PSD limit of A(w) + K C(w): (K_max, worst angle)."""
     def k_of(t: np.ndarray) -> np.ndarray:
         A, C = parts(t)
@@ -229,13 +203,15 @@ def _affine_kmax(loop: HapticLoop | TeleoperationLoop, parts: Any, oscillations:
     return refine_minimum(k_of, th, k_of(th))[::-1]
 
 
-def _check_stiffness_loop(loop: Any) -> None:
-    _check_kind(loop)
-    ctrls = ([loop.controller] if isinstance(loop, HapticLoop)
-             else [loop.master_controller, loop.slave_controller])
-    if not all(isinstance(c, SpringDamper) for c in ctrls):
+def _stiffness_side(loop: Any) -> DeviceSide:
+    side = _side(loop)
+    if not all(isinstance(ch.controller, SpringDamper) for ch in side.channels):
         raise AnalysisError("critical stiffness: needs SpringDamper controller(s) "
                             "(a DiscreteController has no stiffness to vary)")
+    if side.ratios is None:
+        raise AnalysisError("controllers: the master's stiffness is 0 and the slave's is not, so "
+                            "K_s/K_m is undefined; give the master a stiffness > 0 to vary K")
+    return side
 
 
 def critical_stiffness_circle(loop: HapticLoop | TeleoperationLoop, approximation: str = "forward",
@@ -280,22 +256,17 @@ def critical_stiffness_circle(loop: HapticLoop | TeleoperationLoop, approximatio
     ----------
     The paper, Theorem 2.1, Definition 1, eq. (15) and (30).
     """
-    _check_stiffness_loop(loop)
+    side = _stiffness_side(loop)
     a = _approx(approximation)
-    T, n = loop.period, whole_delay(loop, "the circle criterion")
-    D = port_scaling(loop, scaling)
+    T, n = side.period_s, whole_delay(loop, "the circle criterion")
+    D = side.port_weights(scaling)
     if sector is not None:
         return _sector_kmax(loop, a, sector, scaling)
-    km_ks = False
-    if isinstance(loop, TeleoperationLoop):
-        km = spring_damper(loop.master_controller, "master_controller").stiffness
-        ks = spring_damper(loop.slave_controller, "slave_controller").stiffness
-        km_ks = km != ks and D == (1.0, 1.0) and km > 0
-    if km_ks:
+    if len(set(side.ratios or ())) > 1 and set(D) == {1.0}:
         K, th = 0.0, 0.0
         why = "residue (25) at z = 1 is not Hermitian for K_m != K_s (no port scaling)"
     else:
-        K, th = _affine_kmax(loop, lambda t: _hermitian_parts(loop, a, D, t), n + 2)
+        K, th = _affine_kmax(lambda t: _hermitian_parts(side, a, D, t), side.oscillations)
         if K == 0:   # condition (iii) fails at K = 0: the virtual damping (e.g. B < -b) wins
             why = ("G^-1(z) is not PR for any K >= 0: condition (iii) fails already at K = 0 "
                    f"(at w = {th / T:.6g} rad/s; the virtual damping takes more than the device "
@@ -305,8 +276,8 @@ def critical_stiffness_circle(loop: HapticLoop | TeleoperationLoop, approximatio
                    f"w = {th / T:.6g} rad/s")
         else:
             why = "G^-1(z) is PR for every K >= 0"
-    eq = "(15)" if isinstance(loop, HapticLoop) else "(30)"
-    reason = f"circle criterion (Theorem 2.1), {a} approximation, G^-1 of eq. {eq}: {why}"
+    eq = "of eq. " + G_INVERSE[loop.kind] if loop.kind in G_INVERSE else "of the loop"
+    reason = f"circle criterion (Theorem 2.1), {a} approximation, G^-1 {eq}: {why}"
     if a != "forward":
         reason += " (not a stability bound: only forward difference is)"
     f_hz = th / (2 * math.pi * T) if math.isfinite(K) else float("nan")
@@ -334,8 +305,7 @@ def _sector_kmax(loop: Any, a: str, sector: Any, scaling: str | None) -> Critica
         def ok(K: float) -> bool:
             return circle_test(loop.with_stiffness(K), a, sector, scaling).positive_real
 
-        damp = (loop.device.damping if isinstance(loop, HapticLoop)
-                else max(loop.master.damping, loop.slave.damping))
+        damp = float(np.max(device_side(loop, "the circle criterion").damping))
         lo = base * (1 - 1e-7) if base > 0 else 0.0  # PR of G implies PR of K^-1 + G
         if lo > 0 and not ok(lo):
             raise AnalysisError("sector: the circle test fails already at the passive limit's "

@@ -20,7 +20,7 @@ from hapstab.models.loops import HapticLoop, TeleoperationLoop
 from hapstab.results import CriticalStiffnessResult
 
 __all__ = ["colgate", "gil", "eq18", "eq29", "eq34", "gil2004", "CLOSED_FORMS", "TABLE",
-           "ClosedForm", "PAPER", "EQUATION", "closed_forms_for", "paper_condition"]
+           "ClosedForm", "PAPER", "EQUATION", "G_INVERSE", "closed_forms_for", "paper_condition"]
 
 
 def _hve(loop, name: str) -> tuple[float, float, float, float]:
@@ -340,6 +340,10 @@ PAPER = {"hve": ("colgate", "eq18"), "peb": ("eq29", "eq34")}
 
 #: Equation numbers of the paper's conditions, for labels.
 EQUATION = {"colgate": "(13)", "eq18": "(18)", "eq29": "(29)", "eq34": "(34)"}
+
+#: The paper's inverse transfer function G^-1(z) that the circle criterion tests, per
+#: loop kind (other kinds use the same construction from their structure).
+G_INVERSE = {"hve": "(15)", "peb": "(30)"}
 
 
 def closed_forms_for(kind: str) -> tuple[ClosedForm, ...]:

@@ -38,11 +38,11 @@ from typing import Any
 
 import numpy as np
 
-from hapstab.analysis.circle import port_scaling
 from hapstab.analysis.sweeps import min_eig, psd_limit, refine_minimum, theta_grid
+from hapstab.engine.device_side import DeviceSide, device_side
 from hapstab.errors import AnalysisError
-from hapstab.models.controllers import SpringDamper, spring_damper
-from hapstab.models.loops import HapticLoop, TeleoperationLoop, whole_delay
+from hapstab.models.controllers import SpringDamper
+from hapstab.models.loops import HapticLoop, TeleoperationLoop, require_loop, whole_delay
 from hapstab.results import CriticalStiffnessResult, Result, jsonable
 from hapstab.tolerances import ROOT_ON_CIRCLE
 
@@ -89,51 +89,34 @@ class PassivityResult(Result):
                          "period_s": self.period})
 
 
-def _h_of(c: Any, theta: np.ndarray, T: float, unit: str | None = None) -> np.ndarray:
-    """H(e^{j theta}); ``unit="K"``/``"B"`` gives the SpringDamper's K- or B-part."""
-    if isinstance(c, SpringDamper):
-        one_minus = 2j * np.sin(theta / 2) * np.exp(-0.5j * theta)  # 1 - e^{-j theta}
-        k = 1.0 if unit == "K" else (0.0 if unit == "B" else c.stiffness)
-        B = 0.0 if unit == "K" else c.damping
-        return k + B * one_minus / T
-    num, den = c.transfer(T)
-    poles = np.roots(den) if len(den) > 1 else np.zeros(0)
-    if np.any(np.abs(poles) >= 1.0 - ROOT_ON_CIRCLE):     # on the circle to np.roots' accuracy
-        raise AnalysisError("passivity: the controller H(z) has a pole on or outside the unit "
-                            "circle; the Colgate-Schenkel test needs a stable H(z)")
-    z = np.exp(1j * theta)
-    return np.polyval(num, z) / np.polyval(den, z)
+def _side(loop: Any) -> DeviceSide:
+    """The device side, after refusing what the test is not derived for: a delay that
+    is not n whole samples both ways, or a controller pole on or outside the circle."""
+    require_loop(loop)
+    whole_delay(loop, "sampled-data passivity")
+    side = device_side(loop, "sampled-data passivity")
+    for ch in side.channels:
+        if isinstance(ch.controller, SpringDamper):
+            continue
+        den = ch.controller.transfer(side.period_s)[1]
+        poles = np.roots(den) if len(den) > 1 else np.zeros(0)
+        if np.any(np.abs(poles) >= 1.0 - ROOT_ON_CIRCLE):     # on the circle to np.roots' accuracy
+            raise AnalysisError("passivity: the controller H(z) has a pole on or outside the unit "
+                                "circle; the Colgate-Schenkel test needs a stable H(z)")
+    return side
 
 
-def _parts(loop: HapticLoop | TeleoperationLoop, theta: np.ndarray, scaling: str | None,
-           unit: str | None) -> tuple[np.ndarray, np.ndarray]:
-    """(damping matrix D diag(b), sampled part W = -(T/2) Herm{...}/(1 - cos)) with the
-    controllers' full H (unit None), K-part per unit master K ("K") or B-part ("B")."""
-    T, n = loop.period, whole_delay(loop, "sampled-data passivity")
+def _parts(side: DeviceSide, theta: np.ndarray, D: tuple[float, ...], part: str | None
+           ) -> tuple[np.ndarray, np.ndarray]:
+    """(damping matrix D diag(b), sampled part W = -(T/2) Herm{f D Hc}) with
+    f = (1 - e^{-jw})/(1 - cos w) and the controllers' whole H (``part`` None),
+    their part per unit K ("K") or at K = 0 ("B")."""
     f = 1j * np.exp(-0.5j * theta) / np.sin(theta / 2)  # (1 - e^{-jw})/(1 - cos w)
-    d = np.exp(-1j * n * theta)
-    if isinstance(loop, HapticLoop):
-        h = d * _h_of(loop.controller, theta, T, unit)
-        return np.full(theta.size, loop.device.damping), -(T / 2) * np.real(f * h)
-    D = port_scaling(loop, scaling)
-    cm, cs = loop.master_controller, loop.slave_controller
-    hm, hs = _h_of(cm, theta, T, unit), _h_of(cs, theta, T, unit)
-    if unit == "K" and isinstance(cm, SpringDamper):  # per unit master K, K_s/K_m kept
-        ks = spring_damper(cs, "slave_controller").stiffness
-        hs = hs * (ks / cm.stiffness if cm.stiffness > 0 else 1.0)
-    H = np.zeros((theta.size, 2, 2), complex)
-    H[:, 0, 0], H[:, 0, 1] = D[0] * hm, -D[0] * d * hm
-    H[:, 1, 0], H[:, 1, 1] = -D[1] * d * hs, D[1] * hs
-    X = f[:, None, None] * H
-    W = -(T / 2) * (X + np.conj(np.swapaxes(X, 1, 2))) / 2
-    Db = np.zeros((theta.size, 2, 2), complex)
-    Db[:, 0, 0], Db[:, 1, 1] = D[0] * loop.master.damping, D[1] * loop.slave.damping
+    w = np.asarray(D)[None, :, None]
+    X = f[:, None, None] * w * side.controller_matrix(theta, part)
+    W = -(side.period_s / 2) * (X + np.conj(np.swapaxes(X, 1, 2))) / 2
+    Db = np.broadcast_to(np.diag(np.asarray(D) * side.damping), W.shape).astype(complex)
     return Db, W
-
-
-def _check(loop: Any) -> None:
-    if not isinstance(loop, (HapticLoop, TeleoperationLoop)):
-        raise AnalysisError(f"loop = {loop!r}: must be a HapticLoop or a TeleoperationLoop")
 
 
 def sampled_passivity(loop: HapticLoop | TeleoperationLoop, scaling: str | None = "auto"
@@ -161,16 +144,16 @@ def sampled_passivity(loop: HapticLoop | TeleoperationLoop, scaling: str | None 
     ----------
     Colgate and Schenkel 1997; the paper, eq. (1).
     """
-    _check(loop)
-    T = loop.period
+    side = _side(loop)
+    T, D = side.period_s, side.port_weights(scaling)
 
     def margin(t: np.ndarray) -> np.ndarray:
-        Db, W = _parts(loop, t, scaling, None)
+        Db, W = _parts(side, t, D, None)
         return min_eig(Db + W)
 
-    th = theta_grid(whole_delay(loop, "sampled-data passivity") + 2)
+    th = theta_grid(side.oscillations)
     t_min, m = refine_minimum(margin, th, margin(th))
-    scale = float(np.max(np.abs(_parts(loop, th, scaling, None)[1]))) + 1e-300
+    scale = float(np.max(np.abs(_parts(side, th, D, None)[1]))) + 1e-300
     ok = m >= -1e-12 * scale  # rounding slack relative to the sampled part's size
     where = f"w = {t_min / T:.6g} rad/s ({t_min / (2 * math.pi * T):.6g} Hz)"
     reason = (f"passive (Colgate-Schenkel): damping to spare {m:.6g} N*s/m, least at {where}" if ok
@@ -212,32 +195,34 @@ def critical_stiffness_passivity(loop: HapticLoop | TeleoperationLoop,
     AnalysisError
         Approximation given, or a controller that is not a SpringDamper.
     """
-    _check(loop)
     if approximation is not None:
         raise AnalysisError(f"approximation = {approximation!r}: applies to method 'circle' only; "
                             "'passivity' is exact")
-    ctrls = loop.controllers
-    if not all(isinstance(c, SpringDamper) for c in ctrls):
+    side = _side(loop)
+    if not all(isinstance(ch.controller, SpringDamper) for ch in side.channels):
         raise AnalysisError("critical stiffness: needs SpringDamper controller(s)")
-    T = loop.period
+    if side.ratios is None:
+        raise AnalysisError("controllers: the master's stiffness is 0 and the slave's is not, so "
+                            "K_s/K_m is undefined; give the master a stiffness > 0 to vary K")
+    T, D = side.period_s, side.port_weights(scaling)
 
     def k_of(t: np.ndarray) -> np.ndarray:
-        Db, WB = _parts(loop, t, scaling, "B")
-        _, WK = _parts(loop, t, scaling, "K")
+        Db, WB = _parts(side, t, D, "B")
+        _, WK = _parts(side, t, D, "K")
         A = Db + WB
         tol = 1e-12 * np.abs(A).reshape(t.size, -1).max(axis=1)  # rounding slack on A >= 0
         return psd_limit(A, WK, tol)
 
-    th = theta_grid(whole_delay(loop, "sampled-data passivity") + 2)
+    th = theta_grid(side.oscillations)
     t_min, K = refine_minimum(k_of, th, k_of(th))
     fin = math.isfinite(K)
     head = ("sampled-data passivity (Colgate-Schenkel 1997"
-            + (", multiport" if loop.kind == "peb" else "") + "): ")
+            + (", multiport" if side.ports > 1 else "") + "): ")
     if K > 0:
         reason = head + "passive for K <= K_max" + (f"; binds at w = {t_min / T:.6g} rad/s" if fin
                                                     else " = inf")
     else:  # already at K = 0 the damping does not cover the virtual damping (e.g. B < -b)
-        Db, WB = _parts(loop, th, scaling, "B")
+        Db, WB = _parts(side, th, D, "B")
         m0 = min_eig(Db + WB)
         i = int(np.argmin(m0))
         reason = head + (f"not passive for any K >= 0: at K = 0, {-m0[i]:.6g} N*s/m of damping is "
@@ -248,4 +233,4 @@ def critical_stiffness_passivity(loop: HapticLoop | TeleoperationLoop,
         whole_delay(loop, "sampled-data passivity"),
         t_min / (2 * math.pi * T) if fin else float("nan"),
         {"worst_frequency_rad_s": t_min / T if fin else float("nan"),
-         "port_scaling": list(port_scaling(loop, scaling))})
+         "port_scaling": list(D)})

@@ -31,7 +31,6 @@ from typing import Any
 
 import numpy as np
 
-from hapstab.analysis.exact.core import rigid_body_modes
 from hapstab.analysis.exact.crossings import analyse, winding
 from hapstab.engine.frequency import loop_response, stack_responses
 from hapstab.engine.structure import structure_of
@@ -158,7 +157,7 @@ def _char_poly_grid(loop: Loop, Kg: np.ndarray, Bg: np.ndarray) -> np.ndarray:
     c = mono @ coef
     # rigid-body modes are z = 1 roots for every (K, B): divide them out, as the exact
     # analysis does, so the check judges the same poles
-    for _ in range(rigid_body_modes(A00, AK + AB)):
+    for _ in range(s1.rigid_modes):
         q = np.zeros((c.shape[0], c.shape[1] - 1))
         q[:, 0] = c[:, 0]
         for i in range(1, q.shape[1]):

@@ -50,10 +50,10 @@ from hapstab.engine.discs import (
     poly_jet,
     zero,
 )
-from hapstab.engine.structure import structure_of
+from hapstab.engine.structure import port_is_free, rigid_modes, structure_of
 from hapstab.engine.zoh import expm_batched, port_matrices
 from hapstab.errors import AnalysisError
-from hapstab.models.controllers import SpringDamper
+from hapstab.models.controllers import SpringDamper, stiffness_ratios
 from hapstab.models.loops import HapticLoop, TeleoperationLoop, split_delay
 
 __all__ = ["LoopResponse", "loop_response", "stack_responses"]
@@ -293,11 +293,11 @@ def loop_response(loop: HapticLoop | TeleoperationLoop,
     if len(ctrls) != len(st.channels):
         raise AnalysisError("controller: critical stiffness needs SpringDamper controllers "
                             "(a general H(z) has no stiffness K to vary)")
-    ks = np.array([c.stiffness for c in ctrls], float)
-    if ks[0] == 0 and np.any(ks > 0):
+    ratios = stiffness_ratios([c.stiffness for c in ctrls])
+    if ratios is None:
         raise AnalysisError("controllers: the master's stiffness is 0 and the slave's is not, so "
                             "K_s/K_m is undefined; give the master a stiffness > 0 to vary K")
-    ratio = ks / ks[0] if ks[0] > 0 else np.ones_like(ks)   # K_s/K_m kept (the one convention)
+    ratio = np.array(ratios)
     terms = tuple(tuple((j, float(s), *split_delay(d)) for j, s, d in ch.terms)
                   for ch in st.channels)
     fracs: dict[int, set[float]] = {j: set() for j in range(len(st.ports))}
@@ -305,17 +305,13 @@ def loop_response(loop: HapticLoop | TeleoperationLoop,
         for j, _, _, f in ch:
             if f:
                 fracs[j].add(f)
-    ports, masses, free = [], [], []
+    ports, masses = [], []
     for j, pt in enumerate(st.ports):
         A, Bm, _ = port_matrices(pt)
-        M = pt.device.mass + pt.termination.mass
-        # a spring with k T^2 / m below 1e-20 moves the pole at z = 1 by less than
-        # double precision can see: the port is free (and the spring dropped)
-        fr = pt.termination.stiffness * float(T.max()) ** 2 / M < 1e-20
+        fr = port_is_free(pt, float(T.max()))   # then the spring is dropped
         if fr:
             A = A.copy()
             A[1, 0] = 0.0
-        free.append(fr)
         masses.append(pt.device.mass + pt.termination.mass)
         ports.append(_port_poly(A, Bm, fr, T, sorted(fracs[j])))
     for j, pp in enumerate(ports):
@@ -327,12 +323,7 @@ def loop_response(loop: HapticLoop | TeleoperationLoop,
                 f"{pt.device.damping:g} N*s/m at T = {T.min():g}..{T.max():g} s: the discretised "
                 "plant over- or underflows double precision")
     p = len(ports)
-    # the rigid-body rule (one place): every port free and every column of s sums to 0
-    col = np.zeros(p)
-    for ch in terms:
-        for j, s, _, _ in ch:
-            col[j] += s
-    rigid = int(all(free) and np.all(col == 0))
+    rigid = rigid_modes(st, float(T.max()))
     q = sum(pp.d.shape[1] - 1 for pp in ports) - rigid
     scale = 2.0 ** np.round(np.log2(min(masses) / T ** 2))
     beta = np.array([[c.damping for c in ctrls]]) / T[:, None]

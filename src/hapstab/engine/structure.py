@@ -9,11 +9,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
+
 from hapstab.models.controllers import DiscreteController, SpringDamper
 from hapstab.models.loops import HapticLoop, TeleoperationLoop, split_delay
 from hapstab.models.parts import Device, Impedance
 
-__all__ = ['Port', 'Channel', 'LoopStructure', 'structure_of', 'split_delay']
+__all__ = ['Port', 'Channel', 'LoopStructure', 'structure_of', 'split_delay', 'port_is_free',
+           'rigid_modes', 'FREE_SPRING']
 
 
 @dataclass(frozen=True)
@@ -69,6 +72,57 @@ class LoopStructure:
 
     ports: tuple[Port, ...]
     channels: tuple[Channel, ...]
+
+
+#: A spring to ground with k T^2 / m below this moves the port's pole at z = 1 by
+#: less than double precision can see (about sqrt(1e-20) = 1e-10 in angle, on
+#: numbers near 1): the port counts as free and the spring is dropped.
+FREE_SPRING = 1e-20
+
+
+def port_is_free(port: Port, period_s: float) -> bool:
+    """Whether nothing ties the port to ground at this sampling period.
+
+    Parameters
+    ----------
+    port : Port
+        The device and its termination.
+    period_s : float
+        The (largest) sampling period in s.
+
+    Returns
+    -------
+    bool
+        ``k T^2 / m < FREE_SPRING`` for the termination's spring k and the port's mass m.
+    """
+    mass = port.device.mass + port.termination.mass
+    return bool(port.termination.stiffness * float(period_s) ** 2 / mass < FREE_SPRING)
+
+
+def rigid_modes(structure: LoopStructure, period_s: float) -> int:
+    """The rigid-body rule (its one definition): the loop has one mode at z = 1 that
+    no controller moves when every port is free and every controller input is a
+    difference of positions (each column of the signs s_ij sums to zero, e.g. PEB
+    without operator or environment): a common translation of all ports.
+
+    Parameters
+    ----------
+    structure : LoopStructure
+        The loop.
+    period_s : float
+        The (largest) sampling period in s (see :func:`port_is_free`).
+
+    Returns
+    -------
+    int
+        0 or 1.
+    """
+    col = np.zeros(len(structure.ports))
+    for ch in structure.channels:
+        for j, sign, _ in ch.terms:
+            col[j] += sign
+    free = all(port_is_free(pt, period_s) for pt in structure.ports)
+    return int(free and bool(np.all(col == 0)))
 
 
 def structure_of(loop: HapticLoop | TeleoperationLoop) -> LoopStructure:

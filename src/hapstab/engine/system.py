@@ -25,9 +25,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from hapstab.engine.structure import LoopStructure, structure_of
+from hapstab.engine.structure import LoopStructure, rigid_modes, structure_of
 from hapstab.engine.zoh import discretize, port_matrices
-from hapstab.models.controllers import DiscreteController, SpringDamper
+from hapstab.models.controllers import DiscreteController, SpringDamper, stiffness_ratios
 from hapstab.models.loops import HapticLoop, TeleoperationLoop, split_delay
 
 __all__ = ['SampledSystem', 'build']
@@ -100,6 +100,9 @@ class SampledSystem:
         The controller input of each port, ``e_i = E_i s`` (delays included).
     fixed_reason : str
         Why K cannot be varied (empty when it can).
+    rigid_modes : int
+        Modes at z = 1 that no controller moves (the rigid-body rule,
+        :func:`~hapstab.engine.structure.rigid_modes`): 0 or 1.
     """
 
     periods: np.ndarray
@@ -120,6 +123,7 @@ class SampledSystem:
     varies_with_K: bool = True
     E: np.ndarray | None = None
     fixed_reason: str = ""
+    rigid_modes: int = 0
 
     @property
     def order(self) -> int:
@@ -292,11 +296,12 @@ def _stiffness(st: LoopStructure, k: _KPart, Bd: np.ndarray, lay: _Layout,
                           "general H(z) has no stiffness K to vary)")
         return k
     k.K_own[:] = ks[0]
+    ratios = stiffness_ratios(ks)
     if len(set(ks)) == 1:
         return k
-    if ks[0] > 0:
+    if ratios is not None:
         # unequal K_m, K_s: K is the master's stiffness, K_s/K_m is kept fixed
-        scale = np.array(ks) / ks[0]
+        scale = np.array(ratios)
         k.C1, k.Fu1 = k.C1 * scale[None, :, None], k.Fu1 * scale[None, :, None]
         return k
     # K_m = 0 < K_s: no ratio to keep; the loop is exact with every port's own K
@@ -353,4 +358,5 @@ def build(loop: HapticLoop | TeleoperationLoop,
     return SampledSystem(periods=T, A0=k.A0, B1=B1, C1=k.C1, stiffness=k.K_own, B_ext=B_ext,
                          F_u0=k.Fu0, F_u1=k.Fu1, pos=pos, vel=vel, Ac=Ac, Bc=Bc, Cf=Cf,
                          n_plant=n, labels=[pt.name for pt in st.ports], varies_with_K=k.varies,
-                         E=E, fixed_reason=k.fixed_reason)
+                         E=E, fixed_reason=k.fixed_reason,
+                         rigid_modes=rigid_modes(st, float(T.max())))

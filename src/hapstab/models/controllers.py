@@ -10,6 +10,7 @@ Equation and figure numbers below are the paper's.
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -17,7 +18,7 @@ import numpy as np
 from hapstab.errors import ModelError, check_real
 from hapstab.models.parts import _poly
 
-__all__ = ['SpringDamper', 'DiscreteController', 'Controller', 'spring_damper']
+__all__ = ['SpringDamper', 'DiscreteController', 'Controller', 'spring_damper', 'stiffness_ratios']
 
 
 # ----------------------------------------------------------------------- controllers
@@ -117,3 +118,28 @@ def spring_damper(controller: Controller, name: str = "controller") -> SpringDam
     if not isinstance(controller, SpringDamper):
         raise ModelError(f"{name}: a SpringDamper is needed to vary the stiffness")
     return controller
+
+
+def stiffness_ratios(stiffnesses: Sequence[float]) -> tuple[float, ...] | None:
+    """The one K_s/K_m convention: each controller's stiffness per unit K.
+
+    K is the first controller's (the master's) stiffness; every other controller
+    keeps its ratio to it, so equal stiffnesses (the paper's C_m = C_s) stay equal.
+    Every loop builder, the engine and the frequency-domain analyses vary K by this
+    rule and by no other.
+
+    Parameters
+    ----------
+    stiffnesses : sequence of float
+        The controllers' stiffnesses in N/m, first the one that K names.
+
+    Returns
+    -------
+    tuple of float or None
+        ``k_i`` with ``k_0 = 1`` (all ones when every stiffness is 0); ``None`` when
+        the ratio is undefined: the first stiffness is 0 and another is not.
+    """
+    ks = [float(k) for k in stiffnesses]
+    if ks[0] > 0:
+        return tuple(k / ks[0] for k in ks)
+    return None if any(k > 0 for k in ks) else tuple(1.0 for _ in ks)

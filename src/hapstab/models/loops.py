@@ -27,12 +27,13 @@ from hapstab.models.controllers import (
     DiscreteController,
     SpringDamper,
     spring_damper,
+    stiffness_ratios,
 )
 from hapstab.models.parts import Device, Impedance
 from hapstab.tolerances import DELAY_SNAP
 
 __all__ = ["split_delay", "DELAY_SNAP", "HapticLoop", "TeleoperationLoop", "delay_from_seconds",
-           "whole_delay"]
+           "whole_delay", "require_loop"]
 
 
 def _check_fraction(name: str, value: Any) -> float:
@@ -293,13 +294,12 @@ class TeleoperationLoop:
         stiffnesses, the paper's C_m = C_s case, stay equal)."""
         cm = spring_damper(self.master_controller, "master_controller")
         cs = spring_damper(self.slave_controller, "slave_controller")
-        km, ks = cm.stiffness, cs.stiffness
-        if km == 0 and ks > 0:
+        ratios = stiffness_ratios((cm.stiffness, cs.stiffness))
+        if ratios is None:
             raise AnalysisError("master_controller: stiffness 0 with a slave stiffness > 0 leaves "
                                 "K_s/K_m undefined; set the master's stiffness to vary K")
-        ratio = ks / km if km > 0 else 1.0
         return dataclasses.replace(self, master_controller=cm.with_stiffness(K),
-                                   slave_controller=cs.with_stiffness(K * ratio))
+                                   slave_controller=cs.with_stiffness(K * ratios[1]))
 
     def replace(self, **changes: Any) -> TeleoperationLoop:
         return dataclasses.replace(self, **changes)
@@ -325,6 +325,23 @@ class TeleoperationLoop:
 
 
 Loop = HapticLoop | TeleoperationLoop
+
+
+def require_loop(loop: Any) -> None:
+    """Refuse anything that is not a loop, with the one message every analysis gives.
+
+    Parameters
+    ----------
+    loop : object
+        What the caller was given.
+
+    Raises
+    ------
+    AnalysisError
+        If ``loop`` is neither a :class:`HapticLoop` nor a :class:`TeleoperationLoop`.
+    """
+    if not isinstance(loop, (HapticLoop, TeleoperationLoop)):
+        raise AnalysisError(f"loop = {loop!r}: must be a HapticLoop or a TeleoperationLoop")
 
 
 def whole_delay(loop: HapticLoop | TeleoperationLoop, what: str) -> int:

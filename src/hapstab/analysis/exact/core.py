@@ -26,7 +26,7 @@ from hapstab.models.loops import HapticLoop, TeleoperationLoop
 from hapstab.results import CriticalStiffnessResult, StabilityResult
 from hapstab.tolerances import POLE_ON_CIRCLE
 
-__all__ = ["stability", "exact_critical_stiffness", "exact_kmax_batch", "rigid_body_modes"]
+__all__ = ["stability", "exact_critical_stiffness", "exact_kmax_batch"]
 
 #: A polished dominant pole with ||z| - 1| below this is on the circle
 #: (:data:`hapstab.tolerances.POLE_ON_CIRCLE`, with its reason).
@@ -53,14 +53,6 @@ def exact_kmax_batch(loop: HapticLoop | TeleoperationLoop,
         See :func:`hapstab.crossings.analyse`.
     """
     return analyse(loop_response(loop, periods), full=intervals)
-
-
-def rigid_body_modes(A0: np.ndarray, A1: np.ndarray) -> int:
-    """Number of independent modes at z = 1 that no K moves: dim null([I - A0; A1])."""
-    N = A0.shape[-1]
-    S = np.linalg.svd(np.vstack([np.eye(N) - A0, A1]), compute_uv=False)
-    scale = max(1.0, float(S[0]))
-    return int(np.sum(S < 1e-10 * scale))
 
 
 # ---------------------------------------------------------------------- stability
@@ -127,7 +119,7 @@ def stability(loop: HapticLoop | TeleoperationLoop) -> StabilityResult:
         u = float(sysm.stiffness[0] / resp.scale[0])
         count = int(winding(resp, np.zeros(1, int), np.array([u]))[0])
     else:
-        m = rigid_body_modes(sysm.A0[0], sysm.A1()[0]) if sysm.varies_with_K else 0
+        m = sysm.rigid_modes
         count = -2
     rest = eigs
     if m:

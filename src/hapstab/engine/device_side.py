@@ -1,0 +1,211 @@
+"""The loop seen from its terminations: the devices' damping and the controller
+matrix H(z), for the frequency-domain analyses (circle criterion, passivity).
+
+Cut the loop at the operator and the environment. What is left at the ports is
+each device's viscous damping b_i and the controllers, which push on port i with
+
+    u_i = H_i(z) sum_j s_ij z^-n_ij x_j,     i.e.  u = Hc(z) x,  Hc_ij = s_ij z^-n_ij H_i(z)
+
+(:class:`~hapstab.engine.structure.Channel`). The circle criterion's inverse
+transfer function is ``G^-1(z) = diag(b) + Hc(z) X(z)`` with X(z) an
+approximation of Z{v/s} (eq. 15, eq. 24/30), and sampled-data passivity is a
+condition on ``diag(b)`` and ``(1 - z^-1) Hc(z)`` (Colgate and Schenkel). Both
+take Hc from here, built from the same :class:`~hapstab.engine.structure.LoopStructure`
+as the time-domain engine, so a new loop kind needs only its structure.
+
+K is varied by :func:`~hapstab.models.controllers.stiffness_ratios` (K_s/K_m kept).
+
+References
+----------
+The paper, eq. (14)-(15), (20)-(24), (30); J. E. Colgate and G. G. Schenkel, J. Robotic
+Systems 14(1), 1997.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from hapstab.engine.structure import Channel, structure_of
+from hapstab.errors import AnalysisError
+from hapstab.models.controllers import SpringDamper, stiffness_ratios
+from hapstab.models.loops import HapticLoop, TeleoperationLoop, split_delay
+
+__all__ = ["DeviceSide", "device_side", "PARTS"]
+
+#: What :meth:`DeviceSide.controller_matrix` evaluates: the whole H, its part per unit
+#: K (``"K"``, K_s/K_m kept) or its part at K = 0 (``"B"``).
+PARTS = (None, "K", "B")
+
+
+@dataclass(frozen=True)
+class DeviceSide:
+    """The devices' damping and the controller matrix of one loop.
+
+    Attributes
+    ----------
+    period_s : float
+        Sampling period T in s.
+    names : tuple of str
+        Port names (``"device"``; ``"master"``, ``"slave"``).
+    damping : (p,) array
+        Each device's viscous damping b_i in N*s/m.
+    channels : tuple of Channel
+        One controller per port and what it measures (whole-sample delays).
+    ratios : tuple of float or None
+        Each controller's stiffness per unit K; ``None`` when K cannot be varied
+        (a controller that is not a spring-damper, or K_m = 0 < K_s).
+    """
+
+    period_s: float
+    names: tuple[str, ...]
+    damping: np.ndarray
+    channels: tuple[Channel, ...]
+    ratios: tuple[float, ...] | None
+
+    @property
+    def ports(self) -> int:
+        """Number of ports p."""
+        return len(self.names)
+
+    @property
+    def oscillations(self) -> int:
+        """Oscillations over theta in [0, pi] of a p x p determinant of Hc: the sum over
+        channels of the longest delay, plus 2 (a grid density for sweeps)."""
+        return sum(max(int(d) for _, _, d in ch.terms) for ch in self.channels) + 2
+
+    def port_weights(self, scaling: str | None = "auto") -> tuple[float, ...]:
+        """Diagonal port weights D that make the residue of D Hc X at z = 1 Hermitian.
+
+        Port i is weighted by ``k_last / k_i`` (k_i its stiffness per unit K), so
+        ``D diag(k)`` is a multiple of the identity; equal stiffnesses give D = I.
+        See :func:`hapstab.analysis.circle.port_scaling` for why stability still follows.
+
+        Parameters
+        ----------
+        scaling : {"auto", None}
+            ``None`` (or ``"none"``): no weighting, D = I.
+
+        Returns
+        -------
+        tuple of float
+
+        Raises
+        ------
+        AnalysisError
+            Any other ``scaling``.
+        """
+        if scaling not in ("auto", None, "none"):
+            raise AnalysisError(f"scaling = {scaling!r}: allowed: 'auto' or None")
+        k = self.ratios
+        if scaling == "auto" and k is not None and min(k) > 0 and len(set(k)) > 1:
+            return tuple(k[-1] / ki for ki in k)
+        return tuple(1.0 for _ in range(self.ports))
+
+    def controller_matrix(self, theta: np.ndarray, part: str | None = None) -> np.ndarray:
+        """Hc(e^{j theta}), shape ``(N, p, p)``.
+
+        Parameters
+        ----------
+        theta : array of float
+            Angles in rad/sample.
+        part : {None, "K", "B"}
+            The whole H (None), its part per unit K (``"K"``) or at K = 0 (``"B"``).
+
+        Returns
+        -------
+        (N, p, p) complex array
+
+        Raises
+        ------
+        AnalysisError
+            ``part`` given for a loop whose K cannot be varied.
+        """
+        th = np.atleast_1d(np.asarray(theta, float))
+        if part not in PARTS:
+            raise AnalysisError(f"part = {part!r}: allowed: None, 'K' or 'B'")
+        if part is not None and self.ratios is None:
+            raise AnalysisError("controllers: K cannot be varied in this loop (needs spring-damper "
+                                "controllers with the master's stiffness > 0 if the slave's is)")
+        out = np.zeros((th.size, self.ports, self.ports), complex)
+        for i, ch in enumerate(self.channels):
+            h = _response(ch.controller, th, self.period_s, part,
+                          self.ratios[i] if self.ratios is not None else 1.0)
+            for j, s, d in ch.terms:
+                out[:, i, j] += s * np.exp(-1j * int(d) * th) * h
+        return out
+
+    def controller_polynomials(self) -> tuple[list[list[np.ndarray]], list[list[np.ndarray]]]:
+        """Hc(z) as rational functions: ``(nums, dens)``, p x p, highest power first.
+
+        Returns
+        -------
+        (list of list of array, list of list of array)
+            ``Hc_ij = nums[i][j] / dens[i][j]``; an entry without a term is ``0 / 1``.
+        """
+        p = self.ports
+        nums = [[np.zeros(1) for _ in range(p)] for _ in range(p)]
+        dens = [[np.ones(1) for _ in range(p)] for _ in range(p)]
+        for i, ch in enumerate(self.channels):
+            hn, hd = (np.asarray(a, float) for a in ch.controller.transfer(self.period_s))
+            for j, s, d in ch.terms:
+                if np.any(nums[i][j]):
+                    raise AnalysisError(f"{self.names[i]}: measures port {j} twice")
+                zn = np.concatenate([[1.0], np.zeros(int(d))])  # z^-n: z^n into the denominator
+                nums[i][j], dens[i][j] = s * hn, np.polymul(hd, zn)
+        return nums, dens
+
+
+def _response(c: object, theta: np.ndarray, T: float, part: str | None, ratio: float
+              ) -> np.ndarray:
+    """H(e^{j theta}) of one controller, or its K-part (times ``ratio``) or B-part.
+    A spring-damper's ``1 - e^{-j theta}`` is ``2j sin(theta/2) e^{-j theta/2}``:
+    no cancellation as theta -> 0."""
+    if isinstance(c, SpringDamper):
+        one_minus = 2j * np.sin(theta / 2) * np.exp(-0.5j * theta)
+        k = ratio if part == "K" else (0.0 if part == "B" else c.stiffness)
+        B = 0.0 if part == "K" else c.damping
+        return k + B * one_minus / T
+    num, den = c.transfer(T)  # type: ignore[attr-defined]
+    z = np.exp(1j * theta)
+    return np.polyval(num, z) / np.polyval(den, z)
+
+
+def device_side(loop: HapticLoop | TeleoperationLoop, what: str) -> DeviceSide:
+    """The loop cut at its terminations (see the module notes).
+
+    Parameters
+    ----------
+    loop : HapticLoop or TeleoperationLoop
+        Any loop kind the engine's :func:`~hapstab.engine.structure.structure_of` builds.
+    what : str
+        The analysis that needs it, named in errors (e.g. ``"the circle criterion"``).
+
+    Returns
+    -------
+    DeviceSide
+
+    Raises
+    ------
+    AnalysisError
+        A delay that is not a whole number of samples: the frequency-domain
+        conditions are derived for t_d = nT.
+    """
+    st = structure_of(loop)
+    channels = []
+    for ch in st.channels:
+        terms = []
+        for j, s, d in ch.terms:
+            n, f = split_delay(d)
+            if f:
+                raise AnalysisError(f"{what}: derived for a whole number of samples of delay "
+                                    f"(t_d = nT); this loop has t_d = {d:g} T")
+            terms.append((j, s, float(n)))
+        channels.append(Channel(ch.port, ch.controller, tuple(terms)))
+    ctrls = [ch.controller for ch in st.channels]
+    ratios = (stiffness_ratios([c.stiffness for c in ctrls])  # type: ignore[union-attr]
+              if all(isinstance(c, SpringDamper) for c in ctrls) else None)
+    return DeviceSide(float(loop.period), tuple(pt.name for pt in st.ports),
+                      np.array([pt.device.damping for pt in st.ports], float), tuple(channels),
+                      ratios)
