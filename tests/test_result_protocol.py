@@ -1,5 +1,10 @@
 """Every result object follows one protocol (issue #10, step 3): it is a Result,
-gives a JSON-ready dict and shows as a table in a notebook."""
+gives a strict-JSON dict (infinities as null plus a flag) and shows as a table in a
+notebook; a result with a picture draws it with plot(ax=None) and returns the axes;
+a result with a table writes it with to_csv."""
+
+import csv
+import math
 
 import json
 
@@ -32,7 +37,8 @@ def _results():
 def test_every_result_is_a_result_with_json_and_html(res):
     assert isinstance(res, Result)
     d = res.to_dict()
-    json.dumps(d, allow_nan=False)          # JSON-ready: no NaN, no numpy types
+    text = json.dumps(d, allow_nan=False)   # JSON-ready: no NaN, no Infinity, no numpy types
+    assert '"inf"' not in text               # an infinity is null plus a flag, never a string
     page = res._repr_html_()
     assert page.startswith("<table>") and type(res).__name__ in page
     assert page.count("<tr>") == len(d)
@@ -44,3 +50,53 @@ def test_details_cannot_replace_a_key_of_the_result():
     with pytest.raises(ValueError, match="method"):
         r.to_dict()
     assert merged({"a": 1}, {"b": np.float64(2.0)}, "x") == {"a": 1, "b": 2.0}
+
+
+PLOTS = [r for r in _results() if hasattr(r, "plot")]
+
+
+@pytest.mark.parametrize("res", PLOTS, ids=lambda r: type(r).__name__)
+def test_plot_returns_the_axes_and_draws_on_given_ones(res):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    axes = np.ravel(np.asarray(res.plot(), dtype=object))
+    assert all(a.has_data() for a in axes)
+    n = axes.size
+    fig, given = plt.subplots(n, 1, squeeze=False)
+    again = np.ravel(np.asarray(res.plot(given[:, 0] if n > 1 else given[0, 0]), dtype=object))
+    assert list(again) == list(given[:, 0]) and all(a.has_data() for a in again)
+    plt.close("all")
+
+
+def test_every_result_with_a_table_writes_csv(tmp_path):
+    with_csv = [r for r in _results() if hasattr(r, "to_csv")]
+    names = {type(r).__name__ for r in with_csv}
+    assert {"BoundaryResult", "RegionResult", "SimulationResult", "AuditResult",
+            "BestDampingResult"} <= names
+    for i, r in enumerate(with_csv):
+        p = tmp_path / f"{i}.csv"
+        r.to_csv(str(p))
+        rows = list(csv.reader(p.read_text().splitlines()))
+        assert len(rows) >= 2 and all(len(x) == len(rows[0]) for x in rows)
+
+
+def test_audit_csv_has_one_row_per_condition_with_the_exact_last(tmp_path):
+    res = h.audit(h.paper_hve(1e-3, 2))
+    res.to_csv(str(tmp_path / "a.csv"))
+    rows = list(csv.DictReader((tmp_path / "a.csv").read_text().splitlines()))
+    assert [r["key"] for r in rows] == [r.key for r in res.rows]
+    assert math.isclose(float(rows[-1]["critical_stiffness"]), res.exact_kmax, rel_tol=1e-15)
+
+
+def test_reproduction_plots_and_writes_its_points(tmp_path):
+    from hapstab.paper.reproduce import reproduce_figure
+
+    rep = reproduce_figure("fig5", [1e-3, 2e-3])
+    ax = rep.plot()
+    assert ax.get_title().startswith("Fig. 5") and ax.has_data()
+    rep.to_csv(str(tmp_path / "f.csv"))
+    rows = list(csv.DictReader((tmp_path / "f.csv").read_text().splitlines()))
+    assert len(rows) == len(rep.rows) and float(rows[0]["exact"]) == rep.rows[0]["exact"]

@@ -274,7 +274,9 @@ def test_outputs_csv_dict_plot(tmp_path):
     res.to_csv(str(tmp_path / "dense.csv"), dense=True)
     assert (tmp_path / "dense.csv").stat().st_size > 0
     json.dumps(res.to_dict(series=True))
-    res.plot(str(tmp_path / "run.png"))
+    from hapstab.plotting import save_plot
+    assert len(res.plot()) == 3
+    save_plot(res, str(tmp_path / "run.png"))
     assert (tmp_path / "run.png").stat().st_size > 1000
     with pytest.raises(ValueError):
         res.position[0, 0] = 1.0     # frozen arrays

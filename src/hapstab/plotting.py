@@ -88,21 +88,34 @@ def _figure(nrows: int = 1, figsize: tuple[float, float] = (7, 4.5)) -> tuple[An
     return plt.subplots(nrows, 1, figsize=figsize, sharex=nrows > 1, squeeze=False)
 
 
-def plot_simulation(res: Any, path: str | None = None) -> Any:
+def _panels(ax: Any, n: int, figsize: tuple[float, float]) -> np.ndarray:
+    """``n`` stacked axes: the ones given (a sequence of n) or a new figure's."""
+    if ax is None:
+        return _figure(n, figsize)[1][:, 0]
+    axs = np.ravel(np.asarray(ax, dtype=object))
+    if axs.size != n:
+        from hapstab.errors import ModelError
+
+        raise ModelError(f"ax: {n} axes are needed here, one per panel; got {axs.size}")
+    return axs
+
+
+def plot_simulation(res: Any, ax: Any = None) -> Any:
     """Position, controller force and port energy (passivity observer) against time.
 
     Parameters
     ----------
     res : SimulationResult
-    path : str, optional
-        Save the figure there (format from the extension) and close it.
+        The run.
+    ax : sequence of 3 matplotlib Axes, optional
+        Where to draw the three panels; a new figure when omitted.
 
     Returns
     -------
-    matplotlib Figure (None once saved to ``path``).
+    array of 3 matplotlib Axes
     """
-    fig, axs = _figure(3, (7, 7))
-    ax1, ax2, ax3 = axs[:, 0]
+    axs = _panels(ax, 3, (7, 7))
+    ax1, ax2, ax3 = axs
     for j, lab in enumerate(res.labels):
         if res.dense_time is not None:
             ax1.plot(res.dense_time, res.dense_position[:, j], "-", lw=0.8, label=f"x {lab}")
@@ -118,41 +131,34 @@ def plot_simulation(res: Any, path: str | None = None) -> Any:
     ax1.set_title(f"K = {res.stiffness:g} N/m, T = {res.period * 1e3:g} ms, n = {res.delay_samples}: "
                   f"{v.verdict}: {v.behaviour} ({v.confidence} confidence, rate "
                   f"{v.growth_rate:.3g} 1/s)", fontsize=9)
-    for ax in (ax1, ax2, ax3):
-        ax.grid(True, alpha=0.3)
-        ax.legend(fontsize=8, loc="best")
-    fig.tight_layout()
-    if path:
-        import matplotlib.pyplot as plt
-
-        try:
-            save_figure(fig, path)
-        finally:
-            plt.close(fig)
-        return None
-    return fig
+    for a in axs:
+        a.grid(True, alpha=0.3)
+        a.legend(fontsize=8, loc="best")
+    if ax is None:
+        ax1.figure.tight_layout()
+    return axs
 
 
-def plot_reproduction(rows: list[dict[str, Any]], title: str, equations: tuple[str, str],
-                      paths: list[str]) -> None:
+def plot_reproduction(res: Any, ax: Any = None) -> Any:
     """K_max against T like the paper's Fig. 5 / Fig. 6: theoretical lines (solid),
     simulation stars, exact boundary (dashed) and circle criterion (dotted) if present;
     non-delayed blue, delayed red.
 
     Parameters
     ----------
-    rows : list of dict
-        ``period_s, delay_samples, theory, exact, simulation`` (and ``circle``).
-    title : str
-    equations : (str, str)
-        Labels of the theory for the non-delayed and delayed loop, e.g. ("(13)", "(18)").
-    paths : list of str
-        Files to write (PNG, SVG, ...).
-    """
-    import matplotlib.pyplot as plt
+    res : Reproduction
+        The figure's points (rows with ``period_s, delay_samples, theory, exact,
+        simulation`` and maybe ``circle``) and its title and equations.
+    ax : matplotlib Axes, optional
+        Where to draw; a new figure when omitted.
 
-    fig, axs = _figure(1, (7, 4.8))
-    ax = axs[0, 0]
+    Returns
+    -------
+    matplotlib Axes
+    """
+    new = ax is None
+    ax = _figure(1, (7, 4.8))[1][0, 0] if new else ax
+    rows, equations = list(res.rows), res.figure.equations
     delays = sorted({r["delay_samples"] for r in rows})
     colors = ["tab:blue", "tab:red", "tab:green", "tab:purple"]
     for i, n in enumerate(delays):
@@ -168,15 +174,97 @@ def plot_reproduction(rows: list[dict[str, Any]], title: str, equations: tuple[s
     ax.set_xlabel("sampling period T (ms)")
     ax.set_ylabel("K_max (N/m)")
     ax.set_yscale("log")
-    ax.set_title(title, fontsize=10)
+    ax.set_title(res.figure.title, fontsize=10)
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=7, ncol=2)
-    fig.tight_layout()
+    if new:
+        ax.figure.tight_layout()
+    return ax
+
+
+def plot_audit(res: Any, ax: Any = None) -> Any:
+    """K_max of every condition of an audit (bars, log scale), the exact limit as a
+    vertical line; a condition that promises more than the exact limit is red.
+
+    Parameters
+    ----------
+    res : AuditResult
+        The audit.
+    ax : matplotlib Axes, optional
+        Where to draw; a new figure when omitted.
+
+    Returns
+    -------
+    matplotlib Axes
+    """
+    ax = _axes(ax)
+    rows = [r for r in res.rows if np.isfinite(r.critical_stiffness) and r.critical_stiffness > 0]
+    y = np.arange(len(rows))
+    ax.barh(y, [r.critical_stiffness for r in rows],
+            color=["tab:red" if r.flag else "tab:blue" for r in rows])
+    ax.set_yticks(y, [r.label for r in rows], fontsize=8)
+    if np.isfinite(res.exact_kmax) and res.exact_kmax > 0:
+        ax.axvline(res.exact_kmax, color="k", lw=1.0, ls="--",
+                   label=f"exact K_max = {res.exact_kmax:.6g} N/m")
+        ax.legend(fontsize=8)
+    ax.set_xscale("log")
+    ax.set_xlabel("K_max (N/m)")
+    ax.set_title(f"audit, {res.kind}: T = {res.period * 1e3:g} ms, n = {res.delay_samples:g} "
+                 "(red: promises more than the exact limit)", fontsize=9)
+    ax.grid(True, axis="x", which="both", alpha=0.3)
+    return ax
+
+
+def plot_best_damping(res: Any, ax: Any = None) -> Any:
+    """K_max against the virtual damping B, with the best B* marked.
+
+    Parameters
+    ----------
+    res : BestDampingResult
+        The scan.
+    ax : matplotlib Axes, optional
+        Where to draw; a new figure when omitted.
+
+    Returns
+    -------
+    matplotlib Axes
+    """
+    ax = _axes(ax)
+    ax.plot(res.B_curve, res.K_curve, "-", color="tab:blue", lw=1.2)
+    ax.plot([res.damping], [res.critical_stiffness], "o", color="k",
+            label=f"B* = {res.damping:.6g} N*s/m, K* = {res.critical_stiffness:.6g} N/m")
+    ax.set_xlabel("virtual damping B (N*s/m)")
+    ax.set_ylabel("K_max (N/m)")
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=8)
+    return ax
+
+
+def save_plot(res: Any, path: str, **kw: Any) -> str:
+    """Draw ``res.plot()`` on a new figure, write it to ``path`` and close it.
+
+    Parameters
+    ----------
+    res : result object
+        Anything with a ``plot(ax=None)`` returning its axes.
+    path : str
+        The file; its extension names the format (:data:`FORMATS`).
+    **kw
+        Passed to ``savefig`` (e.g. ``dpi``).
+
+    Returns
+    -------
+    str
+        ``path``.
+    """
+    import matplotlib.pyplot as plt
+
+    fig = np.ravel(np.asarray(res.plot(), dtype=object))[0].figure
     try:
-        for p in paths:
-            save_figure(fig, p)
+        save_figure(fig, path, **kw)
     finally:
         plt.close(fig)
+    return path
 
 
 def plot_positive_real(res: Any, ax: Any = None) -> Any:

@@ -4,35 +4,81 @@ JSON-ready dict; ``.plot()`` hands off to :mod:`hapstab.plotting`."""
 from __future__ import annotations
 
 import html
+import json
 import math
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
-__all__ = ["Result", "StabilityResult", "CriticalStiffnessResult", "BoundaryResult", "jsonable"]
+__all__ = ["Result", "StabilityResult", "CriticalStiffnessResult", "BoundaryResult", "jsonable",
+           "dumps", "INFINITE"]
+
+
+#: The key under which :func:`jsonable` lists the values it wrote as ``null`` because
+#: they were infinite: ``{"path": 1}`` for +inf, ``-1`` for -inf (paths join keys and
+#: list indices with "/", e.g. ``"stable_intervals/0/1"``).
+INFINITE = "infinite"
 
 
 def jsonable(x: Any) -> Any:
-    """Convert numpy scalars/arrays, tuples and non-finite floats for JSON."""
+    """Convert numpy scalars/arrays, tuples and non-finite floats for strict JSON.
+
+    NaN becomes ``null``; an infinity becomes ``null`` and, when ``x`` is a dict, its
+    path is flagged under :data:`INFINITE` with its sign (so ``K_max = inf`` reads
+    ``{"critical_stiffness": null, "infinite": {"critical_stiffness": 1}}``). Complex
+    numbers become ``{"re": ..., "im": ...}``.
+
+    Parameters
+    ----------
+    x : object
+        A dict (a result's fields), list, scalar or array.
+
+    Returns
+    -------
+    object
+        Made of dict, list, str, int, float (finite), bool and None only.
+    """
+    found: dict[str, int] = {}
+    out = _convert(x, "", found)
+    if found and isinstance(out, dict):
+        out[INFINITE] = {**out.get(INFINITE, {}), **found}
+    return out
+
+
+def _convert(x: Any, path: str, found: dict[str, int]) -> Any:
+    at = (lambda k: f"{path}/{k}" if path else str(k))  # noqa: E731
     if isinstance(x, dict):
-        return {k: jsonable(v) for k, v in x.items()}
+        return {k: _convert(v, at(k), found) for k, v in x.items()}
     if isinstance(x, (list, tuple)):
-        return [jsonable(v) for v in x]
+        return [_convert(v, at(i), found) for i, v in enumerate(x)]
     if isinstance(x, np.ndarray):
-        return jsonable(x.tolist())
+        return _convert(x.tolist(), path, found)
     if isinstance(x, (np.floating, float)):
         v = float(x)
-        if math.isnan(v):
-            return None
         if math.isinf(v):
-            return "inf" if v > 0 else "-inf"
-        return v
-    if isinstance(x, np.integer):
-        return int(x)
-    if isinstance(x, complex):
-        return {"re": x.real, "im": x.imag}
+            found[path] = 1 if v > 0 else -1
+        return v if math.isfinite(v) else None
+    if isinstance(x, (np.integer, np.bool_)):
+        return x.item()
+    if isinstance(x, (complex, np.complexfloating)):
+        return {"re": _convert(x.real, at("re"), found), "im": _convert(x.imag, at("im"), found)}
     return x
+
+
+def dumps(data: Any) -> str:
+    """Strict JSON text (never NaN or Infinity) of ``data`` after :func:`jsonable`.
+
+    Parameters
+    ----------
+    data : object
+        A result's ``to_dict()`` or any dict of plain values.
+
+    Returns
+    -------
+    str
+    """
+    return json.dumps(jsonable(data), allow_nan=False)
 
 
 class Result:

@@ -109,6 +109,40 @@ class AuditResult(Result):
                          "exact_kmax": self.exact_kmax, "passivity_kmax": self.passivity_kmax,
                          "flagged": list(self.flagged), "rows": [r.to_dict() for r in self.rows]})
 
+    def to_csv(self, path: str) -> None:
+        """Write one row per condition: key, label, critical_stiffness (N/m; ``inf``
+        as written by Python), claims, exact_verdict, flag.
+
+        Parameters
+        ----------
+        path : str
+            The file to write.
+        """
+        import csv
+
+        with open(path, "w", newline="") as fh:
+            w = csv.writer(fh)
+            w.writerow(["key", "label", "critical_stiffness", "claims", "exact_verdict", "flag"])
+            for r in self.rows:
+                w.writerow([r.key, r.label, repr(float(r.critical_stiffness)), r.claims,
+                            r.exact_verdict, r.flag or ""])
+
+    def plot(self, ax: Any = None) -> Any:
+        """K_max of every condition as a bar, the exact limit as a line, broken
+        promises in red (see :func:`hapstab.plotting.plot_audit`).
+
+        Parameters
+        ----------
+        ax : matplotlib Axes, optional
+            Where to draw; a new figure when omitted.
+
+        Returns
+        -------
+        matplotlib Axes
+        """
+        from hapstab.plotting import plot_audit
+        return plot_audit(self, ax)
+
 
 
 

@@ -290,6 +290,37 @@ class BestDampingResult(Result):
                          "reason": self.reason,
                          "curve": {"virtual_damping": self.B_curve, "critical_stiffness": self.K_curve}})
 
+    def to_csv(self, path: str) -> None:
+        """Write the scanned curve: virtual_damping (N*s/m), critical_stiffness (N/m).
+
+        Parameters
+        ----------
+        path : str
+            The file to write.
+        """
+        import csv
+
+        with open(path, "w", newline="") as fh:
+            w = csv.writer(fh)
+            w.writerow(["virtual_damping", "critical_stiffness"])
+            for B, K in zip(self.B_curve, self.K_curve, strict=True):
+                w.writerow([repr(float(B)), repr(float(K))])
+
+    def plot(self, ax: Any = None) -> Any:
+        """K_max against the virtual damping, with B* marked.
+
+        Parameters
+        ----------
+        ax : matplotlib Axes, optional
+            Where to draw; a new figure when omitted.
+
+        Returns
+        -------
+        matplotlib Axes
+        """
+        from hapstab.plotting import plot_best_damping
+        return plot_best_damping(self, ax)
+
 
 # ------------------------------------------------------------------- the front
 def stability_region(loop: Loop, K: tuple[float, float], B: tuple[float, float],

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 from typing import Any
 
 import click
@@ -19,6 +18,7 @@ from hapstab.cli.options import (
     rich_table,
 )
 from hapstab.errors import HapstabError
+from hapstab.results import dumps
 
 
 @click.group()
@@ -156,7 +156,7 @@ def demo(as_json: bool) -> None:
                              "equation": eq, "exact": float(res.critical_stiffness[i, j])})
         data[title] = rows
     if as_json:
-        click.echo(json.dumps(data))
+        click.echo(dumps(data))
         return
     from rich.console import Console
     from rich.table import Table

@@ -3,7 +3,6 @@ peb, and the output (one JSON object, or a table)."""
 
 from __future__ import annotations
 
-import json
 import math
 from collections.abc import Callable
 from typing import Any
@@ -14,6 +13,7 @@ from hapstab.errors import HapstabError
 from hapstab.models.controllers import SpringDamper
 from hapstab.models.loops import HapticLoop, TeleoperationLoop
 from hapstab.models.parts import Device, parse_impedance
+from hapstab.results import dumps
 
 
 class Number(click.ParamType):
@@ -194,7 +194,7 @@ LOOP_KINDS: dict[str, Callable[..., HapticLoop | TeleoperationLoop]] = {
 def emit(data: dict[str, Any], as_json: bool, table: Callable[[], None]) -> None:
     """One JSON object on stdout, or a readable table."""
     if as_json:
-        click.echo(json.dumps(data))
+        click.echo(dumps(data))
     else:
         table()
 

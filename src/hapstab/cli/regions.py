@@ -64,7 +64,7 @@ def _region_command(kind: str) -> None:
              csv_path: str | None, as_json: bool, **kw: Any) -> None:
         from hapstab.analysis.methods import METHODS
         from hapstab.analysis.regions import stability_region
-        from hapstab.plotting import save_figure
+        from hapstab.plotting import save_plot
 
         _equal_controllers(kw)
         K, B = _range(K_spec, "--K"), _range(B_spec, "--B", signed=True)
@@ -77,8 +77,7 @@ def _region_command(kind: str) -> None:
         if csv_path:
             res.to_csv(csv_path)
         if plot_path:
-            ax = res.plot()
-            save_figure(ax.figure, plot_path, dpi=120, bbox_inches="tight")
+            save_plot(res, plot_path, dpi=120, bbox_inches="tight")
         d = res.to_dict()
         kmax = res.kmax()
         rows = [("window", f"K in [{K[0]:g}, {K[1]:g}] N/m, B in [{B[0]:g}, {B[1]:g}] N*s/m"),

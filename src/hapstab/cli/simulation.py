@@ -3,7 +3,6 @@
 
 from __future__ import annotations
 
-import json
 import math
 import sys
 from collections.abc import Callable, Iterator
@@ -22,6 +21,7 @@ from hapstab.cli.options import (
     parse_periods,
     rich_table,
 )
+from hapstab.results import dumps
 
 # ------------------------------------------------------------------ simulate
 #: What ``stability`` describes beside a run: the loop itself, or its linearisation.
@@ -109,8 +109,9 @@ def _write(res: Any, csv_path: str | None, plot_path: str | None) -> list[str]:
         res.to_csv(csv_path)
         files.append(csv_path)
     if plot_path:
-        res.plot(plot_path)
-        files.append(plot_path)
+        from hapstab.plotting import save_plot
+
+        files.append(save_plot(res, plot_path))
     return files
 
 
@@ -203,7 +204,7 @@ def reproduce_cmd(figure: str, out_dir: str, periods: str | None, as_json: bool)
             files += write_figure(rep, out_dir)
             reps.append(rep)
     if as_json:
-        click.echo(json.dumps({"figures": [r.to_dict() for r in reps], "files": files,
+        click.echo(dumps({"figures": [r.to_dict() for r in reps], "files": files,
                                "worst_simulation_error": max(r.worst_simulation_error()
                                                              for r in reps)}))
         return

@@ -89,6 +89,36 @@ class Reproduction(Result):
         return jsonable({"figure": self.figure.name, "title": self.figure.title,
                          "rows": [dict(r) for r in self.rows]})
 
+    def to_csv(self, path: str) -> None:
+        """Write the points as CSV, one row per (delay, period), columns :attr:`columns`.
+
+        Parameters
+        ----------
+        path : str
+            The file to write.
+        """
+        with open(path, "w", newline="") as fh:
+            w = csv.writer(fh)
+            w.writerow(self.columns)
+            for r in self.rows:
+                w.writerow([repr(float(r[c])) if c != "delay_samples" else int(r[c])
+                            for c in self.columns])
+
+    def plot(self, ax: Any = None) -> Any:
+        """The figure like the paper's (see :func:`hapstab.plotting.plot_reproduction`).
+
+        Parameters
+        ----------
+        ax : matplotlib Axes, optional
+            Where to draw; a new figure when omitted.
+
+        Returns
+        -------
+        matplotlib Axes
+        """
+        from hapstab.plotting import plot_reproduction
+        return plot_reproduction(self, ax)
+
     def worst_simulation_error(self) -> float:
         """max |simulation / exact - 1| over the points with finite exact K_max."""
         errs = [abs(r["simulation"] / r["exact"] - 1) for r in self.rows
@@ -168,7 +198,7 @@ def write_figure(rep: Reproduction, out_dir: str) -> list[str]:
     AnalysisError
         If ``out_dir`` cannot be created or written.
     """
-    from hapstab.plotting import plot_reproduction
+    from hapstab.plotting import save_figure
 
     try:
         os.makedirs(out_dir, exist_ok=True)
@@ -177,13 +207,15 @@ def write_figure(rep: Reproduction, out_dir: str) -> list[str]:
     base = os.path.join(out_dir, rep.figure.name)
     paths = [base + ".csv", base + ".png", base + ".svg"]
     try:
-        with open(paths[0], "w", newline="") as fh:
-            w = csv.writer(fh)
-            w.writerow(rep.columns)
-            for r in rep.rows:
-                w.writerow([repr(float(r[c])) if c != "delay_samples" else int(r[c])
-                            for c in rep.columns])
-        plot_reproduction(list(rep.rows), rep.figure.title, rep.figure.equations, paths[1:])
+        rep.to_csv(paths[0])
+        import matplotlib.pyplot as plt
+
+        ax = rep.plot()
+        try:
+            for p in paths[1:]:
+                save_figure(ax.figure, p)
+        finally:
+            plt.close(ax.figure)
     except OSError as e:
         raise AnalysisError(f"--out = {out_dir!r}: cannot write ({e.strerror})") from None
     return paths

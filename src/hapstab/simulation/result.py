@@ -132,7 +132,18 @@ class SimulationResult(Result):
         data = np.column_stack(list(cols.values()))
         np.savetxt(path, data, delimiter=",", header=",".join(cols), comments="", fmt="%.17g")
 
-    def plot(self, path: str | None = None) -> Any:
-        """Position, controller force and port energy against time (matplotlib figure)."""
+    def plot(self, ax: Any = None) -> Any:
+        """Position, controller force and port energy against time.
+
+        Parameters
+        ----------
+        ax : sequence of 3 matplotlib Axes, optional
+            Where to draw the three panels; a new figure when omitted.
+
+        Returns
+        -------
+        array of 3 matplotlib Axes
+            (:func:`hapstab.plotting.save_plot` writes the figure to a file.)
+        """
         from hapstab.plotting import plot_simulation
-        return plot_simulation(self, path)
+        return plot_simulation(self, ax)
