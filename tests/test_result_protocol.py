@@ -4,9 +4,8 @@ notebook; a result with a picture draws it with plot(ax=None) and returns the ax
 a result with a table writes it with to_csv."""
 
 import csv
-import math
-
 import json
+import math
 
 import numpy as np
 import pytest
@@ -65,7 +64,7 @@ def test_plot_returns_the_axes_and_draws_on_given_ones(res):
     axes = np.ravel(np.asarray(res.plot(), dtype=object))
     assert all(a.has_data() for a in axes)
     n = axes.size
-    fig, given = plt.subplots(n, 1, squeeze=False)
+    _fig, given = plt.subplots(n, 1, squeeze=False)
     again = np.ravel(np.asarray(res.plot(given[:, 0] if n > 1 else given[0, 0]), dtype=object))
     assert list(again) == list(given[:, 0]) and all(a.has_data() for a in again)
     plt.close("all")

@@ -8,6 +8,7 @@ Haptic Interaction and Teleoperation", IEEE Haptics Symposium 2014.
 from hapstab.analysis.audit import AuditResult, audit
 from hapstab.analysis.circle import circle_test, loop_inverse
 from hapstab.analysis.closed_forms import colgate, eq18, eq29, eq34, gil, gil2004
+from hapstab.analysis.damping import BestDampingResult, best_damping
 from hapstab.analysis.exact.core import stability
 from hapstab.analysis.methods import boundary, critical_stiffness, methods_for
 from hapstab.analysis.passivity import PassivityResult, sampled_passivity
@@ -17,12 +18,7 @@ from hapstab.analysis.positive_real import (
     circle_criterion,
     positive_real,
 )
-from hapstab.analysis.regions import (
-    BestDampingResult,
-    RegionResult,
-    best_damping,
-    stability_region,
-)
+from hapstab.analysis.regions import RegionResult, stability_region
 from hapstab.engine.system import SampledSystem, build
 from hapstab.errors import AnalysisError, HapstabError, ModelError
 from hapstab.models.controllers import DiscreteController, SpringDamper

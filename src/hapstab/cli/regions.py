@@ -106,7 +106,7 @@ def _best_command(kind: str) -> None:
                   help="Smallest B to search, <= 0 (default: where K_max falls to 0 going "
                        "down; 0 searches B >= 0 only).")
     def _cmd(B_max: float | None, B_min: float | None, as_json: bool, **kw: Any) -> None:
-        from hapstab.analysis.regions import best_damping
+        from hapstab.analysis.damping import best_damping
 
         _equal_controllers(kw)
         if B_min is not None and B_min > 0:

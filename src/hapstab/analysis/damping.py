@@ -1,0 +1,177 @@
+"""The virtual damping that lets a loop render the stiffest wall: B* maximising the
+exact K_max(B), found on the batched K_max-over-B of :mod:`hapstab.analysis.regions`.
+
+References
+----------
+Gil, Avello, Rubio, Florez 2004; Hulin, Preusche, Hirzinger 2008 (K-B charts);
+the paper, eq. (23) for H(z).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from hapstab.analysis.regions import Loop, check_equal_gains, kmax_over_B
+from hapstab.errors import AnalysisError, check_real
+from hapstab.results import Result, jsonable
+
+__all__ = ["BestDampingResult", "best_damping"]
+
+
+@dataclass(frozen=True)
+class BestDampingResult(Result):
+    """The virtual damping that maximises K_max: "render at most K* N/m, with B* N*s/m".
+
+    Attributes
+    ----------
+    damping : float
+        B* in N*s/m.
+    critical_stiffness : float
+        K* = K_max(B*) in N/m.
+    critical_stiffness_at_zero_damping : float
+        K_max(0), for comparison.
+    reason : str
+        How B* was found, in words.
+    B_curve, K_curve : arrays
+        K_max over the scanned dampings (N*s/m, N/m).
+    """
+
+    damping: float
+    critical_stiffness: float
+    critical_stiffness_at_zero_damping: float
+    reason: str
+    B_curve: np.ndarray = field(repr=False)
+    K_curve: np.ndarray = field(repr=False)
+
+    def to_dict(self) -> dict[str, Any]:
+        return jsonable({"virtual_damping": self.damping, "critical_stiffness": self.critical_stiffness,
+                         "critical_stiffness_at_zero_damping": self.critical_stiffness_at_zero_damping,
+                         "reason": self.reason,
+                         "curve": {"virtual_damping": self.B_curve, "critical_stiffness": self.K_curve}})
+
+    def to_csv(self, path: str) -> None:
+        """Write the scanned curve: virtual_damping (N*s/m), critical_stiffness (N/m).
+
+        Parameters
+        ----------
+        path : str
+            The file to write.
+        """
+        import csv
+
+        with open(path, "w", newline="") as fh:
+            w = csv.writer(fh)
+            w.writerow(["virtual_damping", "critical_stiffness"])
+            for B, K in zip(self.B_curve, self.K_curve, strict=True):
+                w.writerow([repr(float(B)), repr(float(K))])
+
+    def plot(self, ax: Any = None) -> Any:
+        """K_max against the virtual damping, with B* marked.
+
+        Parameters
+        ----------
+        ax : matplotlib Axes, optional
+            Where to draw; a new figure when omitted.
+
+        Returns
+        -------
+        matplotlib Axes
+        """
+        from hapstab.plotting import plot_best_damping
+        return plot_best_damping(self, ax)
+
+
+def best_damping(loop: Loop, B_max: float | None = None, resolution: int = 64,
+                 B_min: float | None = None) -> BestDampingResult:
+    """The virtual damping B* that maximises K_max, and K* = K_max(B*).
+
+    K_max(B) is computed exactly on a grid of B (batched), then refined by bounded
+    Brent iterations around the best grid point. K_max(B) often has a kink at its
+    maximum (two crossing branches meet), which Brent's method handles.
+
+    The search covers both signs of B by default. Negative virtual damping usually
+    lowers K_max (it takes damping from the device: at n = 0, K_max ~ 2(b - |B|)/T),
+    but not always: with delay, B (z - 1)/(Tz) z^-n is rotated by the delay's phase,
+    and at a device-operator resonance where that rotation exceeds 90 degrees a
+    *negative* B damps (e.g. a 10 g device on a 100 N/m operator with n = 6 has its
+    largest K_max at B < 0). So the lower end is found like the upper one, and a
+    caller who cannot use B < 0 passes ``B_min=0``.
+
+    Parameters
+    ----------
+    loop : HapticLoop or TeleoperationLoop
+        C_m = C_s for teleoperation; the loop's own K and B are ignored.
+    B_max : float, optional
+        Upper end of the search, > 0; default: where K_max first falls to 0 (found
+        by doubling from 10 b).
+    resolution : int
+        Grid points before refinement (B = 0 is always added).
+    B_min : float, optional
+        Lower end of the search, <= 0; default: where K_max first falls to 0 going
+        down (found by doubling from -10 b). ``0`` restricts the search to B >= 0.
+
+    Returns
+    -------
+    BestDampingResult
+        ``B_curve``/``K_curve`` span [B_min, B_max]; the reason says when B* < 0,
+        and when K_max = 0 for every B searched (then B* = 0 is reported).
+
+    Raises
+    ------
+    AnalysisError
+        Controllers that are not equal spring-dampers, or ``B_min > 0``.
+    ModelError
+        ``B_max <= 0`` or a non-finite bound.
+    """
+    from scipy.optimize import minimize_scalar
+
+    b = check_equal_gains(loop)
+
+    def kmax(Bs: np.ndarray) -> np.ndarray:
+        return np.array([r["kmax"] for r in kmax_over_B(loop, Bs)])
+
+    def first_zero(start: float) -> float:
+        """Double ``start`` until K_max there is 0 (at most 30 times)."""
+        B_end = start
+        for _ in range(30):
+            if kmax(np.array([B_end]))[0] == 0.0:
+                break
+            B_end *= 2
+        return B_end
+
+    if B_max is None:
+        B_max = first_zero(max(10 * b, 1e-3))
+    else:
+        B_max = check_real("B_max", B_max, positive=True)
+    if B_min is None:
+        B_min = first_zero(-max(10 * b, 1e-3))
+    else:
+        B_min = check_real("B_min", B_min)
+        if B_min > 0:
+            raise AnalysisError(f"B_min = {B_min}: must be <= 0 (the search always includes B = 0)")
+    Bs = np.unique(np.concatenate([np.linspace(B_min, B_max, int(resolution)), [0.0]]))
+    Ks = kmax(Bs)
+    i = int(np.argmax(Ks))
+    lo, hi = Bs[max(i - 1, 0)], Bs[min(i + 1, Bs.size - 1)]
+    best_B, best_K = float(Bs[i]), float(Ks[i])
+    if hi > lo and math.isfinite(best_K):
+        res = minimize_scalar(lambda x: -kmax(np.array([x]))[0], bounds=(lo, hi), method="bounded",
+                              options={"xatol": 1e-10 * (B_max - B_min)})
+        if -res.fun > best_K:
+            best_B, best_K = float(res.x), float(-res.fun)
+    K0 = float(Ks[int(np.flatnonzero(Bs == 0.0)[0])])
+    if best_K == 0.0:
+        best_B = 0.0
+        reason = (f"unstable for every K > 0 at every B in [{B_min:.6g}, {B_max:.6g}] N*s/m: no "
+                  "virtual damping in this range makes the loop stable (B* = 0 reported)")
+    else:
+        reason = (f"render at most K* = {best_K:.6g} N/m with B* = {best_B:.6g} N*s/m "
+                  f"(K_max = {K0:.6g} N/m at B = 0)")
+    if best_B < 0:
+        reason += ("; B* < 0: negative virtual damping is best here (with this delay and these "
+                   "terminations it damps at the critical frequency; it is not passive)")
+    return BestDampingResult(best_B, best_K, K0, reason, Bs, Ks)
