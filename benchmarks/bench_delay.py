@@ -89,7 +89,7 @@ def main() -> None:
         for name, loop in loops(n).items():
             N = build(loop).order
             rep = 5 if n <= 300 else 3
-            k = exact_kmax_batch(loop, intervals=False)[0]["kmax"]
+            k = exact_kmax_batch(loop, intervals=False)[0].kmax
             t_fast = median_time(partial(exact_kmax_batch, loop, intervals=False), rep)
             t_full = median_time(partial(h.critical_stiffness, loop), max(1, rep // 2))
             tracemalloc.start()

@@ -16,8 +16,8 @@ from reference_data import ref
                                   h.paper_hve(damping=0.05, delay_samples=2)])
 def test_kmax_only_path_equals_full_path(loop):
     r = loop_response(loop, np.geomspace(1e-4, 2e-2, 9))
-    fast = [x["kmax"] for x in analyse(r, full=False)]
-    full = [x["kmax"] for x in analyse(r, full=True)]
+    fast = [x.kmax for x in analyse(r, full=False)]
+    full = [x.kmax for x in analyse(r, full=True)]
     np.testing.assert_allclose(fast, full, rtol=1e-12)
 
 
@@ -100,6 +100,6 @@ def test_a_crossing_inside_an_unresolved_zone_is_not_counted_twice():
     s = resp.scale[0]
     u1 = next(u for u, *_ in cross if abs(u * s - 45.69) < 0.1)
     res = _classify(resp, 0, anchor, cross, [(0.99 * u1, 1.01 * u1)], True)
-    ivs = res["intervals"]
+    ivs = res.intervals
     assert len(ivs) == 3 and ivs[1][1] == pytest.approx(0.99 * u1 * s, rel=1e-12)
-    assert ivs[2][0] == pytest.approx(127.345, rel=1e-5) and res["uncertain"]
+    assert ivs[2][0] == pytest.approx(127.345, rel=1e-5) and res.uncertain

@@ -132,7 +132,7 @@ def best_damping(loop: Loop, B_max: float | None = None, resolution: int = 64,
     b = check_equal_gains(loop)
 
     def kmax(Bs: np.ndarray) -> np.ndarray:
-        return np.array([r["kmax"] for r in kmax_over_B(loop, Bs)])
+        return np.array([r.kmax for r in kmax_over_B(loop, Bs)])
 
     def first_zero(start: float) -> float:
         """Double ``start`` until K_max there is 0 (at most 30 times)."""

@@ -126,7 +126,7 @@ def boundary(loop: HapticLoop | TeleoperationLoop, periods: Sequence[float] | np
         tmpl = loop.with_whole_delay(n, float(T[0]))
         if method == "exact":
             res = exact_kmax_batch(tmpl, T, intervals=False)
-            out[i] = [r["kmax"] for r in res]
+            out[i] = [r.kmax for r in res]
         else:
             f = _resolve(method)
             out[i] = [f(tmpl.replace(period=float(t)), **options).critical_stiffness for t in T]

@@ -33,6 +33,7 @@ from typing import Any
 import numpy as np
 
 from hapstab.analysis.exact.crossings import analyse, winding
+from hapstab.analysis.exact.stable_set import StableSet
 from hapstab.engine.frequency import loop_response, stack_responses
 from hapstab.engine.structure import structure_of
 from hapstab.engine.system import build
@@ -140,8 +141,23 @@ def d_decomposition(loop: Loop, n_theta: int = 4000) -> dict[str, Any]:
 
 
 def kmax_over_B(loop: Loop, Bs: Sequence[float] | np.ndarray,
-                intervals: bool = False) -> list[dict[str, Any]]:
-    """Exact crossing analysis for each virtual damping in ``Bs`` (batched)."""
+                intervals: bool = False) -> list[StableSet]:
+    """Exact crossing analysis for each virtual damping in ``Bs`` (batched).
+
+    Parameters
+    ----------
+    loop : HapticLoop or TeleoperationLoop
+        Equal spring-damper controllers; their K and B are replaced.
+    Bs : array of float
+        Virtual dampings in N*s/m.
+    intervals : bool
+        Every stable interval (True) or K_max alone (False).
+
+    Returns
+    -------
+    list of StableSet
+        One per damping.
+    """
     # one structure for every B (B enters only as beta = B/T): one batched analysis
     resps = [loop_response(with_gains(loop, 1.0, float(B))) for B in np.asarray(Bs, float)]
     return analyse(stack_responses(resps), full=intervals)
@@ -315,13 +331,13 @@ def stability_region(loop: Loop, K: tuple[float, float], B: tuple[float, float],
         raise AnalysisError(f"resolution = {resolution}: must be >= 2")
     Brows = np.linspace(B_lo, B_hi, n)
     rows = kmax_over_B(loop, Brows, intervals=True)
-    intervals = tuple(tuple((max(a, K_lo), min(b, K_hi)) for a, b in r["intervals"]
+    intervals = tuple(tuple((max(a, K_lo), min(b, K_hi)) for a, b in r.intervals
                             if b > K_lo and a < K_hi) for r in rows)
     Kg = np.linspace(K_lo, K_hi, n)
     KK, BB = np.meshgrid(Kg, Brows)
     exact = np.zeros(KK.shape, bool)
     for i, r in enumerate(rows):
-        for a, b in r["intervals"]:
+        for a, b in r.intervals:
             exact[i] |= (Kg > a) & (Kg < b)
     if np.any(Kg == 0):
         # K = 0 itself (the intervals are for K > 0): the certified count at K = 0
@@ -333,7 +349,7 @@ def stability_region(loop: Loop, K: tuple[float, float], B: tuple[float, float],
     margin = 1e-3 * (K_hi - K_lo)
     near = np.zeros(KK.shape, bool)
     for i, r in enumerate(rows):
-        for e in {e for iv in r["intervals"] for e in iv if math.isfinite(e)}:
+        for e in {e for iv in r.intervals for e in iv if math.isfinite(e)}:
             near[i] |= np.abs(Kg - e) <= margin
     bad = (exact != grid) & ~near
     agreement = {"compared": int((~near).sum()), "disagree": int(bad.sum()),

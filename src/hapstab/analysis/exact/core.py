@@ -14,11 +14,11 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from typing import Any
 
 import numpy as np
 
 from hapstab.analysis.exact.crossings import analyse, winding
+from hapstab.analysis.exact.stable_set import StableSet
 from hapstab.engine.frequency import LoopResponse, loop_response
 from hapstab.engine.system import build
 from hapstab.models.controllers import SpringDamper
@@ -35,7 +35,7 @@ MARGINAL_TOL = POLE_ON_CIRCLE
 
 def exact_kmax_batch(loop: HapticLoop | TeleoperationLoop,
                      periods: Sequence[float] | np.ndarray | None = None,
-                     intervals: bool = True) -> list[dict[str, Any]]:
+                     intervals: bool = True) -> list[StableSet]:
     """Exact K_max (and the stable set in K) of ``loop`` at each sampling period.
 
     Parameters
@@ -49,8 +49,8 @@ def exact_kmax_batch(loop: HapticLoop | TeleoperationLoop,
 
     Returns
     -------
-    list of dict
-        See :func:`hapstab.crossings.analyse`.
+    list of StableSet
+        One per period (see :func:`hapstab.analysis.exact.crossings.analyse`).
     """
     return analyse(loop_response(loop, periods), full=intervals)
 
@@ -196,14 +196,14 @@ def exact_critical_stiffness(loop: HapticLoop | TeleoperationLoop) -> CriticalSt
     return _to_result(res, loop.period, loop.delay_in_samples)
 
 
-def _to_result(res: dict[str, Any], T: float, n: int | float) -> CriticalStiffnessResult:
-    kmax, th = res["kmax"], res["theta"]
+def _to_result(res: StableSet, T: float, n: int | float) -> CriticalStiffnessResult:
+    kmax, th = res.kmax, res.theta
     freq = th / (2 * math.pi * T) if np.isfinite(th) else math.nan
-    if kmax == 0.0 and res["outside_small_K"] < 0:
+    if kmax == 0.0 and res.outside_small_K < 0:
         reason = ("marginal for K -> 0+: a pole is on the unit circle to the model's accuracy "
                   "(e.g. an undamped termination), so no K > 0 can be certified stable")
     elif kmax == 0.0:
-        reason = (f"unstable for every K > 0: already as K -> 0+, {res['outside_small_K']} "
+        reason = (f"unstable for every K > 0: already as K -> 0+, {res.outside_small_K} "
                   "closed-loop pole(s) lie outside the unit circle (the virtual damping, delay "
                   "and terminations alone destabilise the loop)")
     elif math.isinf(kmax):
@@ -215,16 +215,16 @@ def _to_result(res: dict[str, Any], T: float, n: int | float) -> CriticalStiffne
                   f"Nyquist frequency, {1 / (2 * T):.6g} Hz)")
     else:
         reason = f"a complex pole pair crosses |z| = 1 at K_max, oscillating at {freq:.6g} Hz"
-    if len(res["intervals"]) > 1:
-        reason += f"; the stable set in K is not one interval ({len(res['intervals'])} intervals)"
-    if res["rigid"]:
-        reason += f"; {res['rigid']} rigid-body mode(s) at z = 1 (marginal, K-independent) divided out"
-    if res["uncertain"]:
-        spans = ", ".join(f"[{a:.8g}, {b:.8g}]" for a, b in res["uncertain"])
-        at = any(a == kmax for a, _ in res["uncertain"])
+    if len(res.intervals) > 1:
+        reason += f"; the stable set in K is not one interval ({len(res.intervals)} intervals)"
+    if res.rigid:
+        reason += f"; {res.rigid} rigid-body mode(s) at z = 1 (marginal, K-independent) divided out"
+    if res.uncertain:
+        spans = ", ".join(f"[{a:.8g}, {b:.8g}]" for a, b in res.uncertain)
+        at = any(a == kmax for a, _ in res.uncertain)
         reason += (f"; marginal within K in {spans}: a pole is within rounding of the unit "
                    "circle there, so the numerics cannot decide"
                    + (" (K_max is its lower end, the safe side)" if at else ""))
-    return CriticalStiffnessResult(kmax, "exact", res["intervals"], reason, T, n, freq,
-                                   {"rigid_body_modes": res["rigid"],
-                                    "uncertain_intervals": [list(iv) for iv in res["uncertain"]]})
+    return CriticalStiffnessResult(kmax, "exact", res.intervals, reason, T, n, freq,
+                                   {"rigid_body_modes": res.rigid,
+                                    "uncertain_intervals": [list(iv) for iv in res.uncertain]})

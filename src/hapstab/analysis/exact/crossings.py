@@ -65,6 +65,7 @@ from hapstab.analysis.exact.boxes import (
     _theta_floor,
     _trim,
 )
+from hapstab.analysis.exact.stable_set import StableSet, first_only, stable_set
 from hapstab.engine.frequency import LoopResponse
 from hapstab.errors import AnalysisError
 
@@ -334,7 +335,7 @@ def winding(resp: LoopResponse, items: np.ndarray, u: np.ndarray) -> np.ndarray:
 
 
 # ------------------------------------------------------------------ the analysis
-def analyse(resp: LoopResponse, full: bool = True) -> list[dict[str, Any]]:
+def analyse(resp: LoopResponse, full: bool = True) -> list[StableSet]:
     """Exact K_max and stable set in K for every item of ``resp``.
 
     Parameters
@@ -346,10 +347,8 @@ def analyse(resp: LoopResponse, full: bool = True) -> list[dict[str, Any]]:
 
     Returns
     -------
-    list of dict
-        ``kmax``, ``intervals``, ``theta`` (angle of the crossing at K_max, nan if
-        none), ``rigid``, ``outside_small_K`` (poles outside at K -> 0+),
-        ``uncertain`` (K-intervals the numerics could not resolve).
+    list of StableSet
+        One per item.
     """
     L = resp.size
     items = np.arange(L)
@@ -368,42 +367,25 @@ def analyse(resp: LoopResponse, full: bool = True) -> list[dict[str, Any]]:
     return out
 
 
-def _classify(resp: LoopResponse, i: int, anchor: int, cross, unsure, full: bool) -> dict[str, Any]:
+def _classify(resp: LoopResponse, i: int, anchor: int, cross, unsure, full: bool) -> StableSet:
     """Item i's stable set from the count of poles outside at U_LO (``anchor``, -1:
     not certified), its crossings and its unresolved zones."""
     s = float(resp.scale[i])
-    base = {"rigid": resp.rigid, "outside_small_K": anchor}
+    base: dict[str, Any] = {"rigid": resp.rigid, "outside_small_K": anchor}
     unc = _merge(unsure)
     if anchor < 0:
-        return {**base, "kmax": 0.0, "intervals": (), "theta": math.nan,
-                "uncertain": ((0.0, U_LO * s),)}
+        return StableSet(**base, kmax=0.0, intervals=(), theta=math.nan,
+                         uncertain=((0.0, U_LO * s),))
     # a crossing inside an unresolved zone is part of it: the count after the zone comes
     # from the argument principle above the zone, which accounts for all it holds
     inside = lambda u: any(a <= u <= b for a, b in unc)  # noqa: E731
     events = sorted([(u, u, t, d, m) for u, t, d, m in cross if not inside(u)] +
                     [(a, b, math.nan, 0, 0) for a, b in unc])
     if not full:
-        return {**base, **_first_only(events, anchor, s)}
+        return StableSet(**base, **first_only(events, anchor, s))
     counts = _counts(resp, i, events, anchor)
     _verify(resp, i, events, counts)
-    return {**base, **_stable_set(events, counts, s)}
-
-
-def _first_only(events: list[Any], anchor: int, s: float) -> dict[str, Any]:
-    """K_max alone: the first event above a loop stable at small K."""
-    if anchor > 0:
-        return {"kmax": 0.0, "intervals": (), "theta": math.nan, "uncertain": ()}
-    if not events:
-        return {"kmax": math.inf, "intervals": ((0.0, math.inf),), "theta": math.nan,
-                "uncertain": ()}
-    a, b, t, d, m = events[0]
-    if d < 0:
-        raise AnalysisError("crossing analysis: the first crossing points inwards while no "
-                            "pole is outside; please report this loop")
-    kmax = a * s
-    uncertain: tuple[tuple[float, float], ...] = ((a * s, b * s),) if m == 0 else ()
-    return {"kmax": kmax, "intervals": ((0.0, kmax),) if kmax > 0 else (), "theta": t,
-            "uncertain": uncertain}
+    return StableSet(**base, **stable_set(events, counts, s))
 
 
 def _counts(resp: LoopResponse, i: int, events: list[Any],
@@ -425,34 +407,6 @@ def _counts(resp: LoopResponse, i: int, events: list[Any],
         raise AnalysisError("crossing analysis: a negative count of unstable poles; please "
                             "report this loop")
     return counts
-
-
-def _stable_set(events: list[Any], counts: list[int | None],
-                s: float) -> dict[str, Any]:
-    """The gaps with no pole outside, merged into intervals of K; K_max is the first
-    if it starts at 0; the unresolved zones that border a stable (or unknown) gap."""
-    edges_lo = [0.0] + [b * s for a, b, *_ in events]
-    edges_hi = [a * s for a, b, *_ in events] + [math.inf]
-    thetas = [t for _, _, t, _, _ in events]
-    intervals: list[tuple[float, float]] = []
-    upper: list[int] = []
-    kmax, theta = 0.0, math.nan
-    for g, cnt in enumerate(counts):
-        if cnt == 0:
-            lo, hi = edges_lo[g], edges_hi[g]
-            if intervals and intervals[-1][1] == lo:
-                intervals[-1] = (intervals[-1][0], hi)
-                upper[-1] = g
-            else:
-                intervals.append((lo, hi))
-                upper.append(g)
-    if intervals and intervals[0][0] == 0.0:
-        kmax = intervals[0][1]
-        theta = thetas[upper[0]] if upper[0] < len(thetas) else math.nan
-    uncertain = tuple((a * s, b * s) for g, (a, b, t, d, m) in enumerate(events)
-                      if m == 0 and (counts[g] in (0, None) or counts[g + 1] in (0, None)))
-    return {"kmax": float(kmax), "intervals": tuple(intervals), "theta": theta,
-            "uncertain": uncertain}
 
 
 def _verify(resp: LoopResponse, i: int, events, counts) -> None:
