@@ -66,7 +66,11 @@ def test_reproduce_json_reduced_grid(tmp_path):
     assert r.exit_code == 0, r.output
     d = json.loads(r.stdout)          # --json: nothing but the JSON object on stdout
     assert [f["figure"] for f in d["figures"]] == ["fig5", "fig6"]
-    assert len(d["files"]) == 6 and d["worst_simulation_error"] < 0.01
+    assert len(d["files"]) == 7 and d["worst_simulation_error"] < 0.01
+    assert d["files"][-1].endswith("manifest.json")       # written last, naming the run
+    man = json.loads((tmp_path / "manifest.json").read_text())
+    assert man["figure"] == "all" and man["periods_s"] == [0.003, 0.008]
+    assert man["files"] == [f"fig{k}.{e}" for k in (5, 6) for e in ("csv", "png", "svg")]
     for name in ("fig5", "fig6"):
         for ext in ("csv", "png", "svg"):
             assert (tmp_path / f"{name}.{ext}").stat().st_size > 0

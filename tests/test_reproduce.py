@@ -45,7 +45,8 @@ def test_paper_grid_is_section_5():
 
 @pytest.mark.parametrize("fig", ["fig5", "fig6"])
 def test_csv_columns_match_library(full, fig):
-    csv_path, png, svg = full[fig]
+    csv_path, png, svg, manifest = full[fig]
+    assert manifest.endswith("manifest.json")
     rows = read_csv(csv_path)
     cols = ["period_s", "delay_samples", "theory", "exact", "simulation"]
     if "circle" in METHODS:
@@ -80,7 +81,7 @@ def test_reduced_grid_and_progress(tmp_path):
     assert rep.worst_simulation_error() < 0.01
     paths = write_figure(rep, str(tmp_path / "sub" / "dir"))
     assert all((tmp_path / "sub" / "dir" / f"fig6.{e}").stat().st_size > 0 for e in ("csv", "png", "svg"))
-    assert len(paths) == 3
+    assert len(paths) == 4 and paths[-1].endswith("manifest.json")
 
 
 def test_bad_inputs():

@@ -24,21 +24,32 @@ def _axes(ax: Any) -> Any:
 FORMATS = ("png", "svg", "svgz", "pdf", "eps", "ps", "jpg", "jpeg", "tif", "tiff", "webp")
 
 
-def save_figure(fig: Any, path: str, **kw: Any) -> None:
-    """Write ``fig`` to ``path`` in the format its extension names.
+def save_figure(fig: Any, path: Any, name: str = "plot", **kw: Any) -> None:
+    """Write ``fig`` to ``path`` (atomically) in the format its extension names.
+
+    Parameters
+    ----------
+    fig : matplotlib Figure
+        The figure.
+    path : str or os.PathLike
+        The file; its extension is the format, one of :data:`FORMATS`.
+    name : str
+        The option or argument that gave it, named in errors (``"--plot"``).
+    **kw
+        Passed to ``savefig`` (e.g. ``dpi``).
 
     Raises
     ------
-    ModelError
-        The extension is not one of :data:`FORMATS`.
+    OutputError
+        Not a format hapstab writes, an empty path, a missing folder, or a failed write
+        (the previous file, if any, is left as it was).
     """
-    from hapstab.errors import ModelError
+    from hapstab.outputs import check_target, writing
 
-    ext = path.rsplit(".", 1)[-1].lower() if "." in path.rsplit("/", 1)[-1] else ""
-    if ext not in FORMATS:
-        raise ModelError(f"plot = {path!r}: the extension {ext or '(none)'!r} is not a format "
-                         f"hapstab writes; allowed: {', '.join(FORMATS)}")
-    fig.savefig(path, **kw)
+    target = check_target(path, name, FORMATS)
+    ext = target.rsplit(".", 1)[-1].lower()
+    with writing(target, name, "wb") as fh:
+        fig.savefig(fh, format=ext, **kw)
 
 
 def _has_display() -> bool:
@@ -116,13 +127,18 @@ def plot_simulation(res: Any, ax: Any = None) -> Any:
     """
     axs = _panels(ax, 3, (7, 7))
     ax1, ax2, ax3 = axs
+    # an overflowed run: its values past 1e100 are left out (a gap); matplotlib cannot
+    # place ticks on an axis that spans ~1e300
+    fin = lambda a: np.where(np.abs(a) < 1e100, a, np.nan)  # noqa: E731
     for j, lab in enumerate(res.labels):
         if res.dense_time is not None:
-            ax1.plot(res.dense_time, res.dense_position[:, j], "-", lw=0.8, label=f"x {lab}")
+            ax1.plot(res.dense_time, fin(res.dense_position[:, j]), "-", lw=0.8, label=f"x {lab}")
         else:
-            ax1.plot(res.time, res.position[:, j], "-", lw=0.8, label=f"x {lab}")
-        ax2.step(res.time, res.controller_force[:, j], where="post", lw=0.8, label=f"u {lab}")
-        ax3.plot(res.time, res.port_energy[:, j], "-", lw=0.8, label=f"into controller from {lab}")
+            ax1.plot(res.time, fin(res.position[:, j]), "-", lw=0.8, label=f"x {lab}")
+        ax2.step(res.time, fin(res.controller_force[:, j]), where="post", lw=0.8,
+                 label=f"u {lab}")
+        ax3.plot(res.time, fin(res.port_energy[:, j]), "-", lw=0.8,
+                 label=f"into controller from {lab}")
     ax1.set_ylabel("position (m)")
     ax2.set_ylabel("controller force (N)")
     ax3.set_ylabel("port energy (J)")
@@ -240,15 +256,17 @@ def plot_best_damping(res: Any, ax: Any = None) -> Any:
     return ax
 
 
-def save_plot(res: Any, path: str, **kw: Any) -> str:
+def save_plot(res: Any, path: Any, name: str = "plot", **kw: Any) -> str:
     """Draw ``res.plot()`` on a new figure, write it to ``path`` and close it.
 
     Parameters
     ----------
     res : result object
         Anything with a ``plot(ax=None)`` returning its axes.
-    path : str
+    path : str or os.PathLike
         The file; its extension names the format (:data:`FORMATS`).
+    name : str
+        The option or argument that gave it, named in errors (``"--plot"``).
     **kw
         Passed to ``savefig`` (e.g. ``dpi``).
 
@@ -256,15 +274,23 @@ def save_plot(res: Any, path: str, **kw: Any) -> str:
     -------
     str
         ``path``.
+
+    Raises
+    ------
+    OutputError
+        See :func:`save_figure`; checked before anything is drawn.
     """
     import matplotlib.pyplot as plt
 
+    from hapstab.outputs import check_target
+
+    check_target(path, name, FORMATS)
     fig = np.ravel(np.asarray(res.plot(), dtype=object))[0].figure
     try:
-        save_figure(fig, path, **kw)
+        save_figure(fig, path, name, **kw)
     finally:
         plt.close(fig)
-    return path
+    return str(path)
 
 
 def plot_positive_real(res: Any, ax: Any = None) -> Any:

@@ -246,9 +246,20 @@ class BoundaryResult(Result):
                  "critical_stiffness": float(self.critical_stiffness[i, j])}
                 for i, n in enumerate(self.delays) for j, T in enumerate(self.periods)]
 
-    def to_csv(self, path: str) -> None:
+    def to_csv(self, path: Any) -> None:
+        """Write one row per (delay, period): period_s, delay_samples, critical_stiffness
+        (N/m; ``inf`` as Python writes it).
+
+        Parameters
+        ----------
+        path : str, os.PathLike or file object
+            Where to write (a path is written atomically, see :mod:`hapstab.outputs`).
+        """
         import csv
-        with open(path, "w", newline="") as fh:
+
+        from hapstab.outputs import writing
+
+        with writing(path, "path", newline="") as fh:
             w = csv.DictWriter(fh, ["period_s", "delay_samples", "critical_stiffness"])
             w.writeheader()
             w.writerows(self.rows())

@@ -109,18 +109,20 @@ class AuditResult(Result):
                          "exact_kmax": self.exact_kmax, "passivity_kmax": self.passivity_kmax,
                          "flagged": list(self.flagged), "rows": [r.to_dict() for r in self.rows]})
 
-    def to_csv(self, path: str) -> None:
+    def to_csv(self, path: Any) -> None:
         """Write one row per condition: key, label, critical_stiffness (N/m; ``inf``
         as written by Python), claims, exact_verdict, flag.
 
         Parameters
         ----------
-        path : str
-            The file to write.
+        path : str, os.PathLike or file object
+            Where to write (a path is written atomically, see :mod:`hapstab.outputs`).
         """
         import csv
 
-        with open(path, "w", newline="") as fh:
+        from hapstab.outputs import writing
+
+        with writing(path, "path", newline="") as fh:
             w = csv.writer(fh)
             w.writerow(["key", "label", "critical_stiffness", "claims", "exact_verdict", "flag"])
             for r in self.rows:

@@ -53,17 +53,19 @@ class BestDampingResult(Result):
                          "reason": self.reason,
                          "curve": {"virtual_damping": self.B_curve, "critical_stiffness": self.K_curve}})
 
-    def to_csv(self, path: str) -> None:
+    def to_csv(self, path: Any) -> None:
         """Write the scanned curve: virtual_damping (N*s/m), critical_stiffness (N/m).
 
         Parameters
         ----------
-        path : str
-            The file to write.
+        path : str, os.PathLike or file object
+            Where to write (a path is written atomically, see :mod:`hapstab.outputs`).
         """
         import csv
 
-        with open(path, "w", newline="") as fh:
+        from hapstab.outputs import writing
+
+        with writing(path, "path", newline="") as fh:
             w = csv.writer(fh)
             w.writerow(["virtual_damping", "critical_stiffness"])
             for B, K in zip(self.B_curve, self.K_curve, strict=True):

@@ -277,9 +277,20 @@ class RegionResult(Result):
             "overlays": {k: v for k, v in self.overlays.items()},
         })
 
-    def to_csv(self, path: str) -> None:
+    def to_csv(self, path: Any) -> None:
+        """Write one row per grid point: stiffness, virtual_damping, stable_exact,
+        stable_grid (0/1).
+
+        Parameters
+        ----------
+        path : str, os.PathLike or file object
+            Where to write (a path is written atomically, see :mod:`hapstab.outputs`).
+        """
         import csv
-        with open(path, "w", newline="") as fh:
+
+        from hapstab.outputs import writing
+
+        with writing(path, "path", newline="") as fh:
             w = csv.writer(fh)
             w.writerow(["stiffness", "virtual_damping", "stable_exact", "stable_grid"])
             for i, B in enumerate(self.B_rows):

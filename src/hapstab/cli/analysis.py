@@ -100,12 +100,13 @@ def _boundary_command(kind: str) -> None:
                   help="Also write the table as CSV.")
     def _cmd(method: str, csv_path: str | None, as_json: bool, **kw: Any) -> None:
         from hapstab.analysis.methods import boundary
+        from hapstab.cli.files import check_files, write_files
 
+        check_files(csv_path)
         periods, delays = parse_periods(kw["period"]), parse_delays(kw["delay"])
         kw.update(period=periods[0], delay=delays[0])
         res = boundary(make(kw, 1.0), periods, delays, method=method)
-        if csv_path:
-            res.to_csv(csv_path)
+        write_files(res, csv_path)
         emit(res.to_dict(), as_json, lambda: _boundary_table(res))
 
     _cmd.__doc__ = f"K_max of the {kind.upper()} loop over a range of periods and delays."

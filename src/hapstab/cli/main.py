@@ -29,6 +29,8 @@ class HapstabGroup(click.Group):
     def main(self, args: Any = None, prog_name: str | None = None, complete_var: str | None = None,
              standalone_mode: bool = True, **extra: Any) -> Any:
         argv = list(sys.argv[1:] if args is None else args)
+        if sys.stdout is None:   # started with stdout closed (>&-): the answer would be lost
+            _fail("stdout is closed: hapstab writes its answer there; give it a file or a pipe")
         try:
             # extreme inputs overflow inside numpy: the library says so once, as an
             # error, not as warnings
@@ -36,15 +38,20 @@ class HapstabGroup(click.Group):
                 warnings.simplefilter("ignore", RuntimeWarning)
                 rv = super().main(args=argv, prog_name=prog_name or "hapstab",
                                   complete_var=complete_var, standalone_mode=False, **extra)
+            _flush_stdout()
         except click.exceptions.ClickException as e:
             _fail(e.format_message())
         except HapstabError as e:
             _fail(str(e))
         except OSError as e:
-            _fail(f"cannot use {e.filename or 'the file'}: {e.strerror or e}")
+            _fail(f"cannot use {e.filename}: {e.strerror or e}" if e.filename
+                  else f"cannot write the output: {e.strerror or e}")
         except MemoryError:
             _fail("out of memory: the model is too large for this machine")
-        except click.exceptions.Abort:
+        except click.exceptions.Abort as e:
+            if isinstance(e.__cause__, KeyboardInterrupt):   # Ctrl-C: no partial file is left
+                click.echo("hapstab: interrupted", err=True)
+                sys.exit(130)
             click.echo("hapstab: aborted", err=True)
             sys.exit(1)
         except Exception as e:   # everything else is a bug, said as one
@@ -55,6 +62,15 @@ class HapstabGroup(click.Group):
                        "report it with the command line (--debug shows the traceback)", err=True)
             sys.exit(1)
         sys.exit(rv if isinstance(rv, int) else 0)
+
+
+def _flush_stdout() -> None:
+    """Make a failed write of the answer an error (e.g. stdout on a full disk), not a
+    silent exit 0."""
+    try:
+        sys.stdout.flush()
+    except OSError as e:
+        _fail(f"cannot write to stdout ({e.strerror or e})")
 
 
 def _fail(msg: str) -> None:

@@ -64,8 +64,9 @@ def _region_command(kind: str) -> None:
              csv_path: str | None, as_json: bool, **kw: Any) -> None:
         from hapstab.analysis.methods import METHODS
         from hapstab.analysis.regions import stability_region
-        from hapstab.plotting import save_plot
+        from hapstab.cli.files import check_files, write_files
 
+        check_files(csv_path, plot_path)
         _equal_controllers(kw)
         K, B = _range(K_spec, "--K"), _range(B_spec, "--B", signed=True)
         names = [o.strip() for o in overlays.split(",") if o.strip() and o.strip() != "none"]
@@ -74,10 +75,7 @@ def _region_command(kind: str) -> None:
                 raise HapstabError(f"--overlay = {o!r}: unknown; allowed: paper, passivity, circle, none")
         ov = names if plot_path else []
         res = stability_region(make(kw, 1.0), K, B, resolution, overlays=ov)
-        if csv_path:
-            res.to_csv(csv_path)
-        if plot_path:
-            save_plot(res, plot_path, dpi=120, bbox_inches="tight")
+        write_files(res, csv_path, plot_path, dpi=120, bbox_inches="tight")
         d = res.to_dict()
         kmax = res.kmax()
         rows = [("window", f"K in [{K[0]:g}, {K[1]:g}] N/m, B in [{B[0]:g}, {B[1]:g}] N*s/m"),
@@ -86,9 +84,9 @@ def _region_command(kind: str) -> None:
                                             f"{res.B_rows[int(kmax.argmax())]:.6g} N*s/m"),
                 ("grid cross-check", f"{res.agreement['disagree']} of {res.agreement['compared']} "
                                      "points differ away from the boundary")]
-        if plot_path:
+        if plot_path is not None:
             rows.append(("plot", plot_path))
-        if csv_path:
+        if csv_path is not None:
             rows.append(("csv", csv_path))
         emit(d, as_json, lambda: rich_table(f"K-B stability region, {kind}", rows))
 

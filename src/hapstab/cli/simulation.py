@@ -11,6 +11,7 @@ from typing import Any
 
 import click
 
+from hapstab.cli.files import check_files, write_files
 from hapstab.cli.options import (
     LOOP_KINDS,
     NONNEG,
@@ -21,6 +22,7 @@ from hapstab.cli.options import (
     parse_periods,
     rich_table,
 )
+from hapstab.outputs import write_folder
 from hapstab.results import dumps
 
 # ------------------------------------------------------------------ simulate
@@ -69,11 +71,12 @@ def _simulate_command(kind: str) -> None:
              csv_path: str | None, plot_path: str | None, as_json: bool,
              environment_force: str | None = None, wall: float | None = None,
              wall_pulls: bool = False, **kw: Any) -> None:
+        check_files(csv_path, plot_path)
         loop = make(kw, stiffness)
         res = _run(kind, loop, duration, force, x0, rest, environment_force, wall, wall_pulls,
                    saturation=saturation, resolution=resolution, quantizer=quantizer,
                    dense=dense)
-        files = _write(res, csv_path, plot_path)
+        files = write_files(res, csv_path, plot_path)
         d = _summary(res, loop, files)
         emit(d, as_json, lambda: _table(kind, stiffness, loop, res, d, files))
 
@@ -100,19 +103,6 @@ def _run(kind: str, loop: Any, duration: float, force: str, x0: float, rest: flo
         x_init, rest_pos = x0, rest
     return simulate(loop, duration, force=None if force == "none" else force,
                     initial_position=x_init, rest_position=rest_pos, **opts)
-
-
-def _write(res: Any, csv_path: str | None, plot_path: str | None) -> list[str]:
-    """Write the CSV and the plot asked for; the files written."""
-    files = []
-    if csv_path:
-        res.to_csv(csv_path)
-        files.append(csv_path)
-    if plot_path:
-        from hapstab.plotting import save_plot
-
-        files.append(save_plot(res, plot_path))
-    return files
 
 
 def _summary(res: Any, loop: Any, files: list[str]) -> dict[str, Any]:
@@ -187,22 +177,19 @@ def _progress(total: int, quiet: bool) -> Iterator[Callable[[int], None] | None]
 def reproduce_cmd(figure: str, out_dir: str, periods: str | None, as_json: bool) -> None:
     """Reproduce the paper's Fig. 5 (HVE) and/or Fig. 6 (PEB): theory lines, simulation
     stars, exact and circle-criterion boundaries; PNG, SVG and CSV files."""
-    from hapstab.paper.reproduce import (
-        FIGURES,
-        PAPER_PERIODS,
-        reproduce_figure,
-        write_figure,
-    )
+    from hapstab import __version__
+    from hapstab.paper.reproduce import FIGURES, PAPER_PERIODS, reproduce_figure
 
     T = parse_periods(periods) if periods else list(PAPER_PERIODS)
     names = list(FIGURES) if figure == "all" else [figure]
     total = sum(len(FIGURES[n].delays) for n in names) * len(T)
-    reps, files = [], []
+    reps = []
     with _progress(total, as_json) as tick:
         for n in names:
-            rep = reproduce_figure(n, T, progress=tick)
-            files += write_figure(rep, out_dir)
-            reps.append(rep)
+            reps.append(reproduce_figure(n, T, progress=tick))
+    manifest = {"command": "reproduce", "figure": figure, "periods_s": T,
+                "hapstab_version": __version__}
+    files = write_folder(out_dir, [(r.figure.name, r) for r in reps], manifest, "--out")
     if as_json:
         click.echo(dumps({"figures": [r.to_dict() for r in reps], "files": files,
                                "worst_simulation_error": max(r.worst_simulation_error()

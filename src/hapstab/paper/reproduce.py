@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import csv
 import math
-import os
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -89,15 +88,17 @@ class Reproduction(Result):
         return jsonable({"figure": self.figure.name, "title": self.figure.title,
                          "rows": [dict(r) for r in self.rows]})
 
-    def to_csv(self, path: str) -> None:
+    def to_csv(self, path: Any) -> None:
         """Write the points as CSV, one row per (delay, period), columns :attr:`columns`.
 
         Parameters
         ----------
-        path : str
-            The file to write.
+        path : str, os.PathLike or file object
+            Where to write (a path is written atomically, see :mod:`hapstab.outputs`).
         """
-        with open(path, "w", newline="") as fh:
+        from hapstab.outputs import writing
+
+        with writing(path, "path", newline="") as fh:
             w = csv.writer(fh)
             w.writerow(self.columns)
             for r in self.rows:
@@ -186,36 +187,30 @@ def reproduce_figure(name: str, periods: Sequence[float] | None = None, *,
 
 
 def write_figure(rep: Reproduction, out_dir: str) -> list[str]:
-    """Write ``<fig>.csv``, ``<fig>.png`` and ``<fig>.svg`` into ``out_dir``.
+    """Write ``<fig>.csv``, ``<fig>.png``, ``<fig>.svg`` and ``manifest.json`` into
+    ``out_dir``, atomically (see :func:`hapstab.outputs.write_folder`).
+
+    Parameters
+    ----------
+    rep : Reproduction
+        The figure's points.
+    out_dir : str
+        The folder (created if missing).
 
     Returns
     -------
     list of str
-        The paths written.
+        The paths written, the manifest last.
 
     Raises
     ------
-    AnalysisError
+    OutputError
         If ``out_dir`` cannot be created or written.
     """
-    from hapstab.plotting import save_figure
+    from hapstab import __version__
+    from hapstab.outputs import write_folder
 
-    try:
-        os.makedirs(out_dir, exist_ok=True)
-    except OSError as e:
-        raise AnalysisError(f"--out = {out_dir!r}: cannot create the directory ({e.strerror})") from None
-    base = os.path.join(out_dir, rep.figure.name)
-    paths = [base + ".csv", base + ".png", base + ".svg"]
-    try:
-        rep.to_csv(paths[0])
-        import matplotlib.pyplot as plt
-
-        ax = rep.plot()
-        try:
-            for p in paths[1:]:
-                save_figure(ax.figure, p)
-        finally:
-            plt.close(ax.figure)
-    except OSError as e:
-        raise AnalysisError(f"--out = {out_dir!r}: cannot write ({e.strerror})") from None
-    return paths
+    manifest = {"command": "reproduce", "figure": rep.figure.name,
+                "periods_s": sorted({r["period_s"] for r in rep.rows}),
+                "hapstab_version": __version__}
+    return write_folder(out_dir, [(rep.figure.name, rep)], manifest, "--out")

@@ -126,11 +126,33 @@ class SimulationResult(Result):
             cols["contact"] = self.contact.astype(int)
         return cols
 
-    def to_csv(self, path: str, dense: bool = False) -> None:
-        """Write the sampled (or, with ``dense``, the between-sample) series as CSV."""
+    def to_csv(self, path: Any, dense: bool = False) -> None:
+        """Write the sampled (or, with ``dense``, the between-sample) series as CSV.
+
+        Parameters
+        ----------
+        path : str, os.PathLike or file object
+            Where to write (a path is written atomically, see :mod:`hapstab.outputs`).
+        dense : bool
+            The between-sample series (needs ``simulate(..., dense=m)``).
+
+        Raises
+        ------
+        OutputError
+            The run left the range of double precision (a value is inf or NaN): a
+            file of such numbers would be silently wrong, so nothing is written.
+        """
+        from hapstab.outputs import OutputError, writing
+
         cols = self._columns(dense)
         data = np.column_stack(list(cols.values()))
-        np.savetxt(path, data, delimiter=",", header=",".join(cols), comments="", fmt="%.17g")
+        bad = ~np.all(np.isfinite(data), axis=1)
+        if bad.any():
+            t = float(data[int(np.argmax(bad)), 0])
+            raise OutputError(f"CSV not written: the run overflowed double precision at t = "
+                              f"{t:.6g} s (the loop is unstable), so its series would be inf/NaN")
+        with writing(path, "path") as fh:
+            np.savetxt(fh, data, delimiter=",", header=",".join(cols), comments="", fmt="%.17g")
 
     def plot(self, ax: Any = None) -> Any:
         """Position, controller force and port energy against time.

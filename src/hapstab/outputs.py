@@ -1,0 +1,320 @@
+"""Files a user asks for, written so that they are never half-written.
+
+Every file goes to a temporary file in the target's own folder (``.name.XXXX.part``)
+and is renamed over the target only once it is complete and flushed to disk
+(``os.replace`` is atomic on one file system). An error or an interrupt removes the
+temporary files and leaves the previous target untouched; concurrent writers each
+leave one complete file. Several files of one run (a CSV and its plot, the folder of
+a reproduction) are committed together, after every one of them was written.
+
+A target that exists and is not a regular file (``/dev/stdout``, ``/dev/null``, a
+pipe) cannot be replaced: it is written directly, and a failed write is still an
+error.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import stat
+import tempfile
+from collections.abc import Iterator
+from typing import IO, Any
+
+from hapstab.errors import HapstabError
+
+__all__ = ["OutputError", "check_target", "Outputs", "atomic_file", "writing", "figure_to",
+           "write_folder"]
+
+
+class OutputError(HapstabError):
+    """A file the user asked for cannot be written (the message names the option and path)."""
+
+
+def check_target(path: Any, name: str, formats: tuple[str, ...] | None = None) -> str:
+    """Refuse a target before any work is done: empty, a folder, a missing folder, or an
+    extension that is not one of ``formats``.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The file to write.
+    name : str
+        The option or argument that gave it (``"--csv"``), named in errors.
+    formats : tuple of str, optional
+        Allowed extensions (lower case, no dot); ``None``: any.
+
+    Returns
+    -------
+    str
+        The path as a string.
+
+    Raises
+    ------
+    OutputError
+        If the target cannot be written.
+    """
+    if not isinstance(path, (str, os.PathLike)) or not str(os.fspath(path)).strip():
+        raise OutputError(f"{name} = {path!r}: must be a file path (it is empty)")
+    p = str(os.fspath(path))
+    if os.path.isdir(p):
+        raise OutputError(f"{name} = {p!r}: is a folder; give a file path")
+    folder = os.path.dirname(os.path.abspath(p))
+    if not os.path.isdir(folder):
+        raise OutputError(f"{name} = {p!r}: the folder {folder!r} does not exist")
+    if formats is not None:
+        base = os.path.basename(p)
+        ext = base.rsplit(".", 1)[-1].lower() if "." in base else ""
+        if ext not in formats:
+            raise OutputError(f"{name} = {p!r}: the extension {ext or '(none)'!r} is not a format "
+                              f"hapstab writes; allowed: {', '.join(formats)}")
+    return p
+
+
+def _is_special(path: str) -> bool:
+    """An existing target that is not a regular file (a device or a pipe)."""
+    try:
+        return not stat.S_ISREG(os.stat(path).st_mode)
+    except FileNotFoundError:
+        return False
+
+
+class Outputs:
+    """Files written together: each to a temporary file, all renamed into place by
+    :meth:`commit` (the ``with`` block commits when it ends without an exception and
+    removes every temporary file otherwise).
+
+    Examples
+    --------
+    >>> with Outputs() as out:                                   # doctest: +SKIP
+    ...     with out.open("run.csv", "--csv") as fh:
+    ...         fh.write("t,x\\n0,1\\n")
+    """
+
+    def __init__(self) -> None:
+        self._pending: list[tuple[str, str, str]] = []   # (temporary, target, option)
+        self.written: list[str] = []
+
+    @contextlib.contextmanager
+    def open(self, path: Any, name: str, mode: str = "w", **kw: Any) -> Iterator[IO[Any]]:
+        """A file object for ``path``, written to a temporary file until :meth:`commit`.
+
+        Parameters
+        ----------
+        path : str or os.PathLike
+            The target.
+        name : str
+            The option or argument that gave it, named in errors.
+        mode : {"w", "wb"}
+            Text or binary.
+        **kw
+            Passed to :func:`open` (e.g. ``newline=""``).
+
+        Yields
+        ------
+        file object
+
+        Raises
+        ------
+        OutputError
+            The file cannot be created or written (the path and the reason named).
+        """
+        target = check_target(path, name)
+        if _is_special(target):
+            with self._failing(target, name), open(target, mode, **kw) as fh:  # device or pipe
+                yield fh
+                fh.flush()
+            self.written.append(target)
+            return
+        folder, base = os.path.split(os.path.abspath(target))
+        with self._failing(target, name):
+            fd, tmp = tempfile.mkstemp(prefix=f".{base}.", suffix=".part", dir=folder)
+        try:
+            with self._failing(target, name), os.fdopen(fd, mode, **kw) as fh:
+                yield fh
+                fh.flush()
+                os.fsync(fh.fileno())
+        except BaseException:
+            _remove(tmp)
+            raise
+        self._pending.append((tmp, target, name))
+
+    @contextlib.contextmanager
+    def _failing(self, target: str, name: str) -> Iterator[None]:
+        try:
+            yield
+        except OSError as e:
+            raise OutputError(f"{name} = {target!r}: cannot write ({e.strerror or e})") from None
+
+    def commit(self) -> list[str]:
+        """Rename every temporary file over its target.
+
+        Returns
+        -------
+        list of str
+            Every target written, in order.
+
+        Raises
+        ------
+        OutputError
+            A rename failed (the remaining temporary files are removed).
+        """
+        try:
+            while self._pending:
+                tmp, target, name = self._pending[0]
+                with self._failing(target, name):
+                    os.chmod(tmp, _mode())
+                    os.replace(tmp, target)
+                self._pending.pop(0)
+                self.written.append(target)
+        finally:
+            self.abort()
+        return self.written
+
+    def abort(self) -> None:
+        """Remove the temporary files not yet committed."""
+        for tmp, _, _ in self._pending:
+            _remove(tmp)
+        self._pending.clear()
+
+    def __enter__(self) -> Outputs:
+        return self
+
+    def __exit__(self, kind: Any, value: Any, tb: Any) -> None:
+        if kind is None:
+            self.commit()
+        else:
+            self.abort()
+
+
+@contextlib.contextmanager
+def atomic_file(path: Any, name: str, mode: str = "w", **kw: Any) -> Iterator[IO[Any]]:
+    """One file written atomically (see :class:`Outputs`).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The target.
+    name : str
+        The option or argument that gave it, named in errors.
+    mode : {"w", "wb"}
+        Text or binary.
+    **kw
+        Passed to :func:`open`.
+
+    Yields
+    ------
+    file object
+    """
+    with Outputs() as out, out.open(path, name, mode, **kw) as fh:
+        yield fh
+
+
+@contextlib.contextmanager
+def writing(target: Any, name: str, mode: str = "w", **kw: Any) -> Iterator[IO[Any]]:
+    """A file object to write to: ``target`` itself if it is one (anything with
+    ``write``), else an atomic file at that path (see :class:`Outputs`).
+
+    Parameters
+    ----------
+    target : str, os.PathLike or file object
+        Where to write.
+    name : str
+        The argument that gave it, named in errors.
+    mode : {"w", "wb"}
+        Text or binary, for a path.
+    **kw
+        Passed to :func:`open` for a path.
+
+    Yields
+    ------
+    file object
+    """
+    if hasattr(target, "write"):
+        yield target
+        return
+    with atomic_file(target, name, mode, **kw) as fh:
+        yield fh
+
+
+def figure_to(out: Outputs, res: Any, path: str, name: str, **kw: Any) -> None:
+    """Draw ``res.plot()`` on a new figure and add it to ``out`` at ``path`` (its
+    extension names the format).
+
+    Parameters
+    ----------
+    out : Outputs
+        The files being written together.
+    res : result object
+        Anything with ``plot(ax=None)`` returning its axes.
+    path : str
+        The target.
+    name : str
+        The option or argument that gave it, named in errors.
+    **kw
+        Passed to ``savefig``.
+    """
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    fig = np.ravel(np.asarray(res.plot(), dtype=object))[0].figure
+    try:
+        with out.open(path, name, "wb") as fh:
+            fig.savefig(fh, format=path.rsplit(".", 1)[-1].lower(), **kw)
+    finally:
+        plt.close(fig)
+
+
+def write_folder(out_dir: str, results: list[tuple[str, Any]], manifest: dict[str, Any],
+                 name: str = "out_dir") -> list[str]:
+    """A folder of results: ``<name>.csv``, ``<name>.png`` and ``<name>.svg`` per result,
+    then ``manifest.json`` naming the run, its inputs and every file, written last.
+
+    Parameters
+    ----------
+    out_dir : str
+        The folder (created if missing).
+    results : list of (str, result)
+        Each result's file name stem and the result.
+    manifest : dict
+        The run's inputs (command, arguments, hapstab version).
+    name : str
+        The option or argument that gave ``out_dir``, named in errors.
+
+    Returns
+    -------
+    list of str
+        The files written, the manifest last.
+    """
+    if not str(out_dir).strip():
+        raise OutputError(f"{name} = {out_dir!r}: must be a folder path (it is empty)")
+    try:
+        os.makedirs(out_dir, exist_ok=True)
+    except OSError as e:
+        raise OutputError(f"{name} = {out_dir!r}: cannot create the folder ({e.strerror})") from None
+    with Outputs() as out:
+        names = []
+        for stem, res in results:
+            base = os.path.join(out_dir, stem)
+            with out.open(base + ".csv", name, newline="") as fh:
+                res.to_csv(fh)
+            for ext in ("png", "svg"):
+                figure_to(out, res, f"{base}.{ext}", name)
+            names += [f"{stem}.csv", f"{stem}.png", f"{stem}.svg"]
+        with out.open(os.path.join(out_dir, "manifest.json"), name) as fh:
+            json.dump({**manifest, "files": names}, fh, indent=2)
+            fh.write("\n")
+    return out.written
+
+
+def _remove(path: str) -> None:
+    with contextlib.suppress(OSError):
+        os.remove(path)
+
+
+def _mode() -> int:
+    """The permissions a new file gets under the current umask (mkstemp makes 0600)."""
+    mask = os.umask(0)
+    os.umask(mask)
+    return 0o666 & ~mask

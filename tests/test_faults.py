@@ -1,0 +1,114 @@
+"""Fault injection on the writing commands (issue #11): SIGINT and SIGKILL at seeded
+moments, a full disk (a file-size limit), and four concurrent writers. Each run must
+leave either the old file or the complete new one, byte for byte the file of an
+uninterrupted run; Ctrl-C exits 130 saying "interrupted"."""
+
+import os
+import random
+import resource
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+
+SRC = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "src")
+OLD = b"the previous file\n"
+
+#: writing commands, each with a target of its own (the {out} placeholder)
+COMMANDS = {
+    "simulate-csv": ["simulate", "hve", "-K", "9", "--duration", "60", "--csv", "{out}"],
+    "simulate-plot": ["simulate", "hve", "-K", "9", "--duration", "20", "--plot", "{out}.png"],
+    "region-csv": ["region", "hve", "--K", "0:900", "--B", "0:20", "--resolution", "300",
+                   "--csv", "{out}"],
+    "boundary-csv": ["boundary", "hve", "--period", "0.001:0.01:40", "-n", "0,1,2,5,10",
+                     "--csv", "{out}"],
+}
+
+
+def _argv(name, out):
+    return [sys.executable, "-m", "hapstab", *[a.format(out=out) for a in COMMANDS[name]]]
+
+
+def _target(name, out):
+    return out + ".png" if name.endswith("plot") else out
+
+
+def _env():
+    return {**os.environ, "PYTHONPATH": SRC, "OPENBLAS_NUM_THREADS": "1"}
+
+
+@pytest.fixture(scope="module")
+def references(tmp_path_factory):
+    """Each command's file from an uninterrupted run, and how long the run took."""
+    d = tmp_path_factory.mktemp("ref")
+    refs = {}
+    for name in COMMANDS:
+        out = str(d / name)
+        t0 = time.monotonic()
+        r = subprocess.run(_argv(name, out), env=_env(), capture_output=True, timeout=120)
+        assert r.returncode == 0, r.stderr.decode()
+        with open(_target(name, out), "rb") as fh:
+            refs[name] = (fh.read(), time.monotonic() - t0)
+    return refs
+
+
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGKILL], ids=["SIGINT", "SIGKILL"])
+@pytest.mark.parametrize("name", list(COMMANDS))
+def test_a_signal_leaves_the_old_file_or_the_whole_new_one(references, tmp_path, name, sig):
+    ref, took = references[name]
+    rng = random.Random(f"{name}-{sig}")      # seeded moments, spread over the run
+    for frac in (rng.uniform(0.2, 0.6), rng.uniform(0.6, 1.0)):
+        out = str(tmp_path / f"{name}-{frac:.3f}")
+        target = _target(name, out)
+        with open(target, "wb") as fh:
+            fh.write(OLD)
+        p = subprocess.Popen(_argv(name, out), env=_env(), stdout=subprocess.DEVNULL,
+                             stderr=subprocess.PIPE)
+        time.sleep(frac * took)
+        p.send_signal(sig)
+        _, err = p.communicate(timeout=120)
+        with open(target, "rb") as fh:
+            got = fh.read()
+        assert got in (OLD, ref), f"{name}: a partial or different file after {sig!r}"
+        if p.returncode != 0 and sig == signal.SIGINT:
+            # 130 and one line once hapstab runs; during Python's start-up (importing
+            # numpy) the interpreter itself dies by SIGINT, which a shell reports as 130 too
+            assert (p.returncode == 130 and b"interrupted" in err) or p.returncode == -2, \
+                err.decode()      # (the file may be the new one: interrupted after the rename)
+        if sig == signal.SIGINT:           # an interrupt cleans up; SIGKILL cannot
+            assert not [f for f in os.listdir(tmp_path) if f.endswith(".part")]
+
+
+def _limit_file_size():
+    resource.setrlimit(resource.RLIMIT_FSIZE, (200_000, 200_000))
+    signal.signal(signal.SIGXFSZ, signal.SIG_IGN)   # a write past the limit fails with EFBIG
+
+
+@pytest.mark.parametrize("name", ["simulate-csv", "region-csv"])
+def test_a_full_disk_is_an_error_naming_the_file_and_leaves_the_old_one(tmp_path, name):
+    out = str(tmp_path / name)
+    with open(out, "wb") as fh:
+        fh.write(OLD)
+    r = subprocess.run(_argv(name, out), env=_env(), capture_output=True, timeout=120,
+                       preexec_fn=_limit_file_size)
+    err = r.stderr.decode()
+    assert r.returncode == 2 and err.count("\n") == 1, err
+    assert f"--csv = '{out}': cannot write" in err
+    with open(out, "rb") as fh:
+        assert fh.read() == OLD
+    assert not [f for f in os.listdir(tmp_path) if f.endswith(".part")]
+
+
+def test_four_concurrent_writers_leave_one_complete_file(references, tmp_path):
+    name = "simulate-csv"
+    out = str(tmp_path / "shared.csv")
+    procs = [subprocess.Popen(_argv(name, out), env=_env(), stdout=subprocess.DEVNULL,
+                              stderr=subprocess.PIPE) for _ in range(4)]
+    errs = [p.communicate(timeout=120)[1] for p in procs]
+    assert [p.returncode for p in procs] == [0] * 4, errs
+    with open(out, "rb") as fh:
+        assert fh.read() == references[name][0]

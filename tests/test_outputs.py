@@ -1,0 +1,109 @@
+"""Files are never half-written (issue #11): every output goes to a temporary file in the
+target's folder and is renamed into place only when complete; an error or an interrupt
+leaves the previous file; a bad target is refused before any work, naming the option."""
+
+import multiprocessing
+import os
+import stat
+
+import pytest
+
+from hapstab.outputs import OutputError, Outputs, atomic_file, check_target, writing
+
+
+def _leftovers(folder):
+    return [p for p in os.listdir(folder) if p.endswith(".part")]
+
+
+def test_a_complete_write_replaces_the_file(tmp_path):
+    p = tmp_path / "a.csv"
+    p.write_text("old\n")
+    with atomic_file(p, "--csv") as fh:
+        fh.write("new\n")
+    assert p.read_text() == "new\n" and _leftovers(tmp_path) == []
+
+
+@pytest.mark.parametrize("exc", [RuntimeError("boom"), KeyboardInterrupt()])
+def test_an_error_or_interrupt_leaves_the_old_file(tmp_path, exc):
+    p = tmp_path / "a.csv"
+    p.write_text("old\n")
+    with pytest.raises(type(exc)), atomic_file(p, "--csv") as fh:
+        fh.write("half")
+        raise exc
+    assert p.read_text() == "old\n" and _leftovers(tmp_path) == []
+
+
+def test_files_of_one_run_are_committed_together(tmp_path):
+    a, b = tmp_path / "a.csv", tmp_path / "b.png"
+    a.write_text("old a")
+    with pytest.raises(RuntimeError), Outputs() as out:
+        with out.open(a, "--csv") as fh:
+            fh.write("new a")
+        with out.open(b, "--plot", "wb") as fh:
+            raise RuntimeError("the plot failed")
+    assert a.read_text() == "old a" and not b.exists() and _leftovers(tmp_path) == []
+
+
+def test_new_files_get_the_usual_permissions(tmp_path):
+    p = tmp_path / "a.csv"
+    with atomic_file(p, "--csv") as fh:
+        fh.write("x")
+    mask = os.umask(0)
+    os.umask(mask)
+    assert stat.S_IMODE(p.stat().st_mode) == 0o666 & ~mask   # not mkstemp's 0600
+
+
+@pytest.mark.parametrize("path,needle", [
+    ("", "--csv = '': must be a file path (it is empty)"),
+    ("   ", "must be a file path"),
+    (None, "--csv = None: must be a file path"),
+])
+def test_empty_targets_are_refused(path, needle):
+    with pytest.raises(OutputError, match=needle.replace("(", r"\(").replace(")", r"\)")):
+        check_target(path, "--csv")
+
+
+def test_folders_missing_folders_and_unknown_formats_are_refused(tmp_path):
+    with pytest.raises(OutputError, match="is a folder"):
+        check_target(tmp_path, "--csv")
+    with pytest.raises(OutputError, match=r"the folder .* does not exist"):
+        check_target(tmp_path / "no" / "a.csv", "--csv")
+    with pytest.raises(OutputError, match=r"--plot = .*'pgf' is not a format"):
+        check_target(tmp_path / "a.pgf", "--plot", ("png", "svg"))
+
+
+def test_a_device_is_written_directly_and_a_failed_write_is_an_error():
+    with atomic_file("/dev/null", "--csv") as fh:
+        fh.write("x")
+    assert stat.S_ISCHR(os.stat("/dev/null").st_mode)          # still the device
+    if os.path.exists("/dev/full"):
+        with pytest.raises(OutputError, match=r"--plot = '/dev/full': cannot write \(No space"), \
+                atomic_file("/dev/full", "--plot", "wb") as fh:
+            fh.write(b"x" * 100000)
+
+
+def test_writing_passes_a_file_object_through(tmp_path):
+    p = tmp_path / "a.txt"
+    with p.open("w") as own, writing(own, "path") as fh:
+        assert fh is own
+        fh.write("direct")
+    assert p.read_text() == "direct"
+
+
+def _writer(args):
+    path, k = args
+    with atomic_file(path, "--csv") as fh:
+        for i in range(20000):
+            fh.write(f"{k},{i}\n")
+    return k
+
+
+def test_concurrent_writers_each_leave_one_complete_file(tmp_path):
+    p = str(tmp_path / "c.csv")
+    with multiprocessing.get_context("fork").Pool(4) as pool:
+        pool.map(_writer, [(p, k) for k in range(4)])
+    with open(p) as fh:
+        lines = fh.read().splitlines()
+    k = lines[0].split(",")[0]
+    assert lines == [f"{k},{i}" for i in range(20000)]        # one writer's file, whole
+    assert _leftovers(tmp_path) == []
