@@ -27,6 +27,7 @@ from hapstab.results import Result, jsonable
 __all__ = ["AuditRow", "AuditResult", "audit"]
 
 _REL = 1e-6  # K_max values agree to ~1e-9; a promise counts as broken beyond 1e-6 relative
+_ABS = 1e-12  # N/m, added to that: a promise of K = 0 (to rounding) never breaks an exact 0
 
 #: closed form -> (label, what it claims)
 
@@ -188,9 +189,9 @@ def audit(loop: HapticLoop | TeleoperationLoop) -> AuditResult:
 
     def add(key: str, label: str, K: float, claims: str, note: str) -> None:
         flags = []
-        if claims != "exact" and K > exact * (1 + _REL) + 1e-12:
+        if claims != "exact" and K > exact * (1 + _REL) + _ABS:
             flags.append(f"over-promises: exact loop unstable beyond {exact:.6g} N/m")
-        if claims == "passivity" and K > passive * (1 + _REL) + 1e-12:
+        if claims == "passivity" and K > passive * (1 + _REL) + _ABS:
             flags.append(f"not passive: PR test fails beyond {passive:.6g} N/m")
         rows.append(AuditRow(key, label, float(K), claims, _verdict(loop, K),
                              "; ".join(flags) or None, note))

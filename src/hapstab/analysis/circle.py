@@ -45,6 +45,7 @@ from hapstab.errors import AnalysisError
 from hapstab.models.controllers import SpringDamper
 from hapstab.models.loops import HapticLoop, TeleoperationLoop, require_loop, whole_delay
 from hapstab.results import CriticalStiffnessResult
+from hapstab.tolerances import PSD_SLACK
 
 __all__ = ["APPROXIMATIONS", "loop_inverse", "port_scaling", "circle_test",
            "critical_stiffness_circle"]
@@ -196,7 +197,7 @@ def _affine_kmax(parts: Any, oscillations: int) -> tuple[float, float]:
     """min over w of the PSD limit of A(w) + K C(w): (K_max, worst angle)."""
     def k_of(t: np.ndarray) -> np.ndarray:
         A, C = parts(t)
-        tol = 1e-12 * np.abs(A).reshape(t.size, -1).max(axis=1)  # rounding slack on A >= 0
+        tol = PSD_SLACK * np.abs(A).reshape(t.size, -1).max(axis=1)  # rounding slack on A >= 0
         return psd_limit(A, C, tol)
 
     th = theta_grid(oscillations)
@@ -306,11 +307,15 @@ def _sector_kmax(loop: Any, a: str, sector: Any, scaling: str | None) -> Critica
             return circle_test(loop.with_stiffness(K), a, sector, scaling).positive_real
 
         damp = float(np.max(device_side(loop, "the circle criterion").damping))
-        lo = base * (1 - 1e-7) if base > 0 else 0.0  # PR of G implies PR of K^-1 + G
+        # PR of G implies PR of K^-1 + G; 1e-7 below the passive limit keeps lo inside it
+        # despite its rounding (~1e-12), at a tenth of the bisection's resolution (1e-6)
+        lo = base * (1 - 1e-7) if base > 0 else 0.0
         if lo > 0 and not ok(lo):
             raise AnalysisError("sector: the circle test fails already at the passive limit's "
                                 f"K = {lo:.6g} N/m, which PR of G guarantees; no finite-sector "
                                 "result can be trusted here")
+        # no passive limit to start from: a first step of 1e-6 (the bisection's resolution)
+        # of b/T, the scale of K_max at n = 0 (2 b / T), with b = 1e-6 N*s/m if it is 0
         step = base if base > 0 else max(damp, 1e-6) / loop.period * 1e-6
         hi = lo + step
         while ok(hi):
@@ -319,6 +324,8 @@ def _sector_kmax(loop: Any, a: str, sector: Any, scaling: str | None) -> Critica
             if hi > 1e12 * max(1.0, base):
                 lo = hi = float("inf")
                 break
+        # to 1e-6 relative: below what the PR test itself resolves (~1e-4, see above),
+        # so the bisection adds no error of its own
         while math.isfinite(hi) and hi - lo > 1e-6 * hi:
             mid = 0.5 * (lo + hi)
             lo, hi = (mid, hi) if ok(mid) else (lo, mid)

@@ -146,11 +146,11 @@ def best_damping(loop: Loop, B_max: float | None = None, resolution: int = 64,
         return B_end
 
     if B_max is None:
-        B_max = first_zero(max(10 * b, 1e-3))
+        B_max = first_zero(max(10 * b, 1e-3))   # b = 0: from 1e-3 N*s/m; doubling finds the end
     else:
         B_max = check_real("B_max", B_max, positive=True)
     if B_min is None:
-        B_min = first_zero(-max(10 * b, 1e-3))
+        B_min = first_zero(-max(10 * b, 1e-3))  # as B_max, on the negative side
     else:
         B_min = check_real("B_min", B_min)
         if B_min > 0:
@@ -162,6 +162,8 @@ def best_damping(loop: Loop, B_max: float | None = None, resolution: int = 64,
     best_B, best_K = float(Bs[i]), float(Ks[i])
     if hi > lo and math.isfinite(best_K):
         res = minimize_scalar(lambda x: -kmax(np.array([x]))[0], bounds=(lo, hi), method="bounded",
+                              # B* to ~10 digits of the range (far below the grid step it
+                              # refines): the bounded search needs only a few dozen K_max's
                               options={"xatol": 1e-10 * (B_max - B_min)})
         if -res.fun > best_K:
             best_B, best_K = float(res.x), float(-res.fun)

@@ -44,7 +44,7 @@ from hapstab.errors import AnalysisError
 from hapstab.models.controllers import SpringDamper
 from hapstab.models.loops import HapticLoop, TeleoperationLoop, require_loop, whole_delay
 from hapstab.results import CriticalStiffnessResult, Result, jsonable
-from hapstab.tolerances import ROOT_ON_CIRCLE
+from hapstab.tolerances import DIVISOR_FLOOR, PSD_SLACK, ROOT_ON_CIRCLE
 
 __all__ = ["PassivityResult", "sampled_passivity", "critical_stiffness_passivity"]
 
@@ -153,8 +153,8 @@ def sampled_passivity(loop: HapticLoop | TeleoperationLoop, scaling: str | None 
 
     th = theta_grid(side.oscillations)
     t_min, m = refine_minimum(margin, th, margin(th))
-    scale = float(np.max(np.abs(_parts(side, th, D, None)[1]))) + 1e-300
-    ok = m >= -1e-12 * scale  # rounding slack relative to the sampled part's size
+    scale = float(np.max(np.abs(_parts(side, th, D, None)[1]))) + DIVISOR_FLOOR
+    ok = m >= -PSD_SLACK * scale  # rounding slack relative to the sampled part's size
     where = f"w = {t_min / T:.6g} rad/s ({t_min / (2 * math.pi * T):.6g} Hz)"
     reason = (f"passive (Colgate-Schenkel): damping to spare {m:.6g} N*s/m, least at {where}" if ok
               else f"not passive (Colgate-Schenkel): {-m:.6g} N*s/m of damping missing at {where}")
@@ -210,7 +210,7 @@ def critical_stiffness_passivity(loop: HapticLoop | TeleoperationLoop,
         Db, WB = _parts(side, t, D, "B")
         _, WK = _parts(side, t, D, "K")
         A = Db + WB
-        tol = 1e-12 * np.abs(A).reshape(t.size, -1).max(axis=1)  # rounding slack on A >= 0
+        tol = PSD_SLACK * np.abs(A).reshape(t.size, -1).max(axis=1)  # rounding slack on A >= 0
         return psd_limit(A, WK, tol)
 
     th = theta_grid(side.oscillations)

@@ -30,7 +30,7 @@ import numpy as np
 from hapstab.analysis.sweeps import min_eig, refine_minimum, theta_grid
 from hapstab.errors import AnalysisError, ModelError, check_poly, check_real
 from hapstab.results import Result, jsonable
-from hapstab.tolerances import ROOT_ON_CIRCLE
+from hapstab.tolerances import COEFF_ZERO, DIVISOR_FLOOR, ROOT_ON_CIRCLE
 
 __all__ = ["RationalMatrix", "PositiveRealResult", "positive_real", "circle_criterion"]
 
@@ -154,6 +154,7 @@ class RationalMatrix:
                     rad = abs(r)
                     if rad < 0.5 or rad > 2.0:
                         continue
+                    # a root on the circle has no width: 1e-6, the nearest offset kept below
                     phi, w = abs(np.angle(r)), max(abs(rad - 1.0), 1e-6)
                     off = w * np.geomspace(0.05, 200.0, 24)
                     off = off[off >= 1e-6]  # closer to a unit-circle pole G + G^H is all rounding
@@ -189,7 +190,7 @@ class RationalMatrix:
         den_all = pm(pm(d[0][0], d[1][1]), pm(d[0][1], d[1][0]))
         det_num: np.ndarray = np.polysub(pm(pm(n[0][0], n[1][1]), pm(d[0][1], d[1][0])),
                              pm(pm(n[0][1], n[1][0]), pm(d[0][0], d[1][1])))
-        if not np.any(np.abs(det_num) > 1e-14 * np.abs(det_num).max(initial=0.0)):
+        if not np.any(np.abs(det_num) > COEFF_ZERO * np.abs(det_num).max(initial=0.0)):
             raise AnalysisError("G(z) is singular: not invertible")
         # (G^{-1})_ij = adj_ij / det = adj_ij * den_all / det_num
         adj = [[(n[1][1], d[1][1]), (-n[0][1], d[0][1])], [(-n[1][0], d[1][0]), (n[0][0], d[0][0])]]
@@ -284,10 +285,10 @@ def _unit_circle_check(G: RationalMatrix) -> tuple[bool, str]:
                     continue
                 others = np.array([q for q in e.poles if abs(p - q) > _SIMPLE], complex)
                 R[i, j] = e.gain * np.prod(p - e.zeros) / np.prod(p - others) / p
-        scale = max(np.abs(R).max(), 1e-300)
+        scale = max(np.abs(R).max(), DIVISOR_FLOOR)
         if np.abs(R - R.conj().T).max() > 1e-7 * scale:  # roots carry ~1e-8 relative error
             return False, f"residue at z = {p:.6g} is not Hermitian ({np.round(R, 12).tolist()})"
-        if np.linalg.eigvalsh((R + R.conj().T) / 2)[0] < -1e-7 * scale:
+        if np.linalg.eigvalsh((R + R.conj().T) / 2)[0] < -1e-7 * scale:  # roots' ~1e-8 error
             return False, f"residue at z = {p:.6g} is not positive semidefinite"
     return True, ""
 
@@ -335,8 +336,6 @@ def positive_real(G: RationalMatrix, period: float | None = None, grid: int | No
     on_circle = np.abs(np.angle(poles[np.abs(np.abs(poles) - 1.0) <= _ON_CIRCLE]))
     extra = G.critical_angles()
     th = theta_grid(G.degree() + 1, minimum=grid or 1024, extra=extra)
-    # the w -> 0 limit is reached to O(w^2): 1e-6/(deg+1) is within ~1e-12 of it,
-    # while staying far enough from a pole at z = 1 for G + G^H to be accurate
     if on_circle.size:  # stay just off unit-circle poles, where G is undefined
         d = np.min(np.abs(th[:, None] - on_circle[None, :]), axis=1)
         th = th[d > _POLE_GAP]
@@ -381,6 +380,8 @@ def positive_real(G: RationalMatrix, period: float | None = None, grid: int | No
 
 
 def _near(angles: np.ndarray) -> np.ndarray:
+    # 1e-6 rad/sample at the nearest (closer, G + G^H is rounding: |G| ~ 1/distance) to
+    # 1e-2, a few steps of the grid (pi/1024 ~ 3e-3 at most), which takes over from there
     off = np.geomspace(1e-6, 1e-2, 9)
     return np.concatenate([np.concatenate([a - off, a + off]) for a in angles])
 

@@ -41,6 +41,7 @@ from hapstab.errors import AnalysisError, check_real
 from hapstab.models.controllers import SpringDamper
 from hapstab.models.loops import HapticLoop, TeleoperationLoop
 from hapstab.results import Result, jsonable
+from hapstab.tolerances import DIVISOR_FLOOR
 
 __all__ = ["stability_region", "RegionResult", "d_decomposition", "kmax_over_B",
            "check_equal_gains", "with_gains", "Loop"]
@@ -114,9 +115,11 @@ def d_decomposition(loop: Loop, n_theta: int = 4000) -> dict[str, Any]:
     check_equal_gains(loop)
     T = loop.period
     A0, B1, C1 = _unit_loop(loop)
-    # dense near theta = 0, where the slow (physical) dynamics live
+    # dense near theta = 0, where the slow (physical) dynamics live, from 1e-6 rad/sample
+    # (w = 1e-6/T, slower than any device mode; theta -> 0 itself is the z = 1 line) to
+    # 1e-9 short of pi, where B = T Im(h) / sin(theta) is 0/0 (pi is the z = -1 line)
     th = np.unique(np.concatenate([np.geomspace(1e-6, 0.2, n_theta // 2),
-                                   np.linspace(0.2, np.pi - 1e-9, n_theta // 2)]))
+                                   np.linspace(0.2, np.pi - 1e-9, n_theta // 2)]))  # see above
     mu = _mu(A0, B1, C1, np.exp(1j * th))
     curves = []
     with np.errstate(all="ignore"):
@@ -124,7 +127,7 @@ def d_decomposition(loop: Loop, n_theta: int = 4000) -> dict[str, Any]:
             h = 1.0 / mu[:, i]
             K = h.real - h.imag * np.tan(th / 2)
             B = T * h.imag / np.sin(th)
-            ok = np.isfinite(K) & np.isfinite(B) & (np.abs(mu[:, i]) > 1e-300)
+            ok = np.isfinite(K) & np.isfinite(B) & (np.abs(mu[:, i]) > DIVISOR_FLOOR)
             curves.append(np.column_stack([K[ok], B[ok]]))
     lines = {}
     for name, z in (("z1", 1.0), ("zm1", -1.0)):
@@ -132,6 +135,8 @@ def d_decomposition(loop: Loop, n_theta: int = 4000) -> dict[str, Any]:
         M = z * np.eye(A0.shape[0]) - A0
         if np.linalg.cond(M) < 1e12:
             for m in np.linalg.eigvals(C1 @ np.linalg.solve(M, B1)):
+                # real to rounding: eigvals leaves a simple real eigenvalue ~1e-15 |m| of
+                # imaginary part; a genuine complex m is far from real
                 if abs(m.imag) <= 1e-9 * abs(m) and m.real != 0:
                     vals.append(1.0 / m.real)
         else:
@@ -176,8 +181,8 @@ def _char_poly_grid(loop: Loop, Kg: np.ndarray, Bg: np.ndarray) -> np.ndarray:
     A00 = s1.A0[0] - AB
     AK = (s1.B1 @ s1.C1)[0]
     p = s1.n_ports
-    Ks = max(np.abs(Kg).max(), 1e-12)
-    Bs = max(np.abs(Bg).max(), 1e-12)
+    Ks = max(np.abs(Kg).max(), 1e-12)  # an all-zero K grid: any unit > 0 fits it exactly
+    Bs = max(np.abs(Bg).max(), 1e-12)  # an all-zero B grid: any unit > 0 fits it exactly
     pts = [(i, j) for i in range(p + 1) for j in range(p + 1 - i)]   # monomials K'^i B'^j
     V = np.array([[a ** i * b ** j for (i, j) in pts] for (a, b) in pts], float)
     vals = []
@@ -357,6 +362,8 @@ def stability_region(loop: Loop, K: tuple[float, float], B: tuple[float, float],
         exact[:, Kg == 0] = zero_ok[:, None]
     grid = _schur_cohn(_char_poly_grid(loop, KK, BB)).reshape(KK.shape)
     # near an exact boundary either verdict is within rounding: compare away from it
+    # (a thousandth of the window, a fifth of the default grid step: this sets aside
+    # only grid points practically on a boundary)
     margin = 1e-3 * (K_hi - K_lo)
     near = np.zeros(KK.shape, bool)
     for i, r in enumerate(rows):

@@ -13,6 +13,8 @@ from collections.abc import Callable
 
 import numpy as np
 
+from hapstab.tolerances import DIVISOR_FLOOR
+
 __all__ = ["theta_grid", "refine_minimum", "psd_limit", "min_eig"]
 
 _GOLD = (3.0 - np.sqrt(5.0)) / 2.0  # 0.381966...: golden-section step
@@ -37,7 +39,7 @@ def theta_grid(oscillations: int, points_per_oscillation: int = 48, minimum: int
         Additional angles (e.g. clustered near poles and zeros close to the circle).
     """
     N = max(minimum, points_per_oscillation * (int(oscillations) + 1))
-    th0 = 1e-7 / (int(oscillations) + 1)
+    th0 = 1e-7 / (int(oscillations) + 1)  # the w -> 0 limit to ~1e-14 (see above)
     th = np.linspace(0.0, np.pi, N)
     th[0] = th0
     if extra is not None and len(extra):
@@ -48,6 +50,8 @@ def theta_grid(oscillations: int, points_per_oscillation: int = 48, minimum: int
 
 def refine_minimum(f: Callable[[np.ndarray], np.ndarray], theta: np.ndarray,
                    values: np.ndarray, n_best: int = 8, iters: int = 48,
+                   # above f's rounding (~1e-13 relative) and the first point's offset
+                   # from the w -> 0 limit (~1e-14), far below the 1e-6 aimed at
                    zero_rtol: float = 1e-10) -> tuple[float, float]:
     """Global minimum of ``f`` on [theta[0], theta[-1]] from its grid values.
 
@@ -167,8 +171,9 @@ def psd_limit(A: np.ndarray, C: np.ndarray, tol: np.ndarray | float = 0.0) -> np
         r2 = np.where((disc >= 0) & (r2 > 0), r2, np.inf)
         k = np.minimum(r1, r2)
         # singular A (q0 ~ 0): PSD survives K > 0 only if the determinant grows
-        scale = np.maximum(np.abs(a11) + np.abs(a22), 1e-300) ** 2
-        sing = np.abs(q0) <= 1e-13 * scale
+        scale = np.maximum(np.abs(a11) + np.abs(a22), DIVISOR_FLOOR) ** 2
+        sing = np.abs(q0) <= 1e-13 * scale  # det is 0 to rounding: ~500 eps of its scale
+        # and q1 > 0 beyond its rounding (the same ~500 eps of its own scale)
         grows = ((q1 > 1e-13 * np.sqrt(scale) * (np.abs(c11) + np.abs(c22)))
                  | ((q1 >= 0) & (q2 >= 0) & (c11 + c22 >= 0)))
         k = np.where(sing, np.where(grows, np.where(q2 < 0, -q1 / q2, np.inf), 0.0), k)

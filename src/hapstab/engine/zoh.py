@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from hapstab.engine.structure import Port
+from hapstab.tolerances import DIVISOR_FLOOR
 
 __all__ = ['discretize', 'port_matrices']
 
@@ -77,7 +78,7 @@ def expm_batched(M: np.ndarray) -> np.ndarray:
     n = M.shape[-1]
     norm = np.abs(M).sum(axis=-2).max(axis=-1)                   # 1-norm per matrix
     with np.errstate(divide="ignore"):
-        s = np.maximum(0, np.ceil(np.log2(np.maximum(norm, 1e-300) / _THETA13))).astype(int)
+        s = np.maximum(0, np.ceil(np.log2(np.maximum(norm, DIVISOR_FLOOR) / _THETA13))).astype(int)
     X = M / (2.0 ** s)[:, None, None]
     b = _PADE13
     Id = np.broadcast_to(np.eye(n), X.shape)

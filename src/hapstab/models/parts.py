@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from hapstab.errors import ModelError, check_poly, check_real
+from hapstab.tolerances import COEFF_ZERO
 
 __all__ = ['Device', 'Impedance', 'NO_IMPEDANCE', 'spring', 'mass_spring_damper', 'parse_impedance']
 
@@ -106,7 +107,7 @@ class Impedance:
         q = np.concatenate([np.zeros(max(0, 2 - q.size)), q])
         mz, dz = (float(q[-2]), float(q[-1]))
         r = np.atleast_1d(r)
-        nz = np.flatnonzero(np.abs(r) > 1e-14 * max(1.0, np.abs(num).max()))
+        nz = np.flatnonzero(np.abs(r) > COEFF_ZERO * max(1.0, np.abs(num).max()))
         r = r[nz[0]:] if nz.size else np.zeros(1)
         lead = den[0]
         object.__setattr__(self, "num", tuple(float(x) for x in _poly("num", self.num)))

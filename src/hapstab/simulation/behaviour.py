@@ -35,6 +35,7 @@ from itertools import pairwise
 import numpy as np
 
 from hapstab.simulation.growth import BoundednessVerdict
+from hapstab.tolerances import DIVISOR_FLOOR
 
 __all__ = ["assess_nonlinear"]
 
@@ -102,7 +103,8 @@ class Envelope:
         coef, *_ = np.linalg.lstsq(A, y, rcond=None)
         res = y - A @ coef
         dof = max(1, t.size - 2)
-        se = math.sqrt(float(res @ res) / dof / max(float(((t - t.mean()) ** 2).sum()), 1e-300))
+        se = math.sqrt(float(res @ res) / dof
+                       / max(float(((t - t.mean()) ** 2).sum()), DIVISOR_FLOOR))
         return float(coef[0]), se
 
 
@@ -216,7 +218,7 @@ def _classify(env: Envelope, duration_s: float, linear_rate: float | None,
         conf = "high" if r <= 1 / CLEAR else "medium"
         return _verdict("bounded", "settles", conf, "trajectory", env,
                         f"the oscillation dies out at {rate:.3g} 1/s: {span}")
-    flat = env.amps.max() <= FLAT * max(env.amps.min(), 1e-300)
+    flat = env.amps.max() <= FLAT * max(env.amps.min(), DIVISOR_FLOOR)
     # a flat envelope that still rises or falls steadily (every stretch beyond the
     # last, the slope > 3 standard errors) is a slow trend, not yet a cycle
     rising = rate > TREND_SE * se and env.fraction(up=True) >= MONOTONE

@@ -35,6 +35,7 @@ from typing import Any
 import numpy as np
 
 from hapstab.results import Result, jsonable
+from hapstab.tolerances import DIVISOR_FLOOR
 
 __all__ = ["BoundednessVerdict", "assess", "combine", "dmd_rate"]
 
@@ -167,7 +168,7 @@ def dmd_rate(D: np.ndarray, U: np.ndarray | None = None,
     if r == 0:
         return (0.0, 0.0, 0) if with_rank else (0.0, 0.0)
     G = X2 @ Vo[:r].T @ np.diag(1.0 / So[:r]) @ Uo[:, :r].T   # [A_hat, B_hat]
-    resid = float(np.linalg.norm(X2 - G @ Om) / max(np.linalg.norm(X2), 1e-300))
+    resid = float(np.linalg.norm(X2 - G @ Om) / max(np.linalg.norm(X2), DIVISOR_FLOOR))
     A_hat = G[:, :n]
     # restrict to the subspace the output snapshots actually span
     U2, S2, _ = np.linalg.svd(X2, full_matrices=False)
@@ -224,7 +225,7 @@ def assess(states: np.ndarray, forces: np.ndarray | None, period: float,
     tenth = max(1, M // 10)
     first, last = mag[:tenth].max(), mag[-tenth:].max()
     obs = last / first if first > 0 else (math.inf if last > 0 else 1.0)
-    s0 = max(np.abs(S[0]).max(), first, 1e-300)
+    s0 = max(np.abs(S[0]).max(), first, DIVISOR_FLOOR)
     if np.abs(S).max() > EXPLODE * s0:
         return BoundednessVerdict("unbounded", math.inf, 0.0, "high", "observed", obs, 0.0,
                                   f"the state grew beyond {EXPLODE:.0e} times its initial size")
@@ -283,9 +284,9 @@ def _fitted_verdict(Dw: np.ndarray, Uw: np.ndarray | None, period: float,
         conf = "low"
     elif not math.isfinite(rate):
         conf = "high"
-    elif resid < 1e-6 and abs(rate) > 5 * unc:
+    elif resid < 1e-6 and abs(rate) > 5 * unc:  # linear to ~6 digits, the rate 5 x clear
         conf = "high"
-    elif resid < 1e-2 and abs(rate) > unc:
+    elif resid < 1e-2 and abs(rate) > unc:      # linear to ~2 digits, the rate clear
         conf = "medium"
     else:
         conf = "low"

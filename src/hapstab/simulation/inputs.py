@@ -18,6 +18,11 @@ from hapstab.errors import ModelError, check_real
 
 __all__ = ['ForceSpec', 'force_samples']
 
+#: Slack (s) on a force's edge times: an edge at t0 = k T starts at sample k although
+#: k * T and t0 differ by rounding (~1e-16 t); 1e-12 s is far above that for runs up to
+#: ~1e3 s, and far below any sampling period (>= 1e-7 s): it never moves an edge a sample.
+_EDGE = 1e-12
+
 
 ForceSpec = Any  # None | float | "step:F[,t0]" | "pulse:F,width[,t0]" | "sine:F,Hz" | callable | array
 
@@ -66,10 +71,10 @@ def force_samples(spec: ForceSpec, times: np.ndarray, name: str = "force") -> np
             raise ModelError(f"{name} = {spec!r}: numbers must be finite; {allowed}")
         if kind == "step" and len(v) in (1, 2):
             t0 = v[1] if len(v) == 2 else 0.0
-            return np.where(times >= t0 - 1e-12, v[0], 0.0)
+            return np.where(times >= t0 - _EDGE, v[0], 0.0)
         if kind == "pulse" and len(v) in (2, 3) and v[1] > 0:
             t0 = v[2] if len(v) == 3 else 0.0
-            return np.where((times >= t0 - 1e-12) & (times < t0 + v[1] - 1e-12), v[0], 0.0)
+            return np.where((times >= t0 - _EDGE) & (times < t0 + v[1] - _EDGE), v[0], 0.0)
         if kind == "sine" and len(v) == 2 and v[1] >= 0:
             return v[0] * np.sin(2 * np.pi * v[1] * times)
         raise ModelError(f"{name} = {spec!r}: not understood; {allowed}")

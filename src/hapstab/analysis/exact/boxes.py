@@ -19,6 +19,7 @@ import numpy as np
 
 from hapstab.engine.discs import EPS_OP
 from hapstab.engine.frequency import LoopResponse
+from hapstab.tolerances import DIVISOR_FLOOR, NEWTON_ANGLE_STEP
 
 __all__ = ["Cells", "Found", "THETA_FLOOR", "U_FLOOR", "U_LO", "U_HI"]
 
@@ -134,6 +135,8 @@ def _theta_floor(c: Cells, cell: np.ndarray) -> np.ndarray:
     one unit round-off, so inner cells stop at THETA_FLOOR relative to theta; the
     end cell at 0 is exact down to underflow; the one at pi to THETA_FLOOR * pi."""
     th, rho, kind = c.th[cell], c.rho[cell], c.kind[cell]
+    # the cell at 0 has no relative floor (theta = 0 is exact): it may shrink to 1e-290,
+    # just above underflow (the smallest normal double is 2.2e-308)
     lim = np.where(kind == 1, 1e-290, THETA_FLOOR * np.where(kind == 2, np.pi, th))
     return rho <= lim
 
@@ -247,6 +250,8 @@ def _trim(c: Cells, cell: np.ndarray, ua: np.ndarray, ub: np.ndarray
     r = np.concatenate(pieces_c)
     a = np.concatenate(pieces_a)
     b = np.concatenate(pieces_b)
+    # 1e-12 relative (~4500 ulps, more than the few needed): a wider piece only keeps
+    # more of the box to test, it never drops a zero
     widen = 1e-12 * np.maximum(np.abs(a), np.abs(b))
     a = np.maximum(a - widen, ua[r])
     b = np.minimum(b + widen, ub[r])
@@ -298,7 +303,7 @@ def _krawczyk(c: Cells, cell, uc, ur, rho, tc, tr, kc, kr) -> np.ndarray:
     fu = pc[1] + 2 * uc * pc[2]                                  # F_u at the centre
     a, b, cc, d = ft.real, fu.real, ft.imag, fu.imag             # J = [[a, b], [cc, d]]
     det = a * d - b * cc
-    ok = np.isfinite(det) & (np.abs(det) > 1e-300)
+    ok = np.isfinite(det) & (np.abs(det) > DIVISOR_FLOOR)
     with np.errstate(all="ignore"):
         Y = np.array([[d, -b], [-cc, a]]) / np.where(ok, det, 1.0)   # (2, 2, n)
         # interval entries of J over the box: [centre - radius, centre + radius]
@@ -366,7 +371,8 @@ def _polish(resp: LoopResponse, c: Cells, cell: np.ndarray, ua: np.ndarray, ub: 
         du = np.where(np.isfinite(du), du, 0.0)
         th = np.clip(th + dth, lo_t, hi_t)
         u = np.clip(u + du, ua, ub)
-        if np.all(np.abs(du) <= 4 * np.finfo(float).eps * u) and np.all(np.abs(dth) <= 1e-15 * (1 + th)):
+        if (np.all(np.abs(du) <= 4 * np.finfo(float).eps * u)
+                and np.all(np.abs(dth) <= NEWTON_ANGLE_STEP * (1 + th))):
             break
     F = resp.coefficients(item, th, z)
     ft = F[0].dc + u * (F[1].dc + u * F[2].dc)

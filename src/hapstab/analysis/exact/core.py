@@ -24,7 +24,7 @@ from hapstab.engine.system import build
 from hapstab.models.controllers import SpringDamper
 from hapstab.models.loops import HapticLoop, TeleoperationLoop
 from hapstab.results import CriticalStiffnessResult, StabilityResult
-from hapstab.tolerances import POLE_ON_CIRCLE
+from hapstab.tolerances import NEWTON_ANGLE_STEP, POLE_ON_CIRCLE
 
 __all__ = ["stability", "exact_critical_stiffness", "exact_kmax_batch"]
 
@@ -81,10 +81,11 @@ def _polish_pole(resp: LoopResponse, u: float, z0: complex) -> complex:
             return z0
         step = f[0] / df[0]
         th = th - step
-        if abs(step) <= 1e-15 * max(1.0, abs(th[0])):
+        if abs(step) <= NEWTON_ANGLE_STEP * max(1.0, abs(th[0])):
             break
     z = complex(np.exp(1j * th[0]))
-    # accept only a refinement of the same pole
+    # accept only a refinement of the same pole: z0 is off by rounding (~1e-8 at worst,
+    # a double pole split by sqrt(eps)); a move beyond 1e-6 is a jump to another pole
     return z if abs(z - z0) <= 1e-6 * max(1.0, abs(z0)) else z0
 
 
@@ -166,9 +167,9 @@ def _verdict(count: int, rho: float, dom: complex, T: float, m: int) -> tuple[st
 
 def _describe(z: complex, T: float) -> str:
     th = abs(math.atan2(z.imag, z.real))
-    if th < 1e-12:
+    if th < 1e-12:  # a real pole's angle is 0 to rounding (this only words the reason)
         return "real pole at z = +1 side (non-oscillatory)"
-    if abs(th - math.pi) < 1e-9:
+    if abs(th - math.pi) < 1e-9:  # pi to rounding (looser than at 0; only words it)
         return f"real pole at z = -1 side (oscillation at the Nyquist frequency {1 / (2 * T):.6g} Hz)"
     return f"complex pair, oscillation at {th / (2 * math.pi * T):.6g} Hz"
 

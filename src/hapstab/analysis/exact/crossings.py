@@ -330,7 +330,7 @@ def winding(resp: LoopResponse, items: np.ndarray, u: np.ndarray) -> np.ndarray:
     np.add.at(total, R, inc)
     turns = total / np.pi
     out = resp.q - np.round(turns).astype(int)
-    bad = bad_rows | (np.abs(turns - np.round(turns)) > 1e-6)   # as in _winding_cells
+    bad = bad_rows | (np.abs(turns - np.round(turns)) > 1e-6)   # whole to ~1e-15: _winding_cells
     return np.where(bad, -1, out)
 
 
@@ -434,8 +434,10 @@ def _dedupe(cross: list[tuple[float, float, int, int]]) -> list[tuple[float, flo
     never this close (the Krawczyk boxes that isolate them are disjoint)."""
     out: list[tuple[float, float, int, int]] = []
     for cr in sorted(cross):
-        if out and abs(cr[0] - out[-1][0]) <= 1e-12 * cr[0] \
-                and abs(cr[1] - out[-1][1]) <= 1e-12 * (1.0 + cr[1]) and cr[2] == out[-1][2]:
+        # the same point to rounding: Newton polishes to ~1e-15 relative, and 1e-12 is
+        # still far closer than two Krawczyk-isolated crossings come (see above)
+        if (out and abs(cr[0] - out[-1][0]) <= 1e-12 * cr[0]  # u, then theta (+1: it may be 0)
+                and abs(cr[1] - out[-1][1]) <= 1e-12 * (1.0 + cr[1]) and cr[2] == out[-1][2]):
             continue
         out.append(cr)
     return out
