@@ -206,8 +206,12 @@ def geometric_sum_jet(theta: np.ndarray, rho: np.ndarray, n: int) -> Jet:
     # theta^4 sum k^5 / 24, doubled for the tail of the series (|n theta| < 1e-2)
     s5 = float(n) ** 6 / 6.0
     tail = np.where(small, 2.0 * np.abs(th) ** 4 * s5 / 24.0, 0.0)
+    # the closed form loses digits to cancellation: its numerator's terms are O(n) with
+    # errors of a few units of EPS_OP each (about 8 n EPS_OP in all), divided by |y| ~ theta
+    with np.errstate(all="ignore"):
+        canc = np.where(small, 0.0, 8.0 * EPS_OP * n / np.where(small, 1.0, np.abs(y)))
     near = np.abs(th) - 2.0 * rho <= 1.0 / n
-    out = Jet(g, rho * s1 + rnd, dg, rho * s2 + n * rnd + tail)
+    out = Jet(g, rho * s1 + rnd, dg, rho * s2 + n * rnd + tail + canc)
     if not np.all(near):
         b = base_jets(th, rho)
         zn = np.exp(1j * n * th)
