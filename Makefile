@@ -29,6 +29,7 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_simulate.py
 	$(BIN)/python benchmarks/bench_regions.py
 	$(BIN)/python benchmarks/bench_delay.py
+	$(BIN)/python benchmarks/bench_budget.py
 
 clean:
 	rm -rf $(VENV) out .pytest_cache .hypothesis

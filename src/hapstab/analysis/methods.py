@@ -120,6 +120,13 @@ def boundary(loop: HapticLoop | TeleoperationLoop, periods: Sequence[float] | np
     ns = [check_delay("delay", n) for n in np.atleast_1d(delays)]
     if not ns:
         raise AnalysisError("delays: the list is empty; give at least one delay")
+    if method == "simulation":
+        from hapstab import budget
+        from hapstab.simulation.search import search_cost
+
+        longest = loop.with_whole_delay(max(ns), float(T.min()))
+        budget.check(search_cost(longest, len(ns) * T.size, options.get("n_samples", 2000)),
+                     options.pop("max_memory", None), options.pop("max_seconds", None))
     out = np.empty((len(ns), T.size))
     for i, n in enumerate(ns):
         # the grid's delay replaces the template's, in both directions, whole samples

@@ -32,6 +32,7 @@ from typing import Any
 
 import numpy as np
 
+from hapstab import budget
 from hapstab.analysis.exact.crossings import analyse, winding
 from hapstab.analysis.exact.stable_set import StableSet
 from hapstab.engine.frequency import loop_response, stack_responses
@@ -91,8 +92,12 @@ def _unit_loop(loop: Loop) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 def _mu(A0: np.ndarray, B1: np.ndarray, C1: np.ndarray, z: np.ndarray) -> np.ndarray:
     """Eigenvalues of G(z) for each z, shape (len(z), p), branches kept continuous."""
     N = A0.shape[0]
-    X = np.linalg.solve(z[:, None, None] * np.eye(N) - A0, np.broadcast_to(B1, (z.size, *B1.shape)))
-    G = C1 @ X
+    # in chunks of at most ~64 MB of N x N complex matrices: the memory stays flat in
+    # the number of angles (4000 angles of a 200-state loop were 5 GB at once)
+    chunk = max(1, int(64e6 // (16 * N * N)))
+    G = np.concatenate([C1 @ np.linalg.solve(zc[:, None, None] * np.eye(N) - A0,
+                                             np.broadcast_to(B1, (zc.size, *B1.shape)))
+                        for zc in np.array_split(z, -(-z.size // chunk))])
     mu = np.linalg.eigvals(G)
     if mu.shape[1] == 2:   # follow each branch: swap where that is nearer the previous point
         for i in range(1, mu.shape[0]):
@@ -308,9 +313,22 @@ class RegionResult(Result):
         return plot_region(self, ax=ax)
 
 
+def _region_cost(loop: Loop, n: int) -> budget.Cost:
+    """Peak memory and time of :func:`stability_region` at ``n`` x ``n``."""
+    N = build(with_gains(loop, 1.0, 0.0)).order
+    grid = float(n) * n
+    memory = 3 * 8 * grid * (N + 1) + 64e6
+    flops = 2 * grid * (N + 1) ** 2 + 4000 * 2 * N ** 3     # Schur-Cohn grid, D-decomposition
+    rows = n * 5e-3 * (1 + N / 100)       # the exact stable set per row: ~5 ms at N ~ 50
+    return budget.Cost(f"region: a {n} x {n} grid of a {N}-state loop", memory,
+                       flops / budget.FLOPS + rows)
+
+
 # ------------------------------------------------------------------- the front
 def stability_region(loop: Loop, K: tuple[float, float], B: tuple[float, float],
-                     resolution: int = 200, overlays: Sequence[str] = ()) -> RegionResult:
+                     resolution: int = 200, overlays: Sequence[str] = (), *,
+                     max_memory: float | None = None,
+                     max_seconds: float | None = None) -> RegionResult:
     """Exact K-B stability region of ``loop`` (its own K and B are ignored).
 
     Parameters
@@ -327,6 +345,10 @@ def stability_region(loop: Loop, K: tuple[float, float], B: tuple[float, float],
     overlays : sequence of str
         Also compute K_max per row by these methods: ``"paper"`` (eq. 13/18 or
         29/34), ``"passivity"``, ``"circle"`` (when available).
+    max_memory, max_seconds : float, optional
+        Budget in bytes and seconds (default :mod:`hapstab.budget`'s); the cost
+        (the grid check's characteristic polynomials, resolution^2 of degree N, and
+        the D-decomposition's 4000 N x N solves) is estimated first.
 
     Returns
     -------
@@ -345,6 +367,7 @@ def stability_region(loop: Loop, K: tuple[float, float], B: tuple[float, float],
     n = int(resolution)
     if n < 2:
         raise AnalysisError(f"resolution = {resolution}: must be >= 2")
+    budget.check(_region_cost(loop, n), max_memory, max_seconds)
     Brows = np.linspace(B_lo, B_hi, n)
     rows = kmax_over_B(loop, Brows, intervals=True)
     intervals = tuple(tuple((max(a, K_lo), min(b, K_hi)) for a, b in r.intervals

@@ -6,6 +6,7 @@ Each command lives in a module of its own and is added here, explicitly.
 
 from __future__ import annotations
 
+import contextlib
 import sys
 import warnings
 from typing import Any
@@ -29,12 +30,18 @@ class HapstabGroup(click.Group):
     def main(self, args: Any = None, prog_name: str | None = None, complete_var: str | None = None,
              standalone_mode: bool = True, **extra: Any) -> Any:
         argv = list(sys.argv[1:] if args is None else args)
+        # --yes: run past the cost budget (anywhere on the line, like --debug)
+        yes = "--yes" in argv
+        argv = [a for a in argv if a != "--yes"]
         if sys.stdout is None:   # started with stdout closed (>&-): the answer would be lost
             _fail("stdout is closed: hapstab writes its answer there; give it a file or a pipe")
         try:
             # extreme inputs overflow inside numpy: the library says so once, as an
             # error, not as warnings
-            with np.errstate(all="ignore"), warnings.catch_warnings():
+            from hapstab import budget
+
+            with np.errstate(all="ignore"), warnings.catch_warnings(), \
+                    (budget.unlimited() if yes else contextlib.nullcontext()):
                 warnings.simplefilter("ignore", RuntimeWarning)
                 rv = super().main(args=argv, prog_name=prog_name or "hapstab",
                                   complete_var=complete_var, standalone_mode=False, **extra)
@@ -83,6 +90,9 @@ def _fail(msg: str) -> None:
 @click.version_option(package_name="hapstab")
 @click.option("--debug", is_flag=True, expose_value=False,
               help="On an internal error, show the traceback.")
+@click.option("--yes", is_flag=True, expose_value=False,
+              help="Run even when the estimated memory or time exceeds the budget "
+                   "(2 GiB, 5 min); may be given anywhere on the line.")
 def cli() -> None:
     """Exact stability and critical stiffness of sampled-data, delayed haptic (hve) and
     PEB teleoperation (peb) loops. Defaults are the paper's simulation study."""

@@ -159,7 +159,8 @@ def reproduce_figure(name: str, periods: Sequence[float] | None = None, *,
     AnalysisError
         Unknown figure name or invalid periods.
     """
-    from hapstab.simulation.search import critical_stiffness_simulation
+    from hapstab import budget
+    from hapstab.simulation.search import critical_stiffness_simulation, search_cost
 
     if name not in FIGURES:
         raise AnalysisError(f"figure = {name!r}: unknown; allowed: {', '.join(FIGURES)}")
@@ -169,6 +170,8 @@ def reproduce_figure(name: str, periods: Sequence[float] | None = None, *,
         raise AnalysisError(f"periods = {list(T)}: need at least one finite period > 0")
     cols = (*COLUMNS, "circle")
     rows = []
+    budget.check(search_cost(spec.make(min(T), max(spec.delays)),
+                             len(T) * len(spec.delays)))
     for n in spec.delays:
         for t in T:
             loop = spec.make(t, n, 1.0)

@@ -45,6 +45,7 @@ from typing import Any
 
 import numpy as np
 
+from hapstab import budget
 from hapstab.engine.structure import structure_of
 from hapstab.engine.system import build
 from hapstab.engine.zoh import port_matrices
@@ -77,7 +78,8 @@ def simulate(loop: HapticLoop | TeleoperationLoop, duration: float, *,
              wall: float | None = None, wall_pulls: bool = False,
              saturation: float | None = None,
              resolution: float | None = None, quantizer: str = "floor",
-             dense: int = 0) -> SimulationResult:
+             dense: int = 0, max_memory: float | None = None,
+             max_seconds: float | None = None) -> SimulationResult:
     """Simulate the sampled-data loop for ``duration`` seconds.
 
     Parameters
@@ -113,6 +115,9 @@ def simulate(loop: HapticLoop | TeleoperationLoop, duration: float, *,
         ``nearest``: the nearest multiple of Δ, ties away from zero.
     dense : int
         If >= 2, also return the exact trajectory at ``dense`` points per sample.
+    max_memory, max_seconds : float, optional
+        Budget for this run in bytes and seconds (default :mod:`hapstab.budget`'s):
+        the run's cost is estimated first and a run above it is refused.
 
     Returns
     -------
@@ -126,6 +131,8 @@ def simulate(loop: HapticLoop | TeleoperationLoop, duration: float, *,
     ------
     ModelError
         Invalid duration, forces, initial state or nonlinear parameters.
+    BudgetError
+        The run would need more memory or time than the budget.
 
     References
     ----------
@@ -138,6 +145,7 @@ def simulate(loop: HapticLoop | TeleoperationLoop, duration: float, *,
                             quantizer)
     sysm = build(loop)
     p = sysm.n_ports
+    budget.check(budget.simulation_cost(M, sysm.order, p, dense), max_memory, max_seconds)
     roles = roles_of(loop, sysm)
     t = np.arange(M + 1) * T
     F = np.zeros((M, p))

@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from hapstab import budget
 from hapstab.engine.structure import structure_of
 from hapstab.engine.system import SampledSystem, build
 from hapstab.errors import AnalysisError
@@ -36,6 +37,37 @@ def _stiffness_scale(loop: HapticLoop | TeleoperationLoop) -> float:
 #: the exact analysis resolves K from 1e-6 of its own scale (about 2 m/T^2), and a
 #: stiffness this small moves the poles by less than the 2000-sample growth fit sees.
 _K_FLOOR = 1e-10
+
+
+#: Simulated runs of one K_max search, for its cost: 16 to 20 on the paper's loops (a
+#: scan by the factor 4, then bisection to rtol = 1e-4), rounded up.
+SEARCH_RUNS = 25
+
+
+def search_cost(loop: HapticLoop | TeleoperationLoop, points: int = 1, n_samples: int = 2000
+                ) -> budget.Cost:
+    """The cost of ``points`` K_max searches by simulation (see
+    :func:`critical_stiffness_simulation`) on loops of ``loop``'s size.
+
+    Parameters
+    ----------
+    loop : HapticLoop or TeleoperationLoop
+        The loop (its order sets the cost of each run).
+    points : int
+        How many searches (periods times delays).
+    n_samples : int
+        Samples per run before the long-delay rule lengthens it.
+
+    Returns
+    -------
+    Cost
+    """
+    N = build(loop).order
+    M = max(n_samples, 2 * SNAPSHOTS_PER_STATE * N)
+    one = budget.simulation_cost(M, N, 0, runs=SEARCH_RUNS)
+    return budget.Cost(f"{points} K_max search(es) by simulation ({SEARCH_RUNS} runs of {M} "
+                       f"samples of a {N}-state loop each)", one.memory_bytes,
+                       points * one.seconds)
 
 
 def critical_stiffness_simulation(loop: HapticLoop | TeleoperationLoop, *,

@@ -17,6 +17,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from hapstab import budget
 from hapstab.analysis.exact.crossings import analyse, winding
 from hapstab.analysis.exact.stable_set import StableSet
 from hapstab.engine.frequency import LoopResponse, loop_response
@@ -89,12 +90,18 @@ def _polish_pole(resp: LoopResponse, u: float, z0: complex) -> complex:
     return z if abs(z - z0) <= 1e-6 * max(1.0, abs(z0)) else z0
 
 
-def stability(loop: HapticLoop | TeleoperationLoop) -> StabilityResult:
+def stability(loop: HapticLoop | TeleoperationLoop, *, max_memory: float | None = None,
+              max_seconds: float | None = None) -> StabilityResult:
     """Exact stability of the sampled-data loop at its own parameters.
 
     Parameters
     ----------
     loop : HapticLoop or TeleoperationLoop
+
+    max_memory, max_seconds : float, optional
+        Budget in bytes and seconds (default :mod:`hapstab.budget`'s): the dense
+        eigenvalue problem of the closed loop (N states, N^3 operations) is
+        estimated first and refused above it.
 
     Returns
     -------
@@ -110,6 +117,10 @@ def stability(loop: HapticLoop | TeleoperationLoop) -> StabilityResult:
     Exact ZOH model of Fig. 2a / Fig. 3 with H(z) of eq. (23).
     """
     sysm = build(loop)
+    N = sysm.order
+    budget.check(budget.Cost(f"stability: the eigenvalues of a {N}-state closed loop",
+                             64.0 * N * N, 0.01 + budget.EIG_SECONDS_PER_N3 * N ** 3),
+                 max_memory, max_seconds)
     A = sysm.closed_loop()[0]
     eigs = np.linalg.eigvals(A)
     T = loop.period

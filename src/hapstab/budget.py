@@ -1,0 +1,190 @@
+"""What a computation may cost before it asks: memory and time, estimated from the
+inputs before any work starts.
+
+Every analysis whose cost grows with its inputs (the delay, the grid, the duration,
+the number of points) estimates its peak memory and its run time first and refuses
+with one line, saying what it would need, when that exceeds the budget: by default
+:data:`MEMORY_BYTES` and :data:`SECONDS`. Ask for more with ``max_memory=`` /
+``max_seconds=`` on the call, for a block of code with :func:`limits` (or
+:func:`unlimited`), or on the command line with ``--yes``.
+
+The time estimates count the dominant operations (dense eigenvalue problems, the
+samples of a simulation, the points of a grid) at a rate measured on the project's
+2-core machine; they are meant to be right within a factor of a few, which is what a
+budget needs. The memory estimates count the arrays held at the peak.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import contextvars
+import math
+from collections.abc import Iterator
+from dataclasses import dataclass
+
+from hapstab.errors import HapstabError
+
+__all__ = ["BudgetError", "Cost", "check", "limits", "unlimited", "MEMORY_BYTES", "SECONDS",
+           "EIG_SECONDS_PER_N3", "FLOPS", "RUN_SECONDS", "simulation_cost"]
+
+#: Default memory budget: 2 GiB, a twelfth of the project's 24 GiB machine and what
+#: any laptop spares.
+MEMORY_BYTES = 2 * 1024 ** 3
+#: Default time budget: 5 minutes.
+SECONDS = 300.0
+#: Seconds per N^3 of one dense eigenvalue problem (numpy's eigvals): 0.8e-9 to 1.1e-9
+#: measured at N = 300...600 on the project's 2-core machine, doubled for a busy machine.
+EIG_SECONDS_PER_N3 = 2e-9
+#: Operations per second of numpy's batched products and solves: 6.6e9 counted
+#: operations in 0.27 s (1e5 samples of a 102-state loop) and a 200-state region's
+#: D-decomposition in about 6 s, on the project's machine; taken as 1e10.
+FLOPS = 1e10
+#: Fixed cost of one simulated run (setup, the verdict's fit): a K_max search of about
+#: 18 runs of 2000 samples of a 12-state loop takes 0.044 s.
+RUN_SECONDS = 2e-3
+
+_LIMITS: contextvars.ContextVar[tuple[float, float]] = contextvars.ContextVar(
+    "hapstab_budget", default=(MEMORY_BYTES, SECONDS))
+
+
+class BudgetError(HapstabError):
+    """A computation would need more memory or time than the budget allows."""
+
+
+@dataclass(frozen=True)
+class Cost:
+    """The estimated peak memory and run time of one computation.
+
+    Attributes
+    ----------
+    what : str
+        The computation and the sizes that drive its cost, in words.
+    memory_bytes : float
+        Peak memory held by its arrays.
+    seconds : float
+        Run time on the project's machine.
+    """
+
+    what: str
+    memory_bytes: float
+    seconds: float
+
+
+def _size(b: float) -> str:
+    for unit, f in (("TB", 1e12), ("GB", 1e9), ("MB", 1e6)):
+        if b >= f:
+            return f"{b / f:.3g} {unit}"
+    return f"{b / 1e3:.3g} kB"
+
+
+def _time(s: float) -> str:
+    if s >= 3600:
+        return f"{s / 3600:.3g} h"
+    return f"{s / 60:.3g} min" if s >= 120 else f"{s:.3g} s"
+
+
+def check(cost: Cost, max_memory: float | None = None, max_seconds: float | None = None) -> Cost:
+    """Refuse ``cost`` if it exceeds the budget.
+
+    Parameters
+    ----------
+    cost : Cost
+        The estimate.
+    max_memory : float, optional
+        Budget in bytes for this call (default: the current :func:`limits`).
+    max_seconds : float, optional
+        Budget in seconds for this call (default: the current :func:`limits`).
+
+    Returns
+    -------
+    Cost
+        ``cost``, when within the budget.
+
+    Raises
+    ------
+    BudgetError
+        One line: what it would need, the budget, and how to ask for more.
+    """
+    mem, sec = _LIMITS.get()
+    mem = mem if max_memory is None else float(max_memory)
+    sec = sec if max_seconds is None else float(max_seconds)
+    over = []
+    if cost.memory_bytes > mem:
+        over.append(f"about {_size(cost.memory_bytes)} of memory (budget {_size(mem)})")
+    if cost.seconds > sec:
+        over.append(f"about {_time(cost.seconds)} (budget {_time(sec)})")
+    if over:
+        raise BudgetError(f"{cost.what}: would need {' and '.join(over)}; run it anyway with "
+                          "--yes (Python: max_memory= / max_seconds=, or "
+                          "hapstab.budget.unlimited())")
+    return cost
+
+
+@contextlib.contextmanager
+def limits(memory_bytes: float | None = None, seconds: float | None = None) -> Iterator[None]:
+    """Set the budget for the computations inside the block.
+
+    Parameters
+    ----------
+    memory_bytes : float, optional
+        Bytes (``math.inf``: no limit); default: keep the current one.
+    seconds : float, optional
+        Seconds (``math.inf``: no limit); default: keep the current one.
+
+    Yields
+    ------
+    None
+    """
+    mem, sec = _LIMITS.get()
+    token = _LIMITS.set((mem if memory_bytes is None else float(memory_bytes),
+                         sec if seconds is None else float(seconds)))
+    try:
+        yield
+    finally:
+        _LIMITS.reset(token)
+
+
+def unlimited() -> contextlib.AbstractContextManager[None]:
+    """No budget inside the block (what ``--yes`` does on the command line).
+
+    Returns
+    -------
+    context manager
+    """
+    return limits(math.inf, math.inf)
+
+
+def simulation_cost(samples: int, states: int, ports: int, dense: int = 0,
+                    runs: int = 1) -> Cost:
+    """The cost of ``runs`` simulations of ``samples`` samples of a loop with ``states``
+    states (see :func:`hapstab.simulation.run.simulate`).
+
+    Memory: the state trajectory, one free and one impulse response per port for the
+    verdict (8 bytes each), the per-port series, and the dense output. Time: one
+    block propagation per response, ``2 N^2 + 128 p N`` operations per sample, the
+    verdict's fit (about ``300 N^3``) and a fixed :data:`RUN_SECONDS` per run.
+
+    Parameters
+    ----------
+    samples : int
+        Samples per run.
+    states : int
+        N, the closed loop's order.
+    ports : int
+        p, the devices.
+    dense : int
+        Points per sample of the dense output (0: none).
+    runs : int
+        How many runs (a search runs many, one after the other).
+
+    Returns
+    -------
+    Cost
+    """
+    M, N, p = float(samples), float(states), float(ports)
+    # words per sample, fitted above tracemalloc's peaks of simulate (N = 2...62, dense 50)
+    memory = 8 * M * (N * (3 + 2 * p) + 24 * p + 3 * dense * (1 + 2 * p))
+    fit = 300 * N ** 3       # the verdict's fit on a window of ~4 N snapshots (SVD, eigenvalues)
+    seconds = runs * (((1 + p) * M * (2 * N * N + 128 * p * N) + fit) / FLOPS + RUN_SECONDS)
+    return Cost(f"{runs} simulation(s) of {samples} samples of a {states}-state loop",
+                memory, seconds)

@@ -1,0 +1,84 @@
+"""Nothing runaway (issue #11): every computation whose cost grows with its inputs
+estimates memory and time first and refuses above the budget with one line that says
+what it would need and how to ask for it anyway (--yes, max_memory=, unlimited())."""
+
+import os
+import subprocess
+import sys
+import tracemalloc
+
+import pytest
+from click.testing import CliRunner
+
+import hapstab as h
+from hapstab import budget
+from hapstab.budget import BudgetError, simulation_cost
+from hapstab.cli.main import cli
+from hapstab.engine.system import build
+
+SRC = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "src")
+
+
+@pytest.mark.parametrize("args", [
+    ["region", "hve", "--delay", "2000", "--K", "0:900", "--B", "0:20", "--resolution", "2000"],
+    ["simulate", "hve", "-K", "9", "--duration", "50000"],
+    ["simulate", "hve", "-K", "9", "--dense", "1000", "--duration", "500"],
+    ["reproduce", "fig5", "--periods", "0.001:0.01:100000"],
+    ["boundary", "hve", "--method", "simulation", "--period", "0.001:0.01:100000"],
+], ids=["region", "simulate", "dense", "reproduce", "boundary-simulation"])
+def test_the_issues_runaway_commands_stop_before_they_start(args, tmp_path):
+    # a separate process with a time limit: a regression would otherwise run for hours
+    r = subprocess.run([sys.executable, "-m", "hapstab", *args], cwd=tmp_path, timeout=120,
+                       env={**os.environ, "PYTHONPATH": SRC}, capture_output=True, text=True)
+    assert r.returncode == 2, r.stderr
+    assert r.stderr.count("\n") == 1 and "would need about" in r.stderr and "--yes" in r.stderr
+    assert os.listdir(tmp_path) == []          # nothing written either
+
+
+def test_the_api_refuses_above_its_own_or_the_blocks_budget():
+    loop = h.paper_hve(1e-3, 10).with_stiffness(5.0)
+    with pytest.raises(BudgetError, match=r"simulation\(s\) of 1000 samples .* would need about"):
+        h.simulate(loop, 1.0, max_memory=1e3)
+    with budget.limits(memory_bytes=1e3), pytest.raises(BudgetError, match="memory"):
+        h.simulate(loop, 1.0)
+    with budget.limits(seconds=1e-9), pytest.raises(BudgetError, match=r"stability: .*budget"):
+        h.stability(loop)
+    with budget.limits(memory_bytes=1e3), budget.unlimited():
+        assert h.simulate(loop, 1.0).verdict.verdict == "bounded"
+    with pytest.raises(BudgetError, match="region: a 50 x 50 grid"):
+        h.stability_region(loop, (0, 100), (0, 1), 50, max_seconds=1e-6)
+    with pytest.raises(BudgetError, match="K_max search"):
+        h.boundary(loop, [1e-3, 2e-3], [0, 1], method="simulation", max_seconds=1e-6)
+
+
+def test_yes_runs_past_the_budget_anywhere_on_the_line():
+    args = ["simulate", "hve", "-K", "9", "--duration", "2", "--json"]
+    with budget.limits(memory_bytes=1e3):
+        refused = CliRunner().invoke(cli, args)
+        assert refused.exit_code == 2 and "would need" in refused.stderr
+        assert CliRunner().invoke(cli, [*args, "--yes"]).exit_code == 0
+        assert CliRunner().invoke(cli, ["--yes", *args]).exit_code == 0
+
+
+@pytest.mark.parametrize("make,n,duration,dense", [
+    (h.paper_hve, 0, 20.0, 0), (h.paper_hve, 10, 20.0, 0), (h.paper_hve, 60, 5.0, 0),
+    (h.paper_hve, 10, 2.0, 50), (h.paper_peb, 4, 10.0, 0), (h.paper_peb, 30, 3.0, 20)])
+def test_the_memory_estimate_bounds_what_a_simulation_holds(make, n, duration, dense):
+    loop = make(1e-3, n).with_stiffness(2.0)
+    sysm = build(loop)
+    est = simulation_cost(round(duration / 1e-3), sysm.order, sysm.n_ports, dense).memory_bytes
+    tracemalloc.start()
+    h.simulate(loop, duration, dense=dense)
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    assert peak <= est <= 12 * peak + 1e6, (peak, est)   # safe, and not absurdly so
+
+
+def test_a_refusal_says_what_and_how_much():
+    cost = budget.Cost("region: a 9 x 9 grid of a 7-state loop", 5e9, 7200.0)
+    with pytest.raises(BudgetError) as e:
+        budget.check(cost)
+    msg = str(e.value)
+    assert msg.startswith("region: a 9 x 9 grid of a 7-state loop: would need about 5 GB of "
+                          "memory (budget 2.15 GB) and about 2 h (budget 5 min)")
+    assert budget.check(cost, max_memory=1e10, max_seconds=1e4) is cost
