@@ -107,5 +107,5 @@ def test_to_dict_and_errors():
     assert d["loop"] == "hve" and isinstance(d["rows"], list) and "flagged" in d
     with pytest.raises(AnalysisError):
         audit(HapticLoop(Device(0.1, 0.1), DiscreteController((1.0,), (1.0,)), None, 1e-3, 0))
-    with pytest.raises(AnalysisError):
-        audit("not a loop")
+    with pytest.raises(TypeError, match="loop = 'not a loop': must be a HapticLoop"):
+        audit("not a loop")        # a TypeError, and a HapstabError (one line on the CLI)

@@ -24,6 +24,7 @@ COMMANDS = {
                    "--csv", "{out}"],
     "boundary-csv": ["boundary", "hve", "--period", "0.001:0.01:40", "-n", "0,1,2,5,10",
                      "--csv", "{out}"],
+    "reproduce-folder": ["reproduce", "fig5", "--periods", "0.002,0.004,0.006", "--out", "{out}"],
 }
 
 
@@ -32,6 +33,9 @@ def _argv(name, out):
 
 
 def _target(name, out):
+    if name.endswith("folder"):
+        os.makedirs(out, exist_ok=True)
+        return os.path.join(out, "fig5.csv")       # the folder's table (its SVG has a date)
     return out + ".png" if name.endswith("plot") else out
 
 
@@ -80,7 +84,8 @@ def test_a_signal_leaves_the_old_file_or_the_whole_new_one(references, tmp_path,
             assert (p.returncode == 130 and b"interrupted" in err) or p.returncode == -2, \
                 err.decode()      # (the file may be the new one: interrupted after the rename)
         if sig == signal.SIGINT:           # an interrupt cleans up; SIGKILL cannot
-            assert not [f for f in os.listdir(tmp_path) if f.endswith(".part")]
+            folder = os.path.dirname(target)
+            assert not [f for f in os.listdir(folder) if f.endswith(".part")]
 
 
 def _limit_file_size():

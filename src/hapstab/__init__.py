@@ -19,8 +19,9 @@ from hapstab.analysis.positive_real import (
     positive_real,
 )
 from hapstab.analysis.regions import RegionResult, stability_region
+from hapstab.budget import BudgetError
 from hapstab.engine.system import SampledSystem, build
-from hapstab.errors import AnalysisError, HapstabError, ModelError
+from hapstab.errors import AnalysisError, ArgumentTypeError, HapstabError, ModelError
 from hapstab.models.controllers import DiscreteController, SpringDamper
 from hapstab.models.loops import HapticLoop, TeleoperationLoop
 from hapstab.models.parts import (
@@ -31,6 +32,7 @@ from hapstab.models.parts import (
     parse_impedance,
     spring,
 )
+from hapstab.outputs import OutputError
 from hapstab.paper.loops import paper_hve, paper_peb
 from hapstab.results import BoundaryResult, CriticalStiffnessResult, StabilityResult
 from hapstab.simulation import SimulationResult, critical_stiffness_simulation, simulate
@@ -46,5 +48,6 @@ __all__ = [
     "RationalMatrix", "positive_real", "circle_criterion", "PositiveRealResult", "circle_test",
     "loop_inverse", "sampled_passivity", "PassivityResult", "audit", "AuditResult",
     "stability_region", "RegionResult", "best_damping", "BestDampingResult", "simulate",
-    "SimulationResult", "critical_stiffness_simulation",
+    "SimulationResult", "critical_stiffness_simulation", "ArgumentTypeError", "BudgetError",
+    "OutputError",
 ]

@@ -18,6 +18,10 @@ class HapstabError(ValueError):
     """Base class of every error hapstab raises for a user's input."""
 
 
+class ArgumentTypeError(HapstabError, TypeError):
+    """An argument of the wrong type (e.g. not a loop); a :class:`TypeError` too."""
+
+
 class ModelError(HapstabError):
     """A model (device, impedance, controller, loop) was given invalid parameters."""
 

@@ -16,7 +16,7 @@ from hapstab.analysis.closed_forms import CLOSED_FORMS, TABLE
 from hapstab.analysis.exact.core import exact_critical_stiffness, exact_kmax_batch
 from hapstab.analysis.passivity import critical_stiffness_passivity
 from hapstab.errors import AnalysisError, check_delay, check_period
-from hapstab.models.loops import HapticLoop, TeleoperationLoop
+from hapstab.models.loops import HapticLoop, TeleoperationLoop, require_loop
 from hapstab.results import BoundaryResult, CriticalStiffnessResult
 from hapstab.simulation.search import critical_stiffness_simulation
 
@@ -31,20 +31,24 @@ METHODS: dict[str, Callable[..., CriticalStiffnessResult]] = {
     "simulation": critical_stiffness_simulation,
 }
 
-def methods_for(kind: str) -> list[str]:
+def methods_for(kind: Any) -> list[str]:
     """Method names that apply to loops of ``kind``: every method but the closed
     forms derived for the other kind.
 
     Parameters
     ----------
-    kind : {"hve", "peb"}
-        The loop kind: haptic virtual environment or position-error-based teleoperator.
+    kind : {"hve", "peb"} or a loop
+        The loop kind (haptic virtual environment or position-error-based
+        teleoperator), or a loop, whose kind is taken.
 
     Returns
     -------
     list of str
         Names accepted by :func:`critical_stiffness` for that kind.
     """
+    kind = getattr(kind, "kind", kind)
+    if kind not in ("hve", "peb"):
+        raise AnalysisError(f"kind = {kind!r}: allowed: 'hve', 'peb' or a loop")
     other = {c.key for c in TABLE if c.kind != kind}
     return [m for m in METHODS if m not in other]
 
@@ -112,7 +116,11 @@ def boundary(loop: HapticLoop | TeleoperationLoop, periods: Sequence[float] | np
     BoundaryResult
         ``critical_stiffness[i, j]`` for ``delays[i]``, ``periods[j]``.
     """
-    T = np.atleast_1d(np.asarray(periods, dtype=float))
+    require_loop(loop)
+    try:
+        T = np.atleast_1d(np.asarray(periods, dtype=float)).ravel()
+    except (TypeError, ValueError):
+        raise AnalysisError(f"periods = {periods!r}: must be numbers (s)") from None
     if T.size == 0:
         raise AnalysisError("periods: the range is empty; give at least one period")
     for t in T:   # every period, by the models' own rule (not only the first, which builds the loop)

@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from hapstab.analysis.sweeps import min_eig, refine_minimum, theta_grid
-from hapstab.errors import AnalysisError, ModelError, check_poly, check_real
+from hapstab.errors import AnalysisError, ArgumentTypeError, ModelError, check_poly, check_real
 from hapstab.results import Result, jsonable
 from hapstab.tolerances import COEFF_ZERO, DIVISOR_FLOOR, ROOT_ON_CIRCLE
 
@@ -293,6 +293,11 @@ def _unit_circle_check(G: RationalMatrix) -> tuple[bool, str]:
     return True, ""
 
 
+def _require_matrix(G: Any) -> None:
+    if not isinstance(G, RationalMatrix):
+        raise ArgumentTypeError(f"G = {G!r:.60}: must be a RationalMatrix (got {type(G).__name__})")
+
+
 def positive_real(G: RationalMatrix, period: float | None = None, grid: int | None = None,
                   rtol: float = _RTOL) -> PositiveRealResult:
     """Test Definition 1 for a square proper rational G(z).
@@ -320,6 +325,7 @@ def positive_real(G: RationalMatrix, period: float | None = None, grid: int | No
     ----------
     The paper, Definition 1.
     """
+    _require_matrix(G)
     T = 1.0 if period is None else check_real("period", period, positive=True)
     poles = G.poles()
     fails: list[str] = []
@@ -405,6 +411,7 @@ def circle_criterion(G: RationalMatrix, sector: Sequence[float] | float | None =
     -------
     PositiveRealResult
     """
+    _require_matrix(G)
     if sector is None:
         return positive_real(G, period)
     try:

@@ -40,7 +40,7 @@ from hapstab.engine.structure import structure_of
 from hapstab.engine.system import build
 from hapstab.errors import AnalysisError, check_real
 from hapstab.models.controllers import SpringDamper
-from hapstab.models.loops import HapticLoop, TeleoperationLoop
+from hapstab.models.loops import HapticLoop, TeleoperationLoop, require_loop
 from hapstab.results import Result, jsonable
 from hapstab.tolerances import DIVISOR_FLOOR
 
@@ -69,6 +69,7 @@ def check_equal_gains(loop: Loop) -> float:
     AnalysisError
         A controller that is not a spring-damper, or unequal controllers.
     """
+    require_loop(loop)
     cs = loop.controllers
     if not all(isinstance(c, SpringDamper) for c in cs):
         raise AnalysisError("controller: a K-B region needs SpringDamper controllers (a "
@@ -313,6 +314,15 @@ class RegionResult(Result):
         return plot_region(self, ax=ax)
 
 
+def _window(name: str, w: Any) -> tuple[float, float]:
+    """A (lo, hi) pair of finite numbers, or an error naming the window."""
+    try:
+        lo, hi = w
+    except (TypeError, ValueError):
+        raise AnalysisError(f"{name} = {w!r}: must be a pair (lo, hi) of numbers") from None
+    return check_real(f"{name} range start", lo), check_real(f"{name} range end", hi)
+
+
 def _region_cost(loop: Loop, n: int) -> budget.Cost:
     """Peak memory and time of :func:`stability_region` at ``n`` x ``n``."""
     N = build(with_gains(loop, 1.0, 0.0)).order
@@ -360,13 +370,16 @@ def stability_region(loop: Loop, K: tuple[float, float], B: tuple[float, float],
         Controllers that are not equal spring-dampers, or an empty window.
     """
     check_equal_gains(loop)
-    K_lo, K_hi = (check_real("K range start", K[0], nonnegative=True), check_real("K range end", K[1]))
-    B_lo, B_hi = (check_real("B range start", B[0]), check_real("B range end", B[1]))  # any sign
+    K_lo, K_hi = _window("K", K)
+    B_lo, B_hi = _window("B", B)
+    if K_lo < 0:
+        raise AnalysisError(f"K = {K!r}: the window must start at K >= 0")
     if not (K_hi > K_lo and B_hi >= B_lo):
         raise AnalysisError(f"K = {K}, B = {B}: the window is empty (need lo < hi)")
+    if isinstance(resolution, bool) or not isinstance(resolution, (int, np.integer)) \
+            or resolution < 2:
+        raise AnalysisError(f"resolution = {resolution!r}: must be a whole number >= 2")
     n = int(resolution)
-    if n < 2:
-        raise AnalysisError(f"resolution = {resolution}: must be >= 2")
     budget.check(_region_cost(loop, n), max_memory, max_seconds)
     Brows = np.linspace(B_lo, B_hi, n)
     rows = kmax_over_B(loop, Brows, intervals=True)

@@ -21,8 +21,9 @@ class Number(click.ParamType):
 
     name = "number"
 
-    def __init__(self, positive: bool = False, nonnegative: bool = False) -> None:
-        self.positive, self.nonnegative = positive, nonnegative
+    def __init__(self, positive: bool = False, nonnegative: bool = False,
+                 span: tuple[float, float] | None = None) -> None:
+        self.positive, self.nonnegative, self.span = positive, nonnegative, span
 
     def convert(self, value: Any, param: Any, ctx: Any) -> float:
         if isinstance(value, float):
@@ -38,6 +39,9 @@ class Number(click.ParamType):
             self.fail(f"{value!r}: must be > 0", param, ctx)
         if self.nonnegative and not v >= 0:
             self.fail(f"{value!r}: must be >= 0", param, ctx)
+        if self.span is not None and not self.span[0] <= v <= self.span[1]:
+            self.fail(f"{value!r}: must be between {self.span[0]:g} and {self.span[1]:g}", param,
+                      ctx)
         return v
 
 
@@ -64,6 +68,8 @@ class Delay(click.ParamType):
 
 
 POS, NONNEG, REAL = Number(positive=True), Number(nonnegative=True), Number()
+#: K_s/K_m: scaled teleoperators use 1e-3...1e3; beyond 1e6 the loop's numbers overflow
+RATIO = Number(positive=True, span=(1e-6, 1e6))
 
 
 def _stack(*decorators: Callable) -> Callable:
@@ -118,9 +124,9 @@ def loop_options(kind: str, ranges: bool = False) -> Callable:
             click.option("--slave-damping", type=NONNEG, default=0.02, show_default=True, help="N*s/m"),
             click.option("--environment", default="spring:1", show_default=True,
                          help="Environment impedance: none | spring:k | msd:m,b,k."),
-            click.option("--slave-stiffness-ratio", "slave_stiffness_ratio", type=POS, default=1.0,
+            click.option("--slave-stiffness-ratio", "slave_stiffness_ratio", type=RATIO, default=1.0,
                          show_default=True,
-                         help="K_s / K_m, > 0: the slave's stiffness is this times the master's "
+                         help="K_s / K_m, 1e-6...1e6: the slave's stiffness is this times the master's "
                               "(K is the master's; the ratio is kept as K varies)."),
             click.option("--slave-virtual-damping", "slave_virtual_damping", type=REAL, default=None,
                          help="Slave virtual damping B_s in N*s/m, any sign (default: "
@@ -216,29 +222,29 @@ def fmt(x: float) -> str:
 
 
 
-def parse_periods(spec: str) -> list[float]:
+def parse_periods(spec: str, name: str = "--period") -> list[float]:
     """``start:stop:count`` (inclusive, evenly spaced) or a comma list, seconds."""
     allowed = "allowed: start:stop:count (e.g. 0.001:0.010:10) or a comma list of periods > 0"
     parts = spec.split(":") if ":" in spec else None
-    if parts is not None and len(parts) != 3:
-        raise HapstabError(f"--period = {spec!r}: expected start:stop:count; {allowed}")
+    if parts is not None and (len(parts) != 3 or not all(x.strip() for x in parts)):
+        raise HapstabError(f"{name} = {spec!r}: expected start:stop:count; {allowed}")
     try:
         nums = [float(x) for x in (parts if parts is not None else spec.split(",")) if x.strip()]
     except ValueError:
-        raise HapstabError(f"--period = {spec!r}: malformed number; {allowed}") from None
+        raise HapstabError(f"{name} = {spec!r}: malformed number; {allowed}") from None
     if parts is not None:
         lo, hi, cnt = nums
         if not (math.isfinite(cnt) and cnt.is_integer() and 1 <= cnt <= 100_000):
-            raise HapstabError(f"--period = {spec!r}: count must be a whole number from 1 to "
+            raise HapstabError(f"{name} = {spec!r}: count must be a whole number from 1 to "
                                f"100000; {allowed}")
         if not hi >= lo:
-            raise HapstabError(f"--period = {spec!r}: the range is empty (stop < start); {allowed}")
+            raise HapstabError(f"{name} = {spec!r}: the range is empty (stop < start); {allowed}")
         nums = [lo + (hi - lo) * i / max(int(cnt) - 1, 1) for i in range(int(cnt))]
     if not nums:
-        raise HapstabError(f"--period = {spec!r}: the range is empty; {allowed}")
+        raise HapstabError(f"{name} = {spec!r}: the range is empty; {allowed}")
     for v in nums:
         if not (math.isfinite(v) and v > 0):
-            raise HapstabError(f"--period = {spec!r}: every period must be finite and > 0; {allowed}")
+            raise HapstabError(f"{name} = {spec!r}: every period must be finite and > 0; {allowed}")
     return nums
 
 

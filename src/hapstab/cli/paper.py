@@ -53,29 +53,31 @@ def _passivity_command(kind: str) -> None:
     def _cmd(stiffness: float, method: str, approximation: str | None, sector: float | None,
              as_json: bool, **kw: Any) -> None:
         loop = make(kw, stiffness)
+        res: Any
         if method == "circle":
             from hapstab.analysis.circle import circle_test
 
             approx = approximation or "forward"
             if approx not in _APPROX:
                 raise HapstabError(f"--approximation = {approximation!r}: allowed: {', '.join(_APPROX)}")
-            d = circle_test(loop, approx, sector).to_dict()
+            res = circle_test(loop, approx, sector)
         elif method == "passivity":
             from hapstab.analysis.passivity import sampled_passivity
 
             if approximation is not None or sector is not None:
                 raise HapstabError("--approximation/--sector: apply to --method circle only; "
                                    "'passivity' is exact")
-            d, approx = sampled_passivity(loop).to_dict(), None
+            res, approx = sampled_passivity(loop), None
         else:
             raise HapstabError(f"--method = {method!r}: allowed: circle, passivity")
+        d = res.to_dict()
         d.update(stiffness=stiffness, method=method, approximation=approx, sector=sector)
-        rows = [("verdict", d["verdict"]),
-                ("margin", f"{d['margin']:.6g}" + (" N*s/m" if method == "passivity" else "")),
-                ("worst frequency", f"{d['worst_frequency_hz']:.6g} Hz "
-                                    f"({d['worst_frequency_rad_s']:.6g} rad/s)"),
-                ("failing condition", d["failed_condition"] or "none"),
-                ("why", d["reason"])]
+        rows = [("verdict", res.verdict),
+                ("margin", f"{res.margin:.6g}" + (" N*s/m" if method == "passivity" else "")),
+                ("worst frequency", f"{res.worst_frequency_hz:.6g} Hz "
+                                    f"({res.worst_frequency_rad_s:.6g} rad/s)"),
+                ("failing condition", res.failed_condition or "none"),
+                ("why", res.reason)]
         title = f"{method}{', ' + approx if approx else ''}, {kind}, K = {stiffness:g} N/m"
         emit(d, as_json, lambda: rich_table(title, rows))
 

@@ -122,8 +122,8 @@ def _summary(res: Any, loop: Any, files: list[str]) -> dict[str, Any]:
 
 
 def _g(x: Any, spec: str = ".6g") -> str:
-    """A summary value: a number, or "inf" / None after an overflow."""
-    return format(x, spec) if isinstance(x, (int, float)) else str(x)
+    """A summary value: a number, or "inf/NaN" where the run overflowed (null in JSON)."""
+    return format(x, spec) if isinstance(x, (int, float)) else "inf/NaN (overflow)"
 
 
 def _table(kind: str, stiffness: float, loop: Any, res: Any, d: dict[str, Any],
@@ -180,7 +180,7 @@ def reproduce_cmd(figure: str, out_dir: str, periods: str | None, as_json: bool)
     from hapstab import __version__
     from hapstab.paper.reproduce import FIGURES, PAPER_PERIODS, reproduce_figure
 
-    T = parse_periods(periods) if periods else list(PAPER_PERIODS)
+    T = parse_periods(periods, "--periods") if periods else list(PAPER_PERIODS)
     names = list(FIGURES) if figure == "all" else [figure]
     total = sum(len(FIGURES[n].delays) for n in names) * len(T)
     reps = []

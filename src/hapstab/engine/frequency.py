@@ -50,7 +50,7 @@ from hapstab.engine.discs import (
     poly_jet,
     zero,
 )
-from hapstab.engine.structure import port_is_free, rigid_modes, structure_of
+from hapstab.engine.structure import periods_of, port_is_free, rigid_modes, structure_of
 from hapstab.engine.zoh import expm_batched, port_matrices
 from hapstab.errors import AnalysisError
 from hapstab.models.controllers import SpringDamper, stiffness_ratios
@@ -288,7 +288,7 @@ def loop_response(loop: HapticLoop | TeleoperationLoop,
         vary), or the master's stiffness is 0 while the slave's is not.
     """
     st = structure_of(loop)
-    T = np.atleast_1d(np.asarray(loop.period if periods is None else periods, float))
+    T = periods_of(loop, periods)
     ctrls = [ch.controller for ch in st.channels if isinstance(ch.controller, SpringDamper)]
     if len(ctrls) != len(st.channels):
         raise AnalysisError("controller: critical stiffness needs SpringDamper controllers "
@@ -347,9 +347,10 @@ def _check_finite(resp: LoopResponse, ctrls) -> None:
     with np.errstate(all="ignore"):
         top = [np.abs(f.vc) * u for f, u in zip(F, (1.0, 1e10, 1e20), strict=True)]   # up to u = U_HI
     if not all(np.all(np.isfinite(t)) for t in top):
-        raise AnalysisError(f"virtual damping = {[c.damping for c in ctrls]} N*s/m: cannot analyse "
-                            "these parameters, the loop's characteristic function overflows "
-                            "double precision")
+        raise AnalysisError(f"virtual damping = {[c.damping for c in ctrls]} N*s/m, stiffness = "
+                            f"{[c.stiffness for c in ctrls]} N/m: cannot analyse these "
+                            "parameters, the loop's characteristic function overflows double "
+                            "precision")
 
 
 def stack_responses(resps: Sequence[LoopResponse]) -> LoopResponse:

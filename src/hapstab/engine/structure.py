@@ -11,11 +11,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from hapstab.errors import ModelError, check_period
 from hapstab.models.controllers import DiscreteController, SpringDamper
-from hapstab.models.loops import HapticLoop, TeleoperationLoop, split_delay
+from hapstab.models.loops import HapticLoop, TeleoperationLoop, require_loop, split_delay
 from hapstab.models.parts import Device, Impedance
 
 __all__ = ['Port', 'Channel', 'LoopStructure', 'structure_of', 'split_delay', 'port_is_free',
+           'periods_of',
            'rigid_modes', 'FREE_SPRING']
 
 
@@ -125,6 +127,37 @@ def rigid_modes(structure: LoopStructure, period_s: float) -> int:
     return int(free and bool(np.all(col == 0)))
 
 
+def periods_of(loop: HapticLoop | TeleoperationLoop, periods: object = None) -> np.ndarray:
+    """The sampling periods to build for: the loop's own, or ``periods`` checked.
+
+    Parameters
+    ----------
+    loop : HapticLoop or TeleoperationLoop
+        The loop (its period is the default).
+    periods : sequence of float, optional
+        Periods in s, each within :data:`~hapstab.errors.PERIOD_RANGE`.
+
+    Returns
+    -------
+    (P,) array of float
+
+    Raises
+    ------
+    ModelError
+        An empty list, or a period that is not a number in range.
+    """
+    require_loop(loop)
+    if periods is None:
+        return np.array([float(loop.period)])
+    try:
+        T = np.atleast_1d(np.asarray(periods, dtype=float)).ravel()
+    except (TypeError, ValueError):
+        raise ModelError(f"periods = {periods!r}: must be numbers (s)") from None
+    if T.size == 0:
+        raise ModelError("periods: the list is empty; give at least one period")
+    return np.array([check_period("period", float(t)) for t in T])
+
+
 def structure_of(loop: HapticLoop | TeleoperationLoop) -> LoopStructure:
     """The HVE and PEB builders: both are a :class:`LoopStructure` for one engine.
 
@@ -141,8 +174,8 @@ def structure_of(loop: HapticLoop | TeleoperationLoop) -> LoopStructure:
 
     Raises
     ------
-    TypeError
-        If ``loop`` is neither kind.
+    ArgumentTypeError
+        If ``loop`` is neither kind (a :class:`TypeError`).
     """
     if isinstance(loop, HapticLoop):
         return LoopStructure(
@@ -154,4 +187,5 @@ def structure_of(loop: HapticLoop | TeleoperationLoop) -> LoopStructure:
             (Port(loop.master, loop.operator, "master"), Port(loop.slave, loop.environment, "slave")),
             (Channel(0, loop.master_controller, ((0, 1.0, 0.0), (1, -1.0, bwd))),   # eq. (20)
              Channel(1, loop.slave_controller, ((1, 1.0, 0.0), (0, -1.0, fwd)))))
-    raise TypeError(f"not a loop: {loop!r}")
+    require_loop(loop)
+    raise AssertionError("unreachable: require_loop accepts only the two kinds above")

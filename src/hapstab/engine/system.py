@@ -25,8 +25,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from hapstab.engine.structure import LoopStructure, rigid_modes, structure_of
+from hapstab.engine.structure import LoopStructure, periods_of, rigid_modes, structure_of
 from hapstab.engine.zoh import discretize, port_matrices
+from hapstab.errors import ModelError
 from hapstab.models.controllers import DiscreteController, SpringDamper, stiffness_ratios
 from hapstab.models.loops import HapticLoop, TeleoperationLoop, split_delay
 
@@ -318,6 +319,20 @@ def _stiffness(st: LoopStructure, k: _KPart, Bd: np.ndarray, lay: _Layout,
     return k
 
 
+def _check_finite(st: LoopStructure, T: np.ndarray, arrays: list[np.ndarray]) -> None:
+    """Refuse a model that overflowed double precision, naming its parameters."""
+    with np.errstate(all="ignore"):
+        if all(np.all(np.isfinite(a)) for a in arrays):
+            return
+    ports = "; ".join(f"{pt.name} mass {pt.device.mass:g} kg, damping {pt.device.damping:g} N*s/m"
+                      for pt in st.ports)
+    ctrls = "; ".join(f"stiffness K = {c.stiffness:g} N/m, virtual damping B = {c.damping:g} N*s/m"
+                      if isinstance(c, SpringDamper) else "H(z)"
+                      for c in (ch.controller for ch in st.channels))
+    raise ModelError(f"period = {T.min():g} s: the sampled model overflows double precision with "
+                     f"{ports}; controllers {ctrls}")
+
+
 def build(loop: HapticLoop | TeleoperationLoop,
           periods: Sequence[float] | np.ndarray | None = None) -> SampledSystem:
     """Assemble the exact closed loop of ``loop`` for each sampling period.
@@ -339,7 +354,7 @@ def build(loop: HapticLoop | TeleoperationLoop,
     SampledSystem
     """
     st = structure_of(loop)
-    T = np.atleast_1d(np.asarray(loop.period if periods is None else periods, float))
+    T = periods_of(loop, periods)
     P = T.size
     Ac, Bc, Cf, Ad, Bd, off_p = _plant(st, T)
     parts = [_controller_parts(ch.controller, T) for ch in st.channels]
@@ -355,6 +370,7 @@ def build(loop: HapticLoop | TeleoperationLoop,
     gam_of = _fractional(A0, B_ext, B1, Fu0, Ac, Bc, T, lay)
     # C1 rows: the K-part of each port's force; same for every period
     k = _stiffness(st, _KPart(A0, Fu0, Fu1, Fu1.copy(), np.zeros(P), True, ""), Bd, lay, gam_of)
+    _check_finite(st, T, [k.A0, k.C1, k.Fu0, B_ext, B1])
     return SampledSystem(periods=T, A0=k.A0, B1=B1, C1=k.C1, stiffness=k.K_own, B_ext=B_ext,
                          F_u0=k.Fu0, F_u1=k.Fu1, pos=pos, vel=vel, Ac=Ac, Bc=Bc, Cf=Cf,
                          n_plant=n, labels=[pt.name for pt in st.ports], varies_with_K=k.varies,

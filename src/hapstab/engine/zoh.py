@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from hapstab.engine.structure import Port
+from hapstab.errors import ModelError
 from hapstab.tolerances import DIVISOR_FLOOR
 
 __all__ = ['discretize', 'port_matrices']
@@ -47,6 +48,11 @@ def port_matrices(port: Port) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     B[1, 0] = 1.0 / M
     Cf = np.zeros((1, 2 + nr))
     Cf[0, 0], Cf[0, 1], Cf[0, 2:] = z.stiffness, z.damping, Cr[0]
+    with np.errstate(all="ignore"):
+        if not (np.all(np.isfinite(A)) and np.all(np.isfinite(B))):
+            raise ModelError(f"{port.name} mass = {M:g} kg, {port.name} damping = "
+                             f"{dev.damping + z.damping:g} N*s/m, stiffness {z.stiffness:g} N/m: "
+                             "the port's dynamics (b/m, k/m, 1/m) overflow double precision")
     return A, B, Cf
 
 

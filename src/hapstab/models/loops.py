@@ -16,7 +16,9 @@ from typing import Any, ClassVar
 import numpy as np
 
 from hapstab.errors import (
+    MAX_DELAY_SAMPLES,
     AnalysisError,
+    ArgumentTypeError,
     ModelError,
     check_delay,
     check_period,
@@ -89,9 +91,13 @@ def delay_from_seconds(name: str, seconds: Any, period: float) -> tuple[int, flo
     Raises
     ------
     ModelError
-        If ``seconds`` is negative or not finite.
+        If ``seconds`` is negative, not finite or longer than ``MAX_DELAY_SAMPLES`` samples.
     """
-    return split_delay(check_real(name, seconds, nonnegative=True) / period)
+    d = check_real(name, seconds, nonnegative=True) / period
+    if not d <= MAX_DELAY_SAMPLES:
+        raise ModelError(f"{name} = {seconds!r}: {d:.4g} samples at T = {period:g} s; at most "
+                         f"{MAX_DELAY_SAMPLES} (the exact model carries one state per sample)")
+    return split_delay(d)
 
 
 def _check_controller(name: str, c: Any) -> Controller:
@@ -327,21 +333,30 @@ class TeleoperationLoop:
 Loop = HapticLoop | TeleoperationLoop
 
 
-def require_loop(loop: Any) -> None:
+def require_loop(loop: Any, name: str = "loop") -> None:
     """Refuse anything that is not a loop, with the one message every analysis gives.
 
     Parameters
     ----------
     loop : object
         What the caller was given.
+    name : str
+        The argument's name in the message.
 
     Raises
     ------
-    AnalysisError
-        If ``loop`` is neither a :class:`HapticLoop` nor a :class:`TeleoperationLoop`.
+    ArgumentTypeError
+        (a :class:`TypeError` and a :class:`~hapstab.errors.HapstabError`) if ``loop`` is
+        neither a :class:`HapticLoop` nor a :class:`TeleoperationLoop`.
     """
     if not isinstance(loop, (HapticLoop, TeleoperationLoop)):
-        raise AnalysisError(f"loop = {loop!r}: must be a HapticLoop or a TeleoperationLoop")
+        raise ArgumentTypeError(f"{name} = {_short(loop)}: must be a HapticLoop or a "
+                                f"TeleoperationLoop (got {type(loop).__name__})")
+
+
+def _short(x: Any) -> str:
+    r = repr(x)
+    return r if len(r) <= 60 else r[:57] + "..."
 
 
 def whole_delay(loop: HapticLoop | TeleoperationLoop, what: str) -> int:

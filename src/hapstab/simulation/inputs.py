@@ -79,7 +79,7 @@ def force_samples(spec: ForceSpec, times: np.ndarray, name: str = "force") -> np
             return v[0] * np.sin(2 * np.pi * v[1] * times)
         raise ModelError(f"{name} = {spec!r}: not understood; {allowed}")
     if callable(spec):
-        return np.array([float(spec(t)) for t in times])
+        return _called(spec, times, name)
     try:
         a = np.asarray(spec, dtype=float).ravel()
     except (TypeError, ValueError):
@@ -87,6 +87,23 @@ def force_samples(spec: ForceSpec, times: np.ndarray, name: str = "force") -> np
     if a.size != M or not np.all(np.isfinite(a)):
         raise ModelError(f"{name}: array of {a.size} values; need {M} finite values (one per sample)")
     return a
+
+
+def _called(f: Any, times: np.ndarray, name: str) -> np.ndarray:
+    """``f(t)`` at every instant; a failure or a value that is not a finite number is an
+    error naming the force and the time at which it happened."""
+    out = np.empty(times.size)
+    for k, t in enumerate(times):
+        try:
+            v = float(f(float(t)))
+        except Exception as e:   # the user's function failed: say where, as their error
+            raise ModelError(f"{name}: the function raised {type(e).__name__} at t = {t:.6g} s "
+                             f"({e})") from e
+        if not math.isfinite(v):
+            raise ModelError(f"{name}: the function returned {v} at t = {t:.6g} s; forces "
+                             "must be finite")
+        out[k] = v
+    return out
 
 
 def force_grows(F: np.ndarray) -> bool:

@@ -50,7 +50,7 @@ from hapstab.engine.structure import structure_of
 from hapstab.engine.system import build
 from hapstab.engine.zoh import port_matrices
 from hapstab.errors import ModelError, check_real
-from hapstab.models.loops import HapticLoop, TeleoperationLoop
+from hapstab.models.loops import HapticLoop, TeleoperationLoop, require_loop
 from hapstab.simulation.behaviour import assess_nonlinear
 from hapstab.simulation.growth import BoundednessVerdict, assess, combine
 from hapstab.simulation.inputs import ForceSpec, force_grows, force_samples
@@ -138,6 +138,7 @@ def simulate(loop: HapticLoop | TeleoperationLoop, duration: float, *,
     ----------
     The paper, Fig. 2a, Fig. 3, eq. (19)-(23), Section 5.
     """
+    require_loop(loop)
     T = loop.period
     M = _samples(duration, T, dense)
     haptic = loop.kind == "hve"

@@ -170,8 +170,10 @@ def _round(srch: _Search, cell: np.ndarray, ua: np.ndarray, ub: np.ndarray,
     if not cell.size:
         return cell, ua, ub
     if cell.size > MAX_BOXES:
-        raise AnalysisError("the crossing analysis needs more than "
-                            f"{MAX_BOXES} boxes; the loop is beyond what it can certify")
+        T = ", ".join(f"{t:g}" for t in np.unique(srch.resp.periods[srch.c.item[cell]]))
+        raise AnalysisError(f"period = {T} s: the crossing analysis needs more than {MAX_BOXES} "
+                            "boxes for this loop at this sampling period; it is beyond what it "
+                            "can certify (a shorter period or delay may be)")
     status, w_th, w_u, f_abs, noise = _box_test(srch.c, cell, ua, ub)
     one = np.flatnonzero(status == 1)
     if one.size:

@@ -1,0 +1,242 @@
+"""Hostile input (issue #11): seeded invocations of every command with hostile values
+for its options, and hostile calls of every public function. A user's mistake must be
+one line naming its parameter and exit code 2 (the API: a HapstabError, or a TypeError
+for a wrong type); never a traceback, an "internal error", an AttributeError,
+IndexError, LinAlgError, OverflowError, or a numpy warning (warnings are errors here).
+
+``HAPSTAB_FUZZ_SEED`` draws a fresh campaign; ``-m slow`` runs a larger one."""
+
+import contextlib
+import math
+import os
+import random
+
+import click
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+import hapstab as h
+from hapstab import budget
+from hapstab.cli.main import cli
+from hapstab.errors import HapstabError
+
+SEED = int(os.environ.get("HAPSTAB_FUZZ_SEED", "20261124"))
+
+HOSTILE = ["", " ", "nan", "inf", "-inf", "-1", "0", "-0", "1e308", "-1e308", "1e-308", "5e-324",
+           "abc", "1:2:3:4", "0.001::10", "::", ":", "1,,2", "1e999", "0x10", "1_000", "µ", "½",
+           "--", "-", "None", "[1]", "1 2", "9" * 400, "1e-9", "3.5", "-3.5", "1e9", "none",
+           "spring:", "msd:1,2", "msd:nan,1,1", "step:", "sine:1", "pulse:1,-1", "fig7"]
+
+
+def _commands():
+    """(path, value options) of every command, found by walking the CLI."""
+    out = []
+
+    def walk(cmd, path):
+        if isinstance(cmd, click.Group):
+            for name, sub in cmd.commands.items():
+                walk(sub, [*path, name])
+        else:
+            opts = [p.opts[0] for p in cmd.params if isinstance(p, click.Option)
+                    and not p.is_flag and p.opts[0] not in ("--help",)]
+            out.append((path, opts))
+
+    walk(cli, [])
+    return out
+
+
+COMMANDS = _commands()
+NEEDS = {"region": ["--K", "0:100", "--B", "0:1", "--resolution", "12"], "reproduce": ["fig5"],
+         "check": ["-K", "5"], "passivity": ["-K", "5"], "simulate": ["-K", "5"]}
+
+
+def _invocations(n, seed):
+    rng = random.Random(seed)
+    calls = []
+    for i in range(n):
+        path, opts = COMMANDS[i % len(COMMANDS)]
+        base = list(path) + NEEDS.get(path[0], [])
+        if path[0] == "reproduce":
+            base += ["--periods", "0.003"]         # the paper's grid is slow for a fuzz run
+        k = rng.choice([1, 1, 1, 2])
+        chosen = rng.sample(opts, min(k, len(opts))) if opts else []
+        args = list(base)
+        for o in chosen:
+            args += [o, rng.choice(HOSTILE)]
+        calls.append((args, chosen))
+    # the issue's own observations
+    calls += [(["kmax", "hve", "--period", "0.001::10"], ["--period"]),
+              (["kmax", "hve", "--delay-s", "1e308"], ["--delay-s"]),
+              (["kmax", "hve", "--mass", "1e-308"], ["--mass"]),
+              (["kmax", "hve", "--damping", "1e300"], ["--damping"]),
+              (["kmax", "hve", "-B", "1e300"], ["-B"]),
+              (["best-damping", "hve", "--max-damping", "0"], ["--max-damping"])]
+    return calls
+
+
+def _names(option):
+    """Words a message may name the option by."""
+    bare = option.lstrip("-")
+    words = {option, bare, bare.replace("-", "_"), bare.replace("-", " ")}
+    return words | {w[:-1] for w in words if w.endswith("s")}     # --periods: "period = ..."
+
+
+def _check_cli(args, chosen, runner):
+    with budget.limits(seconds=2.0):          # a fuzz run must stay fast: bigger work is refused
+        r = runner.invoke(cli, args)
+    err = r.stderr
+    assert r.exit_code in (0, 2), (args, r.exit_code, err, r.exception)
+    assert "Traceback" not in err and "internal error" not in err, (args, err)
+    if r.exit_code == 2:
+        assert err.startswith("hapstab: error: ") and err.count("\n") == 1, (args, err)
+        msg = err.lower()
+        named = any(w.lower() in msg for o in chosen for w in _names(o))
+        assert named or "would need about" in msg or not chosen, (args, err)
+
+
+@pytest.mark.parametrize("chunk", range(10))
+def test_hostile_command_lines(chunk, tmp_path):
+    runner = CliRunner()
+    calls = _invocations(520, SEED)
+    os.chdir(tmp_path)                       # reproduce writes ./out
+    for args, chosen in calls[chunk::10]:
+        _check_cli(args, chosen, runner)
+
+
+@pytest.mark.slow
+def test_more_hostile_command_lines(tmp_path):
+    runner = CliRunner()
+    os.chdir(tmp_path)
+    for args, chosen in _invocations(3000, SEED + 1):
+        _check_cli(args, chosen, runner)
+
+
+# ------------------------------------------------------------------------------ API
+LOOP = h.paper_hve(1e-3, 2).with_stiffness(5.0)
+PEB = h.paper_peb(1e-3, 2).with_stiffness(2.0)
+NOT_LOOPS = [None, 1, "x", [], {}, 1.5, object(), math.nan, np.zeros(3), PEB.master]
+
+TAKES_A_LOOP = {
+    "stability": lambda L: h.stability(L),
+    "critical_stiffness": lambda L: h.critical_stiffness(L),
+    "boundary": lambda L: h.boundary(L, [1e-3], [0]),
+    "stability_region": lambda L: h.stability_region(L, (0, 10), (0, 1), 5),
+    "best_damping": lambda L: h.best_damping(L, resolution=4),
+    "simulate": lambda L: h.simulate(L, 0.05),
+    "audit": lambda L: h.audit(L),
+    "sampled_passivity": lambda L: h.sampled_passivity(L),
+    "circle_test": lambda L: h.circle_test(L),
+    "loop_inverse": lambda L: h.loop_inverse(L),
+    "build": lambda L: h.build(L),
+    "critical_stiffness_simulation": lambda L: h.critical_stiffness_simulation(L),
+    "positive_real": lambda G: h.positive_real(G, 1e-3),
+    "circle_criterion": lambda G: h.circle_criterion(G, 1.0, 1e-3),
+}
+
+BAD_VALUES = {
+    "with_delay_s(1e308)": lambda: LOOP.with_delay_s(1e308),
+    "with_delay_s(-1)": lambda: LOOP.with_delay_s(-1),
+    "with_delays_s(inf)": lambda: PEB.with_delays_s(math.inf),
+    "device mass 1e-300": lambda: h.critical_stiffness(LOOP.replace(device=h.Device(1e-300, 0.1))),
+    "device mass 1e300": lambda: h.critical_stiffness(LOOP.replace(device=h.Device(1e300, 0.1))),
+    "device damping 1e300": lambda: h.critical_stiffness(LOOP.replace(device=h.Device(0.1, 1e300))),
+    "stability mass 1e-300": lambda: h.stability(LOOP.replace(device=h.Device(1e-300, 0.1))),
+    "simulate mass 1e-300": lambda: h.simulate(LOOP.replace(device=h.Device(1e-300, 0.1)), 0.1),
+    "region (0,)": lambda: h.stability_region(LOOP, (0,), (0, 1), 5),
+    "region ()": lambda: h.stability_region(LOOP, (), (0, 1), 5),
+    "region 'ab'": lambda: h.stability_region(LOOP, "ab", (0, 1), 5),
+    "region (nan, 1)": lambda: h.stability_region(LOOP, (math.nan, 1), (0, 1), 5),
+    "region resolution 'x'": lambda: h.stability_region(LOOP, (0, 1), (0, 1), "x"),
+    "region resolution 1.5": lambda: h.stability_region(LOOP, (0, 1), (0, 1), 1.5),
+    "region resolution 1e9": lambda: h.stability_region(LOOP, (0, 1), (0, 1), 10 ** 9),
+    "simulate nan force": lambda: h.simulate(LOOP, 0.1, force=lambda t: math.nan),
+    "simulate inf force": lambda: h.simulate(LOOP, 0.1, force=lambda t: math.inf),
+    "simulate force raises": lambda: h.simulate(LOOP, 0.1, force=lambda t: 1 / 0),
+    "simulate force string": lambda: h.simulate(LOOP, 0.1, force="nonsense"),
+    "simulate force array": lambda: h.simulate(LOOP, 0.1, force=[1.0, 2.0]),
+    "simulate duration nan": lambda: h.simulate(LOOP, math.nan),
+    "simulate duration '1'": lambda: h.simulate(LOOP, "1"),
+    "simulate duration 1e12": lambda: h.simulate(LOOP, 1e12),
+    "simulate x0 3 values": lambda: h.simulate(LOOP, 0.1, initial_position=[1, 2, 3]),
+    "simulate initial_state short": lambda: h.simulate(LOOP, 0.1, initial_state=[1, 2]),
+    "simulate dense 1": lambda: h.simulate(LOOP, 0.1, dense=1),
+    "simulate wall nan": lambda: h.simulate(LOOP, 0.1, wall=math.nan),
+    "simulate saturation -1": lambda: h.simulate(LOOP, 0.1, saturation=-1),
+    "simulate quantizer x": lambda: h.simulate(LOOP, 0.1, resolution=1e-3, quantizer="x"),
+    "build periods [-1]": lambda: h.build(LOOP, periods=[-1]),
+    "build periods [nan]": lambda: h.build(LOOP, periods=[math.nan]),
+    "build periods []": lambda: h.build(LOOP, periods=[]),
+    "build periods 'x'": lambda: h.build(LOOP, periods="x"),
+    "boundary periods []": lambda: h.boundary(LOOP, [], [0]),
+    "boundary delays [-1]": lambda: h.boundary(LOOP, [1e-3], [-1]),
+    "boundary delays [1.5]": lambda: h.boundary(LOOP, [1e-3], [1.5]),
+    "boundary method x": lambda: h.boundary(LOOP, [1e-3], [0], method="x"),
+    "critical_stiffness method x": lambda: h.critical_stiffness(LOOP, method="x"),
+    "critical_stiffness method None": lambda: h.critical_stiffness(LOOP, method=None),
+    "eq18 of a PEB": lambda: h.eq18(PEB),
+    "eq34 of an HVE": lambda: h.eq34(LOOP),
+    "SpringDamper('a')": lambda: h.SpringDamper("a"),
+    "SpringDamper(-1)": lambda: h.SpringDamper(-1.0),
+    "Device(-1, 0)": lambda: h.Device(-1, 0),
+    "Device(nan, 0)": lambda: h.Device(math.nan, 0),
+    "HapticLoop(None, None)": lambda: h.HapticLoop(None, None),
+    "period 0": lambda: LOOP.replace(period=0),
+    "period nan": lambda: LOOP.replace(period=math.nan),
+    "delay -1": lambda: LOOP.replace(delay_samples=-1),
+    "paper_hve(-1)": lambda: h.paper_hve(-1),
+    "paper_hve(1e-3, 1e9)": lambda: h.paper_hve(1e-3, 10 ** 9),
+    "DiscreteController([], [])": lambda: h.DiscreteController([], []),
+    "DiscreteController([1], [0])": lambda: h.DiscreteController([1], [0]),
+    "RationalMatrix zero den": lambda: h.RationalMatrix([[1]], [[0]]),
+    "RationalMatrix ragged": lambda: h.RationalMatrix([[1, 2]], [[1]]),
+    "parse_impedance('msd:1,2')": lambda: h.parse_impedance("msd:1,2"),
+    "parse_impedance(None)": lambda: h.parse_impedance(None),
+    "mass_spring_damper(nan)": lambda: h.mass_spring_damper(math.nan, 1, 1),
+    "spring(-1)": lambda: h.spring(-1),
+    "methods_for('x')": lambda: h.methods_for("x"),
+    "circle approximation x": lambda: h.critical_stiffness(LOOP, method="circle",
+                                                           approximation="x"),
+    "circle sector -1": lambda: h.critical_stiffness(LOOP, method="circle", sector=-1),
+    "stability max_memory 1": lambda: h.stability(LOOP, max_memory=1),
+}
+
+API_CALLS = ([(f"{name}({bad!r:.20})", (lambda f=f, b=bad: f(b)))
+              for name, f in TAKES_A_LOOP.items() for bad in NOT_LOOPS]
+             + list(BAD_VALUES.items()))
+
+
+def test_the_api_campaign_has_300_calls():
+    rng = random.Random(SEED)
+    assert len(API_CALLS) + len(_api_combinations(rng)) >= 300
+
+
+def _field_call(field, v):
+    """A call that puts the hostile value ``v`` into one field of the models."""
+    if field in ("mass", "damping"):
+        kw = {"mass": 0.1, "damping": 0.1, field: v}
+        return lambda: h.critical_stiffness(LOOP.replace(device=h.Device(**kw)))
+    if field in ("stiffness", "virtual"):
+        kw = {"stiffness": 5.0, "damping": 0.0, ("damping" if field == "virtual" else field): v}
+        return lambda: h.stability(LOOP.replace(controller=h.SpringDamper(**kw)))
+    if field == "period":
+        return lambda: h.stability(LOOP.replace(period=v))
+    return lambda: h.critical_stiffness(LOOP.replace(delay_samples=v))
+
+
+def _api_combinations(rng):
+    """Seeded random hostile values for the loop models' fields."""
+    vals = [-1.0, 0.0, math.nan, math.inf, 1e-300, 1e300, "x", None, True, [1.0]]
+    fields = ["mass", "damping", "stiffness", "virtual", "period", "delay"]
+    out = []
+    for _ in range(120):
+        field, v = rng.choice(fields), rng.choice(vals)
+        out.append((f"{field} = {v!r}", _field_call(field, v)))
+    return out
+
+
+@pytest.mark.parametrize("name,call", API_CALLS + _api_combinations(random.Random(SEED)),
+                         ids=lambda x: x if isinstance(x, str) else "")
+def test_hostile_api_calls(name, call):
+    with contextlib.suppress(HapstabError):   # a ValueError (or TypeError) naming the argument
+        call()
