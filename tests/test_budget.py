@@ -25,7 +25,8 @@ SRC = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), 
     ["simulate", "hve", "-K", "9", "--dense", "1000", "--duration", "500"],
     ["reproduce", "fig5", "--periods", "0.001:0.01:100000"],
     ["boundary", "hve", "--method", "simulation", "--period", "0.001:0.01:100000"],
-], ids=["region", "simulate", "dense", "reproduce", "boundary-simulation"])
+    ["boundary", "hve", "--period", "0.001:0.01:100000", "-n", "0,1,2,3,5,10"],
+], ids=["region", "simulate", "dense", "reproduce", "boundary-simulation", "boundary-exact"])
 def test_the_issues_runaway_commands_stop_before_they_start(args, tmp_path):
     # a separate process with a time limit: a regression would otherwise run for hours
     r = subprocess.run([sys.executable, "-m", "hapstab", *args], cwd=tmp_path, timeout=120,

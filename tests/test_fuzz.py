@@ -199,6 +199,9 @@ BAD_VALUES = {
                                                            approximation="x"),
     "circle sector -1": lambda: h.critical_stiffness(LOOP, method="circle", sector=-1),
     "stability max_memory 1": lambda: h.stability(LOOP, max_memory=1),
+    "best_damping resolution 'x'": lambda: h.best_damping(LOOP, resolution="x"),
+    "best_damping resolution 10**7": lambda: h.best_damping(LOOP, resolution=10 ** 7),
+    "boundary 10**6 periods": lambda: h.boundary(LOOP, np.linspace(1e-3, 2e-3, 10 ** 6), [0]),
 }
 
 API_CALLS = ([(f"{name}({bad!r:.20})", (lambda f=f, b=bad: f(b)))

@@ -25,7 +25,7 @@ from dataclasses import dataclass
 from hapstab.errors import HapstabError
 
 __all__ = ["BudgetError", "Cost", "check", "limits", "unlimited", "MEMORY_BYTES", "SECONDS",
-           "EIG_SECONDS_PER_N3", "FLOPS", "RUN_SECONDS", "simulation_cost"]
+           "EIG_SECONDS_PER_N3", "FLOPS", "RUN_SECONDS", "POINT_SECONDS", "simulation_cost"]
 
 #: Default memory budget: 2 GiB, a twelfth of the project's 24 GiB machine and what
 #: any laptop spares.
@@ -42,6 +42,10 @@ FLOPS = 1e10
 #: Fixed cost of one simulated run (setup, the verdict's fit): a K_max search of about
 #: 18 runs of 2000 samples of a 12-state loop takes 0.044 s.
 RUN_SECONDS = 2e-3
+#: One certified K_max (the exact core, K_max alone): 6-20 ms at every delay up to 1000
+#: samples (benchmarks/bench_delay.py), taken as 20 ms; a closed form or the circle
+#: criterion costs less.
+POINT_SECONDS = 0.02
 
 _LIMITS: contextvars.ContextVar[tuple[float, float]] = contextvars.ContextVar(
     "hapstab_budget", default=(MEMORY_BYTES, SECONDS))

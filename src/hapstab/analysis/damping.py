@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from hapstab import budget
 from hapstab.analysis.regions import Loop, check_equal_gains, kmax_over_B
 from hapstab.errors import AnalysisError, check_real
 from hapstab.results import Result, jsonable
@@ -155,6 +156,11 @@ def best_damping(loop: Loop, B_max: float | None = None, resolution: int = 64,
         B_min = check_real("B_min", B_min)
         if B_min > 0:
             raise AnalysisError(f"B_min = {B_min}: must be <= 0 (the search always includes B = 0)")
+    if isinstance(resolution, bool) or not isinstance(resolution, (int, np.integer)) \
+            or resolution < 2:
+        raise AnalysisError(f"resolution = {resolution!r}: must be a whole number >= 2")
+    budget.check(budget.Cost(f"best damping: K_max at {int(resolution) + 60} dampings",
+                             1e5 * resolution, budget.POINT_SECONDS * (int(resolution) + 60)))
     Bs = np.unique(np.concatenate([np.linspace(B_min, B_max, int(resolution)), [0.0]]))
     Ks = kmax(Bs)
     i = int(np.argmax(Ks))

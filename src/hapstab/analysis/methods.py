@@ -128,13 +128,20 @@ def boundary(loop: HapticLoop | TeleoperationLoop, periods: Sequence[float] | np
     ns = [check_delay("delay", n) for n in np.atleast_1d(delays)]
     if not ns:
         raise AnalysisError("delays: the list is empty; give at least one delay")
+    from hapstab import budget
+
+    limits = options.pop("max_memory", None), options.pop("max_seconds", None)
     if method == "simulation":
-        from hapstab import budget
         from hapstab.simulation.search import search_cost
 
         longest = loop.with_whole_delay(max(ns), float(T.min()))
         budget.check(search_cost(longest, len(ns) * T.size, options.get("n_samples", 2000)),
-                     options.pop("max_memory", None), options.pop("max_seconds", None))
+                     *limits)
+    else:
+        points = len(ns) * T.size
+        budget.check(budget.Cost(f"boundary: {points} points ({len(ns)} delays x {T.size} "
+                                 f"periods) by method {method!r}", 1e5 * points,
+                                 budget.POINT_SECONDS * points), *limits)
     out = np.empty((len(ns), T.size))
     for i, n in enumerate(ns):
         # the grid's delay replaces the template's, in both directions, whole samples
