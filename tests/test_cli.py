@@ -98,7 +98,8 @@ def test_simulate_with_negative_virtual_damping():
 def test_demo_prints_both_figures():
     r = run("demo", "--json")
     d = json.loads(r.stdout)
-    assert set(d) == {"Fig. 5 (HVE)", "Fig. 6 (PEB)"} and len(d["Fig. 5 (HVE)"]) == 20
+    assert set(d) == {"Fig. 5 (HVE)", "Fig. 6 (PEB)", "hapstab_version", "inputs"}
+    assert len(d["Fig. 5 (HVE)"]) == 20
 
 
 @pytest.mark.parametrize("args,needle", [

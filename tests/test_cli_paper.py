@@ -91,6 +91,9 @@ def test_audit_json():
 def test_bad_input_is_one_line_exit_2(args):
     res = run(*args, "--json")
     assert res.exit_code == 2
-    assert res.stdout == ""
+    # with --json the error is also one JSON object on stdout (issue #12), for tools
+    err = json.loads(res.stdout)
+    assert err["exit_code"] == 2 and "hapstab: error: " + err["error"] == res.stderr.strip()
+    assert err["inputs"]["command_line"] == ["hapstab", *args, "--json"]
     lines = res.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("hapstab: error:") and "Traceback" not in res.stderr

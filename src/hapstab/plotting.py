@@ -182,11 +182,11 @@ def plot_reproduction(res: Any, ax: Any = None) -> Any:
         sel = sorted((r for r in rows if r["delay_samples"] == n), key=lambda r: r["period_s"])
         T = np.array([r["period_s"] for r in sel]) * 1e3
         eq = equations[min(i, 1)]
-        ax.plot(T, [r["theory"] for r in sel], "-", color=c, lw=1.5, label=f"n = {n}: eq. {eq}")
-        ax.plot(T, [r["exact"] for r in sel], "--", color=c, lw=1.0, label=f"n = {n}: exact")
+        ax.plot(T, [r["theory"] for r in sel], "-", color=c, lw=1.5, label=f"n = {n:g}: eq. {eq}")
+        ax.plot(T, [r["exact"] for r in sel], "--", color=c, lw=1.0, label=f"n = {n:g}: exact")
         if "circle" in sel[0]:
-            ax.plot(T, [r["circle"] for r in sel], ":", color=c, lw=1.2, label=f"n = {n}: circle")
-        ax.plot(T, [r["simulation"] for r in sel], "*", color=c, ms=9, label=f"n = {n}: simulation")
+            ax.plot(T, [r["circle"] for r in sel], ":", color=c, lw=1.2, label=f"n = {n:g}: circle")
+        ax.plot(T, [r["simulation"] for r in sel], "*", color=c, ms=9, label=f"n = {n:g}: simulation")
     ax.set_xlabel("sampling period T (ms)")
     ax.set_ylabel("K_max (N/m)")
     ax.set_yscale("log")

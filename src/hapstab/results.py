@@ -211,7 +211,8 @@ class CriticalStiffnessResult(Result):
         return jsonable(merged({
             "critical_stiffness": self.critical_stiffness, "method": self.method,
             "stable_intervals": [list(iv) for iv in self.stable_intervals],
-            "reason": self.reason, "period_s": self.period, "delay_samples": self.delay_samples,
+            "reason": self.reason, "period_s": self.period,
+            "delay_samples": float(self.delay_samples),
             "crossing_frequency_hz": self.crossing_frequency_hz}, self.details, self.method))
 
 

@@ -105,7 +105,7 @@ class AuditResult(Result):
 
     def to_dict(self) -> dict[str, Any]:
         return jsonable({"loop": self.kind, "period_s": self.period,
-                         "delay_samples": self.delay_samples,
+                         "delay_samples": float(self.delay_samples),
                          "virtual_damping": self.virtual_damping,
                          "exact_kmax": self.exact_kmax, "passivity_kmax": self.passivity_kmax,
                          "flagged": list(self.flagged), "rows": [r.to_dict() for r in self.rows]})

@@ -279,7 +279,7 @@ class RegionResult(Result):
 
     def to_dict(self) -> dict[str, Any]:
         return jsonable({
-            "loop": self.kind, "period_s": self.period, "delay_samples": self.delay_samples,
+            "loop": self.kind, "period_s": self.period, "delay_samples": float(self.delay_samples),
             "K_range": self.K_range, "B_range": self.B_range,
             "rows": [{"virtual_damping": b, "stable_intervals": [list(x) for x in iv]}
                      for b, iv in zip(self.B_rows, self.intervals, strict=True)],

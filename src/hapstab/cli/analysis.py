@@ -15,6 +15,7 @@ from hapstab.cli.options import (
     loop_options,
     parse_delays,
     parse_periods,
+    provenance,
     rich_table,
 )
 from hapstab.errors import HapstabError
@@ -64,7 +65,7 @@ def _kmax_command(kind: str) -> None:
                  or "none"),
                 ("crossing frequency", f"{res.crossing_frequency_hz:.6g} Hz"),
                 ("why", res.reason)]
-        emit(res.to_dict(), as_json, lambda: rich_table(f"K_max, {kind}", rows))
+        emit(res.to_dict(), as_json, lambda: rich_table(f"K_max, {kind}", rows), loop)
 
     _cmd.__doc__ = f"K_max of the {kind.upper()} loop."
 
@@ -78,13 +79,15 @@ def _check_command(kind: str) -> None:
     def _cmd(stiffness: float, as_json: bool, **kw: Any) -> None:
         from hapstab.analysis.exact.core import stability
 
-        res = stability(make(kw, stiffness))
+        loop = make(kw, stiffness)
+        res = stability(loop)
         d = res.to_dict()
         d["stiffness"] = stiffness
         rows = [("verdict", res.verdict), ("spectral radius", f"{res.spectral_radius:.12g}"),
                 ("dominant pole", f"{res.dominant_pole:.8g}"),
                 ("frequency", f"{res.frequency_hz:.6g} Hz"), ("why", res.reason)]
-        emit(d, as_json, lambda: rich_table(f"stability, {kind}, K = {stiffness:g} N/m", rows))
+        emit(d, as_json, lambda: rich_table(f"stability, {kind}, K = {stiffness:g} N/m", rows),
+             loop)
 
     _cmd.__doc__ = f"Stability of the {kind.upper()} loop at stiffness K."
 
@@ -105,9 +108,10 @@ def _boundary_command(kind: str) -> None:
         check_files(csv_path)
         periods, delays = parse_periods(kw["period"]), parse_delays(kw["delay"])
         kw.update(period=periods[0], delay=delays[0])
-        res = boundary(make(kw, 1.0), periods, delays, method=method)
+        template = make(kw, 1.0)
+        res = boundary(template, periods, delays, method=method)
         write_files(res, csv_path)
-        emit(res.to_dict(), as_json, lambda: _boundary_table(res))
+        emit(res.to_dict(), as_json, lambda: _boundary_table(res), template)
 
     _cmd.__doc__ = f"K_max of the {kind.upper()} loop over a range of periods and delays."
 
@@ -153,11 +157,11 @@ def demo(as_json: bool) -> None:
                 lp = loop.replace(period=float(t), delay_samples=n)
                 cond = paper_condition(lp)
                 theory, eq = cond.function(lp).critical_stiffness, EQUATION[cond.key]
-                rows.append({"period_s": float(t), "delay_samples": n, "theory": theory,
+                rows.append({"period_s": float(t), "delay_samples": float(n), "theory": theory,
                              "equation": eq, "exact": float(res.critical_stiffness[i, j])})
         data[title] = rows
     if as_json:
-        click.echo(dumps(data))
+        click.echo(dumps({**data, **provenance()}))
         return
     from rich.console import Console
     from rich.table import Table

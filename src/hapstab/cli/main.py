@@ -14,7 +14,9 @@ from typing import Any
 import click
 import numpy as np
 
+from hapstab.cli.options import ARGV, provenance
 from hapstab.errors import HapstabError
+from hapstab.results import dumps
 
 
 # ------------------------------------------------------------------ error handling
@@ -33,8 +35,9 @@ class HapstabGroup(click.Group):
         # --yes: run past the cost budget (anywhere on the line, like --debug)
         yes = "--yes" in argv
         argv = [a for a in argv if a != "--yes"]
+        ARGV.set(tuple(argv))
         if sys.stdout is None:   # started with stdout closed (>&-): the answer would be lost
-            _fail("stdout is closed: hapstab writes its answer there; give it a file or a pipe")
+            _fail([], "stdout is closed: hapstab writes its answer there; give it a file or a pipe")
         try:
             # extreme inputs overflow inside numpy: the library says so once, as an
             # error, not as warnings
@@ -45,16 +48,16 @@ class HapstabGroup(click.Group):
                 warnings.simplefilter("ignore", RuntimeWarning)
                 rv = super().main(args=argv, prog_name=prog_name or "hapstab",
                                   complete_var=complete_var, standalone_mode=False, **extra)
-            _flush_stdout()
+            _flush_stdout(argv)
         except click.exceptions.ClickException as e:
-            _fail(e.format_message())
+            _fail(argv, e.format_message())
         except HapstabError as e:
-            _fail(str(e))
+            _fail(argv, str(e))
         except OSError as e:
-            _fail(f"cannot use {e.filename}: {e.strerror or e}" if e.filename
+            _fail(argv, f"cannot use {e.filename}: {e.strerror or e}" if e.filename
                   else f"cannot write the output: {e.strerror or e}")
         except MemoryError:
-            _fail("out of memory: the model is too large for this machine")
+            _fail(argv, "out of memory: the model is too large for this machine")
         except click.exceptions.Abort as e:
             if isinstance(e.__cause__, KeyboardInterrupt):   # Ctrl-C: no partial file is left
                 click.echo("hapstab: interrupted", err=True)
@@ -71,17 +74,23 @@ class HapstabGroup(click.Group):
         sys.exit(rv if isinstance(rv, int) else 0)
 
 
-def _flush_stdout() -> None:
+def _flush_stdout(argv: list[str]) -> None:
     """Make a failed write of the answer an error (e.g. stdout on a full disk), not a
     silent exit 0."""
     try:
         sys.stdout.flush()
     except OSError as e:
-        _fail(f"cannot write to stdout ({e.strerror or e})")
+        _fail(argv, f"cannot write to stdout ({e.strerror or e})")
 
 
-def _fail(msg: str) -> None:
-    click.echo("hapstab: error: " + " ".join(str(msg).split()), err=True)
+def _fail(argv: list[str], msg: str) -> None:
+    """A user error: one line on stderr, exit code 2; with ``--json`` also a JSON object
+    ``{"error": ..., "exit_code": 2}`` on stdout, so that a tool reading it sees why."""
+    line = " ".join(str(msg).split())
+    click.echo("hapstab: error: " + line, err=True)
+    if "--json" in argv:
+        with contextlib.suppress(OSError):
+            click.echo(dumps({"error": line, "exit_code": 2, **provenance()}))
     sys.exit(2)
 
 

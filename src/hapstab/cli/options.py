@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from contextvars import ContextVar
 from typing import Any
 
 import click
@@ -197,10 +198,25 @@ LOOP_KINDS: dict[str, Callable[..., HapticLoop | TeleoperationLoop]] = {
     "hve": hve_loop, "peb": peb_loop}
 
 
-def emit(data: dict[str, Any], as_json: bool, table: Callable[[], None]) -> None:
-    """One JSON object on stdout, or a readable table."""
+#: The command line being run (set by the group): every JSON output echoes it.
+ARGV: ContextVar[tuple[str, ...]] = ContextVar("hapstab_argv", default=())
+
+
+def provenance(loop: Any = None) -> dict[str, Any]:
+    """What an output was computed from: the hapstab version, the command line and the
+    loop (every parameter, units in the keys)."""
+    from hapstab import __version__
+
+    inputs: dict[str, Any] = {"command_line": ["hapstab", *ARGV.get()]}
+    if loop is not None:
+        inputs["loop"] = loop.to_dict()
+    return {"hapstab_version": __version__, "inputs": inputs}
+
+
+def emit(data: dict[str, Any], as_json: bool, table: Callable[[], None], loop: Any = None) -> None:
+    """One JSON object on stdout (the result, then its provenance), or a readable table."""
     if as_json:
-        click.echo(dumps(data))
+        click.echo(dumps({**data, **provenance(loop)}))
     else:
         table()
 

@@ -79,7 +79,7 @@ def _passivity_command(kind: str) -> None:
                 ("failing condition", res.failed_condition or "none"),
                 ("why", res.reason)]
         title = f"{method}{', ' + approx if approx else ''}, {kind}, K = {stiffness:g} N/m"
-        emit(d, as_json, lambda: rich_table(title, rows))
+        emit(d, as_json, lambda: rich_table(title, rows), loop)
 
     _cmd.__doc__ = (f"Is the {kind.upper()} loop's G^-1(z) positive real (circle criterion) or its "
                     "sampled-data side passive, at stiffness K? Verdict, margin, worst frequency.")
@@ -93,8 +93,9 @@ def _audit_command(kind: str) -> None:
     def _cmd(as_json: bool, **kw: Any) -> None:
         from hapstab.analysis.audit import audit
 
-        res = audit(make(kw, 1.0))
-        emit(res.to_dict(), as_json, lambda: _audit_table(res))
+        loop = make(kw, 1.0)
+        res = audit(loop)
+        emit(res.to_dict(), as_json, lambda: _audit_table(res), loop)
 
     _cmd.__doc__ = (f"Closed-form K_max conditions for the {kind.upper()} loop beside the circle, "
                     "passivity and exact results; flags promises the exact analysis breaks.")

@@ -74,7 +74,8 @@ def _region_command(kind: str) -> None:
             if o != "paper" and o not in METHODS:
                 raise HapstabError(f"--overlay = {o!r}: unknown; allowed: paper, passivity, circle, none")
         ov = names if plot_path else []
-        res = stability_region(make(kw, 1.0), K, B, resolution, overlays=ov)
+        loop = make(kw, 1.0)
+        res = stability_region(loop, K, B, resolution, overlays=ov)
         write_files(res, csv_path, plot_path, dpi=120, bbox_inches="tight")
         d = res.to_dict()
         kmax = res.kmax()
@@ -88,7 +89,7 @@ def _region_command(kind: str) -> None:
             rows.append(("plot", plot_path))
         if csv_path is not None:
             rows.append(("csv", csv_path))
-        emit(d, as_json, lambda: rich_table(f"K-B stability region, {kind}", rows))
+        emit(d, as_json, lambda: rich_table(f"K-B stability region, {kind}", rows), loop)
 
     _cmd.__doc__ = f"Exact K-B stability region of the {kind.upper()} loop (D-decomposition)."
 
@@ -110,12 +111,14 @@ def _best_command(kind: str) -> None:
         if B_min is not None and B_min > 0:
             raise HapstabError(f"--min-damping = {B_min:g}: must be <= 0 (the search always "
                                "includes B = 0)")
-        res = best_damping(make(kw, 1.0), B_max=B_max, B_min=B_min)
+        loop = make(kw, 1.0)
+        res = best_damping(loop, B_max=B_max, B_min=B_min)
         rows = [("best virtual damping B*", f"{res.damping:.10g} N*s/m"),
                 ("critical stiffness K*", f"{fmt(res.critical_stiffness)} N/m"),
                 ("K_max at B = 0", f"{fmt(res.critical_stiffness_at_zero_damping)} N/m"),
                 ("design answer", res.reason)]
-        emit(res.to_dict(), as_json, lambda: rich_table(f"best virtual damping, {kind}", rows))
+        emit(res.to_dict(), as_json, lambda: rich_table(f"best virtual damping, {kind}", rows),
+             loop)
 
     _cmd.__doc__ = f"The virtual damping B that maximises K_max of the {kind.upper()} loop."
 

@@ -20,6 +20,7 @@ from hapstab.cli.options import (
     emit,
     loop_options,
     parse_periods,
+    provenance,
     rich_table,
 )
 from hapstab.outputs import write_folder
@@ -78,7 +79,7 @@ def _simulate_command(kind: str) -> None:
                    dense=dense)
         files = write_files(res, csv_path, plot_path)
         d = _summary(res, loop, files)
-        emit(d, as_json, lambda: _table(kind, stiffness, loop, res, d, files))
+        emit(d, as_json, lambda: _table(kind, stiffness, loop, res, d, files), loop)
 
     for deco in reversed(extra):
         _cmd = deco(_cmd)
@@ -191,7 +192,7 @@ def reproduce_cmd(figure: str, out_dir: str, periods: str | None, as_json: bool)
                 "hapstab_version": __version__}
     files = write_folder(out_dir, [(r.figure.name, r) for r in reps], manifest, "--out")
     if as_json:
-        click.echo(dumps({"figures": [r.to_dict() for r in reps], "files": files,
+        click.echo(dumps({**provenance(), "figures": [r.to_dict() for r in reps], "files": files,
                                "worst_simulation_error": max(r.worst_simulation_error()
                                                              for r in reps)}))
         return

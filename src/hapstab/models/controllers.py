@@ -12,6 +12,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -58,6 +59,11 @@ class SpringDamper:
     def with_stiffness(self, K: float) -> SpringDamper:
         return dataclasses.replace(self, stiffness=K)
 
+    def to_dict(self) -> dict[str, Any]:
+        """The controller as JSON-ready values, units in the keys."""
+        return {"type": "spring-damper", "stiffness_N_per_m": self.stiffness,
+                "virtual_damping_N_s_per_m": self.damping}
+
 
 @dataclass(frozen=True)
 class DiscreteController:
@@ -91,6 +97,10 @@ class DiscreteController:
                 "(numerator degree <= denominator degree)")
         object.__setattr__(self, "num", tuple(map(float, num)))
         object.__setattr__(self, "den", tuple(map(float, den)))
+
+    def to_dict(self) -> dict[str, Any]:
+        """The controller as JSON-ready values: H(z) = num/den, highest power first."""
+        return {"type": "discrete", "num": list(self.num), "den": list(self.den)}
 
     def transfer(self, period: float) -> tuple[np.ndarray, np.ndarray]:
         return np.array(self.num), np.array(self.den)

@@ -175,6 +175,13 @@ class HapticLoop:
     #: The loop's kind, as the CLI names it.
     kind: ClassVar[str] = "hve"
 
+    def to_dict(self) -> dict[str, Any]:
+        """The loop as JSON-ready values (what a result was computed for), units in keys."""
+        return {"kind": self.kind, "period_s": self.period,
+                "delay_samples": float(self.delay_in_samples), "delay_s": self.delay_s,
+                "device": self.device.to_dict(), "operator": self.operator.to_dict(),
+                "controller": self.controller.to_dict()}
+
     @property
     def controllers(self) -> tuple[Controller, ...]:
         """The controller of each port (one: the virtual environment)."""
@@ -312,6 +319,16 @@ class TeleoperationLoop:
 
     #: The loop's kind, as the CLI names it.
     kind: ClassVar[str] = "peb"
+
+    def to_dict(self) -> dict[str, Any]:
+        """The loop as JSON-ready values (what a result was computed for), units in keys."""
+        return {"kind": self.kind, "period_s": self.period,
+                "delay_forward_samples": float(self.forward_delay_in_samples),
+                "delay_backward_samples": float(self.backward_delay_in_samples),
+                "master": self.master.to_dict(), "slave": self.slave.to_dict(),
+                "operator": self.operator.to_dict(), "environment": self.environment.to_dict(),
+                "master_controller": self.master_controller.to_dict(),
+                "slave_controller": self.slave_controller.to_dict()}
 
     @property
     def controllers(self) -> tuple[Controller, ...]:

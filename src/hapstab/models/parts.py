@@ -41,6 +41,10 @@ class Device:
         object.__setattr__(self, "damping",
                            check_real("damping", self.damping, nonnegative=True))
 
+    def to_dict(self) -> dict[str, Any]:
+        """The device as JSON-ready values, units in the keys."""
+        return {"mass_kg": self.mass, "damping_N_s_per_m": self.damping}
+
 
 # ------------------------------------------------------------------------ impedances
 _poly = check_poly
@@ -169,7 +173,11 @@ class Impedance:
         raise ModelError(f"{name} = {obj!r}: expected an Impedance, None, a spec string or (num, den)")
 
     def to_dict(self) -> dict[str, Any]:
-        return {"label": self.label, "num": list(self.num), "den": list(self.den)}
+        """The impedance as JSON-ready values: Z(s) = num/den (velocity to force, highest
+        power first) and its mass, damping and spring to ground."""
+        return {"label": self.label, "num": list(self.num), "den": list(self.den),
+                "mass_kg": self.mass, "damping_N_s_per_m": self.damping,
+                "stiffness_N_per_m": self.stiffness}
 
 
 NO_IMPEDANCE = Impedance((0.0,), (1.0,), label="none")

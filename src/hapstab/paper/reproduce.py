@@ -176,7 +176,7 @@ def reproduce_figure(name: str, periods: Sequence[float] | None = None, *,
         for t in T:
             loop = spec.make(t, n, 1.0)
             row: dict[str, Any] = {
-                "period_s": t, "delay_samples": n,
+                "period_s": t, "delay_samples": float(n),
                 "theory": paper_condition(loop).function(loop).critical_stiffness,
                 "exact": exact_critical_stiffness(loop).critical_stiffness,
                 "simulation": critical_stiffness_simulation(

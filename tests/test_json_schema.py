@@ -1,0 +1,111 @@
+"""JSON that tools can trust (issue #12): every command's --json output validates against
+schemas/hapstab-output.schema.json; numbers are numbers (an infinity is null plus a flag);
+the same key has the same type in every command; the inputs and the version are echoed;
+with --json an error is a JSON object on stdout too."""
+
+import json
+import os
+
+import pytest
+from click.testing import CliRunner
+from jsonschema import Draft202012Validator
+
+from hapstab.cli.main import cli
+
+SCHEMA_PATH = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
+                           "schemas", "hapstab-output.schema.json")
+with open(SCHEMA_PATH) as fh:
+    SCHEMA = json.load(fh)
+Draft202012Validator.check_schema(SCHEMA)
+
+RUNS = [
+    ("kmax", ["kmax", "hve"]),
+    ("kmax", ["kmax", "peb", "--delay", "2", "--method", "circle"]),
+    ("kmax", ["kmax", "hve", "--method", "circle", "--approximation", "backward"]),   # inf
+    ("kmax", ["kmax", "hve", "--method", "eq18", "--delay", "3"]),
+    ("check", ["check", "hve", "-K", "5"]),
+    ("check", ["check", "peb", "-K", "5", "--operator", "none", "--environment", "none"]),
+    ("boundary", ["boundary", "hve", "--period", "0.001,0.002", "-n", "0,2"]),
+    ("passivity", ["passivity", "hve", "-K", "5"]),
+    ("passivity", ["passivity", "peb", "-K", "5", "--method", "passivity"]),
+    ("audit", ["audit", "hve", "--delay", "2"]),
+    ("region", ["region", "hve", "--K", "0:100", "--B", "0:1", "--resolution", "8"]),
+    ("best-damping", ["best-damping", "hve"]),
+    ("simulate", ["simulate", "hve", "-K", "5", "--duration", "0.5"]),
+    ("simulate", ["simulate", "hve", "-K", "1e6", "--duration", "1"]),            # overflows
+    ("reproduce", ["reproduce", "fig5", "--periods", "0.003"]),
+    ("demo", ["demo"]),
+    ("error", ["kmax", "hve", "--delay", "x"]),
+    ("error", ["simulate", "hve", "-K", "9", "--duration", "1e9"]),              # budget
+]
+
+
+def _validator(name):
+    return Draft202012Validator({**SCHEMA, "$ref": f"#/$defs/{name}"})
+
+
+@pytest.fixture(scope="module")
+def outputs(tmp_path_factory):
+    os.chdir(tmp_path_factory.mktemp("json"))       # reproduce writes ./out
+    out = []
+    for name, args in RUNS:
+        r = CliRunner().invoke(cli, [*args, "--json"])
+        assert r.exit_code == (2 if name == "error" else 0), (args, r.stderr)
+        out.append((name, args, json.loads(r.stdout)))
+    return out
+
+
+def test_every_output_validates_against_the_schema(outputs):
+    for name, args, d in outputs:
+        errors = sorted(_validator(name).iter_errors(d), key=str)
+        assert not errors, (args, [e.message for e in errors][:5])
+
+
+def test_the_schema_can_fail():
+    bad = {"critical_stiffness": "inf", "method": "exact", "stable_intervals": [], "reason": "",
+           "period_s": 1e-3, "delay_samples": 0, "crossing_frequency_hz": None,
+           "hapstab_version": "0", "inputs": {"command_line": []}}
+    assert not _validator("kmax").is_valid(bad)           # the string "inf" is not a number
+    assert _validator("kmax").is_valid({**bad, "critical_stiffness": None,
+                                        "infinite": {"critical_stiffness": 1}})
+
+
+def test_an_infinite_value_is_null_with_its_flag(outputs):
+    d = next(d for n, a, d in outputs if "backward" in a)
+    assert d["critical_stiffness"] is None and d["infinite"]["critical_stiffness"] == 1
+
+
+def test_inputs_and_version_are_echoed(outputs):
+    from hapstab import __version__
+
+    for _, args, d in outputs:
+        assert d["hapstab_version"] == __version__
+        assert d["inputs"]["command_line"] == ["hapstab", *args, "--json"]
+    kmax = outputs[0][2]["inputs"]["loop"]
+    assert kmax["device"] == {"mass_kg": 0.15, "damping_N_s_per_m": 0.1}
+    assert kmax["operator"]["stiffness_N_per_m"] == 1.0 and kmax["period_s"] == 0.001
+
+
+def _types(v, path, seen):
+    if isinstance(v, dict):
+        for k, x in v.items():
+            _types(x, k, seen)
+    elif isinstance(v, list):
+        for x in v:
+            _types(x, path + "[]", seen)
+    elif v is not None:
+        kind = "number" if isinstance(v, (int, float)) and not isinstance(v, bool) else \
+            type(v).__name__
+        seen.setdefault(path, set()).add(kind)
+
+
+def test_the_same_key_has_the_same_type_everywhere(outputs):
+    seen: dict[str, set] = {}
+    for _, _, d in outputs:
+        _types(d, "", seen)
+    mixed = {k: v for k, v in seen.items() if len(v) > 1}
+    assert not mixed, mixed
+    # numbers that are whole are still floats where the key is a measurement
+    for _, _, d in outputs:
+        if "delay_samples" in d and not isinstance(d["delay_samples"], list):
+            assert isinstance(d["delay_samples"], float)
