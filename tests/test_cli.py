@@ -210,3 +210,16 @@ def test_help_summaries_are_not_cut_at_fig():
     assert r.exit_code == 0 and "(Fig.\n" not in r.output and not r.output.rstrip().endswith("(Fig.")
     assert all(not line.rstrip().endswith("(Fig.") and not line.rstrip().endswith(" Fig.")
                for line in r.output.splitlines())
+
+
+def test_every_subcommand_has_a_description():
+    # issue #12: the hve / peb subcommands were listed with no description
+    import click
+
+    from hapstab.cli.main import cli as group
+
+    for name, cmd in group.commands.items():
+        if isinstance(cmd, click.Group):
+            for sub_name, sub in cmd.commands.items():
+                assert sub.help and sub.get_short_help_str(80).strip(), (name, sub_name)
+                assert sub.help[:25] in run(name, "--help").stdout

@@ -42,7 +42,7 @@ def test_kmax_backward_without_delay_is_inf():
 
 @pytest.mark.parametrize("K,verdict", [("150", "positive real"), ("250", "not positive real")])
 def test_passivity_circle(K, verdict):
-    d = one_json(run("passivity", "hve", "--stiffness", K, "--json"))
+    d = one_json(run("passivity", "hve", "--stiffness", K, "--method", "circle", "--json"))
     assert d["verdict"] == verdict
     for key in ("margin", "worst_frequency_rad_s", "worst_frequency_hz", "failed_condition"):
         assert key in d
@@ -67,9 +67,19 @@ def test_tables_print():
                          (("kmax", "peb", "--method", "passivity"), "20 N/m")):
         res = run(*args)
         assert res.exit_code == 0 and needle in res.stdout and not res.stderr
-    # "positive real" is also inside "not positive real": the table says which one
+    # "passive" is also inside "not passive": the table says which one
     table = run("passivity", "peb", "-K", "3", "-n", "4").stdout
-    assert ("not positive real" in table) == (verdict == "not positive real")
+    assert ("not passive" in table) == (verdict == "not passive")
+    assert verdict in ("passive", "not passive") and "N*s/m" in table
+
+
+def test_passivity_speaks_of_passivity_by_default():
+    # issue #12: `passivity -K 2000` said "not positive real" and "margin -10" (no unit)
+    d = one_json(run("passivity", "hve", "-K", "2000", "--json"))
+    assert d["verdict"] == "not passive" and d["method"] == "passivity"
+    table = run("passivity", "hve", "-K", "2000").stdout
+    assert "not passive" in table and "N*s/m (damping missing)" in table
+    assert "positive real" not in table
 
 
 def test_audit_json():

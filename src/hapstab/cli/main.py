@@ -116,6 +116,17 @@ def _register() -> None:
                 paper.passivity_cmd, paper.audit_cmd, regions.region,
                 regions.best, simulation.simulate_cmd, simulation.reproduce_cmd):
         cli.add_command(cmd)
+        _describe(cmd)
+
+
+def _describe(cmd: click.Command) -> None:
+    """Give every loop-kind subcommand (hve, peb) the description its builder wrote as
+    ``_cmd.__doc__``, after click had built the command (and read no help)."""
+    if isinstance(cmd, click.Group):
+        for sub in cmd.commands.values():
+            _describe(sub)
+    elif not cmd.help and cmd.__dict__.get("__doc__"):
+        cmd.help = cmd.__dict__["__doc__"]
 
 
 _register()

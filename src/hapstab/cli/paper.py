@@ -29,7 +29,8 @@ _APPROX = ("forward", "backward", "tustin")
 
 @click.group("passivity")
 def passivity_cmd() -> None:
-    """Positive-real (circle criterion) or sampled-data passivity verdict at a stiffness."""
+    """Is the device side passive at a stiffness K (exact sampled-data passivity), or, with
+    --method circle, is G^-1(z) positive real (the paper's circle criterion)?"""
 
 
 @click.group("audit")
@@ -43,8 +44,9 @@ def _passivity_command(kind: str) -> None:
     @passivity_cmd.command(kind)
     @loop_options(kind)
     @click.option("--stiffness", "-K", type=NONNEG, required=True, help="K in N/m.")
-    @click.option("--method", default="circle", show_default=True,
-                  help="circle (G^-1 positive real, Definition 1) | passivity (Colgate-Schenkel).")
+    @click.option("--method", default="passivity", show_default=True,
+                  help="passivity (exact sampled-data passivity, Colgate-Schenkel) | circle "
+                       "(G^-1 positive real, Definition 1, the paper's test).")
     @click.option("--approximation", default=None,
                   help="For --method circle: forward (default) | backward | tustin.")
     @click.option("--sector", type=POS, default=None,
@@ -73,7 +75,8 @@ def _passivity_command(kind: str) -> None:
         d = res.to_dict()
         d.update(stiffness=stiffness, method=method, approximation=approx, sector=sector)
         rows = [("verdict", res.verdict),
-                ("margin", f"{res.margin:.6g}" + (" N*s/m" if method == "passivity" else "")),
+                ("margin", f"{res.margin:.6g} N*s/m ("
+                           + ("damping to spare" if res.margin >= 0 else "damping missing") + ")"),
                 ("worst frequency", f"{res.worst_frequency_hz:.6g} Hz "
                                     f"({res.worst_frequency_rad_s:.6g} rad/s)"),
                 ("failing condition", res.failed_condition or "none"),
@@ -81,8 +84,9 @@ def _passivity_command(kind: str) -> None:
         title = f"{method}{', ' + approx if approx else ''}, {kind}, K = {stiffness:g} N/m"
         emit(d, as_json, lambda: rich_table(title, rows), loop)
 
-    _cmd.__doc__ = (f"Is the {kind.upper()} loop's G^-1(z) positive real (circle criterion) or its "
-                    "sampled-data side passive, at stiffness K? Verdict, margin, worst frequency.")
+    _cmd.__doc__ = (f"Is the {kind.upper()} loop's sampled-data side passive at stiffness K (or, "
+                    "with --method circle, its G^-1(z) positive real)? Verdict, margin in "
+                    "N*s/m, worst frequency.")
 
 
 def _audit_command(kind: str) -> None:
