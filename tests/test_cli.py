@@ -223,3 +223,36 @@ def test_every_subcommand_has_a_description():
             for sub_name, sub in cmd.commands.items():
                 assert sub.help and sub.get_short_help_str(80).strip(), (name, sub_name)
                 assert sub.help[:25] in run(name, "--help").stdout
+
+
+@pytest.mark.parametrize("args,period", [
+    (("-T", "1ms"), 1e-3), (("-T", "250 us"), 2.5e-4), (("-T", "0.002"), 2e-3),
+    (("--rate", "1kHz"), 1e-3), (("--rate", "500"), 2e-3), (("--rate", "2 kHz"), 5e-4)])
+def test_periods_and_rates_with_units(args, period):
+    # issue #12: -T 1ms was refused and there was no --rate
+    r = run("kmax", "hve", *args, "--json")
+    assert r.exit_code == 0, r.stderr
+    assert json.loads(r.stdout)["period_s"] == pytest.approx(period, rel=1e-15)
+
+
+def test_a_delay_in_milliseconds():
+    d = json.loads(run("kmax", "hve", "--delay-s", "20ms", "--json").stdout)
+    assert d["delay_samples"] == 20.0
+
+
+def test_a_one_second_period_warns_of_a_unit_mistake():
+    r = run("kmax", "hve", "-T", "1", "--json")
+    assert r.exit_code == 0 and json.loads(r.stdout)["period_s"] == 1.0
+    assert r.stderr.startswith("hapstab: warning: sampling period T = 1 s") and "-T 1ms" in r.stderr
+    assert run("kmax", "hve", "-T", "1ms", "--json").stderr == ""
+
+
+@pytest.mark.parametrize("args,needle", [
+    (("kmax", "hve", "-T", "1furlong"), "unknown unit 'furlong'; allowed: s, ms, us"),
+    (("kmax", "hve", "-T", "1ms", "--rate", "1kHz"), "--period and --rate: give one"),
+    (("kmax", "--mass", "0.3"), "the loop kind (hve or peb) comes first, its options after it, "
+                                "e.g. hapstab kmax hve --mass 0.3"),
+])
+def test_unit_and_order_mistakes_are_explained(args, needle):
+    r = run(*args)
+    assert r.exit_code == 2 and needle in r.stderr and r.stderr.count("\n") == 1

@@ -88,8 +88,13 @@ def _check_cli(args, chosen, runner):
     err = r.stderr
     assert r.exit_code in (0, 2), (args, r.exit_code, err, r.exception)
     assert "Traceback" not in err and "internal error" not in err, (args, err)
+    lines = err.splitlines()
+    warnings = [ln for ln in lines if ln.startswith("hapstab: warning: ")]
+    if r.exit_code == 0:
+        assert lines == warnings, (args, err)             # nothing but plausibility warnings
     if r.exit_code == 2:
-        assert err.startswith("hapstab: error: ") and err.count("\n") == 1, (args, err)
+        err = lines[-1] + "\n"
+        assert lines[:-1] == warnings and err.startswith("hapstab: error: "), (args, lines)
         msg = err.lower()
         named = any(w.lower() in msg for o in chosen for w in _names(o))
         assert named or "would need about" in msg or not chosen, (args, err)

@@ -76,7 +76,7 @@ def _is_special(path: str) -> bool:
     """An existing target that is not a regular file (a device or a pipe)."""
     try:
         return not stat.S_ISREG(os.stat(path).st_mode)
-    except FileNotFoundError:
+    except OSError:          # missing, or a name the system refuses (too long): not special
         return False
 
 

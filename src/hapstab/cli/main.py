@@ -50,7 +50,8 @@ class HapstabGroup(click.Group):
                                   complete_var=complete_var, standalone_mode=False, **extra)
             _flush_stdout(argv)
         except click.exceptions.ClickException as e:
-            _fail(argv, e.format_message())
+            hint = _kind_hint(argv)
+            _fail(argv, (e.format_message().rstrip(".") + hint) if hint else e.format_message())
         except HapstabError as e:
             _fail(argv, str(e))
         except OSError as e:
@@ -72,6 +73,18 @@ class HapstabGroup(click.Group):
                        "report it with the command line (--debug shows the traceback)", err=True)
             sys.exit(1)
         sys.exit(rv if isinstance(rv, int) else 0)
+
+
+def _kind_hint(argv: list[str]) -> str:
+    """For options given before the loop kind (``kmax --mass 0.3``): where they go."""
+    group = cli.commands.get(argv[0]) if argv else None
+    if not isinstance(group, click.Group) or len(argv) < 2 or argv[1] in group.commands:
+        return ""
+    if not argv[1].startswith("-") or argv[1] in ("-h", "--help"):
+        return ""
+    kinds = " or ".join(group.commands)
+    return (f"; the loop kind ({kinds}) comes first, its options after it, e.g. "
+            f"hapstab {argv[0]} {next(iter(group.commands))} {' '.join(argv[1:])}")
 
 
 def _flush_stdout(argv: list[str]) -> None:

@@ -4,13 +4,14 @@ peb, and the output (one JSON object, or a table)."""
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Callable
 from contextvars import ContextVar
 from typing import Any
 
 import click
 
-from hapstab.errors import HapstabError
+from hapstab.errors import PERIOD_RANGE, HapstabError
 from hapstab.models.controllers import SpringDamper
 from hapstab.models.loops import HapticLoop, TeleoperationLoop
 from hapstab.models.parts import Device, parse_impedance
@@ -44,6 +45,53 @@ class Number(click.ParamType):
             self.fail(f"{value!r}: must be between {self.span[0]:g} and {self.span[1]:g}", param,
                       ctx)
         return v
+
+
+#: Units a quantity may carry (case-insensitive), to the SI unit.
+UNITS = {"s": {"": 1.0, "s": 1.0, "ms": 1e-3, "us": 1e-6, "µs": 1e-6, "μs": 1e-6},
+         "Hz": {"": 1.0, "hz": 1.0, "khz": 1e3, "mhz": 1e6}}
+_QUANTITY = re.compile(r"^\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*([^\d\s]*)\s*$")
+
+
+def parse_quantity(text: Any, unit: str) -> float:
+    """``"1ms"``, ``"1 ms"``, ``"0.001"`` (seconds) or ``"1kHz"`` as a number in ``unit``.
+
+    Raises
+    ------
+    ValueError
+        Not a number with one of the units of :data:`UNITS`; the message says which.
+    """
+    if isinstance(text, (int, float)):
+        return float(text)
+    try:
+        return float(str(text).strip())        # a plain number (also nan and inf, refused later)
+    except ValueError:
+        pass
+    m = _QUANTITY.match(str(text))
+    if not m:
+        raise ValueError(f"{text!r} is not a number (with a unit: "
+                         f"{', '.join(u for u in UNITS[unit] if u)})")
+    scale = UNITS[unit].get(m.group(2).lower().replace("μ", "µ"))
+    if scale is None:
+        raise ValueError(f"{text!r}: unknown unit {m.group(2)!r}; allowed: "
+                         f"{', '.join(u for u in UNITS[unit] if u)} (or none: {unit})")
+    return float(m.group(1)) * scale
+
+
+class Quantity(Number):
+    """A number with an optional unit (``1ms``, ``1 kHz``); plain numbers are in ``unit``."""
+
+    def __init__(self, unit: str, positive: bool = False, nonnegative: bool = False) -> None:
+        super().__init__(positive, nonnegative)
+        self.unit = unit
+        self.name = f"number[{unit}]"
+
+    def convert(self, value: Any, param: Any, ctx: Any) -> float:
+        try:
+            v = parse_quantity(value, self.unit)
+        except ValueError as e:
+            self.fail(str(e), param, ctx)
+        return super().convert(v, param, ctx)
 
 
 class Delay(click.ParamType):
@@ -93,13 +141,16 @@ def loop_options(kind: str, ranges: bool = False) -> Callable:
         ]
     else:
         timing = [
-            click.option("--period", "-T", type=POS, default=1e-3, show_default=True,
-                         help="Sampling period T in seconds."),
+            click.option("--period", "-T", type=Quantity("s", positive=True), default=1e-3,
+                         show_default=True,
+                         help="Sampling period T: seconds, or with a unit (1ms, 250us)."),
+            click.option("--rate", type=Quantity("Hz", positive=True), default=None,
+                         help="Sampling rate instead of --period: Hz, or with a unit (1kHz)."),
             click.option("--delay", "-n", "delay", type=Delay(), default=0, show_default=True,
                          help="Delay n in whole samples (t_d = n T)."),
-            click.option("--delay-s", "delay_s", type=NONNEG, default=None,
-                         help="Delay in seconds, any value (fractional samples modelled exactly); "
-                              "instead of --delay."),
+            click.option("--delay-s", "delay_s", type=Quantity("s", nonnegative=True), default=None,
+                         help="Delay in seconds or with a unit (20ms), any value (fractional "
+                              "samples modelled exactly); instead of --delay."),
         ]
         if kind == "peb":
             timing += [
@@ -154,11 +205,37 @@ def _given(name: str) -> bool:
         return False
 
 
+#: A sampling period this long is almost surely a unit mistake (1 meaning 1 ms): haptic
+#: and teleoperation loops sample at 0.1...10 ms.
+PLAUSIBLE_PERIOD_S = 0.1
+
+
+def _period(kw: dict[str, Any]) -> float:
+    """T from --period or --rate (one of them), with a warning on stderr when it is
+    implausibly long for a haptic loop."""
+    rate = kw.get("rate")
+    if rate is not None:
+        if _given("period"):
+            raise HapstabError("--period and --rate: give one of them, not both")
+        T = 1.0 / rate
+        lo, hi = PERIOD_RANGE
+        if not lo <= T <= hi:
+            raise HapstabError(f"--rate = {rate:g} Hz: gives T = {T:g} s; the rate must be "
+                               f"between {1 / hi:g} Hz and {1 / lo:g} Hz")
+    else:
+        T = kw["period"]
+    if PLAUSIBLE_PERIOD_S <= T <= PERIOD_RANGE[1]:   # (out of range is an error of its own)
+        click.echo(f"hapstab: warning: sampling period T = {T:g} s: haptic loops sample at "
+                   "0.1-10 ms; if you meant milliseconds, write -T 1ms (or --rate 1kHz)",
+                   err=True)
+    return T
+
+
 def hve_loop(kw: dict[str, Any], stiffness: float = 0.0) -> HapticLoop:
     """Build the HVE from parsed options."""
     loop = HapticLoop(Device(kw["mass"], kw["damping"]),
                       SpringDamper(stiffness, kw["virtual_damping"]),
-                      parse_impedance(kw["operator"], "--operator"), kw["period"], kw["delay"])
+                      parse_impedance(kw["operator"], "--operator"), _period(kw), kw["delay"])
     if kw.get("delay_s") is not None:
         if _given("delay"):
             raise HapstabError("--delay and --delay-s: give one of them, not both")
@@ -178,7 +255,7 @@ def peb_loop(kw: dict[str, Any], stiffness: float = 0.0) -> TeleoperationLoop:
                              Device(kw["slave_mass"], kw["slave_damping"]), cm, cs,
                              parse_impedance(kw["operator"], "--operator"),
                              parse_impedance(kw["environment"], "--environment"),
-                             kw["period"], kw["delay"])
+                             _period(kw), kw["delay"])
     fwd, bwd, ds = kw.get("delay_forward"), kw.get("delay_backward"), kw.get("delay_s")
     if ds is not None and (fwd is not None or bwd is not None or _given("delay")):
         raise HapstabError("--delay-s with --delay or --delay-forward/--delay-backward: give the "

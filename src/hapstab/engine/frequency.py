@@ -319,9 +319,9 @@ def loop_response(loop: HapticLoop | TeleoperationLoop,
         if not all(np.all(np.isfinite(a)) for a in arrays) or not np.any(pp.N):
             pt = st.ports[j]
             raise AnalysisError(
-                f"{pt.name}: cannot analyse mass = {pt.device.mass:g} kg with damping "
-                f"{pt.device.damping:g} N*s/m at T = {T.min():g}..{T.max():g} s: the discretised "
-                "plant over- or underflows double precision")
+                f"{pt.name} mass = {pt.device.mass:g} kg, {pt.name} damping = "
+                f"{pt.device.damping:g} N*s/m at T = {T.min():g}..{T.max():g} s: cannot analyse, "
+                "the discretised plant over- or underflows double precision")
     p = len(ports)
     rigid = rigid_modes(st, float(T.max()))
     q = sum(pp.d.shape[1] - 1 for pp in ports) - rigid
@@ -329,10 +329,15 @@ def loop_response(loop: HapticLoop | TeleoperationLoop,
     beta = np.array([[c.damping for c in ctrls]]) / T[:, None]
     # |B| T / m beyond 1e8: the damper's pole pair is beyond double precision's reach
     ratio_B = np.abs(beta).max(axis=1) * T ** 2 / min(masses) if beta.size else np.zeros(T.size)
-    if not (np.all(np.isfinite(scale)) and np.all(scale > 0) and np.all(ratio_B <= 1e8)):
-        raise AnalysisError(f"virtual damping = {[c.damping for c in ctrls]} N*s/m: cannot analyse "
-                            f"|B| T / m = {ratio_B.max():.3g} (at most 1e8; the loop's poles then lie "
-                            "beyond double precision)")
+    if not (np.all(np.isfinite(scale)) and np.all(scale > 0)):
+        names = ", ".join(f"{pt.name} mass = {pt.device.mass:g} kg" for pt in st.ports)
+        raise AnalysisError(f"{names}: cannot analyse at T = {T.min():g}..{T.max():g} s, the "
+                            "loop's stiffness scale m/T^2 leaves double precision")
+    if not np.all(ratio_B <= 1e8):
+        names = ", ".join(f"{st.ports[ch.port].name} virtual damping = {c.damping:g} N*s/m"
+                          for ch, c in zip(st.channels, ctrls, strict=True))
+        raise AnalysisError(f"{names}: cannot analyse |B| T / m = {ratio_B.max():.3g} (at most "
+                            "1e8; the loop's poles then lie beyond double precision)")
     resp = LoopResponse(terms, ports, np.broadcast_to(ratio, (T.size, p)).copy(), beta, scale,
                         q, rigid, T)
     _check_finite(resp, ctrls)

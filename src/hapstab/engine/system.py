@@ -326,9 +326,10 @@ def _check_finite(st: LoopStructure, T: np.ndarray, arrays: list[np.ndarray]) ->
             return
     ports = "; ".join(f"{pt.name} mass {pt.device.mass:g} kg, damping {pt.device.damping:g} N*s/m"
                       for pt in st.ports)
-    ctrls = "; ".join(f"stiffness K = {c.stiffness:g} N/m, virtual damping B = {c.damping:g} N*s/m"
-                      if isinstance(c, SpringDamper) else "H(z)"
-                      for c in (ch.controller for ch in st.channels))
+    ctrls = "; ".join(f"{st.ports[ch.port].name} stiffness K = {ch.controller.stiffness:g} N/m, "
+                      f"{st.ports[ch.port].name} virtual damping B = {ch.controller.damping:g} N*s/m"
+                      if isinstance(ch.controller, SpringDamper) else "H(z)"
+                      for ch in st.channels)
     raise ModelError(f"period = {T.min():g} s: the sampled model overflows double precision with "
                      f"{ports}; controllers {ctrls}")
 

@@ -35,7 +35,7 @@ from hapstab.models.parts import Device, Impedance
 from hapstab.tolerances import DELAY_SNAP
 
 __all__ = ["split_delay", "DELAY_SNAP", "HapticLoop", "TeleoperationLoop", "delay_from_seconds",
-           "whole_delay", "require_loop"]
+           "whole_delay", "require_loop", "describe"]
 
 
 def _check_fraction(name: str, value: Any) -> float:
@@ -350,6 +350,36 @@ class TeleoperationLoop:
 Loop = HapticLoop | TeleoperationLoop
 
 
+def describe(loop: HapticLoop | TeleoperationLoop) -> str:
+    """The loop's parameters in one line, for messages (``device mass 0.15 kg, ...``).
+
+    Parameters
+    ----------
+    loop : HapticLoop or TeleoperationLoop
+        The loop.
+
+    Returns
+    -------
+    str
+    """
+    units = {"kg": "kg", "N_s_per_m": "N*s/m", "N_per_m": "N/m", "s": "s", "samples": "samples"}
+
+    def flat(d: dict[str, Any], prefix: str) -> list[str]:
+        out = []
+        for k, v in d.items():
+            if isinstance(v, dict):
+                out += flat(v, f"{prefix}{k} ")
+            elif isinstance(v, (int, float)) and not isinstance(v, bool):
+                name, unit = k, ""
+                for suffix, u in units.items():
+                    if k.endswith("_" + suffix):
+                        name, unit = k[: -len(suffix) - 1], " " + u
+                out.append(f"{prefix}{name.replace('_', ' ')} {v:g}{unit}")
+        return out
+
+    return ", ".join(flat(loop.to_dict(), ""))
+
+
 def require_loop(loop: Any, name: str = "loop") -> None:
     """Refuse anything that is not a loop, with the one message every analysis gives.
 
@@ -395,8 +425,8 @@ def whole_delay(loop: HapticLoop | TeleoperationLoop, what: str) -> int:
     if isinstance(loop, TeleoperationLoop):
         if not loop.symmetric_delay:
             raise AnalysisError(f"{what}: derived for equal delays in both directions; this loop has "
-                                f"{loop.forward_delay_in_samples:g} and "
-                                f"{loop.backward_delay_in_samples:g} samples")
+                                f"delay forward {loop.forward_delay_in_samples:g} and delay "
+                                f"backward {loop.backward_delay_in_samples:g} samples")
         d = loop.forward_delay_in_samples
     else:
         d = loop.delay_in_samples

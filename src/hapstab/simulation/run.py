@@ -195,9 +195,12 @@ def simulate(loop: HapticLoop | TeleoperationLoop, duration: float, *,
 def _samples(duration: float, T: float, dense: Any) -> int:
     """Number of samples of the run; checks ``duration`` and ``dense``."""
     dur = check_real("duration", duration, positive=True)
+    if not dur / T <= 50_000_000:
+        raise ModelError(f"duration = {duration}: {dur / T:.3g} samples is too many (limit 5e7)")
     M = round(dur / T)
     if M < 8:
-        raise ModelError(f"duration = {duration}: gives {M} samples at T = {T:g} s; need >= 8")
+        raise ModelError(f"duration = {duration}: gives {M} samples at period T = {T:g} s; "
+                         "need >= 8")
     if M > 50_000_000:
         raise ModelError(f"duration = {duration}: {M} samples is too many (limit 5e7)")
     if not isinstance(dense, (int, np.integer)) or isinstance(dense, bool) or dense < 0 or dense == 1:

@@ -22,8 +22,9 @@ from hapstab.analysis.exact.crossings import analyse, winding
 from hapstab.analysis.exact.stable_set import StableSet
 from hapstab.engine.frequency import LoopResponse, loop_response
 from hapstab.engine.system import build
+from hapstab.errors import AnalysisError
 from hapstab.models.controllers import SpringDamper
-from hapstab.models.loops import HapticLoop, TeleoperationLoop
+from hapstab.models.loops import HapticLoop, TeleoperationLoop, describe
 from hapstab.results import CriticalStiffnessResult, StabilityResult
 from hapstab.tolerances import NEWTON_ANGLE_STEP, POLE_ON_CIRCLE
 
@@ -53,7 +54,11 @@ def exact_kmax_batch(loop: HapticLoop | TeleoperationLoop,
     list of StableSet
         One per period (see :func:`hapstab.analysis.exact.crossings.analyse`).
     """
-    return analyse(loop_response(loop, periods), full=intervals)
+    resp = loop_response(loop, periods)
+    try:
+        return analyse(resp, full=intervals)
+    except AnalysisError as e:       # the core gave up: say for which loop
+        raise AnalysisError(f"{e}; the loop: {describe(loop)}") from None
 
 
 # ---------------------------------------------------------------------- stability
