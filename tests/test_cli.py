@@ -256,3 +256,19 @@ def test_a_one_second_period_warns_of_a_unit_mistake():
 def test_unit_and_order_mistakes_are_explained(args, needle):
     r = run(*args)
     assert r.exit_code == 2 and needle in r.stderr and r.stderr.count("\n") == 1
+
+
+def test_tables_are_not_cut_when_piped():
+    # issue #12: `boundary hve ... -n 0,1,2,3,5,10` printed 14021.17... at 80 columns
+    r = run("boundary", "hve", "--period", "0.0001,0.001", "-n", "0,1,2,3,5,10")
+    assert r.exit_code == 0 and "…" not in r.stdout and "2000.022234" in r.stdout
+
+
+def test_region_explains_dash_B_against_double_dash_B():
+    r = run("region", "hve", "--K", "0:900", "-B", "0:20")
+    assert r.exit_code == 2 and "window of B is --B lo:hi (two dashes)" in r.stderr
+
+
+def test_closed_forms_do_not_print_nan_hz():
+    out = run("kmax", "hve", "--method", "eq18", "--delay", "3").stdout
+    assert "nan" not in out and "not given by this method" in out

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import click
@@ -10,6 +11,7 @@ import numpy as np
 from hapstab.cli.options import (
     LOOP_KINDS,
     NONNEG,
+    console,
     emit,
     fmt,
     loop_options,
@@ -63,7 +65,11 @@ def _kmax_command(kind: str) -> None:
                 ("method", res.method),
                 ("stable intervals", ", ".join(f"({fmt(a)}, {fmt(b)}]" for a, b in res.stable_intervals)
                  or "none"),
-                ("crossing frequency", f"{res.crossing_frequency_hz:.6g} Hz"),
+                ("crossing frequency",
+                 f"{res.crossing_frequency_hz:.6g} Hz" if math.isfinite(res.crossing_frequency_hz)
+                 else "not given by this method" if res.method not in ("exact", "circle",
+                                                                       "passivity")
+                 else "none (no pole reaches |z| = 1)"),
                 ("why", res.reason)]
         emit(res.to_dict(), as_json, lambda: rich_table(f"K_max, {kind}", rows), loop)
 
@@ -117,7 +123,6 @@ def _boundary_command(kind: str) -> None:
 
 
 def _boundary_table(res: Any) -> None:
-    from rich.console import Console
     from rich.table import Table
 
     t = Table(title=f"K_max (N/m), {res.loop_kind}, method {res.method}")
@@ -126,7 +131,7 @@ def _boundary_table(res: Any) -> None:
         t.add_column(f"n = {n}", justify="right")
     for j, T in enumerate(res.periods):
         t.add_row(f"{T * 1e3:.4g}", *[fmt(res.critical_stiffness[i, j]) for i in range(len(res.delays))])
-    Console().print(t)
+    console().print(t)
 
 
 for _kind in LOOP_KINDS:
@@ -163,10 +168,9 @@ def demo(as_json: bool) -> None:
     if as_json:
         click.echo(dumps({**data, **provenance()}))
         return
-    from rich.console import Console
     from rich.table import Table
 
-    con = Console()
+    con = console()
     for title, rows in data.items():
         t = Table(title=f"{title}: K_max (N/m), paper's condition vs exact sampled-data loop")
         for c in ("T (ms)", "n", "paper", "eq.", "exact", "exact/paper"):

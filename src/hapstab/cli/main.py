@@ -50,7 +50,7 @@ class HapstabGroup(click.Group):
                                   complete_var=complete_var, standalone_mode=False, **extra)
             _flush_stdout(argv)
         except click.exceptions.ClickException as e:
-            hint = _kind_hint(argv)
+            hint = _kind_hint(argv, e.format_message())
             _fail(argv, (e.format_message().rstrip(".") + hint) if hint else e.format_message())
         except HapstabError as e:
             _fail(argv, str(e))
@@ -75,8 +75,11 @@ class HapstabGroup(click.Group):
         sys.exit(rv if isinstance(rv, int) else 0)
 
 
-def _kind_hint(argv: list[str]) -> str:
-    """For options given before the loop kind (``kmax --mass 0.3``): where they go."""
+def _kind_hint(argv: list[str], message: str = "") -> str:
+    """For options given before the loop kind (``kmax --mass 0.3``): where they go; for
+    ``region ... -B 0:20``: the window is ``--B`` (two dashes)."""
+    if argv and argv[0] == "region" and "'--virtual-damping' / '-B'" in message:
+        return "; the region's window of B is --B lo:hi (two dashes); -B is the virtual damping"
     group = cli.commands.get(argv[0]) if argv else None
     if not isinstance(group, click.Group) or len(argv) < 2 or argv[1] in group.commands:
         return ""

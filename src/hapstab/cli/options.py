@@ -298,8 +298,17 @@ def emit(data: dict[str, Any], as_json: bool, table: Callable[[], None], loop: A
         table()
 
 
-def rich_table(title: str, rows: list[tuple[str, str]]) -> None:
+def console() -> Any:
+    """A rich console as wide as the terminal, and 160 columns when piped or redirected
+    (rich's 80 would cut numbers in tables)."""
+    import shutil
+
     from rich.console import Console
+
+    return Console(width=max(shutil.get_terminal_size((160, 24)).columns, 100))
+
+
+def rich_table(title: str, rows: list[tuple[str, str]]) -> None:
     from rich.table import Table
 
     t = Table(title=title, show_header=False)
@@ -307,7 +316,7 @@ def rich_table(title: str, rows: list[tuple[str, str]]) -> None:
     t.add_column()
     for k, v in rows:
         t.add_row(k, v)
-    Console().print(t)
+    console().print(t)
 
 
 def fmt(x: float) -> str:

@@ -14,6 +14,7 @@ from hapstab.cli.options import (
     LOOP_KINDS,
     NONNEG,
     POS,
+    console,
     emit,
     fmt,
     loop_options,
@@ -106,7 +107,6 @@ def _audit_command(kind: str) -> None:
 
 
 def _audit_table(res: Any) -> None:
-    from rich.console import Console
     from rich.table import Table
 
     t = Table(title=f"audit, {res.kind}: T = {res.period * 1e3:.4g} ms, n = {res.delay_samples}, "
@@ -119,7 +119,7 @@ def _audit_table(res: Any) -> None:
     for r in res.rows:
         t.add_row(r.label, fmt(r.critical_stiffness), r.claims, r.exact_verdict,
                   f"[red]{r.flag}[/red]" if r.flag else "ok")
-    Console().print(t)
+    console().print(t)
 
 
 for _kind in LOOP_KINDS:
