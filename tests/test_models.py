@@ -129,3 +129,16 @@ def test_with_stiffness_keeps_ratio_for_teleoperation():
     new = loop.with_stiffness(5.0)
     assert new.master_controller.stiffness == 5.0
     assert new.slave_controller.stiffness == pytest.approx(10.0)
+
+
+def test_critical_stiffness_needs_no_dummy_stiffness():
+    # issue #12: a loop for K_max needed SpringDamper(stiffness=...) that was then ignored
+    import hapstab as h
+
+    bare = h.HapticLoop(h.Device(0.15, 0.1), operator=h.spring(1.0), delay_samples=10)
+    dummy = bare.replace(controller=h.SpringDamper(123.0))
+    assert h.critical_stiffness(bare).critical_stiffness == \
+        h.critical_stiffness(dummy).critical_stiffness
+    peb = h.TeleoperationLoop(h.Device(0.015, 0.02), h.Device(0.015, 0.02), delay_samples=4)
+    assert h.critical_stiffness(peb).critical_stiffness > 0
+    assert h.SpringDamper(damping=0.5).stiffness == 0.0

@@ -195,6 +195,11 @@ def loop_options(kind: str, ranges: bool = False) -> Callable:
     )
 
 
+def given(name: str) -> bool:
+    """Whether option ``name`` was typed on the command line (not its default)."""
+    return _given(name)
+
+
 def _given(name: str) -> bool:
     ctx = click.get_current_context(silent=True)
     if ctx is None:

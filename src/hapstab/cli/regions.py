@@ -12,6 +12,7 @@ from hapstab.cli.options import (
     REAL,
     emit,
     fmt,
+    given,
     loop_options,
     rich_table,
 )
@@ -42,6 +43,11 @@ def _equal_controllers(kw: dict[str, Any]) -> None:
     if B_s is not None:
         raise HapstabError(f"--slave-virtual-damping = {B_s:g}: a K-B region / best damping is "
                            "defined for C_m = C_s (B is the swept variable); allowed here: not given")
+    if given("virtual_damping"):
+        raise HapstabError(f"--virtual-damping / -B = {kw['virtual_damping']:g}: B is what a K-B "
+                           "region and the best damping vary, so a given B would be ignored; "
+                           "set the window with --B lo:hi (region) or --min-damping / "
+                           "--max-damping (best-damping)")
 
 
 def _region_command(kind: str) -> None:

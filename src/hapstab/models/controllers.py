@@ -30,7 +30,8 @@ class SpringDamper:
     Parameters
     ----------
     stiffness : float
-        K in N/m, >= 0.
+        K in N/m, >= 0 (default 0: for ``critical_stiffness``, which varies K, only B
+        matters, ``SpringDamper(damping=B)``).
     damping : float
         Virtual damping B in N*s/m (backward difference): any finite real.
         B < 0 is used in practice to cancel a device's own damping or friction;
@@ -44,7 +45,7 @@ class SpringDamper:
         If K is negative or not finite, or B is not finite.
     """
 
-    stiffness: float
+    stiffness: float = 0.0
     damping: float = 0.0
 
     def __post_init__(self) -> None:

@@ -10,7 +10,7 @@ Equation and figure numbers below are the paper's.
 from __future__ import annotations
 
 import dataclasses
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
 import numpy as np
@@ -120,7 +120,8 @@ class HapticLoop:
     device : Device
         The haptic device (mass in kg, damping in N*s/m).
     controller : SpringDamper or DiscreteController
-        H(z), eq. (23).
+        H(z), eq. (23). Default ``SpringDamper()`` (K = B = 0): enough for
+        :func:`~hapstab.critical_stiffness`, which varies K.
     operator : Impedance, str or None
         Z_h(s), rigidly attached to the handle. ``None`` means no operator.
     period : float
@@ -133,7 +134,7 @@ class HapticLoop:
     """
 
     device: Device
-    controller: Controller
+    controller: Controller = field(default_factory=SpringDamper)
     operator: Any = None
     period: float = 1e-3
     delay_samples: int = 0
@@ -208,7 +209,7 @@ class TeleoperationLoop:
     master, slave : Device
         The two robots (mass in kg, damping in N*s/m).
     master_controller, slave_controller : SpringDamper or DiscreteController
-        C_m(z), C_s(z) (eq. 23); they may differ.
+        C_m(z), C_s(z) (eq. 23); they may differ. Default ``SpringDamper()`` each.
     operator, environment : Impedance, str or None
         Z_h(s) on the master, Z_e(s) on the slave.
     period : float
@@ -227,8 +228,8 @@ class TeleoperationLoop:
 
     master: Device
     slave: Device
-    master_controller: Controller
-    slave_controller: Controller
+    master_controller: Controller = field(default_factory=SpringDamper)
+    slave_controller: Controller = field(default_factory=SpringDamper)
     operator: Any = None
     environment: Any = None
     period: float = 1e-3
