@@ -142,3 +142,14 @@ def test_critical_stiffness_needs_no_dummy_stiffness():
     peb = h.TeleoperationLoop(h.Device(0.015, 0.02), h.Device(0.015, 0.02), delay_samples=4)
     assert h.critical_stiffness(peb).critical_stiffness > 0
     assert h.SpringDamper(damping=0.5).stiffness == 0.0
+
+
+def test_loops_show_in_a_notebook_and_print_cleanly():
+    # issue #12: reprs like rest_num=(np.float64(0.0),) and no _repr_html_ for loops
+    import hapstab as h
+
+    for loop in (h.paper_hve(), h.paper_peb()):
+        assert "np.float64" not in repr(loop) and "rest_num" not in repr(loop)
+        page = loop._repr_html_()
+        assert page.startswith("<table><caption>") and "period" in page and "0.001 s" in page
+    assert "device mass</th><td style='text-align:left'>0.15 kg" in h.paper_hve()._repr_html_()

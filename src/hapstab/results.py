@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 
 __all__ = ["Result", "StabilityResult", "CriticalStiffnessResult", "BoundaryResult", "jsonable",
+           "html_table",
            "dumps", "INFINITE"]
 
 
@@ -90,11 +91,28 @@ class Result:
         raise NotImplementedError
 
     def _repr_html_(self) -> str:
-        rows = "".join(
-            f"<tr><th style='text-align:left'>{html.escape(str(k))}</th>"
-            f"<td style='text-align:left'>{html.escape(_cell(v))}</td></tr>"
-            for k, v in self.to_dict().items())
-        return f"<table><caption>{html.escape(type(self).__name__)}</caption>{rows}</table>"
+        return html_table(type(self).__name__, self.to_dict().items())
+
+
+def html_table(caption: str, items: Any) -> str:
+    """A small HTML table of (name, value) pairs, for notebooks.
+
+    Parameters
+    ----------
+    caption : str
+        Its caption (the object's class).
+    items : iterable of (str, object)
+        The rows; long lists and dicts are summed up.
+
+    Returns
+    -------
+    str
+    """
+    rows = "".join(
+        f"<tr><th style='text-align:left'>{html.escape(str(k))}</th>"
+        f"<td style='text-align:left'>{html.escape(_cell(v))}</td></tr>"
+        for k, v in items)
+    return f"<table><caption>{html.escape(caption)}</caption>{rows}</table>"
 
 
 def _cell(v: Any) -> str:

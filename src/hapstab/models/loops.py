@@ -35,7 +35,7 @@ from hapstab.models.parts import Device, Impedance
 from hapstab.tolerances import DELAY_SNAP
 
 __all__ = ["split_delay", "DELAY_SNAP", "HapticLoop", "TeleoperationLoop", "delay_from_seconds",
-           "whole_delay", "require_loop", "describe"]
+           "whole_delay", "require_loop", "describe", "parameters"]
 
 
 def _check_fraction(name: str, value: Any) -> float:
@@ -182,6 +182,11 @@ class HapticLoop:
                 "delay_samples": float(self.delay_in_samples), "delay_s": self.delay_s,
                 "device": self.device.to_dict(), "operator": self.operator.to_dict(),
                 "controller": self.controller.to_dict()}
+
+    def _repr_html_(self) -> str:
+        from hapstab.results import html_table
+
+        return html_table(type(self).__name__, parameters(self))
 
     @property
     def controllers(self) -> tuple[Controller, ...]:
@@ -331,6 +336,11 @@ class TeleoperationLoop:
                 "master_controller": self.master_controller.to_dict(),
                 "slave_controller": self.slave_controller.to_dict()}
 
+    def _repr_html_(self) -> str:
+        from hapstab.results import html_table
+
+        return html_table(type(self).__name__, parameters(self))
+
     @property
     def controllers(self) -> tuple[Controller, ...]:
         """The controller of each port: master, slave."""
@@ -351,6 +361,39 @@ class TeleoperationLoop:
 Loop = HapticLoop | TeleoperationLoop
 
 
+def parameters(loop: HapticLoop | TeleoperationLoop) -> list[tuple[str, str]]:
+    """The loop's parameters as (name, value with unit) pairs, e.g. ``("device mass",
+    "0.15 kg")``.
+
+    Parameters
+    ----------
+    loop : HapticLoop or TeleoperationLoop
+        The loop.
+
+    Returns
+    -------
+    list of (str, str)
+    """
+    units = {"kg": "kg", "N_s_per_m": "N*s/m", "N_per_m": "N/m", "s": "s", "samples": "samples"}
+
+    def flat(d: dict[str, Any], prefix: str) -> list[tuple[str, str]]:
+        out: list[tuple[str, str]] = []
+        for k, v in d.items():
+            if isinstance(v, dict):
+                out += flat(v, f"{prefix}{k} ")
+            elif isinstance(v, (int, float)) and not isinstance(v, bool):
+                name, unit = k, ""
+                for suffix, u in units.items():
+                    if k.endswith("_" + suffix):
+                        name, unit = k[: -len(suffix) - 1], " " + u
+                out.append((f"{prefix}{name}".replace("_", " "), f"{v:g}{unit}"))
+            elif isinstance(v, str) and k in ("kind", "label", "type"):
+                out.append((f"{prefix}{k}".replace("_", " "), v))
+        return out
+
+    return flat(loop.to_dict(), "")
+
+
 def describe(loop: HapticLoop | TeleoperationLoop) -> str:
     """The loop's parameters in one line, for messages (``device mass 0.15 kg, ...``).
 
@@ -363,22 +406,8 @@ def describe(loop: HapticLoop | TeleoperationLoop) -> str:
     -------
     str
     """
-    units = {"kg": "kg", "N_s_per_m": "N*s/m", "N_per_m": "N/m", "s": "s", "samples": "samples"}
-
-    def flat(d: dict[str, Any], prefix: str) -> list[str]:
-        out = []
-        for k, v in d.items():
-            if isinstance(v, dict):
-                out += flat(v, f"{prefix}{k} ")
-            elif isinstance(v, (int, float)) and not isinstance(v, bool):
-                name, unit = k, ""
-                for suffix, u in units.items():
-                    if k.endswith("_" + suffix):
-                        name, unit = k[: -len(suffix) - 1], " " + u
-                out.append(f"{prefix}{name.replace('_', ' ')} {v:g}{unit}")
-        return out
-
-    return ", ".join(flat(loop.to_dict(), ""))
+    return ", ".join(f"{k} {v}" for k, v in parameters(loop) if not k.endswith(("kind", "label",
+                                                                                 "type")))
 
 
 def require_loop(loop: Any, name: str = "loop") -> None:

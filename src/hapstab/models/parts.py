@@ -78,8 +78,8 @@ class Impedance:
     mass: float = field(init=False)
     damping: float = field(init=False)
     stiffness: float = field(init=False)
-    rest_num: tuple[float, ...] = field(init=False)
-    rest_den: tuple[float, ...] = field(init=False)
+    rest_num: tuple[float, ...] = field(init=False, repr=False)
+    rest_den: tuple[float, ...] = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         num, den = _poly("impedance numerator", self.num), _poly("impedance denominator", self.den)
@@ -119,8 +119,8 @@ class Impedance:
         object.__setattr__(self, "mass", mz)
         object.__setattr__(self, "damping", dz)
         object.__setattr__(self, "stiffness", float(k))
-        object.__setattr__(self, "rest_num", tuple(float(x) / lead for x in r))
-        object.__setattr__(self, "rest_den", tuple(float(x) / lead for x in den))
+        object.__setattr__(self, "rest_num", tuple(float(x / lead) for x in r))
+        object.__setattr__(self, "rest_den", tuple(float(x / lead) for x in den))
 
     @property
     def is_none(self) -> bool:
