@@ -176,3 +176,16 @@ def test_the_K_zero_column_is_the_exact_verdict_at_K_zero():
     free = h.HapticLoop(h.Device(0.15, 0.1), h.SpringDamper(1.0), None, 1e-3, 2)
     res = stability_region(free, K=(0, 50), B=(0, 0.05), resolution=4)
     assert not res.stable_exact[:, 0].any()          # a free mass at K = 0: pole at z = 1
+
+
+def test_best_damping_says_for_which_operator_and_whether_passivity_is_lost():
+    # issue #12: "render at most K* ... with B*" came with no caveat, though at B* the loop
+    # without its operator was unstable for the stiffness promised
+    loop = h.paper_hve(1e-3, 5).replace(operator=h.mass_spring_damper(0.1, 5, 500))
+    res = best_damping(loop, resolution=16)
+    assert res.holds_for == "for operator " + loop.operator.label
+    bare = h.critical_stiffness(loop.replace(operator=None).replace(
+        controller=h.SpringDamper(0.0, res.damping))).critical_stiffness
+    assert res.critical_stiffness_without_operator == pytest.approx(bare, rel=1e-12)
+    assert bare < res.critical_stiffness and "a hand that lets go" in res.reason
+    assert res.passive_up_to == 0.0 and "passive for no K" in res.reason

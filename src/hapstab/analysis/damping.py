@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from hapstab import budget
-from hapstab.analysis.regions import Loop, check_equal_gains, kmax_over_B
+from hapstab.analysis.regions import Loop, check_equal_gains, kmax_over_B, with_gains
 from hapstab.errors import AnalysisError, check_real
 from hapstab.results import Result, jsonable
 
@@ -39,6 +39,14 @@ class BestDampingResult(Result):
         How B* was found, in words.
     B_curve, K_curve : arrays
         K_max over the scanned dampings (N*s/m, N/m).
+    holds_for : str
+        The terminations the answer is for (the operator's, and the environment's).
+    critical_stiffness_without_operator : float
+        K_max at B* with no operator (or environment): the answer does not carry over
+        to a hand that lets go when this is below K*.
+    passive_up_to : float
+        The largest K at B* for which the device side stays passive (Colgate-Schenkel):
+        above it stability rests on the terminations.
     """
 
     damping: float
@@ -47,11 +55,17 @@ class BestDampingResult(Result):
     reason: str
     B_curve: np.ndarray = field(repr=False)
     K_curve: np.ndarray = field(repr=False)
+    holds_for: str = ""
+    critical_stiffness_without_operator: float = float("nan")
+    passive_up_to: float = float("nan")
 
     def to_dict(self) -> dict[str, Any]:
         return jsonable({"virtual_damping": self.damping, "critical_stiffness": self.critical_stiffness,
                          "critical_stiffness_at_zero_damping": self.critical_stiffness_at_zero_damping,
-                         "reason": self.reason,
+                         "reason": self.reason, "holds_for": self.holds_for,
+                         "critical_stiffness_without_operator":
+                             self.critical_stiffness_without_operator,
+                         "passive_up_to": self.passive_up_to,
                          "curve": {"virtual_damping": self.B_curve, "critical_stiffness": self.K_curve}})
 
     def to_csv(self, path: Any) -> None:
@@ -184,4 +198,34 @@ def best_damping(loop: Loop, B_max: float | None = None, resolution: int = 64,
     if best_B < 0:
         reason += ("; B* < 0: negative virtual damping is best here (with this delay and these "
                    "terminations it damps at the critical frequency; it is not passive)")
-    return BestDampingResult(best_B, best_K, K0, reason, Bs, Ks)
+    holds, bare, passive, caveat = _caveats(loop, best_B, best_K)
+    return BestDampingResult(best_B, best_K, K0, reason + caveat, Bs, Ks, holds, bare, passive)
+
+
+def _caveats(loop: Loop, B: float, K: float) -> tuple[str, float, float, str]:
+    """For which terminations the answer holds, K_max at B without them, and how far the
+    device side stays passive at B; the words a designer needs beside K*."""
+    from hapstab.analysis.exact.core import exact_critical_stiffness
+    from hapstab.analysis.passivity import critical_stiffness_passivity
+
+    at_B = with_gains(loop, K, B)
+    ends = {"operator": at_B.operator, "environment": getattr(at_B, "environment", None)}
+    ends = {k: v for k, v in ends.items() if v is not None}
+    terms = [f"{k} {v.label}" for k, v in ends.items()]
+    bare = at_B.replace(**{k: None for k in ends})
+    holds = "for " + " and ".join(terms)
+    K_bare = exact_critical_stiffness(bare).critical_stiffness
+    try:
+        K_pass = critical_stiffness_passivity(at_B).critical_stiffness
+    except AnalysisError:
+        K_pass = float("nan")
+    words = f"; this holds {holds}"
+    if K > 0 and K_bare < K:
+        words += (f" (without them, K_max at this B is {K_bare:.6g} N/m: a hand that lets go "
+                  "leaves an unstable loop)")
+    if K > 0 and K_pass == 0:
+        words += ("; at this B the device side is passive for no K (B takes more than the "
+                  "device damping gives): stability rests on these terminations")
+    elif K > 0 and math.isfinite(K_pass) and K_pass < K:
+        words += f"; passivity is lost above K = {K_pass:.6g} N/m"
+    return holds, float(K_bare), float(K_pass), words
