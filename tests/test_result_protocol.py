@@ -94,8 +94,15 @@ def test_reproduction_plots_and_writes_its_points(tmp_path):
     from hapstab.paper.reproduce import reproduce_figure
 
     rep = reproduce_figure("fig5", [1e-3, 2e-3])
-    ax = rep.plot()
-    assert ax.get_title().startswith("Fig. 5") and ax.has_data()
+    top, bottom = rep.plot()
+    assert top.get_title().startswith("Fig. 5") and top.has_data() and bottom.has_data()
+    # the lower panel shows the differences in % (the paper's own line is not in it)
+    assert bottom.get_ylabel() == "K_max / paper - 1 (%)"
+    from matplotlib.legend import Legend
+
+    legends = [a for a in top.artists if isinstance(a, Legend)] + [top.get_legend()]
+    labels = [t.get_text() for leg in legends for t in leg.get_texts()]
+    assert "exact" in labels and "n = 0" in labels and len(labels) == len(set(labels))
     rep.to_csv(str(tmp_path / "f.csv"))
     rows = list(csv.DictReader((tmp_path / "f.csv").read_text().splitlines()))
     assert len(rows) == len(rep.rows) and float(rows[0]["exact"]) == rep.rows[0]["exact"]

@@ -259,6 +259,7 @@ def figure_to(out: Outputs, res: Any, path: str, name: str, **kw: Any) -> None:
     import numpy as np
 
     fig = np.ravel(np.asarray(res.plot(), dtype=object))[0].figure
+    kw.setdefault("dpi", 150)      # a figure to read on screen and in a report
     try:
         with out.open(path, name, "wb") as fh:
             fig.savefig(fh, format=path.rsplit(".", 1)[-1].lower(), **kw)

@@ -156,46 +156,70 @@ def plot_simulation(res: Any, ax: Any = None) -> Any:
 
 
 def plot_reproduction(res: Any, ax: Any = None) -> Any:
-    """K_max against T like the paper's Fig. 5 / Fig. 6: theoretical lines (solid),
-    simulation stars, exact boundary (dashed) and circle criterion (dotted) if present;
-    non-delayed blue, delayed red.
+    """K_max against T like the paper's Fig. 5 / Fig. 6, and below it each method's
+    K_max relative to the paper's line (%), where the differences the upper log-scale
+    panel hides (0.01 to a few %) show.
+
+    Upper panel: the paper's theoretical lines (solid), simulation stars, exact boundary
+    (dashed) and circle criterion (dotted) if present; one colour per delay. Lower panel:
+    100 (K / K_paper - 1) for exact, circle and simulation. The legends name each style
+    and each colour once.
 
     Parameters
     ----------
     res : Reproduction
         The figure's points (rows with ``period_s, delay_samples, theory, exact,
         simulation`` and maybe ``circle``) and its title and equations.
-    ax : matplotlib Axes, optional
-        Where to draw; a new figure when omitted.
+    ax : sequence of 2 matplotlib Axes, optional
+        Where to draw the two panels; a new figure when omitted.
 
     Returns
     -------
-    matplotlib Axes
+    array of 2 matplotlib Axes
     """
-    new = ax is None
-    ax = _figure(1, (7, 4.8))[1][0, 0] if new else ax
+    from matplotlib.lines import Line2D
+
+    axs = _panels(ax, 2, (7, 7))
+    top, bottom = axs
     rows, equations = list(res.rows), res.figure.equations
     delays = sorted({r["delay_samples"] for r in rows})
     colors = ["tab:blue", "tab:red", "tab:green", "tab:purple"]
+    styles = {"theory": ("-", None, 1.5), "exact": ("--", None, 1.0), "circle": (":", None, 1.4),
+              "simulation": ("", "*", 0.0)}
+    shown = [k for k in styles if k in rows[0]]
     for i, n in enumerate(delays):
         c = colors[i % len(colors)]
         sel = sorted((r for r in rows if r["delay_samples"] == n), key=lambda r: r["period_s"])
         T = np.array([r["period_s"] for r in sel]) * 1e3
-        eq = equations[min(i, 1)]
-        ax.plot(T, [r["theory"] for r in sel], "-", color=c, lw=1.5, label=f"n = {n:g}: eq. {eq}")
-        ax.plot(T, [r["exact"] for r in sel], "--", color=c, lw=1.0, label=f"n = {n:g}: exact")
-        if "circle" in sel[0]:
-            ax.plot(T, [r["circle"] for r in sel], ":", color=c, lw=1.2, label=f"n = {n:g}: circle")
-        ax.plot(T, [r["simulation"] for r in sel], "*", color=c, ms=9, label=f"n = {n:g}: simulation")
-    ax.set_xlabel("sampling period T (ms)")
-    ax.set_ylabel("K_max (N/m)")
-    ax.set_yscale("log")
-    ax.set_title(res.figure.title, fontsize=10)
-    ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=7, ncol=2)
-    if new:
-        ax.figure.tight_layout()
-    return ax
+        paper = np.array([r["theory"] for r in sel], float)
+        for k in shown:
+            ls, mk, lw = styles[k]
+            y = np.array([r[k] for r in sel], float)
+            top.plot(T, y, ls, marker=mk, color=c, lw=lw, ms=8)
+            if k != "theory":
+                with np.errstate(all="ignore"):
+                    bottom.plot(T, 100 * (y / paper - 1), ls or "", marker=mk or ".", color=c,
+                                lw=max(lw, 1.0), ms=7)
+    by_style = [Line2D([], [], color="k", ls=styles[k][0] or "none", marker=styles[k][1],
+                       lw=styles[k][2] or 1.0,
+                       label={"theory": "paper (eq. " + " / ".join(equations) + ")",
+                              "exact": "exact", "circle": "circle criterion",
+                              "simulation": "simulation"}[k]) for k in shown]
+    by_delay = [Line2D([], [], color=colors[i % len(colors)], lw=3, label=f"n = {n:g}")
+                for i, n in enumerate(delays)]
+    top.add_artist(top.legend(handles=by_style, fontsize=8, loc="upper right"))
+    top.legend(handles=by_delay, fontsize=8, loc="lower left")
+    top.set_ylabel("K_max (N/m)")
+    top.set_yscale("log")
+    top.set_title(res.figure.title, fontsize=10)
+    bottom.axhline(0.0, color="k", lw=0.8)
+    bottom.set_ylabel("K_max / paper - 1 (%)")
+    bottom.set_xlabel("sampling period T (ms)")
+    for a in axs:
+        a.grid(True, which="both", alpha=0.3)
+    if ax is None:
+        top.figure.tight_layout()
+    return axs
 
 
 def plot_audit(res: Any, ax: Any = None) -> Any:

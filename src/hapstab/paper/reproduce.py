@@ -110,12 +110,12 @@ class Reproduction(Result):
 
         Parameters
         ----------
-        ax : matplotlib Axes, optional
-            Where to draw; a new figure when omitted.
+        ax : sequence of 2 matplotlib Axes, optional
+            Where to draw the two panels; a new figure when omitted.
 
         Returns
         -------
-        matplotlib Axes
+        array of 2 matplotlib Axes
         """
         from hapstab.plotting import plot_reproduction
         return plot_reproduction(self, ax)
