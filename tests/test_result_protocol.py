@@ -106,3 +106,20 @@ def test_reproduction_plots_and_writes_its_points(tmp_path):
     rep.to_csv(str(tmp_path / "f.csv"))
     rows = list(csv.DictReader((tmp_path / "f.csv").read_text().splitlines()))
     assert len(rows) == len(rep.rows) and float(rows[0]["exact"]) == rep.rows[0]["exact"]
+
+
+def test_simulation_plot_shows_the_wall_and_the_saturation():
+    # issue #12: the simulation plot lacked the wall line and the saturation level, and its
+    # title printed n = 3.0
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    r = h.simulate(h.paper_hve(1e-3, 3).with_stiffness(100.0), 0.3, wall=0.001, saturation=5,
+                   force="step:1")
+    ax1, ax2, _ = r.plot()
+    assert "n = 3:" in ax1.get_title()
+    assert any("wall at 0.001 m" in t.get_text() for t in ax1.get_legend().get_texts())
+    assert any("saturation +-5 N" in t.get_text() for t in ax2.get_legend().get_texts())
+    plt.close("all")

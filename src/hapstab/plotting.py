@@ -144,9 +144,16 @@ def plot_simulation(res: Any, ax: Any = None) -> Any:
     ax3.set_ylabel("port energy (J)")
     ax3.set_xlabel("time (s)")
     v = res.verdict
-    ax1.set_title(f"K = {res.stiffness:g} N/m, T = {res.period * 1e3:g} ms, n = {res.delay_samples}: "
-                  f"{v.verdict}: {v.behaviour} ({v.confidence} confidence, rate "
-                  f"{v.growth_rate:.3g} 1/s)", fontsize=9)
+    nl = res.nonlinear or {}
+    if nl.get("wall") is not None:
+        ax1.axhline(nl["wall"], color="k", lw=1.0, ls="--", label=f"wall at {nl['wall']:g} m")
+    if nl.get("saturation") is not None:
+        for sign in (1, -1):
+            ax2.axhline(sign * nl["saturation"], color="k", lw=1.0, ls=":",
+                        label=f"saturation +-{nl['saturation']:g} N" if sign > 0 else None)
+    ax1.set_title(f"K = {res.stiffness:g} N/m, T = {res.period * 1e3:g} ms, n = "
+                  f"{res.delay_samples:g}: {v.verdict}: {v.behaviour} ({v.confidence} "
+                  f"confidence, rate {v.growth_rate:.3g} 1/s)", fontsize=9)
     for a in axs:
         a.grid(True, alpha=0.3)
         a.legend(fontsize=8, loc="best")
