@@ -107,3 +107,15 @@ def test_concurrent_writers_each_leave_one_complete_file(tmp_path):
     k = lines[0].split(",")[0]
     assert lines == [f"{k},{i}" for i in range(20000)]        # one writer's file, whole
     assert _leftovers(tmp_path) == []
+
+
+def test_a_symbolic_link_is_written_through_and_a_files_mode_is_kept(tmp_path):
+    real = tmp_path / "real.csv"
+    real.write_text("old")
+    os.chmod(real, 0o640)
+    link = tmp_path / "link.csv"
+    link.symlink_to(real)
+    with atomic_file(link, "--csv") as fh:
+        fh.write("new")
+    assert link.is_symlink() and real.read_text() == "new"
+    assert stat.S_IMODE(real.stat().st_mode) == 0o640

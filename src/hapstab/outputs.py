@@ -127,7 +127,8 @@ class Outputs:
                 fh.flush()
             self.written.append(target)
             return
-        folder, base = os.path.split(os.path.abspath(target))
+        # a symbolic link is written through (its target replaced, the link kept)
+        folder, base = os.path.split(os.path.realpath(target))
         with self._failing(target, name):
             fd, tmp = tempfile.mkstemp(prefix=f".{base}.", suffix=".part", dir=folder)
         try:
@@ -138,7 +139,7 @@ class Outputs:
         except BaseException:
             _remove(tmp)
             raise
-        self._pending.append((tmp, target, name))
+        self._pending.append((tmp, os.path.join(folder, base), name))
 
     @contextlib.contextmanager
     def _failing(self, target: str, name: str) -> Iterator[None]:
@@ -164,7 +165,7 @@ class Outputs:
             while self._pending:
                 tmp, target, name = self._pending[0]
                 with self._failing(target, name):
-                    os.chmod(tmp, _mode())
+                    os.chmod(tmp, _mode(target))
                     os.replace(tmp, target)
                 self._pending.pop(0)
                 self.written.append(target)
@@ -314,8 +315,12 @@ def _remove(path: str) -> None:
         os.remove(path)
 
 
-def _mode() -> int:
-    """The permissions a new file gets under the current umask (mkstemp makes 0600)."""
-    mask = os.umask(0)
-    os.umask(mask)
-    return 0o666 & ~mask
+def _mode(target: str) -> int:
+    """The permissions of the file being replaced, or those a new file gets under the
+    current umask (mkstemp makes 0600)."""
+    try:
+        return stat.S_IMODE(os.stat(target).st_mode)
+    except OSError:
+        mask = os.umask(0)
+        os.umask(mask)
+        return 0o666 & ~mask
