@@ -60,7 +60,8 @@ def references(tmp_path_factory):
 
 
 
-@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGKILL], ids=["SIGINT", "SIGKILL"])
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGKILL, signal.SIGTERM],
+                         ids=["SIGINT", "SIGKILL", "SIGTERM"])
 @pytest.mark.parametrize("name", list(COMMANDS))
 def test_a_signal_leaves_the_old_file_or_the_whole_new_one(references, tmp_path, name, sig):
     ref, took = references[name]
@@ -83,7 +84,10 @@ def test_a_signal_leaves_the_old_file_or_the_whole_new_one(references, tmp_path,
             # numpy) the interpreter itself dies by SIGINT, which a shell reports as 130 too
             assert (p.returncode == 130 and b"interrupted" in err) or p.returncode == -2, \
                 err.decode()      # (the file may be the new one: interrupted after the rename)
-        if sig == signal.SIGINT:           # an interrupt cleans up; SIGKILL cannot
+        if p.returncode != 0 and sig == signal.SIGTERM:
+            assert (p.returncode == 143 and b"terminated" in err) or p.returncode == -15, \
+                err.decode()
+        if sig != signal.SIGKILL:          # an interrupt or SIGTERM cleans up; SIGKILL cannot
             folder = os.path.dirname(target)
             assert not [f for f in os.listdir(folder) if f.endswith(".part")]
 

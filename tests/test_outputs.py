@@ -119,3 +119,23 @@ def test_a_symbolic_link_is_written_through_and_a_files_mode_is_kept(tmp_path):
         fh.write("new")
     assert link.is_symlink() and real.read_text() == "new"
     assert stat.S_IMODE(real.stat().st_mode) == 0o640
+
+
+def test_devices_and_proc_links_are_written_in_place_never_renamed_over():
+    # a review found `--csv /dev/stdout > file` renaming a temporary file over the
+    # /dev/stdout link (as root): paths under /dev and /proc are always written in place
+    from hapstab.outputs import _is_special
+
+    for p in ("/dev/stdout", "/dev/null", "/proc/self/fd/1", "/dev/fd/1"):
+        assert _is_special(p), p
+
+
+def test_a_read_only_file_is_not_replaced(tmp_path):
+    p = tmp_path / "ro.csv"
+    p.write_text("keep")
+    os.chmod(p, 0o444)
+    if os.access(p, os.W_OK):
+        pytest.skip("running with privileges that write to read-only files")
+    with pytest.raises(OutputError, match="read-only"), atomic_file(p, "--csv") as fh:
+        fh.write("new")
+    assert p.read_text() == "keep"

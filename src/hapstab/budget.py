@@ -25,7 +25,8 @@ from dataclasses import dataclass
 from hapstab.errors import HapstabError
 
 __all__ = ["BudgetError", "Cost", "check", "limits", "unlimited", "MEMORY_BYTES", "SECONDS",
-           "EIG_SECONDS_PER_N3", "FLOPS", "RUN_SECONDS", "POINT_SECONDS", "simulation_cost"]
+           "EIG_SECONDS_PER_N3", "FLOPS", "RUN_SECONDS", "POINT_SECONDS", "simulation_cost",
+           "exact_points_cost", "POINT_BYTES_PER_STATE"]
 
 #: Default memory budget: 2 GiB, a twelfth of the project's 24 GiB machine and what
 #: any laptop spares.
@@ -46,6 +47,31 @@ RUN_SECONDS = 2e-3
 #: samples (benchmarks/bench_delay.py), taken as 20 ms; a closed form or the circle
 #: criterion costs less.
 POINT_SECONDS = 0.02
+#: Bytes one item of a batched exact analysis holds per state of the loop (its
+#: polynomials and cells): about 10 MB per period at N = 4004 (a review's measurement).
+POINT_BYTES_PER_STATE = 3000.0
+
+
+def exact_points_cost(what: str, points: int, states: int) -> Cost:
+    """The cost of ``points`` certified K_max of a loop with about ``states`` states, run
+    as one batch: 20 ms plus 50 us per state each (0.2 s at N = 4000), and
+    :data:`POINT_BYTES_PER_STATE` per state each.
+
+    Parameters
+    ----------
+    what : str
+        The computation, in words.
+    points : int
+        How many K_max (periods, dampings, ...).
+    states : int
+        The loop's order, about.
+
+    Returns
+    -------
+    Cost
+    """
+    return Cost(what, points * (1e5 + POINT_BYTES_PER_STATE * states),
+                points * (POINT_SECONDS + 5e-5 * states))
 
 _LIMITS: contextvars.ContextVar[tuple[float, float]] = contextvars.ContextVar(
     "hapstab_budget", default=(MEMORY_BYTES, SECONDS))
@@ -75,10 +101,10 @@ class Cost:
 
 
 def _size(b: float) -> str:
-    for unit, f in (("TB", 1e12), ("GB", 1e9), ("MB", 1e6)):
+    for unit, f in (("TiB", 2.0 ** 40), ("GiB", 2.0 ** 30), ("MiB", 2.0 ** 20)):
         if b >= f:
             return f"{b / f:.3g} {unit}"
-    return f"{b / 1e3:.3g} kB"
+    return f"{b / 1024:.3g} KiB"
 
 
 def _time(s: float) -> str:

@@ -57,7 +57,10 @@ def check_real(name: str, value: Any, *, positive: bool = False,
                 raise TypeError
         except TypeError:
             raise ModelError(f"{name} = {_fmt(value)}: must be a real number") from None
-    v = float(value)
+    try:
+        v = float(value)
+    except OverflowError:              # an int beyond double precision (10**400)
+        raise ModelError(f"{name} = {value!r:.40}: must be finite (not NaN or inf)") from None
     if not math.isfinite(v):
         raise ModelError(f"{name} = {_fmt(value)}: must be finite (not NaN or inf)")
     if positive and not v > 0:

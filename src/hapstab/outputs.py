@@ -73,7 +73,11 @@ def check_target(path: Any, name: str, formats: tuple[str, ...] | None = None) -
 
 
 def _is_special(path: str) -> bool:
-    """An existing target that is not a regular file (a device or a pipe)."""
+    """A target that must be written in place: a device, a pipe, or anything under /dev
+    or /proc (``/dev/stdout`` is a link to whatever fd 1 is: renaming over it would replace
+    the link, and resolving it would replace the file behind the shell's redirection)."""
+    if os.path.abspath(path).startswith(("/dev/", "/proc/")):
+        return True
     try:
         return not stat.S_ISREG(os.stat(path).st_mode)
     except OSError:          # missing, or a name the system refuses (too long): not special
@@ -129,6 +133,10 @@ class Outputs:
             return
         # a symbolic link is written through (its target replaced, the link kept)
         folder, base = os.path.split(os.path.realpath(target))
+        real = os.path.join(folder, base)
+        if os.path.exists(real) and not os.access(real, os.W_OK):
+            raise OutputError(f"{name} = {target!r}: the file is read-only; hapstab does not "
+                              "replace it (make it writable or choose another name)")
         with self._failing(target, name):
             fd, tmp = tempfile.mkstemp(prefix=f".{base}.", suffix=".part", dir=folder)
         try:

@@ -103,7 +103,8 @@ class BestDampingResult(Result):
 
 
 def best_damping(loop: Loop, B_max: float | None = None, resolution: int = 64,
-                 B_min: float | None = None) -> BestDampingResult:
+                 B_min: float | None = None, *, max_memory: float | None = None,
+                 max_seconds: float | None = None) -> BestDampingResult:
     """The virtual damping B* that maximises K_max, and K* = K_max(B*).
 
     K_max(B) is computed exactly on a grid of B (batched), then refined by bounded
@@ -130,6 +131,8 @@ def best_damping(loop: Loop, B_max: float | None = None, resolution: int = 64,
     B_min : float, optional
         Lower end of the search, <= 0; default: where K_max first falls to 0 going
         down (found by doubling from -10 b). ``0`` restricts the search to B >= 0.
+    max_memory, max_seconds : float, optional
+        Budget in bytes and seconds (default :mod:`hapstab.budget`'s).
 
     Returns
     -------
@@ -173,8 +176,12 @@ def best_damping(loop: Loop, B_max: float | None = None, resolution: int = 64,
     if isinstance(resolution, bool) or not isinstance(resolution, (int, np.integer)) \
             or resolution < 2:
         raise AnalysisError(f"resolution = {resolution!r}: must be a whole number >= 2")
-    budget.check(budget.Cost(f"best damping: K_max at {int(resolution) + 60} dampings",
-                             1e5 * resolution, budget.POINT_SECONDS * (int(resolution) + 60)))
+    from hapstab.analysis.methods import order_estimate
+
+    budget.check(budget.exact_points_cost(f"best damping: K_max at {int(resolution) + 60} "
+                                          "dampings", int(resolution) + 60,
+                                          order_estimate(loop, max(loop_delays(loop)))),
+                 max_memory, max_seconds)
     Bs = np.unique(np.concatenate([np.linspace(B_min, B_max, int(resolution)), [0.0]]))
     Ks = kmax(Bs)
     i = int(np.argmax(Ks))
@@ -200,6 +207,13 @@ def best_damping(loop: Loop, B_max: float | None = None, resolution: int = 64,
                    "terminations it damps at the critical frequency; it is not passive)")
     holds, bare, passive, caveat = _caveats(loop, best_B, best_K)
     return BestDampingResult(best_B, best_K, K0, reason + caveat, Bs, Ks, holds, bare, passive)
+
+
+def loop_delays(loop: Loop) -> list[float]:
+    """The loop's delays in samples (one for the HVE, both directions for PEB)."""
+    if loop.kind == "peb":
+        return [loop.forward_delay_in_samples, loop.backward_delay_in_samples]  # type: ignore[union-attr]
+    return [loop.delay_in_samples]
 
 
 def _caveats(loop: Loop, B: float, K: float) -> tuple[str, float, float, str]:

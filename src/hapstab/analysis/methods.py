@@ -53,6 +53,14 @@ def methods_for(kind: Any) -> list[str]:
     return [m for m in METHODS if m not in other]
 
 
+def order_estimate(loop: HapticLoop | TeleoperationLoop, delay_samples: float) -> int:
+    """About how many states the exact model of ``loop`` with ``delay_samples`` of delay
+    has (each channel's delay registers, two per port, a few for controllers), without
+    building it: for cost estimates."""
+    ports = len(loop.controllers)
+    return int(ports * (delay_samples + 4) + 2)
+
+
 def _resolve(method: str) -> Callable[..., CriticalStiffnessResult]:
     if method not in METHODS:
         raise AnalysisError(f"method = {method!r}: unknown; allowed: {', '.join(METHODS)}")
@@ -139,9 +147,14 @@ def boundary(loop: HapticLoop | TeleoperationLoop, periods: Sequence[float] | np
                      *limits)
     else:
         points = len(ns) * T.size
-        budget.check(budget.Cost(f"boundary: {points} points ({len(ns)} delays x {T.size} "
-                                 f"periods) by method {method!r}", 1e5 * points,
-                                 budget.POINT_SECONDS * points), *limits)
+        what = f"boundary: {points} points ({len(ns)} delays x {T.size} periods), {method!r}"
+        states = order_estimate(loop, max(ns))
+        if method in ("exact", "circle", "passivity"):   # per point: grows with the loop
+            cost = budget.exact_points_cost(what, T.size, states)
+            cost = budget.Cost(what, cost.memory_bytes, cost.seconds * len(ns))
+        else:                                              # a closed form: a formula per point
+            cost = budget.Cost(what, 1e3 * points, 1e-4 * points)
+        budget.check(cost, *limits)
     out = np.empty((len(ns), T.size))
     for i, n in enumerate(ns):
         # the grid's delay replaces the template's, in both directions, whole samples

@@ -327,7 +327,7 @@ def _region_cost(loop: Loop, n: int) -> budget.Cost:
     """Peak memory and time of :func:`stability_region` at ``n`` x ``n``."""
     N = build(with_gains(loop, 1.0, 0.0)).order
     grid = float(n) * n
-    memory = 3 * 8 * grid * (N + 1) + 64e6
+    memory = 3 * 8 * grid * (N + 1) + 64e6 + n * budget.POINT_BYTES_PER_STATE * N   # grid, rows
     flops = 2 * grid * (N + 1) ** 2 + 4000 * 2 * N ** 3     # Schur-Cohn grid, D-decomposition
     rows = n * 5e-3 * (1 + N / 100)       # the exact stable set per row: ~5 ms at N ~ 50
     return budget.Cost(f"region: a {n} x {n} grid of a {N}-state loop", memory,

@@ -32,10 +32,12 @@ class HapstabGroup(click.Group):
     def main(self, args: Any = None, prog_name: str | None = None, complete_var: str | None = None,
              standalone_mode: bool = True, **extra: Any) -> Any:
         argv = list(sys.argv[1:] if args is None else args)
+        if args is None:                       # the real process (not a test's runner)
+            _on_termination()
         # --yes: run past the cost budget (anywhere on the line, like --debug)
+        ARGV.set(tuple(argv))                  # echoed as given (with --yes)
         yes = "--yes" in argv
         argv = [a for a in argv if a != "--yes"]
-        ARGV.set(tuple(argv))
         if sys.stdout is None:   # started with stdout closed (>&-): the answer would be lost
             _fail([], "stdout is closed: hapstab writes its answer there; give it a file or a pipe")
         try:
@@ -59,6 +61,9 @@ class HapstabGroup(click.Group):
                   else f"cannot write the output: {e.strerror or e}")
         except MemoryError:
             _fail(argv, "out of memory: the model is too large for this machine")
+        except _Terminated:                   # SIGTERM / SIGHUP: as Ctrl-C, no partial file
+            click.echo("hapstab: terminated", err=True)
+            sys.exit(143)
         except click.exceptions.Abort as e:
             if isinstance(e.__cause__, KeyboardInterrupt):   # Ctrl-C: no partial file is left
                 click.echo("hapstab: interrupted", err=True)
@@ -73,6 +78,25 @@ class HapstabGroup(click.Group):
                        "report it with the command line (--debug shows the traceback)", err=True)
             sys.exit(1)
         sys.exit(rv if isinstance(rv, int) else 0)
+
+
+class _Terminated(BaseException):
+    """Raised by the SIGTERM / SIGHUP handler, so that open outputs are cleaned up."""
+
+
+def _on_termination() -> None:
+    """SIGTERM and SIGHUP unwind like Ctrl-C (temporary files removed), in the main thread."""
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        return
+
+    def stop(signum: int, frame: Any) -> None:
+        raise _Terminated()
+
+    for sig in (signal.SIGTERM, signal.SIGHUP):
+        signal.signal(sig, stop)
 
 
 def _kind_hint(argv: list[str], message: str = "") -> str:

@@ -65,6 +65,8 @@ def search_cost(loop: HapticLoop | TeleoperationLoop, points: int = 1, n_samples
     N = build(loop).order
     M = max(n_samples, 2 * SNAPSHOTS_PER_STATE * N)
     one = budget.simulation_cost(M, N, 0, runs=SEARCH_RUNS)
+    # a run also holds the block propagator (64 N x N) and the fit's N x window matrices
+    one = budget.Cost(one.what, one.memory_bytes + 8.0 * N * N * 80, one.seconds)
     return budget.Cost(f"{points} K_max search(es) by simulation ({SEARCH_RUNS} runs of {M} "
                        f"samples of a {N}-state loop each)", one.memory_bytes,
                        points * one.seconds)
@@ -120,6 +122,7 @@ def critical_stiffness_simulation(loop: HapticLoop | TeleoperationLoop, *,
     """
     sysm = build(loop)
     _check_options(sysm, n_samples, window, rtol, ratio)
+    budget.check(search_cost(loop, 1, n_samples))
     # a fit needs several snapshots per state entry (growth.SNAPSHOTS_PER_RANK): long
     # delays get a longer window and run
     window = max(window, SNAPSHOTS_PER_STATE * sysm.order)
