@@ -71,6 +71,13 @@ class HapstabGroup(click.Group):
             click.echo("hapstab: aborted", err=True)
             sys.exit(1)
         except Exception as e:   # everything else is a bug, said as one
+            if SIGNALLED:                     # ... unless a signal's unwinding set it off
+                import signal
+
+                interrupted = SIGNALLED[0] == signal.SIGINT
+                click.echo("hapstab: interrupted" if interrupted else "hapstab: terminated",
+                           err=True)
+                sys.exit(130 if interrupted else 143)
             if "--debug" in argv:
                 raise
             click.echo(f"hapstab: internal error: {type(e).__name__}: "
@@ -78,6 +85,11 @@ class HapstabGroup(click.Group):
                        "report it with the command line (--debug shows the traceback)", err=True)
             sys.exit(1)
         sys.exit(rv if isinstance(rv, int) else 0)
+
+
+#: Signals received: an exception that a signal's unwinding set off inside a library (e.g.
+#: matplotlib's "Invalid bounding box" when interrupted mid-draw) is then the signal's.
+SIGNALLED: list[int] = []
 
 
 class _Terminated(BaseException):
@@ -93,7 +105,14 @@ def _on_termination() -> None:
         return
 
     def stop(signum: int, frame: Any) -> None:
+        SIGNALLED.append(signum)
         raise _Terminated()
+
+    def interrupt(signum: int, frame: Any) -> None:
+        SIGNALLED.append(signum)
+        raise KeyboardInterrupt()
+
+    signal.signal(signal.SIGINT, interrupt)
 
     for sig in (signal.SIGTERM, signal.SIGHUP):
         signal.signal(sig, stop)
