@@ -311,16 +311,11 @@ def save_plot(res: Any, path: Any, name: str = "plot", **kw: Any) -> str:
     OutputError
         See :func:`save_figure`; checked before anything is drawn.
     """
-    import matplotlib.pyplot as plt
-
-    from hapstab.outputs import check_target
+    from hapstab.outputs import Outputs, check_target, figure_to
 
     check_target(path, name, FORMATS)
-    fig = np.ravel(np.asarray(res.plot(), dtype=object))[0].figure
-    try:
-        save_figure(fig, path, name, **kw)
-    finally:
-        plt.close(fig)
+    with Outputs() as out:
+        figure_to(out, res, str(path), name, **kw)
     return str(path)
 
 

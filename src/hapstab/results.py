@@ -6,13 +6,14 @@ from __future__ import annotations
 import html
 import json
 import math
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
 __all__ = ["Result", "StabilityResult", "CriticalStiffnessResult", "BoundaryResult", "jsonable",
-           "html_table",
+           "html_table", "write_csv",
            "dumps", "INFINITE"]
 
 
@@ -122,6 +123,29 @@ def _cell(v: Any) -> str:
     if isinstance(v, list):
         return str(v) if len(str(v)) <= 120 else f"[{len(v)} values]"
     return str(v)
+
+
+def write_csv(path: Any, header: Sequence[str], rows: Iterable[Sequence[Any]]) -> None:
+    """The one CSV writer of every result's ``to_csv``: a header line, then the rows,
+    to a file object or, atomically, to a path (:func:`hapstab.outputs.writing`).
+
+    Parameters
+    ----------
+    path : str, os.PathLike or file object
+        Where to write.
+    header : sequence of str
+        The column names.
+    rows : iterable of sequences
+        The values, already formatted or as numbers.
+    """
+    import csv
+
+    from hapstab.outputs import writing
+
+    with writing(path, "path", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(header)
+        w.writerows(rows)
 
 
 def merged(base: dict[str, Any], details: dict[str, Any], what: str) -> dict[str, Any]:
@@ -274,14 +298,8 @@ class BoundaryResult(Result):
         path : str, os.PathLike or file object
             Where to write (a path is written atomically, see :mod:`hapstab.outputs`).
         """
-        import csv
-
-        from hapstab.outputs import writing
-
-        with writing(path, "path", newline="") as fh:
-            w = csv.DictWriter(fh, ["period_s", "delay_samples", "critical_stiffness"])
-            w.writeheader()
-            w.writerows(self.rows())
+        cols = ["period_s", "delay_samples", "critical_stiffness"]
+        write_csv(path, cols, ([r[c] for c in cols] for r in self.rows()))
 
     def plot(self, ax: Any = None) -> Any:
         from hapstab.plotting import plot_boundary

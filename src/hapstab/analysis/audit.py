@@ -22,7 +22,7 @@ from hapstab.analysis.passivity import critical_stiffness_passivity
 from hapstab.errors import AnalysisError
 from hapstab.models.controllers import spring_damper
 from hapstab.models.loops import HapticLoop, TeleoperationLoop, require_loop
-from hapstab.results import Result, jsonable
+from hapstab.results import Result, jsonable, write_csv
 
 __all__ = ["AuditRow", "AuditResult", "audit"]
 
@@ -119,16 +119,9 @@ class AuditResult(Result):
         path : str, os.PathLike or file object
             Where to write (a path is written atomically, see :mod:`hapstab.outputs`).
         """
-        import csv
-
-        from hapstab.outputs import writing
-
-        with writing(path, "path", newline="") as fh:
-            w = csv.writer(fh)
-            w.writerow(["key", "label", "critical_stiffness", "claims", "exact_verdict", "flag"])
-            for r in self.rows:
-                w.writerow([r.key, r.label, repr(float(r.critical_stiffness)), r.claims,
-                            r.exact_verdict, r.flag or ""])
+        write_csv(path, ["key", "label", "critical_stiffness", "claims", "exact_verdict", "flag"],
+                  ([r.key, r.label, repr(float(r.critical_stiffness)), r.claims,
+                    r.exact_verdict, r.flag or ""] for r in self.rows))
 
     def plot(self, ax: Any = None) -> Any:
         """K_max of every condition as a bar, the exact limit as a line, broken

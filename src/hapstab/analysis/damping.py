@@ -18,7 +18,7 @@ import numpy as np
 from hapstab import budget
 from hapstab.analysis.regions import Loop, check_equal_gains, kmax_over_B, with_gains
 from hapstab.errors import AnalysisError, check_real
-from hapstab.results import Result, jsonable
+from hapstab.results import Result, jsonable, write_csv
 
 __all__ = ["BestDampingResult", "best_damping"]
 
@@ -76,15 +76,9 @@ class BestDampingResult(Result):
         path : str, os.PathLike or file object
             Where to write (a path is written atomically, see :mod:`hapstab.outputs`).
         """
-        import csv
-
-        from hapstab.outputs import writing
-
-        with writing(path, "path", newline="") as fh:
-            w = csv.writer(fh)
-            w.writerow(["virtual_damping", "critical_stiffness"])
-            for B, K in zip(self.B_curve, self.K_curve, strict=True):
-                w.writerow([repr(float(B)), repr(float(K))])
+        write_csv(path, ["virtual_damping", "critical_stiffness"],
+                  ([repr(float(B)), repr(float(K))]
+                   for B, K in zip(self.B_curve, self.K_curve, strict=True)))
 
     def plot(self, ax: Any = None) -> Any:
         """K_max against the virtual damping, with B* marked.

@@ -41,7 +41,7 @@ from hapstab.engine.system import build
 from hapstab.errors import AnalysisError, check_real
 from hapstab.models.controllers import SpringDamper
 from hapstab.models.loops import HapticLoop, TeleoperationLoop, require_loop
-from hapstab.results import Result, jsonable
+from hapstab.results import Result, jsonable, write_csv
 from hapstab.tolerances import DIVISOR_FLOOR
 
 __all__ = ["stability_region", "RegionResult", "d_decomposition", "kmax_over_B",
@@ -297,17 +297,10 @@ class RegionResult(Result):
         path : str, os.PathLike or file object
             Where to write (a path is written atomically, see :mod:`hapstab.outputs`).
         """
-        import csv
-
-        from hapstab.outputs import writing
-
-        with writing(path, "path", newline="") as fh:
-            w = csv.writer(fh)
-            w.writerow(["stiffness", "virtual_damping", "stable_exact", "stable_grid"])
-            for i, B in enumerate(self.B_rows):
-                for j, K in enumerate(self.K_grid):
-                    w.writerow([f"{K:.10g}", f"{B:.10g}", int(self.stable_exact[i, j]),
-                                int(self.stable_grid[i, j])])
+        write_csv(path, ["stiffness", "virtual_damping", "stable_exact", "stable_grid"],
+                  ([f"{K:.10g}", f"{B:.10g}", int(self.stable_exact[i, j]),
+                    int(self.stable_grid[i, j])]
+                   for i, B in enumerate(self.B_rows) for j, K in enumerate(self.K_grid)))
 
     def plot(self, ax: Any = None) -> Any:
         from hapstab.plotting import plot_region

@@ -197,10 +197,6 @@ def loop_options(kind: str, ranges: bool = False) -> Callable:
 
 def given(name: str) -> bool:
     """Whether option ``name`` was typed on the command line (not its default)."""
-    return _given(name)
-
-
-def _given(name: str) -> bool:
     ctx = click.get_current_context(silent=True)
     if ctx is None:
         return False
@@ -220,7 +216,7 @@ def _period(kw: dict[str, Any]) -> float:
     implausibly long for a haptic loop."""
     rate = kw.get("rate")
     if rate is not None:
-        if _given("period"):
+        if given("period"):
             raise HapstabError("--period and --rate: give one of them, not both")
         T = 1.0 / rate
         lo, hi = PERIOD_RANGE
@@ -242,7 +238,7 @@ def hve_loop(kw: dict[str, Any], stiffness: float = 0.0) -> HapticLoop:
                       SpringDamper(stiffness, kw["virtual_damping"]),
                       parse_impedance(kw["operator"], "--operator"), _period(kw), kw["delay"])
     if kw.get("delay_s") is not None:
-        if _given("delay"):
+        if given("delay"):
             raise HapstabError("--delay and --delay-s: give one of them, not both")
         loop = loop.with_delay_s(kw["delay_s"])
     return loop
@@ -262,7 +258,7 @@ def peb_loop(kw: dict[str, Any], stiffness: float = 0.0) -> TeleoperationLoop:
                              parse_impedance(kw["environment"], "--environment"),
                              _period(kw), kw["delay"])
     fwd, bwd, ds = kw.get("delay_forward"), kw.get("delay_backward"), kw.get("delay_s")
-    if ds is not None and (fwd is not None or bwd is not None or _given("delay")):
+    if ds is not None and (fwd is not None or bwd is not None or given("delay")):
         raise HapstabError("--delay-s with --delay or --delay-forward/--delay-backward: give the "
                            "delay one way (--delay is the default for a side not given)")
     T = loop.period

@@ -19,7 +19,6 @@ The paper, Section 5, Fig. 5 and Fig. 6; eq. (13), (18), (29), (34).
 
 from __future__ import annotations
 
-import csv
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -31,7 +30,7 @@ from hapstab.analysis.closed_forms import EQUATION, PAPER, paper_condition
 from hapstab.analysis.exact.core import exact_critical_stiffness
 from hapstab.errors import AnalysisError, HapstabError
 from hapstab.paper.loops import paper_hve, paper_peb
-from hapstab.results import Result, jsonable
+from hapstab.results import Result, jsonable, write_csv
 
 __all__ = ["FIGURES", "PAPER_PERIODS", "FigureSpec", "Reproduction", "reproduce_figure",
            "write_figure", "COLUMNS"]
@@ -96,14 +95,9 @@ class Reproduction(Result):
         path : str, os.PathLike or file object
             Where to write (a path is written atomically, see :mod:`hapstab.outputs`).
         """
-        from hapstab.outputs import writing
-
-        with writing(path, "path", newline="") as fh:
-            w = csv.writer(fh)
-            w.writerow(self.columns)
-            for r in self.rows:
-                w.writerow([repr(float(r[c])) if c != "delay_samples" else int(r[c])
-                            for c in self.columns])
+        write_csv(path, self.columns,
+                  ([repr(float(r[c])) if c != "delay_samples" else int(r[c])
+                    for c in self.columns] for r in self.rows))
 
     def plot(self, ax: Any = None) -> Any:
         """The figure like the paper's (see :func:`hapstab.plotting.plot_reproduction`).
