@@ -109,3 +109,41 @@ def test_yes_is_echoed_in_the_command_line():
     r = CliRunner().invoke(cli, ["kmax", "hve", "--yes", "--json"])
     assert json.loads(r.stdout)["inputs"]["command_line"] == ["hapstab", "kmax", "hve", "--yes",
                                                                "--json"]
+
+
+def test_audit_charges_every_rows_eigenvalue_problem_before_it_starts():
+    loop = h.paper_peb().with_whole_delay(2000, 1e-3)        # 4004 states, ~2.5 min
+    with pytest.raises(BudgetError, match=r"audit: up to \d+ exact verdicts of a 4004-state"):
+        h.audit(loop, max_seconds=60)
+
+
+def test_circle_test_and_positive_real_are_charged_before_they_start():
+    loop = h.paper_hve().with_whole_delay(2000, 1e-3).with_stiffness(1e-6)
+    with pytest.raises(BudgetError, match="circle_test: roots of a 2002-state loop"):
+        h.circle_test(loop, sector=1.0, max_seconds=5)
+    G = h.RationalMatrix.scalar([1, 0.5], [1, -0.2])
+    with pytest.raises(BudgetError, match=r"positive_real: 1000000000 angles.*GiB of memory"):
+        h.positive_real(G, grid=10**9)
+    with pytest.raises(TypeError, match=r"grid = 1\.5: must be a whole number"):
+        h.positive_real(G, grid=1.5)
+
+
+def test_the_eigenvalue_estimate_covers_the_measured_times_without_refusing_twice_over():
+    # measured on the project's machine: 2.5 s at N = 2004, 18.8 s at N = 4004 (numpy eigvals)
+    for N, measured in ((2004, 2.5), (4004, 18.8)):
+        assert measured < budget.eig_seconds(N) < 3 * measured
+    assert budget.eig_seconds(300) == pytest.approx(0.01 + 2e-9 * 300 ** 3)
+
+
+@pytest.mark.parametrize("kw,needle", [
+    ({"max_seconds": [0.1]}, "max_seconds = [0.1]: must be a number > 0"),
+    ({"max_memory": "1GB"}, "max_memory = '1GB': must be a number > 0"),
+])
+def test_a_budget_of_the_wrong_type_is_a_type_error_naming_it(kw, needle):
+    with pytest.raises(TypeError, match=needle.replace("[", r"\[").replace("]", r"\]")):
+        h.stability(h.paper_hve().with_stiffness(10.0), **kw)
+
+
+def test_a_budget_that_is_not_positive_is_refused():
+    with pytest.raises(BudgetError, match=r"max_seconds = 0: must be > 0 \(math.inf: no limit\)"):
+        h.stability(h.paper_hve().with_stiffness(10.0), max_seconds=0)

@@ -89,3 +89,55 @@ def test_an_answer_that_cannot_be_written_is_an_error():
         r = subprocess.run([sys.executable, "-m", "hapstab", "kmax", "hve"], env=env, stdout=full,
                            stderr=subprocess.PIPE, timeout=60)
     assert r.returncode == 2 and b"No space left on device" in r.stderr
+
+
+def _closed_pipe(*args):
+    """Run hapstab with stdout a pipe whose reader has gone (``hapstab ... | head -c 0``)."""
+    env = {**os.environ, "PYTHONPATH": SRC}
+    r_fd, w_fd = os.pipe()
+    os.close(r_fd)
+    try:
+        return subprocess.run([sys.executable, "-m", "hapstab", *args], env=env, stdout=w_fd,
+                              stderr=subprocess.PIPE, timeout=120)
+    finally:
+        os.close(w_fd)
+
+
+@pytest.mark.parametrize("args", [
+    ("kmax", "hve"),                                   # a rich table
+    ("kmax", "hve", "--json"),                         # click.echo
+    ("simulate", "hve", "-K", "9", "--duration", "1", "--csv", "-"),
+    ("simulate", "hve", "-K", "9", "--duration", "1", "--csv", "/dev/stdout"),
+])
+def test_a_reader_that_closed_the_pipe_is_one_error_with_exit_2(args):
+    r = _closed_pipe(*args)
+    err = r.stderr.decode()
+    assert r.returncode == 2, (r.returncode, err)
+    assert err.count("\n") == 1 and "Broken pipe" in err.replace("broken pipe", "Broken pipe")
+
+
+def test_csv_dash_is_standard_output_and_the_table_goes_to_stderr():
+    r = run("region", "hve", "--K", "0:50", "--B", "0:2", "--resolution", "3", "--csv", "-")
+    assert r.exit_code == 0, r.stderr
+    lines = r.stdout.splitlines()
+    assert lines[0] == "stiffness,virtual_damping,stable_exact,stable_grid" and len(lines) == 1 + 3 * 3
+    assert "K-B stability region" in r.stderr and not os.path.exists("-")
+
+
+@pytest.mark.parametrize("args,needle", [
+    (("region", "hve", "--K", "0:50", "--B", "0:2", "--csv", "-", "--json"),
+     "--csv and --json would both write to standard output"),
+    (("simulate", "hve", "-K", "9", "--csv", "/dev/stdout", "--json"),
+     "--csv and --json would both write to standard output"),
+    (("simulate", "hve", "-K", "9", "--plot", "-"), "--plot = '-': a figure is written to a file"),
+    (("boundary", "hve", "--csv", "-", "--json"), "would both write to standard output"),
+])
+def test_two_outputs_on_standard_output_are_refused(args, needle):
+    _one_line_error(run(*args), needle)
+
+
+def test_csv_and_plot_naming_one_file_are_refused_before_any_work(tmp_path):
+    p = tmp_path / "out.svg"
+    r = run("simulate", "hve", "-K", "9", "--csv", str(p), "--plot", str(tmp_path / "." / "out.svg"))
+    _one_line_error(r, "the same file as --csv")
+    assert not p.exists()

@@ -66,11 +66,12 @@ def test_delay_options():
     (("kmax", "peb", "--delay-s", "0.01", "--delay-forward", "2"), "one way"),
     (("kmax", "hve", "--delay-s", "-1"), "must be >= 0"),
     (("region", "hve", "--K", "5:1", "--B", "0:1"), "--K = '5:1'"),
-    (("region", "hve", "--K", "0:x", "--B", "0:1"), "malformed"),
+    (("region", "hve", "--K", "0:x", "--B", "0:1"), "--K = '0:x': 'x' is not a number"),
     (("region", "hve", "--K", "0:10", "--B", "0:1", "--overlay", "magic"), "--overlay = 'magic'"),
-    (("region", "hve", "--K", "-1:10", "--B", "0:1"), "--K = '-1:10': allowed: lo:hi with 0 <= lo"),
-    (("region", "hve", "--K", "0:10", "--B", "1:-1"), "--B = '1:-1': allowed: lo:hi with lo < hi, "
-                                                      "either sign"),
+    (("region", "hve", "--K", "-1:10", "--B", "0:1"), "--K = '-1:10': every value must be "
+                                                      "finite and >= 0; allowed: start:stop"),
+    (("region", "hve", "--K", "0:10", "--B", "1:-1"), "--B = '1:-1': the range is empty "
+                                                      "(stop <= start)"),
     (("best-damping", "hve", "--min-damping", "0.5"), "--min-damping = 0.5: must be <= 0"),
     (("best-damping", "hve", "--max-damping", "0"), "'--max-damping': '0': must be > 0"),
 ])

@@ -26,6 +26,7 @@ RUNS = [
     ("check", ["check", "hve", "-K", "5"]),
     ("check", ["check", "peb", "-K", "5", "--operator", "none", "--environment", "none"]),
     ("boundary", ["boundary", "hve", "--period", "0.001,0.002", "-n", "0,2"]),
+    ("boundary", ["boundary", "peb", "--rate", "500Hz,1kHz", "--delay-s", "2ms,5ms"]),
     ("passivity", ["passivity", "hve", "-K", "5"]),
     ("passivity", ["passivity", "peb", "-K", "5", "--method", "passivity"]),
     ("audit", ["audit", "hve", "--delay", "2"]),
@@ -35,6 +36,8 @@ RUNS = [
     ("simulate", ["simulate", "hve", "-K", "1e6", "--duration", "1"]),            # overflows
     ("reproduce", ["reproduce", "fig5", "--periods", "0.003"]),
     ("demo", ["demo"]),
+    ("run", ["run", "study.toml"]),
+    ("kmax", ["kmax", "--study", "study.toml", "--variant", "stiff"]),
     ("error", ["kmax", "hve", "--delay", "x"]),
     ("error", ["simulate", "hve", "-K", "9", "--duration", "1e9"]),              # budget
 ]
@@ -47,6 +50,9 @@ def _validator(name):
 @pytest.fixture(scope="module")
 def outputs(tmp_path_factory):
     os.chdir(tmp_path_factory.mktemp("json"))       # reproduce writes ./out
+    with open("study.toml", "w") as fh:
+        fh.write('kind = "peb"\n[loop]\ndelay = 2\n[[variant]]\nname = "stiff"\n'
+                 'environment = "spring:2000"\n[run.kmax]\n[run.check]\nK = 3\n')
     out = []
     for name, args in RUNS:
         r = CliRunner().invoke(cli, [*args, "--json"])

@@ -8,6 +8,7 @@ import stat
 
 import pytest
 
+from hapstab.errors import ArgumentTypeError
 from hapstab.outputs import OutputError, Outputs, atomic_file, check_target, writing
 
 
@@ -56,11 +57,27 @@ def test_new_files_get_the_usual_permissions(tmp_path):
 @pytest.mark.parametrize("path,needle", [
     ("", "--csv = '': must be a file path (it is empty)"),
     ("   ", "must be a file path"),
-    (None, "--csv = None: must be a file path"),
+    ("a\0b.csv", "cannot contain a NUL character"),
 ])
 def test_empty_targets_are_refused(path, needle):
     with pytest.raises(OutputError, match=needle.replace("(", r"\(").replace(")", r"\)")):
         check_target(path, "--csv")
+
+
+@pytest.mark.parametrize("path", [None, b"x.csv", 123, ["x.csv"]])
+def test_a_target_of_the_wrong_type_is_a_type_error_naming_it(path):
+    with pytest.raises(ArgumentTypeError, match=r"--csv = .*must be a file path .*got"):
+        check_target(path, "--csv")
+    assert issubclass(ArgumentTypeError, TypeError)
+
+
+def test_to_csv_of_a_wrong_target_names_it(tmp_path):
+    import hapstab as hs
+
+    res = hs.boundary(hs.paper_hve(), [1e-3, 2e-3])
+    for bad in (None, b"x.csv", 123):
+        with pytest.raises(TypeError, match="must be a file path"):
+            res.to_csv(bad)
 
 
 def test_folders_missing_folders_and_unknown_formats_are_refused(tmp_path):
@@ -139,3 +156,61 @@ def test_a_read_only_file_is_not_replaced(tmp_path):
     with pytest.raises(OutputError, match="read-only"), atomic_file(p, "--csv") as fh:
         fh.write("new")
     assert p.read_text() == "keep"
+
+
+def _fail_on(monkeypatch, victim):
+    """os.replace in hapstab.outputs fails for one target (a rename that fails midway)."""
+    import hapstab.outputs as outputs
+
+    real = os.replace
+
+    def replace(src, dst):
+        if os.path.basename(dst) == victim:
+            raise OSError(28, "No space left on device")
+        return real(src, dst)
+
+    monkeypatch.setattr(outputs.os, "replace", replace)
+
+
+def test_a_commit_that_fails_midway_puts_every_previous_file_back(tmp_path, monkeypatch):
+    for n in ("a", "b", "c"):
+        (tmp_path / f"{n}.txt").write_text(f"old {n}")
+    _fail_on(monkeypatch, "c.txt")
+    with pytest.raises(OutputError, match=r"c\.txt.*No space left"), Outputs() as out:
+        for n in ("a", "b", "new", "c"):
+            with out.open(tmp_path / f"{n}.txt", "--out") as fh:
+                fh.write(f"new {n}")
+    assert {p.name: p.read_text() for p in tmp_path.iterdir()} == {
+        "a.txt": "old a", "b.txt": "old b", "c.txt": "old c"}   # "new.txt" removed, no .part/.old
+
+
+def test_a_commit_that_succeeds_leaves_no_second_names(tmp_path):
+    for n in ("a", "b"):
+        (tmp_path / f"{n}.txt").write_text(f"old {n}")
+    with Outputs() as out:
+        for n in ("a", "b"):
+            with out.open(tmp_path / f"{n}.txt", "--out") as fh:
+                fh.write(f"new {n}")
+    assert {p.name: p.read_text() for p in tmp_path.iterdir()} == {
+        "a.txt": "new a", "b.txt": "new b"}
+
+
+@pytest.mark.parametrize("length", [200, 250, 255])
+def test_names_up_to_the_longest_a_file_may_have_are_written(tmp_path, length):
+    p = tmp_path / ("x" * (length - 4) + ".csv")
+    with atomic_file(p, "--csv") as fh:
+        fh.write("t\n")
+    assert p.read_text() == "t\n" and [q.name for q in tmp_path.iterdir()] == [p.name]
+
+
+def test_a_read_only_folder_is_refused_up_front_unless_the_file_is_writable(tmp_path, monkeypatch):
+    import hapstab.outputs as outputs
+
+    monkeypatch.setattr(outputs, "_folder_writable", lambda path: False)
+    with pytest.raises(OutputError, match="is not writable"):
+        check_target(tmp_path / "new.csv", "--csv")
+    p = tmp_path / "old.csv"
+    p.write_text("old, and longer than the new text\n")
+    with atomic_file(p, "--csv") as fh:           # written in place, once complete
+        fh.write("new\n")
+    assert p.read_text() == "new\n" and [q.name for q in tmp_path.iterdir()] == ["old.csv"]

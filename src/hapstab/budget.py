@@ -21,11 +21,13 @@ import contextvars
 import math
 from collections.abc import Iterator
 from dataclasses import dataclass
+from numbers import Real
+from typing import Any
 
-from hapstab.errors import HapstabError
+from hapstab.errors import ArgumentTypeError, HapstabError
 
 __all__ = ["BudgetError", "Cost", "check", "limits", "unlimited", "MEMORY_BYTES", "SECONDS",
-           "EIG_SECONDS_PER_N3", "FLOPS", "RUN_SECONDS", "POINT_SECONDS", "simulation_cost",
+           "EIG_SECONDS_PER_N3", "eig_seconds", "FLOPS", "RUN_SECONDS", "POINT_SECONDS", "simulation_cost",
            "exact_points_cost", "POINT_BYTES_PER_STATE"]
 
 #: Default memory budget: 2 GiB, a twelfth of the project's 24 GiB machine and what
@@ -36,6 +38,15 @@ SECONDS = 300.0
 #: Seconds per N^3 of one dense eigenvalue problem (numpy's eigvals): 0.8e-9 to 1.1e-9
 #: measured at N = 300...600 on the project's 2-core machine, doubled for a busy machine.
 EIG_SECONDS_PER_N3 = 2e-9
+#: ... and from N = 600 on, LAPACK runs nearer the machine's peak: 3.1e-10 at N = 2004 and
+#: 2.9e-10 at N = 4004 (a PEB loop with 2000 samples of delay, 18.8 s), doubled: the floor.
+EIG_SECONDS_PER_N3_LARGE = 6e-10
+
+
+def eig_seconds(states: int) -> float:
+    """Seconds of one dense eigenvalue problem of ``states`` states (see the constants)."""
+    per = max(EIG_SECONDS_PER_N3_LARGE, EIG_SECONDS_PER_N3 * min(1.0, 600.0 / max(states, 1)))
+    return 0.01 + per * float(states) ** 3
 #: Operations per second of numpy's batched products and solves: 6.6e9 counted
 #: operations in 0.27 s (1e5 samples of a 102-state loop) and a 200-state region's
 #: D-decomposition in about 6 s, on the project's machine; taken as 1e10.
@@ -136,8 +147,8 @@ def check(cost: Cost, max_memory: float | None = None, max_seconds: float | None
         One line: what it would need, the budget, and how to ask for more.
     """
     mem, sec = _LIMITS.get()
-    mem = mem if max_memory is None else float(max_memory)
-    sec = sec if max_seconds is None else float(max_seconds)
+    mem = mem if max_memory is None else _limit("max_memory", max_memory)
+    sec = sec if max_seconds is None else _limit("max_seconds", max_seconds)
     over = []
     if cost.memory_bytes > mem:
         over.append(f"about {_size(cost.memory_bytes)} of memory (budget {_size(mem)})")
@@ -148,6 +159,17 @@ def check(cost: Cost, max_memory: float | None = None, max_seconds: float | None
                           "--yes (Python: max_memory= / max_seconds=, or "
                           "hapstab.budget.unlimited())")
     return cost
+
+
+def _limit(name: str, value: Any) -> float:
+    """A budget given by the user: a real number > 0 (``math.inf``: no limit)."""
+    if isinstance(value, bool) or not isinstance(value, Real):
+        raise ArgumentTypeError(f"{name} = {value!r:.60}: must be a number > 0 (math.inf: no "
+                                f"limit; got {type(value).__name__})")
+    v = float(value)
+    if not v > 0:
+        raise BudgetError(f"{name} = {value!r}: must be > 0 (math.inf: no limit)")
+    return v
 
 
 @contextlib.contextmanager
@@ -166,8 +188,8 @@ def limits(memory_bytes: float | None = None, seconds: float | None = None) -> I
     None
     """
     mem, sec = _LIMITS.get()
-    token = _LIMITS.set((mem if memory_bytes is None else float(memory_bytes),
-                         sec if seconds is None else float(seconds)))
+    token = _LIMITS.set((mem if memory_bytes is None else _limit("memory_bytes", memory_bytes),
+                         sec if seconds is None else _limit("seconds", seconds)))
     try:
         yield
     finally:

@@ -7,6 +7,7 @@ that the CLI can print it as one line and a Python user can act on it.
 from __future__ import annotations
 
 import math
+import warnings
 from numbers import Integral, Real
 from typing import TYPE_CHECKING, Any
 
@@ -24,6 +25,11 @@ class ArgumentTypeError(HapstabError, TypeError):
 
 class ModelError(HapstabError):
     """A model (device, impedance, controller, loop) was given invalid parameters."""
+
+
+class ModelTypeError(ModelError, ArgumentTypeError):
+    """A model parameter of the wrong type (a string, a complex number, a list where one
+    number is wanted): both a :class:`ModelError` and a :class:`TypeError`."""
 
 
 class AnalysisError(HapstabError):
@@ -56,9 +62,12 @@ def check_real(name: str, value: Any, *, positive: bool = False,
             else:
                 raise TypeError
         except TypeError:
-            raise ModelError(f"{name} = {_fmt(value)}: must be a real number") from None
+            raise ModelTypeError(f"{name} = {_fmt(value)!s:.60}: must be a real number "
+                                 f"(got {type(value).__name__})") from None
     try:
-        v = float(value)
+        with warnings.catch_warnings():   # numpy's longdouble/overflow casts warn: we raise
+            warnings.simplefilter("ignore")
+            v = float(value)
     except OverflowError:              # an int beyond double precision (10**400)
         raise ModelError(f"{name} = {value!r:.40}: must be finite (not NaN or inf)") from None
     if not math.isfinite(v):
@@ -68,6 +77,31 @@ def check_real(name: str, value: Any, *, positive: bool = False,
     if nonnegative and not v >= 0:
         raise ModelError(f"{name} = {_fmt(value)}: must be >= 0")
     return v
+
+
+def check_reals(name: str, value: Any) -> np.ndarray:
+    """Return ``value`` (a number or a sequence of numbers) as a flat float array, or raise
+    :class:`ModelTypeError` naming ``name`` for anything that is not real numbers (a string,
+    a complex number, nested lists of different lengths).
+
+    Finiteness and size are the caller's to check (it knows what is allowed).
+    """
+    import numpy as np
+
+    def wrong() -> ModelTypeError:
+        return ModelTypeError(f"{name} = {value!r:.60}: must be a real number or a sequence "
+                              f"of real numbers (got {type(value).__name__})")
+
+    if isinstance(value, (str, bytes)):
+        raise wrong()
+    try:
+        with warnings.catch_warnings():   # numpy's overflow / complex casts warn: we raise
+            warnings.simplefilter("ignore")
+            if np.iscomplexobj(value):
+                raise TypeError
+            return np.asarray(value, dtype=float).ravel()
+    except (TypeError, ValueError, OverflowError):
+        raise wrong() from None
 
 
 def check_delay(name: str, value: Any) -> int:

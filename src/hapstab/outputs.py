@@ -17,12 +17,13 @@ from __future__ import annotations
 import contextlib
 import json
 import os
+import shutil
 import stat
 import tempfile
 from collections.abc import Iterator
 from typing import IO, Any
 
-from hapstab.errors import HapstabError
+from hapstab.errors import ArgumentTypeError, HapstabError
 
 __all__ = ["OutputError", "check_target", "Outputs", "atomic_file", "writing", "figure_to",
            "write_folder"]
@@ -55,14 +56,21 @@ def check_target(path: Any, name: str, formats: tuple[str, ...] | None = None) -
     OutputError
         If the target cannot be written.
     """
-    if not isinstance(path, (str, os.PathLike)) or not str(os.fspath(path)).strip():
+    if not isinstance(path, (str, os.PathLike)) or not isinstance(os.fspath(path), str):
+        raise ArgumentTypeError(f"{name} = {path!r:.60}: must be a file path (str or "
+                                f"os.PathLike) or a file object (got {type(path).__name__})")
+    p = os.fspath(path)
+    if not p.strip():
         raise OutputError(f"{name} = {path!r}: must be a file path (it is empty)")
-    p = str(os.fspath(path))
+    if "\0" in p:
+        raise OutputError(f"{name} = {p!r:.80}: a file path cannot contain a NUL character")
     if os.path.isdir(p):
         raise OutputError(f"{name} = {p!r}: is a folder; give a file path")
     folder = os.path.dirname(os.path.abspath(p))
     if not os.path.isdir(folder):
         raise OutputError(f"{name} = {p!r}: the folder {folder!r} does not exist")
+    if not (_is_special(p) or _folder_writable(p) or _file_writable(p)):
+        raise OutputError(f"{name} = {p!r}: the folder {folder!r} is not writable")
     if formats is not None:
         base = os.path.basename(p)
         ext = base.rsplit(".", 1)[-1].lower() if "." in base else ""
@@ -70,6 +78,16 @@ def check_target(path: Any, name: str, formats: tuple[str, ...] | None = None) -
             raise OutputError(f"{name} = {p!r}: the extension {ext or '(none)'!r} is not a format "
                               f"hapstab writes; allowed: {', '.join(formats)}")
     return p
+
+
+def _folder_writable(path: str) -> bool:
+    """Whether a new file can be created beside ``path`` (its real location)."""
+    return os.access(os.path.dirname(os.path.realpath(path)), os.W_OK | os.X_OK)
+
+
+def _file_writable(path: str) -> bool:
+    """Whether ``path`` exists and can be written (in place, when its folder is not writable)."""
+    return os.path.isfile(path) and os.access(path, os.W_OK)
 
 
 def _is_special(path: str) -> bool:
@@ -97,7 +115,8 @@ class Outputs:
     """
 
     def __init__(self) -> None:
-        self._pending: list[tuple[str, str, str]] = []   # (temporary, target, option)
+        # (temporary, target, option, copied into the target in place)
+        self._pending: list[tuple[str, str, str, bool]] = []
         self.written: list[str] = []
 
     @contextlib.contextmanager
@@ -137,8 +156,9 @@ class Outputs:
         if os.path.exists(real) and not os.access(real, os.W_OK):
             raise OutputError(f"{name} = {target!r}: the file is read-only; hapstab does not "
                               "replace it (make it writable or choose another name)")
+        in_place = not _folder_writable(real)    # a writable file in a read-only folder
         with self._failing(target, name):
-            fd, tmp = tempfile.mkstemp(prefix=f".{base}.", suffix=".part", dir=folder)
+            fd, tmp = _temporary(base, None if in_place else folder)
         try:
             with self._failing(target, name), os.fdopen(fd, mode, **kw) as fh:
                 yield fh
@@ -147,7 +167,7 @@ class Outputs:
         except BaseException:
             _remove(tmp)
             raise
-        self._pending.append((tmp, os.path.join(folder, base), name))
+        self._pending.append((tmp, real, name, in_place))
 
     @contextlib.contextmanager
     def _failing(self, target: str, name: str) -> Iterator[None]:
@@ -157,7 +177,8 @@ class Outputs:
             raise OutputError(f"{name} = {target!r}: cannot write ({e.strerror or e})") from None
 
     def commit(self) -> list[str]:
-        """Rename every temporary file over its target.
+        """Rename every temporary file over its target; if one rename fails, the targets
+        already replaced get their previous versions back (or are removed if new).
 
         Returns
         -------
@@ -169,21 +190,33 @@ class Outputs:
         OutputError
             A rename failed (the remaining temporary files are removed).
         """
+        keep = len(self._pending) > 1        # one file: os.replace is all-or-nothing
+        done: list[tuple[str, str | None]] = []   # (target, _previous_version)
         try:
-            while self._pending:
-                tmp, target, name = self._pending[0]
+            for tmp, target, name, in_place in self._pending:
                 with self._failing(target, name):
-                    os.chmod(tmp, _mode(target))
-                    os.replace(tmp, target)
-                self._pending.pop(0)
-                self.written.append(target)
+                    old = _previous_version(target, keep and not in_place)
+                    try:
+                        _put(tmp, target, in_place)
+                    except BaseException:
+                        if old:
+                            _remove(old)
+                        raise
+                    done.append((target, old))
+        except BaseException:
+            _roll_back(done)
+            raise
         finally:
             self.abort()
+        for _, old in done:
+            if old:
+                _remove(old)
+        self.written += [target for target, _ in done]
         return self.written
 
     def abort(self) -> None:
         """Remove the temporary files not yet committed."""
-        for tmp, _, _ in self._pending:
+        for tmp, *_ in self._pending:
             _remove(tmp)
         self._pending.clear()
 
@@ -316,6 +349,62 @@ def write_folder(out_dir: str, results: list[tuple[str, Any]], manifest: dict[st
             json.dump({**manifest, "files": names}, fh, indent=2)
             fh.write("\n")
     return out.written
+
+
+def _temporary(base: str, folder: str | None) -> tuple[int, str]:
+    """A new temporary file ``.base.XXXXXXXX.part`` in ``folder`` (None: the system's
+    temporary folder); the name is cut so that it stays within the 255 bytes a file name
+    may have."""
+    stem = base.encode()[:200].decode(errors="ignore")   # + 8 random + 7 marks < 255
+    return tempfile.mkstemp(prefix=f".{stem}.", suffix=".part", dir=folder)
+
+
+def _previous_version(target: str, keep: bool) -> str | None:
+    """What a failed commit puts back at ``target``: None if there is no file there (the
+    new one is removed), ``""`` if it is not kept (left as written), else the path of a
+    second name for it (a hard link, or a copy where the file system has no links)."""
+    if not os.path.lexists(target):
+        return None
+    if not keep:
+        return ""
+    fd, old = _temporary(os.path.basename(target) + ".old", os.path.dirname(target))
+    os.close(fd)
+    os.remove(old)                    # a fresh random name, now free for the link
+    try:
+        os.link(target, old)
+    except OSError:
+        shutil.copy2(target, old)
+    return old
+
+
+def _put(tmp: str, target: str, in_place: bool) -> None:
+    """Replace ``target`` by the complete temporary file."""
+    if in_place:
+        _copy_into(tmp, target)
+        _remove(tmp)
+    else:
+        os.chmod(tmp, _mode(target))
+        os.replace(tmp, target)
+
+
+def _roll_back(done: list[tuple[str, str | None]]) -> None:
+    """Put back the previous version of every target already replaced (remove a new one)."""
+    for target, old in reversed(done):
+        with contextlib.suppress(OSError):
+            if old is None:
+                os.remove(target)
+            elif old:
+                os.replace(old, target)
+
+
+def _copy_into(tmp: str, target: str) -> None:
+    """Write the complete temporary file into ``target`` in place (its folder is read-only,
+    so it cannot be renamed over; the computation is done and the copy is short)."""
+    with open(tmp, "rb") as src, open(target, "r+b") as dst:
+        shutil.copyfileobj(src, dst)
+        dst.truncate()
+        dst.flush()
+        os.fsync(dst.fileno())
 
 
 def _remove(path: str) -> None:

@@ -59,17 +59,23 @@ def _has_display() -> bool:
 
 
 def plot_boundary(res: Any, ax: Any = None) -> Any:
-    """K_max against T, one curve per delay (Fig. 5 / Fig. 6 style)."""
+    """K_max against T (ms) or the sampling rate (Hz), one curve per delay (Fig. 5 / 6)."""
     ax = _axes(ax)
-    colors = ["tab:blue", "tab:red", "tab:green", "tab:purple", "tab:orange"]
-    for i, n in enumerate(res.delays):
-        ax.plot(res.periods * 1e3, res.critical_stiffness[i], "-", color=colors[i % len(colors)],
-                label=f"{res.method}, n = {n}")
-    ax.set_xlabel("sampling period T (ms)")
+    colors = ["tab:blue", "tab:red", "tab:green", "tab:purple", "tab:orange", "tab:brown"]
+    by_rate = getattr(res, "axis", "period") == "rate"
+    x = 1.0 / res.periods if by_rate else res.periods * 1e3
+    order = np.argsort(x)
+    for i, d in enumerate(res.delays):
+        label = (f"t_d = {d * 1e3:g} ms" if getattr(res, "delay_unit", "samples") == "s"
+                 else f"n = {int(d)}")
+        ax.plot(x[order], res.critical_stiffness[i][order], "o-" if x.size < 30 else "-",
+                ms=3, color=colors[i % len(colors)], label=label)
+    ax.set_xlabel("sampling rate 1/T (Hz)" if by_rate else "sampling period T (ms)")
     ax.set_ylabel("K_max (N/m)")
     ax.set_yscale("log")
     ax.grid(True, which="both", alpha=0.3)
-    ax.legend()
+    ax.set_title(f"K_max of the {res.loop_kind.upper()} loop, method {res.method}")
+    ax.legend(title="delay")
     return ax
 
 

@@ -260,17 +260,24 @@ class CriticalStiffnessResult(Result):
 
 @dataclass(frozen=True)
 class BoundaryResult(Result):
-    """K_max over a grid of sampling periods and delays (Fig. 5 / Fig. 6).
+    """K_max over a grid of sampling periods and delays (Fig. 5 / Fig. 6), or over
+    sampling rates at fixed delays in seconds.
 
     Attributes
     ----------
     periods : (nT,) array, seconds
-    delays : (nd,) array, samples
+    delays : (nd,) array
+        Whole samples (``delay_unit == "samples"``) or seconds (``"s"``: each delay held
+        fixed in time while T varies).
     critical_stiffness : (nd, nT) array, N/m
     method : str
         The method that computed it.
     loop_kind : {"hve", "peb"}
         The loop kind.
+    delay_unit : {"samples", "s"}
+        The unit of ``delays``.
+    axis : {"period", "rate"}
+        The plot's horizontal axis: T in ms or the sampling rate 1/T in Hz.
     """
 
     periods: np.ndarray
@@ -278,27 +285,41 @@ class BoundaryResult(Result):
     critical_stiffness: np.ndarray
     method: str
     loop_kind: str = "hve"
+    delay_unit: str = "samples"
+    axis: str = "period"
+
+    @property
+    def _delay_key(self) -> str:
+        return "delay_s" if self.delay_unit == "s" else "delay_samples"
 
     def to_dict(self) -> dict[str, Any]:
         return jsonable({"method": self.method, "loop": self.loop_kind,
-                         "period_s": self.periods, "delay_samples": self.delays,
+                         "period_s": self.periods, self._delay_key: self.delays.astype(float),
                          "critical_stiffness": self.critical_stiffness})
 
     def rows(self) -> list[dict[str, Any]]:
-        return [{"period_s": float(T), "delay_samples": int(n),
-                 "critical_stiffness": float(self.critical_stiffness[i, j])}
-                for i, n in enumerate(self.delays) for j, T in enumerate(self.periods)]
+        out = []
+        for i, d in enumerate(self.delays):
+            for j, T in enumerate(self.periods):
+                row = {"period_s": float(T), "delay_samples": float(d) / float(T)
+                       if self.delay_unit == "s" else float(d),
+                       "critical_stiffness": float(self.critical_stiffness[i, j])}
+                if self.delay_unit == "s":
+                    row = {"period_s": float(T), "delay_s": float(d), **row}
+                out.append(row)
+        return out
 
     def to_csv(self, path: Any) -> None:
-        """Write one row per (delay, period): period_s, delay_samples, critical_stiffness
-        (N/m; ``inf`` as Python writes it).
+        """Write one row per (delay, period): period_s, [delay_s,] delay_samples,
+        critical_stiffness (N/m; ``inf`` as Python writes it).
 
         Parameters
         ----------
         path : str, os.PathLike or file object
             Where to write (a path is written atomically, see :mod:`hapstab.outputs`).
         """
-        cols = ["period_s", "delay_samples", "critical_stiffness"]
+        cols = ["period_s", *(["delay_s"] if self.delay_unit == "s" else []), "delay_samples",
+                "critical_stiffness"]
         write_csv(path, cols, ([r[c] for c in cols] for r in self.rows()))
 
     def plot(self, ax: Any = None) -> Any:

@@ -15,10 +15,12 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
+from hapstab import budget
 from hapstab.analysis.circle import critical_stiffness_circle
 from hapstab.analysis.closed_forms import closed_forms_for
 from hapstab.analysis.exact.core import exact_critical_stiffness, stability
 from hapstab.analysis.passivity import critical_stiffness_passivity
+from hapstab.engine.system import build
 from hapstab.errors import AnalysisError
 from hapstab.models.controllers import spring_damper
 from hapstab.models.loops import HapticLoop, TeleoperationLoop, require_loop
@@ -146,10 +148,13 @@ def _verdict(loop: Any, K: float) -> str:
     """Exact verdict just below K (at K itself a boundary is marginal by definition)."""
     if not math.isfinite(K) or K <= 0:
         return "-"
-    return stability(loop.with_stiffness(K * (1 - _REL))).verdict
+    # the audit's budget covered every row's eigenvalue problem before it started
+    return stability(loop.with_stiffness(K * (1 - _REL)), max_memory=math.inf,
+                     max_seconds=math.inf).verdict
 
 
-def audit(loop: HapticLoop | TeleoperationLoop) -> AuditResult:
+def audit(loop: HapticLoop | TeleoperationLoop, *, max_memory: float | None = None,
+          max_seconds: float | None = None) -> AuditResult:
     """Closed forms vs circle / passivity vs exact, for the loop's parameters.
 
     Parameters
@@ -159,6 +164,9 @@ def audit(loop: HapticLoop | TeleoperationLoop) -> AuditResult:
         K_max). PEB closed forms are listed only for C_m = C_s (as derived);
         (1)/(13) and (29) only for n = 0, Gil et al. 2004 only without operator,
         delay and B.
+    max_memory, max_seconds : float, optional
+        Budget in bytes and seconds (default :mod:`hapstab.budget`'s): every row's exact
+        verdict is a dense eigenvalue problem of the closed loop, estimated first.
 
     Returns
     -------
@@ -175,6 +183,11 @@ def audit(loop: HapticLoop | TeleoperationLoop) -> AuditResult:
     """
     require_loop(loop)
     kind = loop.kind
+    N = build(loop).order
+    rows_at_most = len(closed_forms_for(kind)) + 4     # closed forms, 3 circle rows, passivity
+    budget.check(budget.Cost(f"audit: up to {rows_at_most} exact verdicts of a {N}-state "
+                             "closed loop", 64.0 * N * N, rows_at_most * budget.eig_seconds(N)),
+                 max_memory, max_seconds)
     passive = critical_stiffness_passivity(loop).critical_stiffness  # raises for non-SpringDamper
     exact_res = exact_critical_stiffness(loop)
     exact = exact_res.critical_stiffness

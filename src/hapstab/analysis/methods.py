@@ -6,6 +6,7 @@ same models; :data:`METHODS` is the one table of them.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Sequence
 from typing import Any
 
@@ -15,7 +16,14 @@ from hapstab.analysis.circle import critical_stiffness_circle
 from hapstab.analysis.closed_forms import CLOSED_FORMS, TABLE
 from hapstab.analysis.exact.core import exact_critical_stiffness, exact_kmax_batch
 from hapstab.analysis.passivity import critical_stiffness_passivity
-from hapstab.errors import AnalysisError, check_delay, check_period
+from hapstab.errors import (
+    AnalysisError,
+    ArgumentTypeError,
+    check_delay,
+    check_period,
+    check_real,
+    check_reals,
+)
 from hapstab.models.loops import HapticLoop, TeleoperationLoop, require_loop
 from hapstab.results import BoundaryResult, CriticalStiffnessResult
 from hapstab.simulation.search import critical_stiffness_simulation
@@ -96,35 +104,83 @@ def critical_stiffness(loop: HapticLoop | TeleoperationLoop, method: str = "exac
     AnalysisError
         Unknown method, or a method that does not apply to this loop.
     """
-    return _resolve(method)(loop, **options)
+    f = _resolve(method)
+    _check_options(method, f, options)
+    return f(loop, **options)
+
+
+def _check_options(method: str, f: Callable[..., Any], options: dict[str, Any]) -> None:
+    """Refuse an option the method does not take, naming it and the ones it does."""
+    import inspect
+
+    params = inspect.signature(f).parameters
+    if any(p.kind is p.VAR_KEYWORD for p in params.values()):
+        return
+    allowed = [n for n, p in list(params.items())[1:]
+               if p.kind in (p.KEYWORD_ONLY, p.POSITIONAL_OR_KEYWORD)]
+    for name in options:
+        if name not in allowed:
+            raise ArgumentTypeError(f"{name} = {options[name]!r:.40}: not an option of method "
+                                    f"{method!r}; it takes: {', '.join(allowed) or 'none'}")
 
 
 def boundary(loop: HapticLoop | TeleoperationLoop, periods: Sequence[float] | np.ndarray,
-             delays: Sequence[int] | np.ndarray = (0,), method: str = "exact",
-             **options: Any) -> BoundaryResult:
-    """K_max over a grid of sampling periods and delays (the curves of Fig. 5 / 6).
+             delays: Sequence[int] | np.ndarray = (0,), method: str = "exact", *,
+             delays_s: Sequence[float] | np.ndarray | None = None,
+             axis: str = "period", **options: Any) -> BoundaryResult:
+    """K_max over a grid of sampling periods and delays (the curves of Fig. 5 / 6), or
+    over sampling rates at fixed delays in seconds (the question about one's own device:
+    how stiff at 500 Hz, 1 kHz, 4 kHz with 20 ms of network delay?).
 
     Parameters
     ----------
     loop : HapticLoop or TeleoperationLoop
         Template: its own period and delay (fractional and backward parts too) are
-        replaced by the grid's: delays[i] whole samples, equal in both directions.
+        replaced by the grid's, equal in both directions.
     periods : array of float
         Sampling periods T in s (> 0).
     delays : array of int
-        Delays n in samples (t_d = n T at each T).
+        Delays n in whole samples (t_d = n T at each T); ignored with ``delays_s``.
     method : str
         As for :func:`critical_stiffness`; ``"exact"`` is vectorised over T.
+    delays_s : array of float, optional
+        Delays in seconds (>= 0), each held fixed over the periods: at each T the loop
+        has t_d / T samples of delay, fractional parts modelled exactly.
+    axis : {"period", "rate"}
+        What the result's plot puts on its horizontal axis (T in ms, or 1/T in Hz).
     **options
         Passed to the method at every grid point (e.g. ``approximation`` for
-        ``"circle"``); ``"exact"`` takes none and ignores them.
+        ``"circle"``); ``"exact"`` takes none. ``max_memory`` / ``max_seconds``: the
+        budget of the whole grid (see :mod:`hapstab.budget`).
 
     Returns
     -------
     BoundaryResult
-        ``critical_stiffness[i, j]`` for ``delays[i]``, ``periods[j]``.
+        ``critical_stiffness[i, j]`` for ``delays[i]`` (or ``delays_s[i]``), ``periods[j]``.
     """
     require_loop(loop)
+    T = _periods(periods)
+    rows = _delay_rows(delays, delays_s)
+    if axis not in ("period", "rate"):
+        raise AnalysisError(f"axis = {axis!r}: allowed: 'period', 'rate'")
+    limits = options.pop("max_memory", None), options.pop("max_seconds", None)
+    _check_options(method, _resolve(method), options)
+    samples = max(rows) / T.min() + 1 if delays_s is not None else max(rows)
+    _charge_boundary(loop, T, len(rows), samples, method, options, limits)
+    out = np.empty((len(rows), T.size))
+    for i, d in enumerate(rows):
+        if delays_s is None and method == "exact":
+            tmpl = loop.with_whole_delay(int(d), float(T[0]))
+            out[i] = [r.kmax for r in exact_kmax_batch(tmpl, T, intervals=False)]
+        else:
+            f = _resolve(method)
+            out[i] = [f(_at(loop, float(t), d, delays_s is not None), **options).critical_stiffness
+                      for t in T]
+    unit = "s" if delays_s is not None else "samples"
+    return BoundaryResult(T, np.array(rows), out, method, loop.kind, unit, axis)
+
+
+def _periods(periods: Any) -> np.ndarray:
     try:
         T = np.atleast_1d(np.asarray(periods, dtype=float)).ravel()
     except (TypeError, ValueError):
@@ -133,36 +189,46 @@ def boundary(loop: HapticLoop | TeleoperationLoop, periods: Sequence[float] | np
         raise AnalysisError("periods: the range is empty; give at least one period")
     for t in T:   # every period, by the models' own rule (not only the first, which builds the loop)
         check_period("period", float(t))
-    ns = [check_delay("delay", n) for n in np.atleast_1d(delays)]
-    if not ns:
-        raise AnalysisError("delays: the list is empty; give at least one delay")
+    return T
+
+
+def _delay_rows(delays: Any, delays_s: Any) -> list[Any]:
+    """Whole samples, or seconds (>= 0, finite) when ``delays_s`` is given."""
+    if delays_s is None:
+        rows: list[Any] = [check_delay("delay", n) for n in np.atleast_1d(delays)]
+        what = "delays"
+    else:
+        rows = [check_real("delays_s", d, nonnegative=True)
+                for d in check_reals("delays_s", delays_s)]
+        what = "delays_s"
+    if not rows:
+        raise AnalysisError(f"{what}: the list is empty; give at least one delay")
+    return rows
+
+
+def _at(loop: Any, T: float, delay: Any, seconds: bool) -> Any:
+    """The template at period T with the row's delay (whole samples, or seconds)."""
+    return loop.replace(period=T).with_delay_s(delay) if seconds else \
+        loop.with_whole_delay(int(delay), T)
+
+
+def _charge_boundary(loop: Any, T: np.ndarray, n_rows: int, samples: float, method: str,
+                     options: dict[str, Any], limits: tuple[Any, Any]) -> None:
+    """The grid's cost, from its longest delay in samples (see :mod:`hapstab.budget`)."""
     from hapstab import budget
 
-    limits = options.pop("max_memory", None), options.pop("max_seconds", None)
     if method == "simulation":
         from hapstab.simulation.search import search_cost
 
-        longest = loop.with_whole_delay(max(ns), float(T.min()))
-        budget.check(search_cost(longest, len(ns) * T.size, options.get("n_samples", 2000)),
+        longest = loop.with_whole_delay(math.ceil(samples), float(T.min()))
+        budget.check(search_cost(longest, n_rows * T.size, options.get("n_samples", 2000)),
                      *limits)
-    else:
-        points = len(ns) * T.size
-        what = f"boundary: {points} points ({len(ns)} delays x {T.size} periods), {method!r}"
-        states = order_estimate(loop, max(ns))
-        if method in ("exact", "circle", "passivity"):   # per point: grows with the loop
-            cost = budget.exact_points_cost(what, T.size, states)
-            cost = budget.Cost(what, cost.memory_bytes, cost.seconds * len(ns))
-        else:                                              # a closed form: a formula per point
-            cost = budget.Cost(what, 1e3 * points, 1e-4 * points)  # measured: 44,000 in 0.6 s
-        budget.check(cost, *limits)
-    out = np.empty((len(ns), T.size))
-    for i, n in enumerate(ns):
-        # the grid's delay replaces the template's, in both directions, whole samples
-        tmpl = loop.with_whole_delay(n, float(T[0]))
-        if method == "exact":
-            res = exact_kmax_batch(tmpl, T, intervals=False)
-            out[i] = [r.kmax for r in res]
-        else:
-            f = _resolve(method)
-            out[i] = [f(tmpl.replace(period=float(t)), **options).critical_stiffness for t in T]
-    return BoundaryResult(T, np.array(ns), out, method, loop.kind)
+        return
+    points = n_rows * T.size
+    what = f"boundary: {points} points ({n_rows} delays x {T.size} periods), {method!r}"
+    if method in ("exact", "circle", "passivity"):   # per point: grows with the loop
+        cost = budget.exact_points_cost(what, T.size, order_estimate(loop, samples))
+        cost = budget.Cost(what, cost.memory_bytes, cost.seconds * n_rows)
+    else:                                              # a closed form: a formula per point
+        cost = budget.Cost(what, 1e3 * points, 1e-4 * points)  # measured: 44,000 in 0.6 s
+    budget.check(cost, *limits)

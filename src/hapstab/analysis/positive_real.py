@@ -299,7 +299,8 @@ def _require_matrix(G: Any) -> None:
 
 
 def positive_real(G: RationalMatrix, period: float | None = None, grid: int | None = None,
-                  rtol: float = _RTOL) -> PositiveRealResult:
+                  rtol: float = _RTOL, *, max_memory: float | None = None,
+                  max_seconds: float | None = None) -> PositiveRealResult:
     """Test Definition 1 for a square proper rational G(z).
 
     Parameters
@@ -316,6 +317,9 @@ def positive_real(G: RationalMatrix, period: float | None = None, grid: int | No
         Condition (iii) fails when the smallest eigenvalue is below ``-rtol``
         times the median Hermitian-part eigenvalue magnitude, plus 1e-13 times
         ||G|| at the worst frequency (the rounding of G + G^H next to a pole).
+    max_memory, max_seconds : float, optional
+        Budget in bytes and seconds (default :mod:`hapstab.budget`'s) of the frequency
+        sweep (grid angles x elements x degree), estimated first.
 
     Returns
     -------
@@ -327,6 +331,8 @@ def positive_real(G: RationalMatrix, period: float | None = None, grid: int | No
     """
     _require_matrix(G)
     T = 1.0 if period is None else check_real("period", period, positive=True)
+    rtol = check_real("rtol", rtol, positive=True)
+    _charge(G, grid, max_memory, max_seconds)
     poles = G.poles()
     fails: list[str] = []
     reasons: list[str] = []
@@ -383,6 +389,24 @@ def positive_real(G: RationalMatrix, period: float | None = None, grid: int | No
     return PositiveRealResult(ok, fails[0] if fails else None, tuple(fails), float(margin),
                               t_min / T, t_min / (2 * math.pi * T), reason, T,
                               tuple(complex(p) for p in poles), th / T, vals)
+
+
+def _charge(G: RationalMatrix, grid: int | None, max_memory: float | None,
+            max_seconds: float | None) -> None:
+    """Refuse a sweep beyond the budget: every angle evaluates m^2 elements, each a
+    product of ~degree complex factors (an angles x degree array of 16 bytes at a time),
+    about 8 operations per factor."""
+    from hapstab import budget
+
+    if grid is not None and (isinstance(grid, bool) or not isinstance(grid, (int, np.integer))
+                             or grid < 2):
+        raise ArgumentTypeError(f"grid = {grid!r:.40}: must be a whole number >= 2 (or None)")
+    deg = G.degree() + 1
+    points = max(grid or 1024, 48 * deg)
+    work = points * G.m * G.m * deg
+    budget.check(budget.Cost(f"positive_real: {points} angles of a {G.m}x{G.m} matrix of "
+                             f"degree {deg - 1}", 16.0 * points * (deg + 8 * G.m * G.m),
+                             8.0 * work / budget.FLOPS), max_memory, max_seconds)
 
 
 def _near(angles: np.ndarray) -> np.ndarray:

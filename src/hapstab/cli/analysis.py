@@ -14,13 +14,15 @@ from hapstab.cli.options import (
     console,
     emit,
     fmt,
+    given,
     loop_options,
     parse_delays,
     parse_periods,
+    parse_range,
     provenance,
     rich_table,
 )
-from hapstab.errors import HapstabError
+from hapstab.errors import PERIOD_RANGE, HapstabError
 from hapstab.results import dumps
 
 
@@ -107,19 +109,43 @@ def _boundary_command(kind: str) -> None:
     @click.option("--method", default="exact", show_default=True)
     @click.option("--csv", "csv_path", type=click.Path(dir_okay=False), default=None,
                   help="Also write the table as CSV.")
-    def _cmd(method: str, csv_path: str | None, as_json: bool, **kw: Any) -> None:
+    @click.option("--plot", "plot_path", type=click.Path(dir_okay=False), default=None,
+                  help="Write K_max against T (or against the rate, with --rate) as a figure.")
+    def _cmd(method: str, csv_path: str | None, plot_path: str | None, as_json: bool,
+             **kw: Any) -> None:
         from hapstab.analysis.methods import boundary
         from hapstab.cli.files import check_files, write_files
 
-        check_files(csv_path)
-        periods, delays = parse_periods(kw["period"]), parse_delays(kw["delay"])
-        kw.update(period=periods[0], delay=delays[0])
+        check_files(csv_path, plot_path, as_json)
+        periods, axis = _grid_periods(kw)
+        rows_s = None if kw["delay_s"] is None else parse_range(kw["delay_s"], "--delay-s", "s",
+                                                                values=">= 0")
+        if rows_s is not None and given("delay"):
+            raise HapstabError("--delay and --delay-s: give one of them, not both")
+        delays = parse_delays(kw["delay"])
+        kw.update(period=periods[0], delay=delays[0], rate=None, delay_s=None)
         template = make(kw, 1.0)
-        res = boundary(template, periods, delays, method=method)
-        write_files(res, csv_path)
+        res = boundary(template, periods, delays, method=method, delays_s=rows_s, axis=axis)
+        write_files(res, csv_path, plot_path)
         emit(res.to_dict(), as_json, lambda: _boundary_table(res), template)
 
-    _cmd.__doc__ = f"K_max of the {kind.upper()} loop over a range of periods and delays."
+    _cmd.__doc__ = (f"K_max of the {kind.upper()} loop over sampling periods or rates and "
+                    "delays (in samples, or fixed in seconds).")
+
+
+def _grid_periods(kw: dict[str, Any]) -> tuple[list[float], str]:
+    """The periods from --period or --rate (one of them), and the plot's axis."""
+    if kw.get("rate") is None:
+        return parse_periods(kw["period"]), "period"
+    if given("period"):
+        raise HapstabError("--period and --rate: give one of them, not both")
+    rates = parse_range(kw["rate"], "--rate", "Hz")
+    lo, hi = PERIOD_RANGE
+    for r in rates:
+        if not lo <= 1.0 / r <= hi:
+            raise HapstabError(f"--rate = {kw['rate']!r}: {r:g} Hz gives T = {1 / r:g} s; "
+                               f"rates must be between {1 / hi:g} Hz and {1 / lo:g} Hz")
+    return sorted(1.0 / r for r in rates), "rate"
 
 
 def _boundary_table(res: Any) -> None:
@@ -127,10 +153,15 @@ def _boundary_table(res: Any) -> None:
 
     t = Table(title=f"K_max (N/m), {res.loop_kind}, method {res.method}")
     t.add_column("T (ms)", justify="right")
-    for n in res.delays:
-        t.add_column(f"n = {n}", justify="right")
+    by_rate = res.axis == "rate"
+    if by_rate:
+        t.add_column("rate (Hz)", justify="right")
+    for d in res.delays:
+        t.add_column(f"t_d = {d * 1e3:g} ms" if res.delay_unit == "s" else f"n = {d}",
+                     justify="right")
     for j, T in enumerate(res.periods):
-        t.add_row(f"{T * 1e3:.4g}", *[fmt(res.critical_stiffness[i, j]) for i in range(len(res.delays))])
+        t.add_row(f"{T * 1e3:.4g}", *([f"{1 / T:.5g}"] if by_rate else []),
+                  *[fmt(res.critical_stiffness[i, j]) for i in range(len(res.delays))])
     console().print(t)
 
 

@@ -7,6 +7,7 @@ Each command lives in a module of its own and is added here, explicitly.
 from __future__ import annotations
 
 import contextlib
+import os
 import sys
 import warnings
 from typing import Any
@@ -14,6 +15,7 @@ from typing import Any
 import click
 import numpy as np
 
+from hapstab.cli.files import STDOUT_TAKEN
 from hapstab.cli.options import ARGV, provenance
 from hapstab.errors import HapstabError
 from hapstab.results import dumps
@@ -36,26 +38,35 @@ class HapstabGroup(click.Group):
             _on_termination()
         # --yes: run past the cost budget (anywhere on the line, like --debug)
         ARGV.set(tuple(argv))                  # echoed as given (with --yes)
+        STDOUT_TAKEN.set(False)
         yes = "--yes" in argv
         argv = [a for a in argv if a != "--yes"]
+        default_map = None
         if sys.stdout is None:   # started with stdout closed (>&-): the answer would be lost
             _fail([], "stdout is closed: hapstab writes its answer there; give it a file or a pipe")
         try:
             # extreme inputs overflow inside numpy: the library says so once, as an
             # error, not as warnings
             from hapstab import budget
+            from hapstab.cli.study import take_study
 
+            if argv[:1] != ["run"]:                # --study FILE [--variant V], anywhere
+                argv, default_map = take_study(argv, self)
             with np.errstate(all="ignore"), warnings.catch_warnings(), \
                     (budget.unlimited() if yes else contextlib.nullcontext()):
                 warnings.simplefilter("ignore", RuntimeWarning)
                 rv = super().main(args=argv, prog_name=prog_name or "hapstab",
-                                  complete_var=complete_var, standalone_mode=False, **extra)
+                                  complete_var=complete_var, standalone_mode=False,
+                                  default_map=default_map, **extra)
             _flush_stdout(argv)
         except click.exceptions.ClickException as e:
             hint = _kind_hint(argv, e.format_message())
             _fail(argv, (e.format_message().rstrip(".") + hint) if hint else e.format_message())
         except HapstabError as e:
             _fail(argv, str(e))
+        except _BrokenPipe:
+            _fail(argv, "stdout: the reader closed the pipe before the answer was written "
+                        "(broken pipe); the answer is incomplete")
         except OSError as e:
             _fail(argv, f"cannot use {e.filename}: {e.strerror or e}" if e.filename
                   else f"cannot write the output: {e.strerror or e}")
@@ -85,6 +96,19 @@ class HapstabGroup(click.Group):
                        "report it with the command line (--debug shows the traceback)", err=True)
             sys.exit(1)
         sys.exit(rv if isinstance(rv, int) else 0)
+
+
+    def invoke(self, ctx: click.Context) -> Any:
+        """Run the command; a reader that closed stdout early is reported (click would
+        exit 1 silently)."""
+        try:
+            return super().invoke(ctx)
+        except BrokenPipeError:
+            raise _BrokenPipe() from None
+
+
+class _BrokenPipe(Exception):
+    """stdout's reader went away (``hapstab ... | head -c 10``)."""
 
 
 #: Signals received: an exception that a signal's unwinding set off inside a library (e.g.
@@ -138,6 +162,9 @@ def _flush_stdout(argv: list[str]) -> None:
     silent exit 0."""
     try:
         sys.stdout.flush()
+    except BrokenPipeError:
+        _fail(argv, "stdout: the reader closed the pipe before the answer was written "
+                    "(broken pipe); the answer is incomplete")
     except OSError as e:
         _fail(argv, f"cannot write to stdout ({e.strerror or e})")
 
@@ -150,7 +177,20 @@ def _fail(argv: list[str], msg: str) -> None:
     if "--json" in argv:
         with contextlib.suppress(OSError):
             click.echo(dumps({"error": line, "exit_code": 2, **provenance()}))
+    _quiet_stdout()
     sys.exit(2)
+
+
+def _quiet_stdout() -> None:
+    """If stdout cannot take what is buffered (a closed pipe, a full disk), send it to
+    /dev/null, so that Python's flush at exit does not print a second error."""
+    if sys.stdout is None:
+        return
+    try:
+        sys.stdout.flush()
+    except OSError:
+        with contextlib.suppress(OSError, AttributeError, ValueError):
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
 
 
 # ------------------------------------------------------------------------- commands
@@ -161,6 +201,11 @@ def _fail(argv: list[str], msg: str) -> None:
 @click.option("--yes", is_flag=True, expose_value=False,
               help="Run even when the estimated memory or time exceeds the budget "
                    "(2 GiB, 5 min); may be given anywhere on the line.")
+@click.option("--study", metavar="FILE", expose_value=False,
+              help="Take a loop command's options from a TOML study file (the command line "
+                   "overrides them); anywhere on the line. See hapstab run.")
+@click.option("--variant", metavar="NAME", expose_value=False,
+              help="With --study: use this [[variant]] of the study (default: its [loop]).")
 def cli() -> None:
     """Exact stability and critical stiffness of sampled-data, delayed haptic (hve) and
     PEB teleoperation (peb) loops. Defaults are the paper's simulation study."""
@@ -169,11 +214,11 @@ def cli() -> None:
 
 def _register() -> None:
     """Add every command to :data:`cli` (one place, in the order of ``--help``)."""
-    from hapstab.cli import analysis, paper, regions, simulation
+    from hapstab.cli import analysis, paper, regions, run, simulation
 
     for cmd in (analysis.kmax, analysis.check, analysis.boundary_cmd, analysis.demo,
                 paper.passivity_cmd, paper.audit_cmd, regions.region,
-                regions.best, simulation.simulate_cmd, simulation.reproduce_cmd):
+                regions.best, simulation.simulate_cmd, simulation.reproduce_cmd, run.run_cmd):
         cli.add_command(cmd)
         _describe(cmd)
 

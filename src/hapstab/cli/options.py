@@ -5,7 +5,9 @@ from __future__ import annotations
 
 import math
 import re
-from collections.abc import Callable
+import sys
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from contextvars import ContextVar
 from typing import Any
 
@@ -129,15 +131,23 @@ def _stack(*decorators: Callable) -> Callable:
     return wrap
 
 
-def loop_options(kind: str, ranges: bool = False) -> Callable:
-    """Options of one loop kind (defaults: the paper's simulation study). With
-    ``ranges``, --period and --delay take a range / list (for ``boundary``)."""
+def _timing_options(kind: str, ranges: bool) -> list[Callable]:
+    """--period / --rate and the delay options; with ``ranges`` (``boundary``) ranges and
+    lists of them."""
     if ranges:
         timing = [
-            click.option("--period", "-T", "period", default="0.001:0.010:10", show_default=True,
-                         help="Periods in s: start:stop:count (inclusive) or a comma list."),
+            click.option("--period", "-T", "period", default="1ms:10ms:10", show_default=True,
+                         help="Periods: start:stop[:count] (inclusive) or a comma list; "
+                              "seconds, or with a unit (250us:2ms:8)."),
+            click.option("--rate", default=None,
+                         help="Sampling rates instead of --period: start:stop[:count] or a "
+                              "comma list, Hz or with a unit (250Hz:4kHz:16)."),
             click.option("--delay", "-n", "delay", default="0,10" if kind == "hve" else "0,4",
-                         show_default=True, help="Delays in whole samples, a comma list."),
+                         show_default=True, help="Delays in whole samples (t_d = n T at "
+                                                 "each T), a comma list."),
+            click.option("--delay-s", "delay_s", default=None,
+                         help="Delays held fixed in time as T varies, instead of --delay: "
+                              "seconds or with a unit, a comma list (20ms,50ms)."),
         ]
     else:
         timing = [
@@ -161,6 +171,13 @@ def loop_options(kind: str, ranges: bool = False) -> Callable:
                              help="Slave->master delay in samples (fractional allowed; "
                                   "default --delay)."),
             ]
+    return timing
+
+
+def loop_options(kind: str, ranges: bool = False) -> Callable:
+    """Options of one loop kind (defaults: the paper's simulation study). With
+    ``ranges``, --period and --delay take a range / list (for ``boundary``)."""
+    timing = _timing_options(kind, ranges)
     if kind == "hve":
         devices = [
             click.option("--mass", "-m", type=POS, default=0.15, show_default=True,
@@ -301,12 +318,21 @@ def emit(data: dict[str, Any], as_json: bool, table: Callable[[], None], loop: A
 
 def console() -> Any:
     """A rich console as wide as the terminal, and 160 columns when piped or redirected
-    (rich's 80 would cut numbers in tables)."""
+    (rich's 80 would cut numbers in tables); on standard error when standard output
+    carries a file (``--csv -``)."""
     import shutil
 
     from rich.console import Console
 
-    return Console(width=max(shutil.get_terminal_size((160, 24)).columns, 100))
+    from hapstab.cli.files import STDOUT_TAKEN
+
+    class _Console(Console):
+        def on_broken_pipe(self) -> None:   # rich exits 1 silently; hapstab says so (exit 2)
+            self.quiet = True
+            raise BrokenPipeError(32, "Broken pipe")
+
+    return _Console(width=max(shutil.get_terminal_size((160, 24)).columns, 100),
+                    stderr=STDOUT_TAKEN.get())
 
 
 def rich_table(title: str, rows: list[tuple[str, str]]) -> None:
@@ -325,30 +351,89 @@ def fmt(x: float) -> str:
 
 
 
-def parse_periods(spec: str, name: str = "--period") -> list[float]:
-    """``start:stop:count`` (inclusive, evenly spaced) or a comma list, seconds."""
-    allowed = "allowed: start:stop:count (e.g. 0.001:0.010:10) or a comma list of periods > 0"
+#: Points in a range given as start:stop (no count).
+RANGE_COUNT = 10
+
+
+def parse_range(spec: str, name: str, unit: str, *, count: bool = True,
+                values: str = "> 0") -> list[float]:
+    """The one range syntax of every command: ``start:stop[:count]`` (inclusive, evenly
+    spaced, ``count`` default :data:`RANGE_COUNT`) or a comma list; each number may carry a
+    unit (``1ms:10ms``, ``250Hz:4kHz:16``, ``20ms,50ms``).
+
+    Parameters
+    ----------
+    spec : str
+        The option's text.
+    name : str
+        The option, named in errors.
+    unit : {"s", "Hz", "N/m", "N*s/m"}
+        The unit of a plain number (only seconds and hertz take other units).
+    count : bool
+        Whether ``:count`` and comma lists are allowed (``region``'s grid size is
+        ``--resolution``: there it is ``start:stop`` only).
+    values : {"> 0", ">= 0", "any"}
+        What each value must be (besides finite): periods and rates > 0, delays and
+        stiffnesses >= 0, virtual damping either sign.
+
+    Raises
+    ------
+    HapstabError
+        Naming the option, the text and what is allowed.
+    """
+    ex = {"s": "1ms:10ms:10", "Hz": "250Hz:4kHz:16"}.get(unit, "0:900")
+    allowed = (f"allowed: start:stop[:count] or a comma list, e.g. {ex}" if count
+               else f"allowed: start:stop, e.g. {ex} (the grid's size is --resolution)")
     parts = spec.split(":") if ":" in spec else None
-    if parts is not None and (len(parts) != 3 or not all(x.strip() for x in parts)):
-        raise HapstabError(f"{name} = {spec!r}: expected start:stop:count; {allowed}")
+    if parts is not None and (len(parts) not in ((2, 3) if count else (2,))
+                              or not all(x.strip() for x in parts)):
+        raise HapstabError(f"{name} = {spec!r}: expected start:stop{'[:count]' if count else ''}; "
+                           f"{allowed}")
+    if parts is None and not count:
+        raise HapstabError(f"{name} = {spec!r}: expected start:stop; {allowed}")
+    texts = parts[:2] if parts is not None else [x for x in spec.split(",") if x.strip()]
     try:
-        nums = [float(x) for x in (parts if parts is not None else spec.split(",")) if x.strip()]
-    except ValueError:
-        raise HapstabError(f"{name} = {spec!r}: malformed number; {allowed}") from None
+        nums = [parse_quantity(x, unit) if unit in UNITS else _plain(x) for x in texts]
+    except ValueError as e:
+        raise HapstabError(f"{name} = {spec!r}: {e}; {allowed}") from None
     if parts is not None:
-        lo, hi, cnt = nums
-        if not (math.isfinite(cnt) and cnt.is_integer() and 1 <= cnt <= 100_000):
-            raise HapstabError(f"{name} = {spec!r}: count must be a whole number from 1 to "
-                               f"100000; {allowed}")
-        if not hi >= lo:
-            raise HapstabError(f"{name} = {spec!r}: the range is empty (stop < start); {allowed}")
-        nums = [lo + (hi - lo) * i / max(int(cnt) - 1, 1) for i in range(int(cnt))]
+        n = _count(spec, name, parts[2] if len(parts) == 3 else str(RANGE_COUNT), allowed)
+        lo, hi = nums
+        if not hi >= lo or (not count and not hi > lo):
+            raise HapstabError(f"{name} = {spec!r}: the range is empty (stop "
+                               f"{'<' if count else '<='} start); {allowed}")
+        nums = [lo + (hi - lo) * i / max(n - 1, 1) for i in range(n)] if count else [lo, hi]
     if not nums:
-        raise HapstabError(f"{name} = {spec!r}: the range is empty; {allowed}")
+        raise HapstabError(f"{name} = {spec!r}: the list is empty; {allowed}")
+    ok = {"> 0": lambda v: v > 0, ">= 0": lambda v: v >= 0, "any": lambda v: True}[values]
     for v in nums:
-        if not (math.isfinite(v) and v > 0):
-            raise HapstabError(f"{name} = {spec!r}: every period must be finite and > 0; {allowed}")
+        if not (math.isfinite(v) and ok(v)):
+            what = "finite" if values == "any" else f"finite and {values}"
+            raise HapstabError(f"{name} = {spec!r}: every value must be {what}; {allowed}")
     return nums
+
+
+def _plain(text: str) -> float:
+    try:
+        return float(text)
+    except ValueError:
+        raise ValueError(f"{text.strip()!r} is not a number") from None
+
+
+def _count(spec: str, name: str, text: str, allowed: str) -> int:
+    try:
+        c = float(text)
+    except ValueError:
+        raise HapstabError(f"{name} = {spec!r}: count {text!r} is not a number; {allowed}") from None
+    if not (math.isfinite(c) and c.is_integer() and 1 <= c <= 100_000):
+        raise HapstabError(f"{name} = {spec!r}: count must be a whole number from 1 to 100000; "
+                           f"{allowed}")
+    return int(c)
+
+
+def parse_periods(spec: str, name: str = "--period") -> list[float]:
+    """Sampling periods: :func:`parse_range` in seconds."""
+    return parse_range(spec, name, "s")
 
 
 def parse_delays(spec: str) -> list[int]:
@@ -370,3 +455,30 @@ def parse_delays(spec: str) -> list[int]:
     return out
 
 
+
+
+@contextmanager
+def progress(total: int, description: str, quiet: bool = False
+             ) -> Iterator[Callable[[int], None] | None]:
+    """A progress bar on stderr when it is a terminal (nothing with --json, when piped,
+    or when ``quiet``); yields ``advance(k)`` or None.
+
+    Parameters
+    ----------
+    total : int
+        Steps in all.
+    description : str
+        What is being done.
+    quiet : bool
+        No bar (e.g. ``--json``).
+    """
+    if quiet or not sys.stderr.isatty():
+        yield None
+        return
+    from rich.console import Console
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn
+
+    with Progress("[progress.description]{task.description}", BarColumn(), MofNCompleteColumn(),
+                  TimeElapsedColumn(), transient=True, console=Console(stderr=True)) as prog:
+        task = prog.add_task(description, total=total)
+        yield lambda k: prog.advance(task, k)

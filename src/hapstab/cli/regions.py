@@ -14,22 +14,17 @@ from hapstab.cli.options import (
     fmt,
     given,
     loop_options,
+    parse_range,
     rich_table,
 )
 from hapstab.errors import HapstabError
 
 
 def _range(spec: str, name: str, signed: bool = False) -> tuple[float, float]:
-    """``lo:hi`` with lo < hi, finite; ``lo >= 0`` unless ``signed`` (virtual damping)."""
-    allowed = ("allowed: lo:hi with lo < hi, either sign (e.g. -2:20)" if signed
-               else "allowed: lo:hi with 0 <= lo < hi (e.g. 0:800)")
-    parts = spec.split(":")
-    try:
-        lo, hi = (float(x) for x in parts)
-    except ValueError:
-        raise HapstabError(f"{name} = {spec!r}: malformed; {allowed}") from None
-    if not ((signed or lo >= 0) and hi > lo and lo > -float("inf") and hi < float("inf")):
-        raise HapstabError(f"{name} = {spec!r}: {allowed}")
+    """``start:stop`` (the one range syntax, without a count: the grid's size is
+    ``--resolution``); ``start >= 0`` unless ``signed`` (virtual damping)."""
+    unit = "N*s/m" if signed else "N/m"
+    lo, hi = parse_range(spec, name, unit, count=False, values="any" if signed else ">= 0")
     return lo, hi
 
 
@@ -72,7 +67,7 @@ def _region_command(kind: str) -> None:
         from hapstab.analysis.regions import stability_region
         from hapstab.cli.files import check_files, write_files
 
-        check_files(csv_path, plot_path)
+        check_files(csv_path, plot_path, as_json)
         _equal_controllers(kw)
         K, B = _range(K_spec, "--K"), _range(B_spec, "--B", signed=True)
         names = [o.strip() for o in overlays.split(",") if o.strip() and o.strip() != "none"]

@@ -5,8 +5,6 @@ from __future__ import annotations
 
 import math
 import sys
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
 from typing import Any
 
 import click
@@ -20,6 +18,7 @@ from hapstab.cli.options import (
     emit,
     loop_options,
     parse_periods,
+    progress,
     provenance,
     rich_table,
 )
@@ -72,7 +71,7 @@ def _simulate_command(kind: str) -> None:
              csv_path: str | None, plot_path: str | None, as_json: bool,
              environment_force: str | None = None, wall: float | None = None,
              wall_pulls: bool = False, **kw: Any) -> None:
-        check_files(csv_path, plot_path)
+        check_files(csv_path, plot_path, as_json)
         loop = make(kw, stiffness)
         res = _run(kind, loop, duration, force, x0, rest, environment_force, wall, wall_pulls,
                    saturation=saturation, resolution=resolution, quantizer=quantizer,
@@ -153,20 +152,6 @@ for _kind in LOOP_KINDS:
 
 
 # ------------------------------------------------------------------ reproduce
-@contextmanager
-def _progress(total: int, quiet: bool) -> Iterator[Callable[[int], None] | None]:
-    """A rich progress bar on a terminal; nothing with --json or when piped."""
-    if quiet or not sys.stdout.isatty():
-        yield None
-        return
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn
-
-    with Progress("[progress.description]{task.description}", BarColumn(), MofNCompleteColumn(),
-                  TimeElapsedColumn(), transient=True) as prog:
-        task = prog.add_task("K_max by simulation", total=total)
-        yield lambda k: prog.advance(task, k)
-
-
 @click.command("reproduce", short_help="Reproduce the paper's Fig. 5 / Fig. 6 (PNG, SVG, CSV).")
 @click.argument("figure", type=click.Choice(["fig5", "fig6", "all"]))
 @click.option("--out", "out_dir", default="out", show_default=True, type=click.Path(file_okay=False),
@@ -185,7 +170,7 @@ def reproduce_cmd(figure: str, out_dir: str, periods: str | None, as_json: bool)
     names = list(FIGURES) if figure == "all" else [figure]
     total = sum(len(FIGURES[n].delays) for n in names) * len(T)
     reps = []
-    with _progress(total, as_json) as tick:
+    with progress(total, "K_max by simulation", as_json) as tick:
         for n in names:
             reps.append(reproduce_figure(n, T, progress=tick))
     manifest = {"command": "reproduce", "figure": figure, "periods_s": T,

@@ -308,6 +308,11 @@ class TeleoperationLoop:
         return dataclasses.replace(self, delay_samples=n, fractional_delay=f,
                                    delay_backward_samples=nb, fractional_delay_backward=fb)
 
+    def with_delay_s(self, seconds: float) -> TeleoperationLoop:
+        """The same loop with a delay of ``seconds`` in both directions (as the HVE's
+        :meth:`HapticLoop.with_delay_s`)."""
+        return self.with_delays_s(seconds)
+
     def with_stiffness(self, K: float) -> TeleoperationLoop:
         """Master stiffness K; the slave's scales with it, keeping K_s/K_m (equal
         stiffnesses, the paper's C_m = C_s case, stay equal)."""

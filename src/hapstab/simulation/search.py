@@ -16,7 +16,7 @@ import numpy as np
 from hapstab import budget
 from hapstab.engine.structure import structure_of
 from hapstab.engine.system import SampledSystem, build
-from hapstab.errors import AnalysisError
+from hapstab.errors import AnalysisError, check_real
 from hapstab.models.loops import HapticLoop, TeleoperationLoop
 from hapstab.results import CriticalStiffnessResult
 from hapstab.simulation.growth import SNAPSHOTS_PER_STATE, BoundednessVerdict, assess
@@ -167,8 +167,11 @@ def _check_options(sysm: SampledSystem, n_samples: Any, window: Any, rtol: float
         raise AnalysisError(f"n_samples = {n_samples!r}: must be a whole number >= 64")
     if not (isinstance(window, (int, np.integer)) and 16 <= window <= n_samples):
         raise AnalysisError(f"window = {window!r}: must be a whole number in [16, n_samples]")
-    if not (0 < rtol < 0.1) or not ratio > 1:
-        raise AnalysisError(f"rtol = {rtol}, ratio = {ratio}: need 0 < rtol < 0.1 and ratio > 1")
+    rtol, ratio = check_real("rtol", rtol), check_real("ratio", ratio)
+    if not 0 < rtol < 0.1:
+        raise AnalysisError(f"rtol = {rtol}: must be in (0, 0.1)")
+    if not ratio > 1:
+        raise AnalysisError(f"ratio = {ratio}: must be > 1")
 
 
 class _Runs:

@@ -33,7 +33,7 @@ import numpy as np
 
 from hapstab.engine.system import SampledSystem
 from hapstab.engine.zoh import discretize
-from hapstab.errors import ModelError
+from hapstab.errors import ModelError, check_reals
 from hapstab.models.loops import HapticLoop, TeleoperationLoop
 
 __all__ = ["Roles", "roles_of", "initial_state", "step_nonlinear", "dense_output"]
@@ -96,7 +96,7 @@ def initial_state(sysm: SampledSystem, roles: Roles, x0: Any, v0: Any, full: Any
     """
     p, N, npl = sysm.n_ports, sysm.order, sysm.n_plant
     if full is not None:
-        s = np.asarray(full, float).ravel()
+        s = check_reals("initial_state", full)
         if s.size != N or not np.all(np.isfinite(s)):
             raise ModelError(f"initial_state: {s.size} values; need {N} finite values "
                              f"(plant {npl}, then delay registers and controller states)")
@@ -105,7 +105,8 @@ def initial_state(sysm: SampledSystem, roles: Roles, x0: Any, v0: Any, full: Any
     s = np.zeros(N)
     vals = []
     for nm, val in (("initial_position", x0), ("initial_velocity", v0)):
-        a = np.broadcast_to(np.asarray(val, float).ravel(), (p,)) if np.size(val) in (1, p) else None
+        v = check_reals(nm, val)
+        a = np.broadcast_to(v, (p,)) if v.size in (1, p) else None
         if a is None or not np.all(np.isfinite(a)):
             raise ModelError(f"{nm} = {val!r}: must be one finite number or one per port ({p})")
         vals.append(a)

@@ -124,7 +124,7 @@ def stability(loop: HapticLoop | TeleoperationLoop, *, max_memory: float | None 
     sysm = build(loop)
     N = sysm.order
     budget.check(budget.Cost(f"stability: the eigenvalues of a {N}-state closed loop",
-                             64.0 * N * N, 0.01 + budget.EIG_SECONDS_PER_N3 * N ** 3),
+                             64.0 * N * N, budget.eig_seconds(N)),
                  max_memory, max_seconds)
     A = sysm.closed_loop()[0]
     eigs = np.linalg.eigvals(A)

@@ -1,0 +1,375 @@
+"""Study files: a TOML file that keeps a study reproducible.
+
+A study names the loop kind, the loop (its options, by the command line's own names),
+variants of it, and the analyses ``hapstab run`` produces::
+
+    kind = "hve"
+    title = "My 1 kHz device behind 20 ms of network"
+
+    [loop]                      # the loop options, named as on the command line
+    mass = 0.3
+    damping = 0.5
+    operator = "msd:0.5,5,500"
+    rate = "1kHz"
+    delay-s = "20ms"
+
+    [[variant]]                 # a name and the options it changes
+    name = "damped"
+    virtual-damping = 2
+
+    [run.kmax]                  # an analysis of `hapstab run` and its options
+    [run.boundary]
+    rate = "250Hz:4kHz:16"
+    delay-s = "0,20ms"
+
+Every loop command takes ``--study FILE`` (and ``--variant NAME``): the file gives the
+defaults, the command line overrides them. The file is parsed with :mod:`tomllib` (never
+evaluated) and checked before any work: an unknown key, a value of the wrong kind or an
+unknown variant is one line naming the file, the line and the key.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import sys
+from dataclasses import dataclass, field
+from typing import Any
+
+import click
+
+from hapstab.errors import HapstabError
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:                                    # pragma: no cover - Python 3.10
+    import tomli as tomllib  # type: ignore[import-not-found,unused-ignore]
+
+__all__ = ["Study", "load_study", "study_defaults", "BASE", "OUTPUT_KEYS"]
+
+#: The variant that is the [loop] table itself.
+BASE = "base"
+#: Options a study cannot set: where the answer goes is the command line's (or run's).
+OUTPUT_KEYS = ("json", "csv", "plot", "study", "variant", "yes", "debug", "help")
+#: Options that give one quantity two ways: a later layer's choice drops the earlier other.
+ALTERNATIVES = (("period", "rate"), ("delay", "delay_s"))
+#: Loop options a command varies itself: a study's value is not used there (not an error:
+#: a variant with its own B still has a K-B region).
+VARIED = {"region": ("virtual_damping",), "best-damping": ("virtual_damping",)}
+_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$")
+
+
+class StudyError(HapstabError):
+    """A study file that cannot be used (the message names the file, line and key)."""
+
+
+@dataclass(frozen=True)
+class Study:
+    """A parsed study file.
+
+    Attributes
+    ----------
+    path : str
+        The file.
+    kind : {"hve", "peb"}
+        The loop kind.
+    title : str
+        What the study is about (may be empty).
+    loop : dict
+        The [loop] table: option name -> value.
+    variants : dict
+        Variant name -> the options it changes (the base variant changes none).
+    run : dict
+        Analysis (command name) -> its options, in the file's order.
+    text : str
+        The file's text (for line numbers and the run's manifest).
+    """
+
+    path: str
+    kind: str
+    title: str
+    loop: dict[str, Any]
+    variants: dict[str, dict[str, Any]]
+    run: dict[str, dict[str, Any]]
+    text: str = field(repr=False)
+
+    def line_of(self, key: str, table: str | None = None) -> int | None:
+        """The line (1-based) where ``key`` is set, within ``table`` if given."""
+        return _line_of(self.text, key, table)
+
+    def where(self, key: str, table: str | None = None) -> str:
+        """``"FILE line N: "`` for a message."""
+        n = self.line_of(key, table)
+        return f"{self.path}{f' line {n}' if n else ''}: "
+
+
+def load_study(path: Any) -> Study:
+    """Read and check the structure of a study file.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The TOML file.
+
+    Returns
+    -------
+    Study
+
+    Raises
+    ------
+    StudyError
+        The file is missing, not TOML, or its tables are not as documented.
+    """
+    p = os.fspath(path)
+    try:
+        with open(p, "rb") as fh:
+            raw = fh.read()
+    except OSError as e:
+        raise StudyError(f"--study = {p!r}: cannot read it ({e.strerror or e})") from None
+    text = raw.decode("utf-8", errors="replace")
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as e:
+        raise StudyError(f"{p}: not a valid TOML file ({e})") from None
+    known = {"kind", "title", "loop", "variant", "run"}
+    for key in data:
+        if key not in known:
+            raise StudyError(f"{p}{_at(text, key)}: unknown key {key!r}; allowed: "
+                             f"{', '.join(sorted(known))}")
+    kind = data.get("kind")
+    if kind not in ("hve", "peb"):
+        raise StudyError(f"{p}{_at(text, 'kind')}: kind = {kind!r}: allowed: \"hve\", \"peb\"")
+    title = data.get("title", "")
+    loop = _table(p, text, data, "loop")
+    run = _table(p, text, data, "run")
+    for name, opts in run.items():
+        if not isinstance(opts, dict):
+            raise StudyError(f"{p}{_at(text, name, 'run')}: run.{name} must be a table "
+                             f"([run.{name}]) of that command's options")
+    return Study(p, kind, str(title), _flat(loop), _variants(p, text, data), run, text)
+
+
+def _table(p: str, text: str, data: dict[str, Any], name: str) -> dict[str, Any]:
+    value = data.get(name, {})
+    if not isinstance(value, dict):
+        raise StudyError(f"{p}{_at(text, name)}: {name} must be a table ([{name}])")
+    return value
+
+
+def _flat(opts: dict[str, Any]) -> dict[str, Any]:
+    """Option names as the command's parameters spell them (``delay-s`` -> ``delay_s``)."""
+    return {k.replace("-", "_"): v for k, v in opts.items()}
+
+
+def _variants(p: str, text: str, data: dict[str, Any]) -> dict[str, dict[str, Any]]:
+    out: dict[str, dict[str, Any]] = {BASE: {}}
+    items = data.get("variant", [])
+    if not isinstance(items, list) or not all(isinstance(v, dict) for v in items):
+        raise StudyError(f"{p}{_at(text, 'variant')}: variants are [[variant]] tables, each "
+                         "with a name and the loop options it changes")
+    for v in items:
+        name = v.get("name")
+        if not isinstance(name, str) or not _NAME.match(name) or name in out:
+            raise StudyError(f"{p}{_at(text, 'name', None, str(name))}: variant name = {name!r}: "
+                             "each [[variant]] needs a unique name of letters, digits, '.', "
+                             f"'_' or '-' (not {BASE!r}, the [loop] table itself)")
+        out[name] = _flat({k: x for k, x in v.items() if k != "name"})
+    return out
+
+
+def _at(text: str, key: str, table: str | None = None, value: str | None = None) -> str:
+    n = _line_of(text, key, table, value)
+    return f" line {n}" if n else ""
+
+
+def _line_of(text: str, key: str, table: str | None = None, value: str | None = None) -> int | None:
+    """The first line setting ``key`` (spelled with - or _), inside ``[table]`` or
+    ``[table.*]`` if given; or the first table header ``[key]`` / ``[[key]]``."""
+    spellings = {key, key.replace("_", "-"), key.replace("-", "_")}
+    current = ""
+    for i, line in enumerate(text.splitlines(), 1):
+        s = line.strip()
+        header = re.match(r"^\[\[?\s*([^\]]+?)\s*\]\]?", s)
+        if header:
+            current = header.group(1)
+            if table is None and current.split(".")[-1] in spellings:
+                return i
+            continue
+        m = re.match(r"^[\"']?([A-Za-z0-9_-]+)[\"']?\s*=\s*(.*)$", s)
+        if not m or m.group(1) not in spellings:
+            continue
+        if value is not None and value not in m.group(2):
+            continue
+        if table is None or current == table or current.startswith(table + "."):
+            return i
+    return None
+
+
+def study_defaults(study: Study, cmd: click.Command, command: str, variant: str,
+                   argv: list[str]) -> dict[str, Any]:
+    """The defaults a study gives one command: [loop], then the variant, then
+    [run.<command>], each checked against the command's options and converted by their
+    own types; an option given on the command line drops the study's alternative to it.
+
+    Parameters
+    ----------
+    study : Study
+    cmd : click.Command
+        The loop-kind subcommand (e.g. ``kmax hve``).
+    command : str
+        Its group's name (``kmax``): the [run.<command>] table applies.
+    variant : str
+        A name of ``study.variants``.
+    argv : list of str
+        The command line after the loop kind (what overrides the study).
+
+    Returns
+    -------
+    dict
+        Parameter name -> value, for click's ``default_map``.
+
+    Raises
+    ------
+    StudyError
+        An unknown variant, key or value, naming the file, line and key.
+    """
+    if variant not in study.variants:
+        raise StudyError(f"--variant = {variant!r}: {study.path} has "
+                         f"{', '.join(map(repr, study.variants))}")
+    params = {p.name: p for p in cmd.params if isinstance(p, click.Option) and p.name}
+    names = _option_names(params)
+    out: dict[str, Any] = {}
+    layers = [("loop", study.loop), ("variant", study.variants[variant]),
+              (f"run.{command}", _flat(study.run.get(command, {})))]
+    for table, opts in layers:
+        for key, value in opts.items():
+            name = names.get(key)
+            if name is None or key in OUTPUT_KEYS:
+                raise _unknown(study, table, key, command, names)
+            if name in VARIED.get(command, ()):
+                if table.startswith("run."):
+                    raise StudyError(f"{study.where(key, table)}{key.replace('_', '-')}: "
+                                     f"{command} varies it itself; give its window instead")
+                continue
+            _drop_alternative(out, name)
+            out[name] = _convert(study, table, key, value, params[name])
+    for name in _given(params, argv).values():
+        _drop_alternative(out, name)
+    return out
+
+
+def _option_names(params: dict[str, click.Option]) -> dict[str, str]:
+    """Every spelling a study may use for an option -> the parameter's name: the
+    parameter's name, its long options without dashes (``delay_s``, ``K``) and its short
+    ones where no long option spells the same (``K`` for simulate's ``-K``; region's
+    ``--B`` is the window, not ``-B``)."""
+    out: dict[str, str] = {}
+    short: dict[str, str] = {}
+    for name, p in params.items():
+        if name in ("as_json", "csv_path", "plot_path"):
+            continue
+        out[name] = name
+        for o in p.opts:
+            if o.startswith("--"):
+                out[o[2:].replace("-", "_")] = name
+            else:
+                short[o[1:]] = name
+    return {**short, **out}
+
+
+def _unknown(study: Study, table: str, key: str, command: str, names: dict[str, str]) -> StudyError:
+    why = ("where the answer goes is chosen on the command line (or by hapstab run)"
+           if key in OUTPUT_KEYS else
+           f"not an option of {command} {study.kind}; allowed: "
+           f"{', '.join(sorted(k.replace('_', '-') for k in names))}")
+    return StudyError(f"{study.where(key, table)}{key.replace('_', '-')}: {why}")
+
+
+def _convert(study: Study, table: str, key: str, value: Any, param: click.Option) -> Any:
+    if isinstance(value, (dict, list)) or (isinstance(value, bool) and not param.is_flag):
+        raise StudyError(f"{study.where(key, table)}{key.replace('_', '-')} = {value!r}: must be "
+                         "a number or a string, as on the command line")
+    try:
+        return param.type.convert(value, param, None)
+    except click.BadParameter as e:
+        raise StudyError(f"{study.where(key, table)}{key.replace('_', '-')} = {value!r}: "
+                         f"{e.message}") from None
+
+
+def _drop_alternative(out: dict[str, Any], name: str) -> None:
+    for a, b in ALTERNATIVES:
+        if name in (a, b):
+            out.pop(b if name == a else a, None)
+
+
+def _given(params: dict[str, click.Option], argv: list[str]) -> dict[str, str]:
+    """Options typed on the command line (``--period 1ms``, ``--period=1ms``, ``-T1ms``)."""
+    out = {}
+    for name, p in params.items():
+        for o in p.opts:
+            if any(a == o or a.startswith(o + "=") or (len(o) == 2 and a.startswith(o) and
+                                                        not a.startswith("--")) for a in argv):
+                out[o] = name
+    return out
+
+
+def take_study(argv: list[str], group: click.Group) -> tuple[list[str], dict[str, Any] | None]:
+    """Take ``--study FILE`` and ``--variant NAME`` out of the command line (they may be
+    given anywhere) and turn the study into click's ``default_map`` for the command run.
+    Without a loop kind on the line (``hapstab kmax --study f.toml``) the study's is used.
+
+    Parameters
+    ----------
+    argv : list of str
+        The command line after ``hapstab``.
+    group : click.Group
+        The ``hapstab`` group.
+
+    Returns
+    -------
+    (list of str, dict or None)
+        The command line left, and the default map (None without ``--study``).
+    """
+    rest, path = _take(argv, "--study")
+    rest, variant = _take(rest, "--variant")
+    if path is None:
+        if variant is not None:
+            raise StudyError("--variant: names a variant of a study; give the file with --study")
+        return argv, None
+    study = load_study(path)
+    command = rest[0] if rest else ""
+    sub = group.commands.get(command)
+    if not isinstance(sub, click.Group):
+        raise StudyError(f"--study: applies to the loop commands ({', '.join(loop_commands(group))})"
+                         f"; use hapstab run {path} to run the study's analyses")
+    if len(rest) < 2 or rest[1] not in sub.commands:
+        rest = [rest[0], study.kind, *rest[1:]]
+    elif rest[1] != study.kind:
+        raise StudyError(f"--study = {path!r}: its kind is {study.kind!r}, not {rest[1]!r}; "
+                         f"hapstab {command} {study.kind} ... (or leave the kind out)")
+    cmd = sub.commands[study.kind]
+    defaults = study_defaults(study, cmd, command, variant or BASE, rest[2:])
+    return rest, {command: {study.kind: defaults}}
+
+
+def loop_commands(group: click.Group) -> list[str]:
+    """The commands that build a loop (a loop kind under them)."""
+    return [n for n, c in group.commands.items() if isinstance(c, click.Group)]
+
+
+def _take(argv: list[str], opt: str) -> tuple[list[str], str | None]:
+    """Remove ``opt VALUE`` / ``opt=VALUE`` from ``argv``: (the rest, VALUE or None)."""
+    out, value, i = [], None, 0
+    while i < len(argv):
+        a = argv[i]
+        if a == opt:
+            if i + 1 >= len(argv):
+                raise StudyError(f"{opt}: needs a value")
+            value, i = argv[i + 1], i + 2
+            continue
+        if a.startswith(opt + "="):
+            value = a[len(opt) + 1:]
+        else:
+            out.append(a)
+        i += 1
+    return out, value

@@ -1,0 +1,63 @@
+"""Issue #11: the Python API names a wrong argument itself -- a TypeError (that is also a
+HapstabError) for a wrong type, never a bare TypeError/ValueError from numpy or float() --
+and shows no numpy warnings for unusual numeric types."""
+
+import warnings
+
+import numpy as np
+import pytest
+
+import hapstab as h
+from hapstab.errors import ArgumentTypeError, HapstabError, ModelError
+
+LOOP = h.paper_hve().with_stiffness(10.0)
+
+
+@pytest.mark.parametrize("call,needle", [
+    (lambda: h.simulate(LOOP, 0.1, initial_position=1 + 2j), "initial_position = (1+2j)"),
+    (lambda: h.simulate(LOOP, 0.1, initial_position="a"), "initial_position = 'a'"),
+    (lambda: h.simulate(LOOP, 0.1, initial_velocity=[[1], [2, 3]]), "initial_velocity = "),
+    (lambda: h.simulate(LOOP, 0.1, initial_state="abc"), "initial_state = 'abc'"),
+    (lambda: h.simulate(LOOP, "1"), "duration = '1'"),
+    (lambda: h.critical_stiffness_simulation(LOOP, rtol="0.1"), "rtol = '0.1'"),
+    (lambda: h.critical_stiffness_simulation(LOOP, ratio=[2]), "ratio = [2]"),
+    (lambda: h.best_damping(LOOP, max_seconds=[0.1]), "max_seconds = [0.1]"),
+    (lambda: h.Device(mass="0.1", damping=1), "mass = '0.1'"),
+    (lambda: LOOP.with_stiffness(1 + 2j), "stiffness = (1+2j)"),
+    (lambda: h.positive_real(h.RationalMatrix.scalar([1], [1]), rtol="x"), "rtol = 'x'"),
+])
+def test_a_wrong_type_is_a_type_error_naming_the_argument(call, needle):
+    with pytest.raises(ArgumentTypeError) as e:
+        call()
+    assert isinstance(e.value, TypeError) and isinstance(e.value, HapstabError)
+    assert str(e.value).startswith(needle), str(e.value)
+
+
+def test_model_type_errors_are_still_model_errors():
+    with pytest.raises(ModelError):
+        h.Device(mass="0.1", damping=1)
+
+
+@pytest.mark.parametrize("method,option", [("exact", "rtol"), ("circle", "approx"),
+                                           ("colgate", "sector")])
+def test_an_option_a_method_does_not_take_is_named_with_the_ones_it_does(method, option):
+    with pytest.raises(ArgumentTypeError, match=f"{option} = 1: not an option of method "
+                                                f"'{method}'; it takes: "):
+        h.critical_stiffness(h.paper_hve(), method, **{option: 1})
+    with pytest.raises(ArgumentTypeError, match=f"{option} = 1: not an option"):
+        h.boundary(h.paper_hve(), [1e-3], method=method, **{option: 1})
+
+
+@pytest.mark.parametrize("value", [np.uint8(200), np.int64(2**40), np.float32(1e3),
+                                   np.longdouble("1e3"), np.array(5.0)])
+def test_numpy_scalars_are_accepted_without_warnings(value):
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert LOOP.with_stiffness(value).controller.stiffness == float(value)
+
+
+def test_an_overflowing_longdouble_is_a_model_error_without_warnings():
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(ModelError, match=r"stiffness = .*must be finite"):
+            LOOP.with_stiffness(np.longdouble("1e4000"))

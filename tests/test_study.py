@@ -1,0 +1,151 @@
+"""Issue #12: study files -- a TOML file describing a loop, its variants and the analyses
+`hapstab run` produces; usable by every loop command with --study; checked with one-line
+errors naming the file, line and key; parsed by tomllib, never evaluated."""
+
+import json
+import os
+
+import pytest
+from click.testing import CliRunner
+
+import hapstab as h
+from hapstab.cli.main import cli
+
+STUDY = '''kind = "hve"
+title = "My 1 kHz device behind 20 ms of network"
+
+[loop]
+mass = 0.3
+damping = 0.5
+operator = "msd:0.5,5,500"
+rate = "1kHz"
+delay-s = "20ms"
+
+[[variant]]
+name = "damped"
+virtual-damping = 2
+
+[run.kmax]
+
+[run.boundary]
+rate = "250Hz:4kHz:3"
+delay-s = "0,20ms"
+
+[run.simulate]
+K = 20
+duration = 0.5
+'''
+
+
+def run(*args):
+    return CliRunner().invoke(cli, list(args))
+
+
+@pytest.fixture
+def study(tmp_path):
+    p = tmp_path / "dev.toml"
+    p.write_text(STUDY)
+    return p
+
+
+def _loop(B=0.0):
+    return h.HapticLoop(h.Device(0.3, 0.5), h.SpringDamper(0.0, B),
+                        h.parse_impedance("msd:0.5,5,500"), 1e-3).with_delay_s(0.02)
+
+
+def test_a_study_gives_a_command_its_loop_and_the_command_line_overrides_it(study):
+    r = run("kmax", "hve", "--study", str(study), "--json")
+    assert r.exit_code == 0, r.stderr
+    assert json.loads(r.stdout)["critical_stiffness"] == pytest.approx(
+        h.critical_stiffness(_loop()).critical_stiffness, rel=1e-12)
+    r = run("kmax", "--study", str(study), "--variant", "damped", "--json")   # kind from the file
+    assert json.loads(r.stdout)["critical_stiffness"] == pytest.approx(
+        h.critical_stiffness(_loop(2.0)).critical_stiffness, rel=1e-12)
+    r = run("kmax", "hve", "--study", str(study), "--delay", "3", "-T", "2ms", "--json")
+    d = json.loads(r.stdout)          # --delay drops the study's delay-s, -T its rate
+    assert (d["delay_samples"], d["period_s"]) == (3.0, 0.002)
+
+
+def test_hapstab_run_writes_every_variant_and_analysis_with_a_manifest_last(study, tmp_path):
+    out = tmp_path / "results"
+    r = run("run", str(study), "--out", str(out), "--json")
+    assert r.exit_code == 0, r.stderr
+    man = json.loads((out / "manifest.json").read_text())
+    assert man["variants"] == ["base", "damped"] and man["analyses"] == ["kmax", "boundary", "simulate"]
+    expected = {f"{v}/{c}" for v in ("base", "damped")
+                for c in ("kmax.json", "boundary.json", "boundary.csv", "boundary.png",
+                          "simulate.json", "simulate.csv", "simulate.png")}
+    assert set(man["files"]) == expected | {"study.toml"}
+    assert {str(p.relative_to(out)) for p in out.rglob("*") if p.is_file()} == \
+        expected | {"study.toml", "manifest.json"}
+    assert (out / "study.toml").read_text() == STUDY
+    kmax = json.loads((out / "damped" / "kmax.json").read_text())
+    assert kmax["critical_stiffness"] == pytest.approx(
+        h.critical_stiffness(_loop(2.0)).critical_stiffness, rel=1e-12)
+    assert kmax["inputs"]["command_line"][-4:] == ["--study", str(study), "--variant", "damped"][-4:] \
+        or "--variant" in kmax["inputs"]["command_line"]
+    sim = json.loads((out / "base" / "simulate.json").read_text())
+    assert sim["files"] == ["base/simulate.csv", "base/simulate.png"]
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".hapstab-run")]
+
+
+def test_a_failing_analysis_leaves_the_previous_results(study, tmp_path):
+    out = tmp_path / "results"
+    assert run("run", str(study), "--out", str(out)).exit_code == 0
+    before = {p: p.read_bytes() for p in out.rglob("*") if p.is_file()}
+    study.write_text(STUDY.replace("duration = 0.5", "duration = 1e9"))     # over the budget
+    r = run("run", str(study), "--out", str(out))
+    assert r.exit_code == 2 and "variant 'base', simulate: " in r.stderr
+    assert {p: p.read_bytes() for p in out.rglob("*") if p.is_file()} == before
+
+
+@pytest.mark.parametrize("edit,needle", [
+    (("mass = 0.3", "mas = 0.3"), "dev.toml line 5: mas: not an option of kmax hve; allowed:"),
+    (("mass = 0.3", "mass = \"heavy\""), "dev.toml line 5: mass = 'heavy': 'heavy' is not a number"),
+    (("mass = 0.3", "mass = -1"), "dev.toml line 5: mass = -1: -1: must be > 0"),
+    (("kind = \"hve\"", "kind = \"haptic\""), "dev.toml line 1: kind = 'haptic': allowed"),
+    (("name = \"damped\"", "name = \"base\""), "dev.toml line 12: variant name = 'base'"),
+    (("[run.kmax]", "[run.kmax]\njson = true"), "line 16: json: where the answer goes"),
+    (("title =", "titel ="), "dev.toml line 2: unknown key 'titel'"),
+    (("mass = 0.3", "mass = [0.3]"), "line 5: mass = [0.3]: must be a number or a string"),
+    (("[loop]", "[loop\n"), "not a valid TOML file"),
+])
+def test_study_mistakes_are_one_line_naming_the_file_line_and_key(study, edit, needle):
+    study.write_text(STUDY.replace(*edit))
+    r = run("kmax", "hve", "--study", str(study))
+    assert r.exit_code == 2 and r.stderr.count("\n") == 1, r.stderr
+    assert needle in r.stderr.replace(str(study.parent) + os.sep, ""), r.stderr
+
+
+@pytest.mark.parametrize("args,needle", [
+    (("kmax", "peb", "--study", "S"), "its kind is 'hve', not 'peb'"),
+    (("kmax", "--study", "S", "--variant", "nope"), "--variant = 'nope': "),
+    (("kmax", "hve", "--variant", "damped"), "--variant: names a variant of a study"),
+    (("reproduce", "fig5", "--study", "S"), "--study: applies to the loop commands"),
+    (("kmax", "--study", "missing.toml"), "--study = 'missing.toml': cannot read it"),
+    (("run", "S", "--only", "nope"), "--only = 'nope'"),
+])
+def test_study_options_used_wrongly_are_one_line(study, args, needle):
+    r = run(*[str(study) if a == "S" else a for a in args])
+    assert r.exit_code == 2 and needle in r.stderr and r.stderr.count("\n") == 1, r.stderr
+
+
+def test_a_study_without_analyses_says_what_to_add(tmp_path):
+    p = tmp_path / "s.toml"
+    p.write_text('kind = "peb"\n[loop]\nenvironment = "spring:20000"\n')
+    r = run("run", str(p))
+    assert r.exit_code == 2 and "no [run.<command>] table: nothing to run; e.g. [run.kmax]" in r.stderr
+    r = run("kmax", "--study", str(p), "--json")       # but the loop commands use it
+    assert r.exit_code == 0 and json.loads(r.stdout)["inputs"]["loop"]["environment"] == \
+        h.parse_impedance("spring:20000").to_dict()
+
+
+def test_region_ignores_a_variants_virtual_damping_and_refuses_it_in_its_own_table(tmp_path):
+    p = tmp_path / "s.toml"
+    p.write_text(STUDY.replace("[run.kmax]", "[run.region]\nK = \"0:100\"\nB = \"0:5\"\n"
+                                             "resolution = 8\n\n[run.kmax]"))
+    r = run("region", "--study", str(p), "--variant", "damped", "--json")
+    assert r.exit_code == 0, r.stderr
+    p.write_text(STUDY.replace("[run.kmax]", "[run.region]\nvirtual-damping = 1\n\n[run.kmax]"))
+    r = run("region", "--study", str(p))
+    assert r.exit_code == 2 and "region varies it itself" in r.stderr
