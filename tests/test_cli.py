@@ -272,3 +272,19 @@ def test_region_explains_dash_B_against_double_dash_B():
 def test_closed_forms_do_not_print_nan_hz():
     out = run("kmax", "hve", "--method", "eq18", "--delay", "3").stdout
     assert "nan" not in out and "not given by this method" in out
+
+
+@pytest.mark.parametrize("kind", ["hve", "peb"])
+def test_the_cli_defaults_are_the_apis_paper_loops(kind):
+    """Issue #12: one set of defaults, stated: `hapstab <cmd> hve` with no options is
+    `hapstab.paper_hve()` (and peb `paper_peb()`), the stiffness being what kmax varies."""
+    import hapstab as h
+
+    make = {"hve": h.paper_hve, "peb": h.paper_peb}[kind]
+    d = json.loads(CliRunner().invoke(cli, ["kmax", kind, "--json"]).stdout)
+    cli_loop, api_loop = d["inputs"]["loop"], make().to_dict()
+    differ = {k for k in cli_loop if cli_loop[k] != api_loop[k]}
+    assert differ <= {"controller", "master_controller", "slave_controller"}
+    for k in differ:      # only the stiffness, which K_max does not depend on
+        assert {**cli_loop[k], "stiffness_N_per_m": 0} == {**api_loop[k], "stiffness_N_per_m": 0}
+    assert d["critical_stiffness"] == h.critical_stiffness(make()).critical_stiffness

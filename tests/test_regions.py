@@ -189,3 +189,22 @@ def test_best_damping_says_for_which_operator_and_whether_passivity_is_lost():
     assert res.critical_stiffness_without_operator == pytest.approx(bare, rel=1e-12)
     assert bare < res.critical_stiffness and "a hand that lets go" in res.reason
     assert res.passive_up_to == 0.0 and "passive for no K" in res.reason
+
+
+def test_the_boundary_is_drawn_wherever_it_crosses_the_window():
+    """Issue #12: a stiff-environment PEB region's boundary turns fast with theta near
+    B = 0; the first sweep left it from B ~ 0.7 up. Refined, it reaches the window's
+    bottom at the exact K_max of B = 0 (an independent point: the row's own analysis)."""
+    loop = h.TeleoperationLoop(h.Device(0.3, 2.0), h.Device(1.0, 5.0),
+                               operator=h.mass_spring_damper(0.5, 5.0, 500.0),
+                               environment=h.spring(20000.0), period=1e-3, delay_samples=5)
+    res = h.stability_region(loop, (0.0, 8000.0), (0.0, 60.0), resolution=24)
+    pts = np.concatenate([c[(c[:, 0] >= 0) & (c[:, 0] <= 8000) & (c[:, 1] >= 0) & (c[:, 1] <= 60)]
+                          for c in res.boundary["curves"]])
+    low = pts[np.argmin(pts[:, 1])]
+    assert low[1] < 60 * 0.004                    # within one refinement step of B = 0
+    kmax0 = h.critical_stiffness(loop.replace(
+        master_controller=h.SpringDamper(1.0, 0.0), slave_controller=h.SpringDamper(1.0, 0.0)))
+    assert low[0] == pytest.approx(kmax0.critical_stiffness, rel=0.01)
+    steps = np.hypot(np.diff(pts[:, 0]) / 8000, np.diff(pts[:, 1]) / 60)
+    assert np.median(steps) < 0.004

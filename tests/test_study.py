@@ -149,3 +149,24 @@ def test_region_ignores_a_variants_virtual_damping_and_refuses_it_in_its_own_tab
     p.write_text(STUDY.replace("[run.kmax]", "[run.region]\nvirtual-damping = 1\n\n[run.kmax]"))
     r = run("region", "--study", str(p))
     assert r.exit_code == 2 and "region varies it itself" in r.stderr
+
+
+def test_long_computations_report_their_progress_to_a_listener():
+    """Issue #12: a grid of K_max reports its progress (the CLI draws a bar on a terminal);
+    with no listener nothing is reported, and the numbers do not change."""
+    from hapstab import progress
+
+    seen = []
+
+    def listener(what, total):
+        seen.append((what, total))
+        return lambda k: seen.append(k)
+
+    with progress.listening(listener):
+        a = h.boundary(h.paper_hve(), [1e-3, 2e-3, 3e-3], [0, 2])
+        b = h.boundary(h.paper_hve(), [1e-3, 2e-3], delays_s=[0.004], method="circle")
+    assert seen[0] == ("boundary, exact: 6 points", 6) and seen[1:3] == [3, 3]
+    assert seen[3] == ("boundary, circle: 2 points", 2) and seen[4:] == [1, 1]
+    assert (a.critical_stiffness == h.boundary(h.paper_hve(), [1e-3, 2e-3, 3e-3],
+                                               [0, 2]).critical_stiffness).all()
+    assert b.critical_stiffness.shape == (1, 2)

@@ -302,6 +302,7 @@ def figure_to(out: Outputs, res: Any, path: str, name: str, **kw: Any) -> None:
 
     fig = np.ravel(np.asarray(res.plot(), dtype=object))[0].figure
     kw.setdefault("dpi", 150)      # a figure to read on screen and in a report
+    kw.setdefault("bbox_inches", "tight")   # titles of two or three lines stay inside
     try:
         with out.open(path, name, "wb") as fh:
             fig.savefig(fh, format=path.rsplit(".", 1)[-1].lower(), **kw)

@@ -58,6 +58,15 @@ def _has_display() -> bool:
     return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
 
 
+def _wrap(text: str, ax: Any, fontsize: float) -> str:
+    """A model line broken into lines as wide as the axes' figure (a character is about
+    0.6 of the font size wide)."""
+    import textwrap
+
+    width = int(ax.figure.get_figwidth() * 72 / (0.6 * fontsize))
+    return "\n".join(textwrap.wrap(text, max(width, 40), break_long_words=False))
+
+
 def plot_boundary(res: Any, ax: Any = None) -> Any:
     """K_max against T (ms) or the sampling rate (Hz), one curve per delay (Fig. 5 / 6)."""
     ax = _axes(ax)
@@ -143,23 +152,31 @@ def plot_simulation(res: Any, ax: Any = None) -> Any:
             ax1.plot(res.time, fin(res.position[:, j]), "-", lw=0.8, label=f"x {lab}")
         ax2.step(res.time, fin(res.controller_force[:, j]), where="post", lw=0.8,
                  label=f"u {lab}")
+        if np.any(res.exogenous_force[:, j] != 0):     # the force the user gave, held
+            ax2.step(res.time, fin(res.exogenous_force[:, j]), where="post", lw=0.8, ls="--",
+                     label=f"applied force on {lab}")
         ax3.plot(res.time, fin(res.port_energy[:, j]), "-", lw=0.8,
                  label=f"into controller from {lab}")
     ax1.set_ylabel("position (m)")
-    ax2.set_ylabel("controller force (N)")
+    ax2.set_ylabel("force (N)")
     ax3.set_ylabel("port energy (J)")
     ax3.set_xlabel("time (s)")
     v = res.verdict
     nl = res.nonlinear or {}
     if nl.get("wall") is not None:
         ax1.axhline(nl["wall"], color="k", lw=1.0, ls="--", label=f"wall at {nl['wall']:g} m")
+        x = fin(res.position[:, 0])
+        ax1.fill_between(res.time, nl["wall"], x, where=x > nl["wall"], color="tab:red",
+                         alpha=0.15, lw=0, label="penetration")
     if nl.get("saturation") is not None:
         for sign in (1, -1):
             ax2.axhline(sign * nl["saturation"], color="k", lw=1.0, ls=":",
                         label=f"saturation +-{nl['saturation']:g} N" if sign > 0 else None)
     ax1.set_title(f"K = {res.stiffness:g} N/m, T = {res.period * 1e3:g} ms, n = "
                   f"{res.delay_samples:g}: {v.verdict}: {v.behaviour} ({v.confidence} "
-                  f"confidence, rate {v.growth_rate:.3g} 1/s)", fontsize=9)
+                  f"confidence, rate {v.growth_rate:.3g} 1/s)"
+                  + (f"\n{_wrap(res.model, ax1, 8)}" if getattr(res, "model", "") else ""),
+                  fontsize=8)
     for a in axs:
         a.grid(True, alpha=0.3)
         a.legend(fontsize=8, loc="best")
@@ -357,7 +374,10 @@ def plot_region(res: Any, ax: Any = None) -> Any:
     for c in res.boundary["curves"]:
         inwin = (c[:, 0] >= K0) & (c[:, 0] <= K1) & (c[:, 1] >= B0) & (c[:, 1] <= B1)
         if inwin.any():
-            seg = np.where(inwin, 1.0, np.nan)
+            # the first point outside is kept, so the line reaches the window's edge (the
+            # axes clip it); points farther out are left out
+            near = inwin | np.r_[inwin[1:], False] | np.r_[False, inwin[:-1]]
+            seg = np.where(near, 1.0, np.nan)
             ax.plot(c[:, 0] * seg, c[:, 1] * seg, "k-", lw=1.0,
                     label="exact boundary (|z| = 1)" if first else None)
             first = False
@@ -384,6 +404,7 @@ def plot_region(res: Any, ax: Any = None) -> Any:
     ax.set_ylabel("virtual damping B (N·s/m)")
     n = res.delay_samples
     ax.set_title(f"{res.kind.upper()} stable region (shaded), T = {T * 1e3:g} ms, "
-                 f"t_d = {n:g} T")
+                 f"t_d = {n:g} T" + (f"\n{_wrap(res.model, ax, 9)}" if getattr(res, "model", "")
+                                      else ""), fontsize=9)
     ax.legend(loc="best", fontsize=8)
     return ax

@@ -12,11 +12,13 @@ from typing import Any
 
 import numpy as np
 
+from hapstab import progress
 from hapstab.analysis.circle import critical_stiffness_circle
 from hapstab.analysis.closed_forms import CLOSED_FORMS, TABLE
 from hapstab.analysis.exact.core import exact_critical_stiffness, exact_kmax_batch
 from hapstab.analysis.passivity import critical_stiffness_passivity
 from hapstab.errors import (
+    MAX_DELAY_SAMPLES,
     AnalysisError,
     ArgumentTypeError,
     check_delay,
@@ -166,16 +168,24 @@ def boundary(loop: HapticLoop | TeleoperationLoop, periods: Sequence[float] | np
     limits = options.pop("max_memory", None), options.pop("max_seconds", None)
     _check_options(method, _resolve(method), options)
     samples = max(rows) / T.min() + 1 if delays_s is not None else max(rows)
+    if samples > MAX_DELAY_SAMPLES + 1:
+        raise AnalysisError(f"delays_s = {max(rows):g} s: at T = {T.min():g} s that is "
+                            f"{samples - 1:.4g} samples; at most {MAX_DELAY_SAMPLES} (the exact "
+                            "model carries one state per sample of delay)")
     _charge_boundary(loop, T, len(rows), samples, method, options, limits)
     out = np.empty((len(rows), T.size))
-    for i, d in enumerate(rows):
-        if delays_s is None and method == "exact":
-            tmpl = loop.with_whole_delay(int(d), float(T[0]))
-            out[i] = [r.kmax for r in exact_kmax_batch(tmpl, T, intervals=False)]
-        else:
+    with progress.steps(out.size, f"boundary, {method}: {out.size} points") as advance:
+        for i, d in enumerate(rows):
+            if delays_s is None and method == "exact":     # batched over the periods
+                tmpl = loop.with_whole_delay(int(d), float(T[0]))
+                out[i] = [r.kmax for r in exact_kmax_batch(tmpl, T, intervals=False)]
+                advance(T.size)
+                continue
             f = _resolve(method)
-            out[i] = [f(_at(loop, float(t), d, delays_s is not None), **options).critical_stiffness
-                      for t in T]
+            for j, t in enumerate(T):
+                at = _at(loop, float(t), d, delays_s is not None)
+                out[i, j] = f(at, **options).critical_stiffness
+                advance(1)
     unit = "s" if delays_s is not None else "samples"
     return BoundaryResult(T, np.array(rows), out, method, loop.kind, unit, axis)
 

@@ -40,7 +40,7 @@ from hapstab.engine.structure import structure_of
 from hapstab.engine.system import build
 from hapstab.errors import AnalysisError, check_real
 from hapstab.models.controllers import SpringDamper
-from hapstab.models.loops import HapticLoop, TeleoperationLoop, require_loop
+from hapstab.models.loops import HapticLoop, TeleoperationLoop, headline, require_loop
 from hapstab.results import Result, jsonable, write_csv
 from hapstab.tolerances import DIVISOR_FLOOR
 
@@ -91,7 +91,7 @@ def _unit_loop(loop: Loop) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def _mu(A0: np.ndarray, B1: np.ndarray, C1: np.ndarray, z: np.ndarray) -> np.ndarray:
-    """Eigenvalues of G(z) for each z, shape (len(z), p), branches kept continuous."""
+    """Eigenvalues of G(z) for each z, shape (len(z), p), in numpy's order."""
     N = A0.shape[0]
     # in chunks of at most ~64 MB of N x N complex matrices: the memory stays flat in
     # the number of angles (4000 angles of a 200-state loop were 5 GB at once)
@@ -99,8 +99,12 @@ def _mu(A0: np.ndarray, B1: np.ndarray, C1: np.ndarray, z: np.ndarray) -> np.nda
     G = np.concatenate([C1 @ np.linalg.solve(zc[:, None, None] * np.eye(N) - A0,
                                              np.broadcast_to(B1, (zc.size, *B1.shape)))
                         for zc in np.array_split(z, -(-z.size // chunk))])
-    mu = np.linalg.eigvals(G)
-    if mu.shape[1] == 2:   # follow each branch: swap where that is nearer the previous point
+    return np.linalg.eigvals(G)
+
+
+def _follow(mu: np.ndarray) -> np.ndarray:
+    """Keep each of two branches continuous: swap where that is nearer the previous point."""
+    if mu.shape[1] == 2:
         for i in range(1, mu.shape[0]):
             a, b = mu[i]
             if abs(a - mu[i - 1, 0]) + abs(b - mu[i - 1, 1]) > abs(b - mu[i - 1, 0]) + abs(a - mu[i - 1, 1]):
@@ -108,8 +112,66 @@ def _mu(A0: np.ndarray, B1: np.ndarray, C1: np.ndarray, z: np.ndarray) -> np.nda
     return mu
 
 
-def d_decomposition(loop: Loop, n_theta: int = 4000) -> dict[str, Any]:
+def _kb(mu: np.ndarray, th: np.ndarray, T: float) -> tuple[np.ndarray, np.ndarray]:
+    """(K, B) on |z| = 1 at angles ``th`` for each branch (columns), from h = 1/mu."""
+    with np.errstate(all="ignore"):
+        h = 1.0 / mu
+        K = h.real - h.imag * np.tan(th / 2)[:, None]
+        B = T * h.imag / np.sin(th)[:, None]
+        bad = ~(np.isfinite(K) & np.isfinite(B) & (np.abs(mu) > DIVISOR_FLOOR))
+    K[bad], B[bad] = np.nan, np.nan
+    return K, B
+
+
+#: A boundary step longer than this fraction of the window is refined (a step of 1/250
+#: of the window is below a line's width on a figure).
+REFINE_STEP = 0.004
+
+
+def _refine(A0: np.ndarray, B1: np.ndarray, C1: np.ndarray, T: float, th: np.ndarray,
+            mu: np.ndarray, window: tuple[tuple[float, float], tuple[float, float]],
+            extra: int) -> tuple[np.ndarray, np.ndarray]:
+    """Add angles where the boundary jumps across the window (where it turns fast with
+    theta), by bisection, until every step inside it is shorter than REFINE_STEP of the
+    window or ``extra`` angles were added."""
+    (K0, K1), (Bl, Bh) = window
+    added = 0
+    for _ in range(12):                       # each round halves the worst steps
+        K, B = _kb(mu, th, T)
+        u, v = (K - K0) / max(K1 - K0, DIVISOR_FLOOR), (B - Bl) / max(Bh - Bl, DIVISOR_FLOOR)
+        inside = (u >= -0.1) & (u <= 1.1) & (v >= -0.1) & (v <= 1.1)
+        step = np.hypot(np.diff(u, axis=0), np.diff(v, axis=0))
+        step = np.where(np.isnan(step), np.inf, step)       # a gap next to a point inside
+        want = ((inside[1:] | inside[:-1]) & (step > REFINE_STEP)).any(axis=1)
+        idx = np.flatnonzero(want & (np.diff(th) > 1e-12))   # (angles 1e-12 apart: a jump)
+        if idx.size == 0 or added >= extra:
+            break
+        idx = idx[np.argsort(-np.nanmax(np.where(np.isfinite(step), step, 1e9), axis=1)[idx])]
+        idx = idx[:extra - added]
+        new = 0.5 * (th[idx] + th[idx + 1])
+        added += new.size
+        th = np.concatenate([th, new])
+        mu = np.concatenate([mu, _mu(A0, B1, C1, np.exp(1j * new))])
+        order = np.argsort(th)
+        th, mu = th[order], _follow(mu[order])
+    return th, mu
+
+
+def d_decomposition(loop: Loop, n_theta: int = 4000,
+                    window: tuple[tuple[float, float], tuple[float, float]] | None = None
+                    ) -> dict[str, Any]:
     """The exact K-B boundary: every (K, B) at which a closed-loop pole is on |z| = 1.
+
+    Parameters
+    ----------
+    loop : HapticLoop or TeleoperationLoop
+        Equal spring-damper controllers (their K and B are the unknowns).
+    n_theta : int
+        Angles of the first sweep of the unit circle.
+    window : ((K_lo, K_hi), (B_lo, B_hi)), optional
+        Where the boundary is drawn: angles are added (up to ``n_theta`` more) where it
+        crosses the window in steps longer than :data:`REFINE_STEP` of it, so that it is
+        drawn wherever it exists (near a resonance it turns fast with theta).
 
     Returns
     -------
@@ -126,15 +188,17 @@ def d_decomposition(loop: Loop, n_theta: int = 4000) -> dict[str, Any]:
     # 1e-9 short of pi, where B = T Im(h) / sin(theta) is 0/0 (pi is the z = -1 line)
     th = np.unique(np.concatenate([np.geomspace(1e-6, 0.2, n_theta // 2),
                                    np.linspace(0.2, np.pi - 1e-9, n_theta // 2)]))  # see above
-    mu = _mu(A0, B1, C1, np.exp(1j * th))
-    curves = []
-    with np.errstate(all="ignore"):
-        for i in range(mu.shape[1]):
-            h = 1.0 / mu[:, i]
-            K = h.real - h.imag * np.tan(th / 2)
-            B = T * h.imag / np.sin(th)
-            ok = np.isfinite(K) & np.isfinite(B) & (np.abs(mu[:, i]) > DIVISOR_FLOOR)
-            curves.append(np.column_stack([K[ok], B[ok]]))
+    mu = _follow(_mu(A0, B1, C1, np.exp(1j * th)))
+    if window is not None:
+        th, mu = _refine(A0, B1, C1, T, th, mu, window, n_theta)
+    K, B = _kb(mu, th, T)
+    curves = [np.column_stack([K[ok, i], B[ok, i]])
+              for i in range(mu.shape[1]) for ok in [np.isfinite(K[:, i])]]
+    return {"curves": curves, **_real_lines(A0, B1, C1), "period": T}
+
+
+def _real_lines(A0: np.ndarray, B1: np.ndarray, C1: np.ndarray) -> dict[str, list[float]]:
+    """The crossings at z = 1 (vertical lines K = const) and z = -1 (K + 2B/T = const)."""
     lines = {}
     for name, z in (("z1", 1.0), ("zm1", -1.0)):
         vals = []
@@ -148,7 +212,7 @@ def d_decomposition(loop: Loop, n_theta: int = 4000) -> dict[str, Any]:
         else:
             vals.append(0.0)          # a pole of the open loop at z = 1 (a free mass): K = 0
         lines[name] = sorted(vals)
-    return {"curves": curves, "z1": lines["z1"], "zm1": lines["zm1"], "period": T}
+    return lines
 
 
 def kmax_over_B(loop: Loop, Bs: Sequence[float] | np.ndarray,
@@ -256,6 +320,8 @@ class RegionResult(Result):
     disagreement : bool array or None
         Grid points where the verdicts differ away from the boundary (None: not
         compared).
+    model : str
+        The loop in one line (devices, terminations, T, delay), for titles.
     """
 
     kind: str
@@ -272,6 +338,7 @@ class RegionResult(Result):
     agreement: dict = field(default_factory=dict)
     overlays: dict = field(default_factory=dict, repr=False)
     disagreement: np.ndarray | None = field(default=None, repr=False)
+    model: str = ""
 
     def kmax(self) -> np.ndarray:
         """K_max on each row (end of the stable interval starting at 0)."""
@@ -321,7 +388,8 @@ def _region_cost(loop: Loop, n: int) -> budget.Cost:
     N = build(with_gains(loop, 1.0, 0.0)).order
     grid = float(n) * n
     memory = 3 * 8 * grid * (N + 1) + 64e6 + n * budget.POINT_BYTES_PER_STATE * N   # grid, rows
-    flops = 2 * grid * (N + 1) ** 2 + 4000 * 2 * N ** 3     # Schur-Cohn grid, D-decomposition
+    # Schur-Cohn grid; D-decomposition: 4000 angles and up to 4000 more where refined
+    flops = 2 * grid * (N + 1) ** 2 + 8000 * 2 * N ** 3
     rows = n * 5e-3 * (1 + N / 100)       # the exact stable set per row: ~5 ms at N ~ 50
     return budget.Cost(f"region: a {n} x {n} grid of a {N}-state loop", memory,
                        flops / budget.FLOPS + rows)
@@ -405,7 +473,9 @@ def stability_region(loop: Loop, K: tuple[float, float], B: tuple[float, float],
     for name in overlays:
         ov[name] = _overlay(loop, name, Brows)
     return RegionResult(loop.kind, loop.period, loop.delay_in_samples, (K_lo, K_hi), (B_lo, B_hi), Brows,
-                        intervals, d_decomposition(loop), Kg, exact, grid, agreement, ov, bad)
+                        intervals, d_decomposition(loop, window=((K_lo, K_hi), (B_lo, B_hi))),
+                        Kg, exact, grid, agreement, ov, bad,
+                        headline(loop))
 
 
 def _overlay(loop: Loop, name: str, Bs: np.ndarray) -> np.ndarray:

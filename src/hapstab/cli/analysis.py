@@ -22,7 +22,7 @@ from hapstab.cli.options import (
     provenance,
     rich_table,
 )
-from hapstab.errors import PERIOD_RANGE, HapstabError
+from hapstab.errors import MAX_DELAY_SAMPLES, PERIOD_RANGE, HapstabError
 from hapstab.results import dumps
 
 
@@ -73,7 +73,7 @@ def _kmax_command(kind: str) -> None:
                                                                        "passivity")
                  else "none (no pole reaches |z| = 1)"),
                 ("why", res.reason)]
-        emit(res.to_dict(), as_json, lambda: rich_table(f"K_max, {kind}", rows), loop)
+        emit(res.to_dict(), as_json, lambda: rich_table(f"K_max, {kind}", rows, loop), loop)
 
     _cmd.__doc__ = f"K_max of the {kind.upper()} loop."
 
@@ -94,7 +94,7 @@ def _check_command(kind: str) -> None:
         rows = [("verdict", res.verdict), ("spectral radius", f"{res.spectral_radius:.12g}"),
                 ("dominant pole", f"{res.dominant_pole:.8g}"),
                 ("frequency", f"{res.frequency_hz:.6g} Hz"), ("why", res.reason)]
-        emit(d, as_json, lambda: rich_table(f"stability, {kind}, K = {stiffness:g} N/m", rows),
+        emit(d, as_json, lambda: rich_table(f"stability, {kind}, K = {stiffness:g} N/m", rows, loop),
              loop)
 
     _cmd.__doc__ = f"Stability of the {kind.upper()} loop at stiffness K."
@@ -122,6 +122,10 @@ def _boundary_command(kind: str) -> None:
                                                                 values=">= 0")
         if rows_s is not None and given("delay"):
             raise HapstabError("--delay and --delay-s: give one of them, not both")
+        if rows_s is not None and max(rows_s) / min(periods) > MAX_DELAY_SAMPLES:
+            raise HapstabError(f"--delay-s = {kw['delay_s']!r}: {max(rows_s):g} s is "
+                               f"{max(rows_s) / min(periods):.4g} samples at T = "
+                               f"{min(periods):g} s; at most {MAX_DELAY_SAMPLES}")
         delays = parse_delays(kw["delay"])
         kw.update(period=periods[0], delay=delays[0], rate=None, delay_s=None)
         template = make(kw, 1.0)

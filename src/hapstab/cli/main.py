@@ -52,7 +52,7 @@ class HapstabGroup(click.Group):
 
             if argv[:1] != ["run"]:                # --study FILE [--variant V], anywhere
                 argv, default_map = take_study(argv, self)
-            with np.errstate(all="ignore"), warnings.catch_warnings(), \
+            with np.errstate(all="ignore"), warnings.catch_warnings(), _bars(argv), \
                     (budget.unlimited() if yes else contextlib.nullcontext()):
                 warnings.simplefilter("ignore", RuntimeWarning)
                 rv = super().main(args=argv, prog_name=prog_name or "hapstab",
@@ -72,29 +72,10 @@ class HapstabGroup(click.Group):
                   else f"cannot write the output: {e.strerror or e}")
         except MemoryError:
             _fail(argv, "out of memory: the model is too large for this machine")
-        except _Terminated:                   # SIGTERM / SIGHUP: as Ctrl-C, no partial file
-            click.echo("hapstab: terminated", err=True)
-            sys.exit(143)
-        except click.exceptions.Abort as e:
-            if isinstance(e.__cause__, KeyboardInterrupt):   # Ctrl-C: no partial file is left
-                click.echo("hapstab: interrupted", err=True)
-                sys.exit(130)
-            click.echo("hapstab: aborted", err=True)
-            sys.exit(1)
+        except (_Terminated, click.exceptions.Abort) as e:
+            _stopped(e)
         except Exception as e:   # everything else is a bug, said as one
-            if SIGNALLED:                     # ... unless a signal's unwinding set it off
-                import signal
-
-                interrupted = SIGNALLED[0] == signal.SIGINT
-                click.echo("hapstab: interrupted" if interrupted else "hapstab: terminated",
-                           err=True)
-                sys.exit(130 if interrupted else 143)
-            if "--debug" in argv:
-                raise
-            click.echo(f"hapstab: internal error: {type(e).__name__}: "
-                       f"{' '.join(str(e).split())[:300]} -- this is a bug in hapstab; please "
-                       "report it with the command line (--debug shows the traceback)", err=True)
-            sys.exit(1)
+            _bug(e, argv)
         sys.exit(rv if isinstance(rv, int) else 0)
 
 
@@ -105,6 +86,45 @@ class HapstabGroup(click.Group):
             return super().invoke(ctx)
         except BrokenPipeError:
             raise _BrokenPipe() from None
+
+
+def _bars(argv: list[str]) -> Any:
+    """Progress bars on stderr for the library's long computations, on a terminal and
+    without --json (see :mod:`hapstab.progress`)."""
+    from hapstab import progress
+    from hapstab.cli.options import progress as bar
+
+    quiet = "--json" in argv or not sys.stderr.isatty()
+    return progress.listening(None if quiet else lambda what, total: bar(total, what))
+
+
+def _stopped(e: BaseException) -> None:
+    """SIGTERM / SIGHUP (exit 143) or Ctrl-C (130): said, and no partial file is left."""
+    if isinstance(e, _Terminated):
+        click.echo("hapstab: terminated", err=True)
+        sys.exit(143)
+    if isinstance(e.__cause__, KeyboardInterrupt):
+        click.echo("hapstab: interrupted", err=True)
+        sys.exit(130)
+    click.echo("hapstab: aborted", err=True)
+    sys.exit(1)
+
+
+def _bug(e: Exception, argv: list[str]) -> None:
+    """An unexpected exception: a bug (exit 1, one line), unless a signal's unwinding set
+    it off (then the signal's exit code)."""
+    if SIGNALLED:
+        import signal
+
+        interrupted = SIGNALLED[0] == signal.SIGINT
+        click.echo("hapstab: interrupted" if interrupted else "hapstab: terminated", err=True)
+        sys.exit(130 if interrupted else 143)
+    if "--debug" in argv:
+        raise e
+    click.echo(f"hapstab: internal error: {type(e).__name__}: "
+               f"{' '.join(str(e).split())[:300]} -- this is a bug in hapstab; please "
+               "report it with the command line (--debug shows the traceback)", err=True)
+    sys.exit(1)
 
 
 class _BrokenPipe(Exception):
@@ -208,7 +228,8 @@ def _quiet_stdout() -> None:
               help="With --study: use this [[variant]] of the study (default: its [loop]).")
 def cli() -> None:
     """Exact stability and critical stiffness of sampled-data, delayed haptic (hve) and
-    PEB teleoperation (peb) loops. Defaults are the paper's simulation study."""
+    PEB teleoperation (peb) loops. Defaults are the paper's simulation study (the API's
+    hapstab.paper_hve() / paper_peb())."""
 
 
 

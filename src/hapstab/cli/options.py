@@ -335,14 +335,18 @@ def console() -> Any:
                     stderr=STDOUT_TAKEN.get())
 
 
-def rich_table(title: str, rows: list[tuple[str, str]]) -> None:
+def rich_table(title: str, rows: list[tuple[str, str]], loop: Any = None) -> None:
+    """Two columns, no header; with ``loop``, a last row saying which loop it is for."""
+    from rich.markup import escape
     from rich.table import Table
 
-    t = Table(title=title, show_header=False)
+    from hapstab.models.loops import headline
+
+    t = Table(title=escape(title), show_header=False)
     t.add_column(style="bold")
     t.add_column()
-    for k, v in rows:
-        t.add_row(k, v)
+    for k, v in [*rows, *([("loop", headline(loop))] if loop is not None else [])]:
+        t.add_row(escape(k), escape(v))
     console().print(t)
 
 

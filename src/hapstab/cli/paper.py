@@ -83,7 +83,7 @@ def _passivity_command(kind: str) -> None:
                 ("failing condition", res.failed_condition or "none"),
                 ("why", res.reason)]
         title = f"{method}{', ' + approx if approx else ''}, {kind}, K = {stiffness:g} N/m"
-        emit(d, as_json, lambda: rich_table(title, rows), loop)
+        emit(d, as_json, lambda: rich_table(title, rows, loop), loop)
 
     _cmd.__doc__ = (f"Is the {kind.upper()} loop's sampled-data side passive at stiffness K (or, "
                     "with --method circle, its G^-1(z) positive real)? Verdict, margin in "

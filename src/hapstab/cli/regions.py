@@ -90,7 +90,7 @@ def _region_command(kind: str) -> None:
             rows.append(("plot", plot_path))
         if csv_path is not None:
             rows.append(("csv", csv_path))
-        emit(d, as_json, lambda: rich_table(f"K-B stability region, {kind}", rows), loop)
+        emit(d, as_json, lambda: rich_table(f"K-B stability region, {kind}", rows, loop), loop)
 
     _cmd.__doc__ = f"Exact K-B stability region of the {kind.upper()} loop (D-decomposition)."
 
@@ -118,7 +118,7 @@ def _best_command(kind: str) -> None:
                 ("critical stiffness K*", f"{fmt(res.critical_stiffness)} N/m"),
                 ("K_max at B = 0", f"{fmt(res.critical_stiffness_at_zero_damping)} N/m"),
                 ("design answer", res.reason)]
-        emit(res.to_dict(), as_json, lambda: rich_table(f"best virtual damping, {kind}", rows),
+        emit(res.to_dict(), as_json, lambda: rich_table(f"best virtual damping, {kind}", rows, loop),
              loop)
 
     _cmd.__doc__ = f"The virtual damping B that maximises K_max of the {kind.upper()} loop."

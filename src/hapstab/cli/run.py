@@ -24,7 +24,7 @@ import click
 from hapstab.cli.options import ARGV, console, progress, provenance
 from hapstab.cli.study import BASE, Study, StudyError, load_study, loop_commands, study_defaults
 from hapstab.errors import HapstabError
-from hapstab.outputs import Outputs
+from hapstab.outputs import OutputError, Outputs
 from hapstab.results import dumps
 
 #: What each analysis writes besides its JSON (the command's own --csv / --plot).
@@ -42,7 +42,7 @@ def run_cmd(study_path: str, out_dir: str | None, only: tuple[str, ...], as_json
     """Run every analysis of a study file ([run.<command>] tables) for the base loop and
     every [[variant]], into a folder: <variant>/<command>.json (+ .csv, .png), the study
     file and manifest.json, written together."""
-    study = load_study(study_path)
+    study = load_study(study_path, "STUDY.toml")
     root = click.get_current_context().find_root().command
     assert isinstance(root, click.Group)
     plan = _plan(study, root, only)
@@ -87,13 +87,17 @@ def _plan(study: Study, root: click.Group, only: tuple[str, ...]
 
 
 def _stage_folder(out_dir: str) -> str:
-    parent = os.path.dirname(os.path.abspath(out_dir))
+    """The results folder (created now, so that a name it cannot have fails before any
+    work) and a staging folder beside it."""
+    if not out_dir.strip() or "\0" in out_dir:
+        raise OutputError(f"--out = {out_dir!r:.80}: must be a folder path")
     try:
-        os.makedirs(parent, exist_ok=True)
+        os.makedirs(out_dir, exist_ok=True)
+        parent = os.path.dirname(os.path.abspath(out_dir))
         return tempfile.mkdtemp(prefix=".hapstab-run.", dir=parent)
     except OSError as e:
-        raise HapstabError(f"--out = {out_dir!r}: cannot create a folder in {parent!r} "
-                           f"({e.strerror or e})") from None
+        raise OutputError(f"--out = {out_dir!r:.80}: cannot create the folder "
+                          f"({e.strerror or e})") from None
 
 
 def _one(root: click.Group, study: Study, variant: str, command: str,
@@ -133,11 +137,15 @@ def _one(root: click.Group, study: Study, variant: str, command: str,
 
 def _commit(study: Study, stage: str, out_dir: str, results: list[dict[str, Any]]) -> list[str]:
     """Every staged file, the study file and the manifest (last), written together."""
-    os.makedirs(out_dir, exist_ok=True)
+    for variant in {r["variant"] for r in results}:
+        try:
+            os.makedirs(os.path.join(out_dir, variant), exist_ok=True)
+        except OSError as e:
+            raise OutputError(f"--out = {out_dir!r:.80}: cannot create {variant}/ in it "
+                              f"({e.strerror or e})") from None
     with Outputs() as out:
         for r in results:
             for rel in r["files"]:
-                os.makedirs(os.path.join(out_dir, os.path.dirname(rel)), exist_ok=True)
                 with open(os.path.join(stage, rel), "rb") as src, \
                         out.open(os.path.join(out_dir, rel), "--out", "wb") as dst:
                     shutil.copyfileobj(src, dst)

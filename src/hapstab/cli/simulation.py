@@ -131,7 +131,12 @@ def _table(kind: str, stiffness: float, loop: Any, res: Any, d: dict[str, Any],
     """The readable table of a run."""
     v = res.verdict
     rows = [("simulated", f"{v.verdict}: {v.behaviour} ({v.confidence} confidence, {v.basis})"),
-            ("growth rate", f"{_g(v.growth_rate)} 1/s (+- {_g(v.growth_rate_uncertainty, '.2g')})")]
+            ("growth rate", f"{_g(v.growth_rate)} 1/s (+- {_g(v.growth_rate_uncertainty, '.2g')})"
+                            f"{_doubling(v.growth_rate)}")]
+    for lab in res.labels:       # what the plot shows: the swing at the start and at the end
+        rows.append((f"swing of x, {lab}", f"{_g(d[f'swing_start_m_{lab}'])} m in the first "
+                                           f"tenth of the run, {_g(d[f'swing_end_m_{lab}'])} m "
+                                           "in the last"))
     if v.amplitude_m is not None:
         rows.append(("limit cycle", f"amplitude {v.amplitude_m:.4g} m, period {v.period_s:.4g} s"))
     if v.duration_hint_s is not None:
@@ -144,7 +149,14 @@ def _table(kind: str, stiffness: float, loop: Any, res: Any, d: dict[str, Any],
         rows.append((f"max |u| {lab}", f"{_g(d[f'max_abs_force_{lab}'])} N"))
         rows.append((f"energy into controller from {lab}", f"{_g(d[f'final_port_energy_{lab}'])} J"))
     rows.extend([("why", v.reason)] + [("wrote", f) for f in files])
-    rich_table(f"simulation, {kind}, K = {stiffness:g} N/m", rows)
+    rich_table(f"simulation, {kind}, K = {stiffness:g} N/m", rows, loop)
+
+
+def _doubling(rate: float) -> str:
+    """``: doubles every 8.3 s`` / ``: halves every ...`` for a rate in 1/s."""
+    if not math.isfinite(rate) or abs(rate) < 1e-12:   # (below 1e-12 1/s: never, in practice)
+        return ""
+    return f": {'doubles' if rate > 0 else 'halves'} every {math.log(2) / abs(rate):.3g} s"
 
 
 for _kind in LOOP_KINDS:

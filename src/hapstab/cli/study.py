@@ -103,13 +103,15 @@ class Study:
         return f"{self.path}{f' line {n}' if n else ''}: "
 
 
-def load_study(path: Any) -> Study:
+def load_study(path: Any, name: str = "--study") -> Study:
     """Read and check the structure of a study file.
 
     Parameters
     ----------
     path : str or os.PathLike
         The TOML file.
+    name : str
+        The option or argument that gave it, named in errors about the file as a whole.
 
     Returns
     -------
@@ -125,12 +127,12 @@ def load_study(path: Any) -> Study:
         with open(p, "rb") as fh:
             raw = fh.read()
     except OSError as e:
-        raise StudyError(f"--study = {p!r}: cannot read it ({e.strerror or e})") from None
+        raise StudyError(f"{name} = {p!r}: cannot read it ({e.strerror or e})") from None
     text = raw.decode("utf-8", errors="replace")
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
-        raise StudyError(f"{p}: not a valid TOML file ({e})") from None
+        raise StudyError(f"{name} = {p!r}: not a valid TOML file ({e})") from None
     known = {"kind", "title", "loop", "variant", "run"}
     for key in data:
         if key not in known:

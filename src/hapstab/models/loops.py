@@ -415,6 +415,38 @@ def describe(loop: HapticLoop | TeleoperationLoop) -> str:
                                                                                  "type")))
 
 
+def headline(loop: HapticLoop | TeleoperationLoop) -> str:
+    """The model in a figure title's line: devices, terminations, T and the delay
+    (``device 0.3 kg, 0.5 N*s/m; operator msd m=0.5 kg, ...; T = 1 ms, t_d = 20 ms``).
+
+    Parameters
+    ----------
+    loop : HapticLoop or TeleoperationLoop
+        The loop.
+
+    Returns
+    -------
+    str
+    """
+    def dev(name: str, d: Device) -> str:
+        return f"{name} {d.mass:g} kg, {d.damping:g} N*s/m"
+
+    def term(name: str, z: Any) -> str:
+        return f"{name} {getattr(z, 'label', 'none') if z is not None else 'none'}"
+
+    if isinstance(loop, TeleoperationLoop):
+        parts = [dev("master", loop.master), dev("slave", loop.slave),
+                 term("operator", loop.operator), term("environment", loop.environment)]
+        delay = f"t_d = {loop.delay_s * 1e3:.4g} ms" + (
+            f" / {loop.delay_backward_s * 1e3:.4g} ms" if loop.delay_backward_s != loop.delay_s
+            else "")
+    else:
+        parts = [dev("device", loop.device), term("operator", loop.operator)]
+        delay = f"t_d = {loop.delay_s * 1e3:.4g} ms"
+    n = loop.delay_in_samples
+    return "; ".join([*parts, f"T = {loop.period * 1e3:.4g} ms, {delay} ({n:.4g} samples)"])
+
+
 def require_loop(loop: Any, name: str = "loop") -> None:
     """Refuse anything that is not a loop, with the one message every analysis gives.
 

@@ -60,6 +60,8 @@ class SimulationResult(Result):
         Exact output between samples (``dense`` points per sample).
     rest : tuple of float
         Rest position of each port's operator / environment spring (m).
+    model : str
+        The loop in one line (devices, terminations, T, delay), for titles.
     """
 
     time: np.ndarray
@@ -81,6 +83,7 @@ class SimulationResult(Result):
     dense_position: np.ndarray | None = field(default=None, repr=False)
     dense_velocity: np.ndarray | None = field(default=None, repr=False)
     rest: tuple[float, ...] = ()
+    model: str = ""
 
     @property
     def bounded(self) -> bool:
@@ -93,7 +96,13 @@ class SimulationResult(Result):
                                "stiffness": self.stiffness, "nonlinear": self.nonlinear,
                                "rest_position_m": list(self.rest),
                                **self.verdict.to_dict()}
+        tenth = max(self.time.size // 10, 2)     # the first and last tenth of the run
         for j, lab in enumerate(self.labels):
+            x = self.position[:, j]
+            # what a reader sees on the plot: half the peak-to-peak position at the start
+            # and at the end of the run
+            out[f"swing_start_m_{lab}"] = float(np.ptp(x[:tenth]) / 2)
+            out[f"swing_end_m_{lab}"] = float(np.ptp(x[-tenth:]) / 2)
             out[f"max_abs_position_{lab}"] = float(np.abs(self.position[:, j]).max())
             out[f"max_abs_force_{lab}"] = float(np.abs(self.controller_force[:, j]).max())
             out[f"final_port_energy_{lab}"] = float(self.port_energy[-1, j])

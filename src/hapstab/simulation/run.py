@@ -50,7 +50,7 @@ from hapstab.engine.structure import structure_of
 from hapstab.engine.system import build
 from hapstab.engine.zoh import port_matrices
 from hapstab.errors import ModelError, check_real
-from hapstab.models.loops import HapticLoop, TeleoperationLoop, require_loop
+from hapstab.models.loops import HapticLoop, TeleoperationLoop, headline, require_loop
 from hapstab.simulation.behaviour import assess_nonlinear
 from hapstab.simulation.growth import BoundednessVerdict, assess, combine
 from hapstab.simulation.inputs import ForceSpec, force_grows, force_samples
@@ -189,7 +189,7 @@ def simulate(loop: HapticLoop | TeleoperationLoop, duration: float, *,
     K = float(sysm.stiffness[0])
     return SimulationResult(t, X, V, U, Fx, pe, ee, S, verdict, tuple(sysm.labels), T,
                             loop.delay_in_samples, K, nl, contact, dt, dx, dv,
-                            rest=tuple(float(r) for r in rest))
+                            rest=tuple(float(r) for r in rest), model=headline(loop))
 
 
 def _samples(duration: float, T: float, dense: Any) -> int:
