@@ -109,3 +109,26 @@ def test_to_dict_and_errors():
         audit(HapticLoop(Device(0.1, 0.1), DiscreteController((1.0,), (1.0,)), None, 1e-3, 0))
     with pytest.raises(TypeError, match="loop = 'not a loop': must be a HapticLoop"):
         audit("not a loop")        # a TypeError, and a HapstabError (one line on the CLI)
+
+
+def test_the_verdict_column_agrees_with_the_closed_loop_eigenvalues():
+    """The audit reads each row's verdict from the certified stable set; an independent
+    eigenvalue check of the closed loop at K (1 - 1e-6) must agree, on seeded loops."""
+    import numpy as np
+
+    rng = np.random.default_rng(20261124)
+    for i in range(12):
+        n = int(rng.integers(0, 6))
+        T = float(rng.choice([5e-4, 1e-3, 2e-3]))
+        if i % 2:
+            loop = h.paper_peb(T, n).replace(
+                master=h.Device(float(rng.uniform(0.01, 1)), float(rng.uniform(0.01, 3))),
+                environment=h.spring(float(rng.choice([1.0, 500.0, 2e4]))))
+        else:
+            loop = h.paper_hve(T, n).replace(
+                device=h.Device(float(rng.uniform(0.05, 1)), float(rng.uniform(0.01, 3))))
+        for r in h.audit(loop).rows:
+            if r.exact_verdict == "-":
+                continue
+            v = h.stability(loop.with_stiffness(r.critical_stiffness * (1 - 1e-6))).verdict
+            assert v == r.exact_verdict, (i, r.key, r.critical_stiffness, v, r.exact_verdict)

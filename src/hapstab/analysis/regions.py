@@ -32,7 +32,7 @@ from typing import Any
 
 import numpy as np
 
-from hapstab import budget
+from hapstab import budget, progress
 from hapstab.analysis.exact.crossings import analyse, winding
 from hapstab.analysis.exact.stable_set import StableSet
 from hapstab.engine.frequency import loop_response, stack_responses
@@ -442,8 +442,18 @@ def stability_region(loop: Loop, K: tuple[float, float], B: tuple[float, float],
         raise AnalysisError(f"resolution = {resolution!r}: must be a whole number >= 2")
     n = int(resolution)
     budget.check(_region_cost(loop, n), max_memory, max_seconds)
+    with progress.steps(4, f"region: {n} x {n}") as advance:
+        return _region(loop, (K_lo, K_hi), (B_lo, B_hi), n, overlays, advance)
+
+
+def _region(loop: Loop, Kw: tuple[float, float], Bw: tuple[float, float], n: int,
+            overlays: Sequence[str], advance: Any) -> RegionResult:
+    """The rows' exact stable sets, the grid check, the overlays and the boundary, with
+    progress after each (see :func:`stability_region`)."""
+    (K_lo, K_hi), (B_lo, B_hi) = Kw, Bw
     Brows = np.linspace(B_lo, B_hi, n)
     rows = kmax_over_B(loop, Brows, intervals=True)
+    advance(1)
     intervals = tuple(tuple((max(a, K_lo), min(b, K_hi)) for a, b in r.intervals
                             if b > K_lo and a < K_hi) for r in rows)
     Kg = np.linspace(K_lo, K_hi, n)
@@ -458,6 +468,7 @@ def stability_region(loop: Loop, K: tuple[float, float], B: tuple[float, float],
         zero_ok = winding(resp, np.arange(n), np.zeros(n)) == 0
         exact[:, Kg == 0] = zero_ok[:, None]
     grid = _schur_cohn(_char_poly_grid(loop, KK, BB)).reshape(KK.shape)
+    advance(1)
     # near an exact boundary either verdict is within rounding: compare away from it
     # (a thousandth of the window, a fifth of the default grid step: this sets aside
     # only grid points practically on a boundary)
@@ -469,13 +480,12 @@ def stability_region(loop: Loop, K: tuple[float, float], B: tuple[float, float],
     bad = (exact != grid) & ~near
     agreement = {"compared": int((~near).sum()), "disagree": int(bad.sum()),
                  "margin_N_per_m": margin}
-    ov: dict[str, np.ndarray] = {}
-    for name in overlays:
-        ov[name] = _overlay(loop, name, Brows)
-    return RegionResult(loop.kind, loop.period, loop.delay_in_samples, (K_lo, K_hi), (B_lo, B_hi), Brows,
-                        intervals, d_decomposition(loop, window=((K_lo, K_hi), (B_lo, B_hi))),
-                        Kg, exact, grid, agreement, ov, bad,
-                        headline(loop))
+    ov = {name: _overlay(loop, name, Brows) for name in overlays}
+    advance(1)
+    boundary = d_decomposition(loop, window=(Kw, Bw))
+    advance(1)
+    return RegionResult(loop.kind, loop.period, loop.delay_in_samples, Kw, Bw, Brows, intervals,
+                        boundary, Kg, exact, grid, agreement, ov, bad, headline(loop))
 
 
 def _overlay(loop: Loop, name: str, Bs: np.ndarray) -> np.ndarray:
