@@ -61,3 +61,37 @@ def test_an_overflowing_longdouble_is_a_model_error_without_warnings():
         warnings.simplefilter("error")
         with pytest.raises(ModelError, match=r"stiffness = .*must be finite"):
             LOOP.with_stiffness(np.longdouble("1e4000"))
+
+
+@pytest.mark.parametrize("call,needle", [
+    (lambda: h.critical_stiffness(LOOP, method=["exact"]), "method = ['exact']: must be a string"),
+    (lambda: h.boundary(LOOP, "0.001"), "periods = '0.001'"),
+    (lambda: h.boundary(LOOP, b"1"), "periods = b'1'"),
+    (lambda: h.boundary(LOOP, [1e-3 + 1j]), "periods = "),
+    (lambda: h.boundary(LOOP, True), "periods = True"),
+    (lambda: h.stability_region(LOOP, (0, 20), (0, 1), 8, overlays=3), "overlays = 3"),
+    (lambda: h.simulate(LOOP, 0.1, rest_position="abc"), "rest_position = 'abc'"),
+    (lambda: h.simulate(LOOP, 0.1, rest_position=1 + 2j), "rest_position = (1+2j)"),
+    (lambda: h.critical_stiffness_simulation(LOOP, seed="abc"), "seed = 'abc'"),
+    (lambda: h.critical_stiffness_simulation(LOOP, seed=-1), "seed = -1"),
+])
+def test_more_wrong_types_are_type_errors_naming_the_argument(call, needle):
+    with pytest.raises(ArgumentTypeError) as e:
+        call()
+    assert str(e.value).startswith(needle), str(e.value)
+
+
+@pytest.mark.parametrize("call", [
+    lambda: h.circle_test(LOOP, scaling=np.array(["auto"])),
+    lambda: h.simulate(LOOP, 0.1, quantizer=np.array(["floor"])),
+    lambda: h.boundary(LOOP, [1e-3], axis=np.array(["rate"])),
+    lambda: h.methods_for(np.array(["hve", "peb"])),
+    lambda: h.critical_stiffness_simulation(LOOP, rtol=1e-17),    # hung: neighbouring doubles
+])
+def test_array_choices_and_a_tolerance_below_rounding_are_refused_not_crashed(call):
+    with pytest.raises(HapstabError):
+        call()
+
+
+def test_a_budget_beyond_double_precision_means_no_limit():
+    assert h.stability(LOOP, max_memory=10**400, max_seconds=10**400).verdict == "stable"

@@ -288,3 +288,20 @@ def test_the_cli_defaults_are_the_apis_paper_loops(kind):
     for k in differ:      # only the stiffness, which K_max does not depend on
         assert {**cli_loop[k], "stiffness_N_per_m": 0} == {**api_loop[k], "stiffness_N_per_m": 0}
     assert d["critical_stiffness"] == h.critical_stiffness(make()).critical_stiffness
+
+
+@pytest.mark.parametrize("args,needle", [
+    (["kmax", "hve", "--rate", "1mHz"], "unknown unit 'mHz'"),        # millihertz is not MHz
+    (["kmax", "hve", "-T", "1Ms"], "unknown unit 'Ms'"),              # megaseconds is not ms
+    (["kmax", "hve", "--mass", "1" + "0" * 5000], "must be"),
+])
+def test_case_sensitive_units_and_short_lines(args, needle):
+    r = CliRunner().invoke(cli, args)
+    assert r.exit_code == 2 and needle in r.stderr and r.stderr.count("\n") == 1
+    assert len(r.stderr) < 700
+
+
+@pytest.mark.parametrize("text,seconds", [("1MHz", 1e-6), ("2kHz", 5e-4), ("500 Hz", 2e-3)])
+def test_rates_with_units_still_read(text, seconds):
+    d = json.loads(CliRunner().invoke(cli, ["kmax", "hve", "--rate", text, "--json"]).stdout)
+    assert d["period_s"] == pytest.approx(seconds, rel=1e-15)

@@ -214,3 +214,65 @@ def test_a_read_only_folder_is_refused_up_front_unless_the_file_is_writable(tmp_
     with atomic_file(p, "--csv") as fh:           # written in place, once complete
         fh.write("new\n")
     assert p.read_text() == "new\n" and [q.name for q in tmp_path.iterdir()] == ["old.csv"]
+
+
+def test_a_file_written_in_place_is_put_back_when_a_later_rename_fails(tmp_path, monkeypatch):
+    import hapstab.outputs as outputs
+
+    ro, rw = tmp_path / "ro", tmp_path / "rw"
+    ro.mkdir()
+    rw.mkdir()
+    (ro / "x.txt").write_text("old x, longer than the new one")
+    (rw / "y.txt").write_text("old y")
+    monkeypatch.setattr(outputs, "_folder_writable", lambda path: not str(path).startswith(str(ro)))
+    _fail_on(monkeypatch, "y.txt")
+    with pytest.raises(OutputError, match=r"y\.txt"), Outputs() as out:
+        for p in (ro / "x.txt", rw / "y.txt"):
+            with out.open(p, "--out") as fh:
+                fh.write(f"new {p.name}")
+    assert (ro / "x.txt").read_text() == "old x, longer than the new one"
+    assert (rw / "y.txt").read_text() == "old y"
+    assert sorted(q.name for q in rw.iterdir()) == ["y.txt"]
+
+
+def test_an_interrupt_right_after_a_rename_is_undone_with_the_rest(tmp_path, monkeypatch):
+    import hapstab.outputs as outputs
+
+    for n in ("a", "b"):
+        (tmp_path / f"{n}.txt").write_text(f"old {n}")
+    real_put = outputs._put
+
+    def put(tmp, target, in_place):            # the rename succeeds, then Ctrl-C lands
+        real_put(tmp, target, in_place)
+        if target.endswith("b.txt"):
+            raise KeyboardInterrupt
+    monkeypatch.setattr(outputs, "_put", put)
+    with pytest.raises(KeyboardInterrupt), Outputs() as out:
+        for n in ("a", "b"):
+            with out.open(tmp_path / f"{n}.txt", "--out") as fh:
+                fh.write(f"new {n}")
+    assert {p.name: p.read_text() for p in tmp_path.iterdir()} == {"a.txt": "old a",
+                                                                   "b.txt": "old b"}
+
+
+def test_signals_are_held_during_a_commit_and_delivered_after():
+    import signal
+    import time
+
+    import hapstab.outputs as outputs
+
+    reached = False
+    with pytest.raises(KeyboardInterrupt), outputs._signals_held():
+        os.kill(os.getpid(), signal.SIGINT)
+        time.sleep(0.05)
+        reached = True
+    assert reached
+
+
+def test_a_file_without_write_permission_is_not_replaced_even_by_root(tmp_path):
+    p = tmp_path / "ro.csv"
+    p.write_text("old\n")
+    p.chmod(0o444)
+    with pytest.raises(OutputError, match="is read-only"), atomic_file(p, "--csv") as fh:
+        fh.write("new\n")
+    assert p.read_text() == "old\n"

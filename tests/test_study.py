@@ -170,3 +170,44 @@ def test_long_computations_report_their_progress_to_a_listener():
     assert (a.critical_stiffness == h.boundary(h.paper_hve(), [1e-3, 2e-3, 3e-3],
                                                [0, 2]).critical_stiffness).all()
     assert b.critical_stiffness.shape == (1, 2)
+
+
+@pytest.mark.parametrize("edit,needle", [
+    (("mass = 0.3", "mass = 0.3\nm = 2"), "m and mass in [loop]: give one of them, not both"),
+    (("rate = \"1kHz\"", "rate = \"1kHz\"\nperiod = \"2ms\""), "period and rate in [loop]: give one"),
+    (("delay-s = \"20ms\"", "delay-s = \"20ms\"\ndelay = 3"), "delay and delay-s in [loop]: give one"),
+    (("mass = 0.3", "mass = 1" + "0" * 5000), "not a valid TOML file"),
+    (("title = \"My", "title = [1]\n#"), "title = [1]: must be a string"),
+    (("name = \"damped\"", "name = \"manifest.json\""), "nor the run's manifest.json"),
+])
+def test_more_study_mistakes_are_one_line(study, edit, needle):
+    study.write_text(STUDY.replace(*edit, 1))
+    r = run("kmax", "hve", "--study", str(study))
+    assert r.exit_code == 2 and r.stderr.count("\n") == 1 and needle in r.stderr, r.stderr
+    assert len(r.stderr) < 700
+
+
+def test_a_study_that_is_not_utf8_is_refused_and_a_good_one_is_copied_byte_for_byte(tmp_path):
+    bad = tmp_path / "bad.toml"
+    bad.write_bytes(b'kind = "hve"  # caf\xe9\n[run.kmax]\n')
+    r = run("run", str(bad), "--out", str(tmp_path / "o"))
+    assert r.exit_code == 2 and "not UTF-8 at byte 19" in r.stderr
+    assert bad.read_bytes() == b'kind = "hve"  # caf\xe9\n[run.kmax]\n'
+    good = tmp_path / "good.toml"
+    good.write_bytes('kind = "hve"  # café\r\n[run.kmax]\r\n'.encode())
+    r = run("run", str(good), "--out", str(tmp_path / "o"), "--json")
+    assert r.exit_code == 0, r.stderr
+    import hashlib
+
+    assert (tmp_path / "o" / "study.toml").read_bytes() == good.read_bytes()
+    assert json.loads(r.stdout)["study_sha256"] == hashlib.sha256(good.read_bytes()).hexdigest()
+
+
+def test_run_stages_inside_its_output_folder_and_refuses_an_empty_one(study, tmp_path):
+    out = tmp_path / "deep" / "results"
+    r = run("run", str(study), "--out", str(out), "--only", "base")
+    assert r.exit_code == 0, r.stderr
+    assert sorted(p.name for p in out.iterdir()) == ["base", "manifest.json", "study.toml"]
+    assert [p.name for p in (tmp_path / "deep").iterdir()] == ["results"]
+    r = run("run", str(study), "--out", "")
+    assert r.exit_code == 2 and "--out = '': must be a folder path" in r.stderr

@@ -166,7 +166,10 @@ def _limit(name: str, value: Any) -> float:
     if isinstance(value, bool) or not isinstance(value, Real):
         raise ArgumentTypeError(f"{name} = {value!r:.60}: must be a number > 0 (math.inf: no "
                                 f"limit; got {type(value).__name__})")
-    v = float(value)
+    try:
+        v = float(value)
+    except OverflowError:          # an integer beyond double precision: no limit, in effect
+        v = math.inf
     if not v > 0:
         raise BudgetError(f"{name} = {value!r}: must be > 0 (math.inf: no limit)")
     return v

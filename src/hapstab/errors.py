@@ -92,7 +92,7 @@ def check_reals(name: str, value: Any) -> np.ndarray:
         return ModelTypeError(f"{name} = {value!r:.60}: must be a real number or a sequence "
                               f"of real numbers (got {type(value).__name__})")
 
-    if isinstance(value, (str, bytes)):
+    if isinstance(value, (str, bytes, bool)):
         raise wrong()
     try:
         with warnings.catch_warnings():   # numpy's overflow / complex casts warn: we raise

@@ -153,7 +153,8 @@ class Outputs:
         # a symbolic link is written through (its target replaced, the link kept)
         folder, base = os.path.split(os.path.realpath(target))
         real = os.path.join(folder, base)
-        if os.path.exists(real) and not os.access(real, os.W_OK):
+        if os.path.exists(real) and not (os.access(real, os.W_OK)
+                                         and os.stat(real).st_mode & 0o222):
             raise OutputError(f"{name} = {target!r}: the file is read-only; hapstab does not "
                               "replace it (make it writable or choose another name)")
         in_place = not _folder_writable(real)    # a writable file in a read-only folder
@@ -191,27 +192,25 @@ class Outputs:
             A rename failed (the remaining temporary files are removed).
         """
         keep = len(self._pending) > 1        # one file: os.replace is all-or-nothing
-        done: list[tuple[str, str | None]] = []   # (target, _previous_version)
-        try:
-            for tmp, target, name, in_place in self._pending:
-                with self._failing(target, name):
-                    old = _previous_version(target, keep and not in_place)
-                    try:
+        done: list[tuple[str, str | None, bool]] = []   # (target, _previous_version, in place)
+        # a signal is held until the files are all replaced or all put back (a Ctrl-C
+        # between two renames would leave a mix); it is delivered right after
+        with _signals_held():
+            try:
+                for tmp, target, name, in_place in self._pending:
+                    with self._failing(target, name):
+                        old = _previous_version(target, keep or in_place, in_place)
+                        done.append((target, old, in_place))   # a failed put is undone too
                         _put(tmp, target, in_place)
-                    except BaseException:
-                        if old:
-                            _remove(old)
-                        raise
-                    done.append((target, old))
-        except BaseException:
-            _roll_back(done)
-            raise
-        finally:
-            self.abort()
-        for _, old in done:
-            if old:
-                _remove(old)
-        self.written += [target for target, _ in done]
+            except BaseException:
+                _roll_back(done)
+                raise
+            finally:
+                self.abort()
+                for _, old, _ in done:
+                    if old:
+                        _remove(old)
+        self.written += [target for target, _, _ in done]
         return self.written
 
     def abort(self) -> None:
@@ -360,22 +359,45 @@ def _temporary(base: str, folder: str | None) -> tuple[int, str]:
     return tempfile.mkstemp(prefix=f".{stem}.", suffix=".part", dir=folder)
 
 
-def _previous_version(target: str, keep: bool) -> str | None:
+def _previous_version(target: str, keep: bool, in_place: bool = False) -> str | None:
     """What a failed commit puts back at ``target``: None if there is no file there (the
     new one is removed), ``""`` if it is not kept (left as written), else the path of a
-    second name for it (a hard link, or a copy where the file system has no links)."""
+    second name for it (a hard link, or a copy where the file system has no links; a
+    copy in the system's temporary folder for a file written in place, whose folder is
+    read-only)."""
     if not os.path.lexists(target):
         return None
     if not keep:
         return ""
-    fd, old = _temporary(os.path.basename(target) + ".old", os.path.dirname(target))
+    folder = None if in_place else os.path.dirname(target)
+    fd, old = _temporary(os.path.basename(target) + ".old", folder)
     os.close(fd)
+    if in_place:
+        shutil.copyfile(target, old)
+        return old
     os.remove(old)                    # a fresh random name, now free for the link
     try:
         os.link(target, old)
     except OSError:
         shutil.copy2(target, old)
     return old
+
+
+@contextlib.contextmanager
+def _signals_held() -> Iterator[None]:
+    """Hold SIGINT, SIGTERM and SIGHUP (delivered when the block ends)."""
+    import signal
+
+    sigs = {signal.SIGINT, signal.SIGTERM, signal.SIGHUP}
+    try:
+        before = signal.pthread_sigmask(signal.SIG_BLOCK, sigs)
+    except (AttributeError, OSError, ValueError):      # no POSIX signal masks here
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, before)
 
 
 def _put(tmp: str, target: str, in_place: bool) -> None:
@@ -388,12 +410,14 @@ def _put(tmp: str, target: str, in_place: bool) -> None:
         os.replace(tmp, target)
 
 
-def _roll_back(done: list[tuple[str, str | None]]) -> None:
+def _roll_back(done: list[tuple[str, str | None, bool]]) -> None:
     """Put back the previous version of every target already replaced (remove a new one)."""
-    for target, old in reversed(done):
+    for target, old, in_place in reversed(done):
         with contextlib.suppress(OSError):
             if old is None:
                 os.remove(target)
+            elif old and in_place:
+                _copy_into(old, target)
             elif old:
                 os.replace(old, target)
 

@@ -57,7 +57,7 @@ def methods_for(kind: Any) -> list[str]:
         Names accepted by :func:`critical_stiffness` for that kind.
     """
     kind = getattr(kind, "kind", kind)
-    if kind not in ("hve", "peb"):
+    if not isinstance(kind, str) or kind not in ("hve", "peb"):
         raise AnalysisError(f"kind = {kind!r}: allowed: 'hve', 'peb' or a loop")
     other = {c.key for c in TABLE if c.kind != kind}
     return [m for m in METHODS if m not in other]
@@ -72,6 +72,9 @@ def order_estimate(loop: HapticLoop | TeleoperationLoop, delay_samples: float) -
 
 
 def _resolve(method: str) -> Callable[..., CriticalStiffnessResult]:
+    if not isinstance(method, str):
+        raise ArgumentTypeError(f"method = {method!r:.40}: must be a string; allowed: "
+                                f"{', '.join(METHODS)}")
     if method not in METHODS:
         raise AnalysisError(f"method = {method!r}: unknown; allowed: {', '.join(METHODS)}")
     return METHODS[method]
@@ -163,7 +166,7 @@ def boundary(loop: HapticLoop | TeleoperationLoop, periods: Sequence[float] | np
     require_loop(loop)
     T = _periods(periods)
     rows = _delay_rows(delays, delays_s)
-    if axis not in ("period", "rate"):
+    if not isinstance(axis, str) or axis not in ("period", "rate"):
         raise AnalysisError(f"axis = {axis!r}: allowed: 'period', 'rate'")
     limits = options.pop("max_memory", None), options.pop("max_seconds", None)
     _check_options(method, _resolve(method), options)
@@ -191,10 +194,9 @@ def boundary(loop: HapticLoop | TeleoperationLoop, periods: Sequence[float] | np
 
 
 def _periods(periods: Any) -> np.ndarray:
-    try:
-        T = np.atleast_1d(np.asarray(periods, dtype=float)).ravel()
-    except (TypeError, ValueError):
-        raise AnalysisError(f"periods = {periods!r}: must be numbers (s)") from None
+    if isinstance(periods, bool):
+        raise ArgumentTypeError(f"periods = {periods!r}: must be numbers (s)")
+    T = check_reals("periods", periods)       # not a string, a complex number, ...
     if T.size == 0:
         raise AnalysisError("periods: the range is empty; give at least one period")
     for t in T:   # every period, by the models' own rule (not only the first, which builds the loop)

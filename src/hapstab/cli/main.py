@@ -193,6 +193,8 @@ def _fail(argv: list[str], msg: str) -> None:
     """A user error: one line on stderr, exit code 2; with ``--json`` also a JSON object
     ``{"error": ..., "exit_code": 2}`` on stdout, so that a tool reading it sees why."""
     line = " ".join(str(msg).split())
+    if len(line) > 600:        # a value of thousands of digits: one readable line still
+        line = f"{line[:400]} ... {line[-150:]}"
     click.echo("hapstab: error: " + line, err=True)
     if "--json" in argv:
         with contextlib.suppress(OSError):

@@ -50,8 +50,10 @@ class Number(click.ParamType):
 
 
 #: Units a quantity may carry (case-insensitive), to the SI unit.
-UNITS = {"s": {"": 1.0, "s": 1.0, "ms": 1e-3, "us": 1e-6, "µs": 1e-6, "μs": 1e-6},
-         "Hz": {"": 1.0, "hz": 1.0, "khz": 1e3, "mhz": 1e6}}
+#: Case matters where it changes the meaning (mHz is not MHz, Ms is not ms): only these
+#: spellings are read.
+UNITS = {"s": {"": 1.0, "s": 1.0, "ms": 1e-3, "us": 1e-6, "µs": 1e-6},
+         "Hz": {"": 1.0, "Hz": 1.0, "hz": 1.0, "kHz": 1e3, "khz": 1e3, "KHz": 1e3, "MHz": 1e6}}
 _QUANTITY = re.compile(r"^\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*([^\d\s]*)\s*$")
 
 
@@ -73,7 +75,7 @@ def parse_quantity(text: Any, unit: str) -> float:
     if not m:
         raise ValueError(f"{text!r} is not a number (with a unit: "
                          f"{', '.join(u for u in UNITS[unit] if u)})")
-    scale = UNITS[unit].get(m.group(2).lower().replace("μ", "µ"))
+    scale = UNITS[unit].get(m.group(2).replace("μ", "µ"))
     if scale is None:
         raise ValueError(f"{text!r}: unknown unit {m.group(2)!r}; allowed: "
                          f"{', '.join(u for u in UNITS[unit] if u)} (or none: {unit})")
@@ -400,6 +402,8 @@ def parse_range(spec: str, name: str, unit: str, *, count: bool = True,
         nums = [parse_quantity(x, unit) if unit in UNITS else _plain(x) for x in texts]
     except ValueError as e:
         raise HapstabError(f"{name} = {spec!r}: {e}; {allowed}") from None
+    if not all(math.isfinite(v) for v in nums):
+        raise HapstabError(f"{name} = {spec!r}: every value must be finite; {allowed}")
     if parts is not None:
         n = _count(spec, name, parts[2] if len(parts) == 3 else str(RANGE_COUNT), allowed)
         lo, hi = nums

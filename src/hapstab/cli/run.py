@@ -24,7 +24,7 @@ import click
 from hapstab.cli.options import ARGV, console, progress, provenance
 from hapstab.cli.study import BASE, Study, StudyError, load_study, loop_commands, study_defaults
 from hapstab.errors import HapstabError
-from hapstab.outputs import OutputError, Outputs
+from hapstab.outputs import OutputError, Outputs, _signals_held
 from hapstab.results import dumps
 
 #: What each analysis writes besides its JSON (the command's own --csv / --plot).
@@ -46,7 +46,8 @@ def run_cmd(study_path: str, out_dir: str | None, only: tuple[str, ...], as_json
     root = click.get_current_context().find_root().command
     assert isinstance(root, click.Group)
     plan = _plan(study, root, only)
-    out_dir = out_dir or os.path.join("out", os.path.splitext(os.path.basename(study.path))[0])
+    if out_dir is None:
+        out_dir = os.path.join("out", os.path.splitext(os.path.basename(study.path))[0])
     stage = _stage_folder(out_dir)
     try:
         with progress(len(plan), f"study {os.path.basename(study.path)}", as_json) as tick:
@@ -57,7 +58,8 @@ def run_cmd(study_path: str, out_dir: str | None, only: tuple[str, ...], as_json
                     tick(1)
         written = _commit(study, stage, out_dir, results)
     finally:
-        shutil.rmtree(stage, ignore_errors=True)
+        with _signals_held():               # a second Ctrl-C must not leave it behind
+            shutil.rmtree(stage, ignore_errors=True)
     manifest = _manifest(study, results, written)
     if as_json:
         click.echo(dumps({**manifest, **provenance()}))
@@ -87,14 +89,13 @@ def _plan(study: Study, root: click.Group, only: tuple[str, ...]
 
 
 def _stage_folder(out_dir: str) -> str:
-    """The results folder (created now, so that a name it cannot have fails before any
-    work) and a staging folder beside it."""
+    """The results folder (created now, so that a folder it cannot be fails before any
+    work) and a hidden staging folder inside it (its parent may not be writable)."""
     if not out_dir.strip() or "\0" in out_dir:
-        raise OutputError(f"--out = {out_dir!r:.80}: must be a folder path")
+        raise OutputError(f"--out = {out_dir!r:.80}: must be a folder path (it is empty)")
     try:
         os.makedirs(out_dir, exist_ok=True)
-        parent = os.path.dirname(os.path.abspath(out_dir))
-        return tempfile.mkdtemp(prefix=".hapstab-run.", dir=parent)
+        return tempfile.mkdtemp(prefix=".hapstab-run.", dir=out_dir)
     except OSError as e:
         raise OutputError(f"--out = {out_dir!r:.80}: cannot create the folder "
                           f"({e.strerror or e})") from None
@@ -150,7 +151,7 @@ def _commit(study: Study, stage: str, out_dir: str, results: list[dict[str, Any]
                         out.open(os.path.join(out_dir, rel), "--out", "wb") as dst:
                     shutil.copyfileobj(src, dst)
         with out.open(os.path.join(out_dir, "study.toml"), "--out") as fh:
-            fh.write(study.text)
+            fh.write(study.text)           # the file's own bytes (UTF-8, checked on reading)
         names = [rel for r in results for rel in r["files"]] + ["study.toml"]
         with out.open(os.path.join(out_dir, "manifest.json"), "--out") as fh:
             json.dump(json.loads(dumps({**_manifest(study, results, names), **provenance()})),

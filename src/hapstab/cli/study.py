@@ -128,11 +128,14 @@ def load_study(path: Any, name: str = "--study") -> Study:
             raw = fh.read()
     except OSError as e:
         raise StudyError(f"{name} = {p!r}: cannot read it ({e.strerror or e})") from None
-    text = raw.decode("utf-8", errors="replace")
     try:
+        text = raw.decode("utf-8")       # TOML is UTF-8; the file is kept as it is
         data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as e:
-        raise StudyError(f"{name} = {p!r}: not a valid TOML file ({e})") from None
+    except UnicodeDecodeError as e:
+        raise StudyError(f"{name} = {p!r}: not UTF-8 at byte {e.start} (a TOML file is UTF-8)"
+                         ) from None
+    except (tomllib.TOMLDecodeError, ValueError) as e:   # ValueError: an integer of 4300+ digits
+        raise StudyError(f"{name} = {p!r}: not a valid TOML file ({str(e)[:200]})") from None
     known = {"kind", "title", "loop", "variant", "run"}
     for key in data:
         if key not in known:
@@ -142,6 +145,8 @@ def load_study(path: Any, name: str = "--study") -> Study:
     if kind not in ("hve", "peb"):
         raise StudyError(f"{p}{_at(text, 'kind')}: kind = {kind!r}: allowed: \"hve\", \"peb\"")
     title = data.get("title", "")
+    if not isinstance(title, str):
+        raise StudyError(f"{p}{_at(text, 'title')}: title = {title!r:.40}: must be a string")
     loop = _table(p, text, data, "loop")
     run = _table(p, text, data, "run")
     for name, opts in run.items():
@@ -171,10 +176,12 @@ def _variants(p: str, text: str, data: dict[str, Any]) -> dict[str, dict[str, An
                          "with a name and the loop options it changes")
     for v in items:
         name = v.get("name")
-        if not isinstance(name, str) or not _NAME.match(name) or name in out:
+        if not isinstance(name, str) or not _NAME.match(name) or name in out \
+                or name in ("manifest.json", "study.toml"):
             raise StudyError(f"{p}{_at(text, 'name', None, str(name))}: variant name = {name!r}: "
                              "each [[variant]] needs a unique name of letters, digits, '.', "
-                             f"'_' or '-' (not {BASE!r}, the [loop] table itself)")
+                             f"'_' or '-' (not {BASE!r}, the [loop] table itself, nor the "
+                             "run's manifest.json or study.toml)")
         out[name] = _flat({k: x for k, x in v.items() if k != "name"})
     return out
 
@@ -244,10 +251,12 @@ def study_defaults(study: Study, cmd: click.Command, command: str, variant: str,
     layers = [("loop", study.loop), ("variant", study.variants[variant]),
               (f"run.{command}", _flat(study.run.get(command, {})))]
     for table, opts in layers:
+        seen: dict[str, str] = {}
         for key, value in opts.items():
             name = names.get(key)
             if name is None or key in OUTPUT_KEYS:
                 raise _unknown(study, table, key, command, names)
+            _once(study, table, key, name, seen)
             if name in VARIED.get(command, ()):
                 if table.startswith("run."):
                     raise StudyError(f"{study.where(key, table)}{key.replace('_', '-')}: "
@@ -258,6 +267,17 @@ def study_defaults(study: Study, cmd: click.Command, command: str, variant: str,
     for name in _given(params, argv).values():
         _drop_alternative(out, name)
     return out
+
+
+def _once(study: Study, table: str, key: str, name: str, seen: dict[str, str]) -> None:
+    """Refuse one option set twice in one table (``m`` and ``mass``; ``period`` and
+    ``rate``), as the command line does."""
+    for a, b in ((name, name), *ALTERNATIVES, *[(y, x) for x, y in ALTERNATIVES]):
+        if name == a and b in seen:
+            raise StudyError(f"{study.where(key, table)}{key.replace('_', '-')} and "
+                             f"{seen[b].replace('_', '-')} in [{table}]: give one of them, not "
+                             "both")
+    seen[name] = key
 
 
 def _option_names(params: dict[str, click.Option]) -> dict[str, str]:
@@ -361,17 +381,20 @@ def loop_commands(group: click.Group) -> list[str]:
 
 def _take(argv: list[str], opt: str) -> tuple[list[str], str | None]:
     """Remove ``opt VALUE`` / ``opt=VALUE`` from ``argv``: (the rest, VALUE or None)."""
-    out, value, i = [], None, 0
+    out, values, i = [], [], 0
     while i < len(argv):
         a = argv[i]
         if a == opt:
             if i + 1 >= len(argv):
                 raise StudyError(f"{opt}: needs a value")
-            value, i = argv[i + 1], i + 2
+            values.append(argv[i + 1])
+            i += 2
             continue
         if a.startswith(opt + "="):
-            value = a[len(opt) + 1:]
+            values.append(a[len(opt) + 1:])
         else:
             out.append(a)
         i += 1
-    return out, value
+    if len(values) > 1:
+        raise StudyError(f"{opt}: given {len(values)} times; give it once")
+    return out, (values[0] if values else None)

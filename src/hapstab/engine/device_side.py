@@ -96,7 +96,7 @@ class DeviceSide:
         AnalysisError
             Any other ``scaling``.
         """
-        if scaling not in ("auto", None, "none"):
+        if not (scaling is None or isinstance(scaling, str)) or scaling not in ("auto", None, "none"):
             raise AnalysisError(f"scaling = {scaling!r}: allowed: 'auto' or None")
         k = self.ratios
         if scaling == "auto" and k is not None and min(k) > 0 and len(set(k)) > 1:

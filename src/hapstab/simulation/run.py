@@ -49,7 +49,7 @@ from hapstab import budget
 from hapstab.engine.structure import structure_of
 from hapstab.engine.system import build
 from hapstab.engine.zoh import port_matrices
-from hapstab.errors import ModelError, check_real
+from hapstab.errors import ModelError, check_real, check_reals
 from hapstab.models.loops import HapticLoop, TeleoperationLoop, headline, require_loop
 from hapstab.simulation.behaviour import assess_nonlinear
 from hapstab.simulation.growth import BoundednessVerdict, assess, combine
@@ -219,7 +219,7 @@ def _nonlinear_options(haptic: bool, environment_force: Any, wall: Any, wall_pul
                          "TeleoperationLoop's environment is its impedance (--environment)")
     if not isinstance(wall_pulls, (bool, np.bool_)):
         raise ModelError(f"wall_pulls = {wall_pulls!r}: must be True or False")
-    if quantizer not in QUANTIZERS:
+    if not isinstance(quantizer, str) or quantizer not in QUANTIZERS:
         raise ModelError(f"quantizer = {quantizer!r}: allowed: {', '.join(QUANTIZERS)}")
     nl: dict[str, Any] = {}
     if wall is not None:
@@ -281,7 +281,8 @@ def _rest(rest_position: Any, initial: np.ndarray, p: int) -> np.ndarray:
     """Rest position of each port's termination spring (default: where it starts)."""
     if rest_position is None:
         return np.array(initial, float)
-    a = np.asarray(rest_position, float).ravel() if np.size(rest_position) in (1, p) else None
+    v = check_reals("rest_position", rest_position)
+    a = v if v.size in (1, p) else None
     if a is None or not np.all(np.isfinite(a)):
         raise ModelError(f"rest_position = {rest_position!r}: must be one finite number or one "
                          f"per port ({p})")

@@ -16,7 +16,7 @@ import numpy as np
 from hapstab import budget
 from hapstab.engine.structure import structure_of
 from hapstab.engine.system import SampledSystem, build
-from hapstab.errors import AnalysisError, check_real
+from hapstab.errors import AnalysisError, ArgumentTypeError, check_real
 from hapstab.models.loops import HapticLoop, TeleoperationLoop
 from hapstab.results import CriticalStiffnessResult
 from hapstab.simulation.growth import SNAPSHOTS_PER_STATE, BoundednessVerdict, assess
@@ -128,6 +128,8 @@ def critical_stiffness_simulation(loop: HapticLoop | TeleoperationLoop, *,
     window = max(window, SNAPSHOTS_PER_STATE * sysm.order)
     n_samples = max(n_samples, 2 * window)
     T, Ks = loop.period, _stiffness_scale(loop)
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise ArgumentTypeError(f"seed = {seed!r:.40}: must be a whole number >= 0")
     run = _Runs(sysm, np.random.default_rng(seed).standard_normal(sysm.order), n_samples,
                 window, T)
     lo, v_lo, hi, v_hi = _bracket(run, Ks, ratio)
@@ -168,8 +170,8 @@ def _check_options(sysm: SampledSystem, n_samples: Any, window: Any, rtol: float
     if not (isinstance(window, (int, np.integer)) and 16 <= window <= n_samples):
         raise AnalysisError(f"window = {window!r}: must be a whole number in [16, n_samples]")
     rtol, ratio = check_real("rtol", rtol), check_real("ratio", ratio)
-    if not 0 < rtol < 0.1:
-        raise AnalysisError(f"rtol = {rtol}: must be in (0, 0.1)")
+    if not 1e-12 <= rtol < 0.1:   # below ~1e-12 the bracket's ends are neighbouring doubles
+        raise AnalysisError(f"rtol = {rtol}: must be in [1e-12, 0.1)")
     if not ratio > 1:
         raise AnalysisError(f"ratio = {ratio}: must be > 1")
 
