@@ -211,3 +211,15 @@ def test_run_stages_inside_its_output_folder_and_refuses_an_empty_one(study, tmp
     assert [p.name for p in (tmp_path / "deep").iterdir()] == ["results"]
     r = run("run", str(study), "--out", "")
     assert r.exit_code == 2 and "--out = '': must be a folder path" in r.stderr
+
+
+def test_regions_and_the_best_damping_report_progress_too():
+    from hapstab import progress
+
+    seen = []
+    with progress.listening(lambda what, total: (seen.append((what, total)),
+                                                 lambda k: seen.append(k))[1]):
+        h.stability_region(h.paper_hve(), (0, 300), (0, 1), resolution=8)
+        h.best_damping(h.paper_hve(), resolution=8)
+    assert seen[:5] == [("region: 8 x 8", 4), 1, 1, 1, 1]
+    assert seen[5][0] == "best damping" and sum(k for k in seen[6:] if isinstance(k, int)) > 9

@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from hapstab import budget
+from hapstab import budget, progress
 from hapstab.analysis.regions import Loop, check_equal_gains, kmax_over_B, with_gains
 from hapstab.errors import AnalysisError, check_real
 from hapstab.results import Result, jsonable, write_csv
@@ -141,7 +141,6 @@ def best_damping(loop: Loop, B_max: float | None = None, resolution: int = 64,
     ModelError
         ``B_max <= 0`` or a non-finite bound.
     """
-    from scipy.optimize import minimize_scalar
 
     b = check_equal_gains(loop)
 
@@ -177,17 +176,8 @@ def best_damping(loop: Loop, B_max: float | None = None, resolution: int = 64,
                                           order_estimate(loop, max(loop_delays(loop)))),
                  max_memory, max_seconds)
     Bs = np.unique(np.concatenate([np.linspace(B_min, B_max, int(resolution)), [0.0]]))
-    Ks = kmax(Bs)
-    i = int(np.argmax(Ks))
-    lo, hi = Bs[max(i - 1, 0)], Bs[min(i + 1, Bs.size - 1)]
-    best_B, best_K = float(Bs[i]), float(Ks[i])
-    if hi > lo and math.isfinite(best_K):
-        res = minimize_scalar(lambda x: -kmax(np.array([x]))[0], bounds=(lo, hi), method="bounded",
-                              # B* to ~10 digits of the range (far below the grid step it
-                              # refines): the bounded search needs only a few dozen K_max's
-                              options={"xatol": 1e-10 * (B_max - B_min)})
-        if -res.fun > best_K:
-            best_B, best_K = float(res.x), float(-res.fun)
+    with progress.steps(Bs.size + 60, "best damping") as advance:
+        Ks, best_B, best_K = _search(kmax, Bs, B_max - B_min, advance)
     K0 = float(Ks[int(np.flatnonzero(Bs == 0.0)[0])])
     if best_K == 0.0:
         best_B = 0.0
@@ -201,6 +191,31 @@ def best_damping(loop: Loop, B_max: float | None = None, resolution: int = 64,
                    "terminations it damps at the critical frequency; it is not passive)")
     holds, bare, passive, caveat = _caveats(loop, best_B, best_K)
     return BestDampingResult(best_B, best_K, K0, reason + caveat, Bs, Ks, holds, bare, passive)
+
+
+def _search(kmax: Any, Bs: np.ndarray, span: float, advance: Any
+            ) -> tuple[np.ndarray, float, float]:
+    """K_max on the grid ``Bs``, then a bounded search around its best point:
+    (the grid's K_max, B*, K*)."""
+    from scipy.optimize import minimize_scalar
+
+    Ks = kmax(Bs)
+    advance(Bs.size)
+    i = int(np.argmax(Ks))
+    lo, hi = Bs[max(i - 1, 0)], Bs[min(i + 1, Bs.size - 1)]
+    best_B, best_K = float(Bs[i]), float(Ks[i])
+    if hi > lo and math.isfinite(best_K):
+        def minus_kmax(x: float) -> float:
+            advance(1)
+            return -float(kmax(np.array([x]))[0])
+
+        res = minimize_scalar(minus_kmax, bounds=(lo, hi), method="bounded",
+                              # B* to ~10 digits of the range (far below the grid step it
+                              # refines): the bounded search needs a few dozen K_max's
+                              options={"xatol": 1e-10 * span})
+        if -res.fun > best_K:
+            best_B, best_K = float(res.x), float(-res.fun)
+    return Ks, best_B, best_K
 
 
 def loop_delays(loop: Loop) -> list[float]:
