@@ -134,7 +134,7 @@ def test_help_exits_zero():
 
 def test_approximation_only_with_circle():
     r = run("kmax", "hve", "--method", "exact", "--approximation", "forward")
-    assert r.exit_code == 2 and "applies to --method circle only" in r.stderr
+    assert r.exit_code == 2 and "applies to --method circle or llewellyn only" in r.stderr
     assert "Traceback" not in r.stderr
 
 

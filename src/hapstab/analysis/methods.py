@@ -17,6 +17,7 @@ from hapstab.analysis.circle import critical_stiffness_circle
 from hapstab.analysis.closed_forms import CLOSED_FORMS, TABLE
 from hapstab.analysis.exact.core import exact_critical_stiffness, exact_kmax_batch
 from hapstab.analysis.passivity import critical_stiffness_passivity
+from hapstab.analysis.twoport import critical_stiffness_llewellyn
 from hapstab.errors import (
     MAX_DELAY_SAMPLES,
     AnalysisError,
@@ -38,8 +39,11 @@ METHODS: dict[str, Callable[..., CriticalStiffnessResult]] = {
     **CLOSED_FORMS,
     "circle": critical_stiffness_circle,
     "passivity": critical_stiffness_passivity,
+    "llewellyn": critical_stiffness_llewellyn,
     "simulation": critical_stiffness_simulation,
 }
+#: Methods for one loop kind only (besides the closed forms derived for one).
+ONLY = {"llewellyn": "peb"}
 
 def methods_for(kind: Any) -> list[str]:
     """Method names that apply to loops of ``kind``: every method but the closed
@@ -59,7 +63,7 @@ def methods_for(kind: Any) -> list[str]:
     kind = getattr(kind, "kind", kind)
     if not isinstance(kind, str) or kind not in ("hve", "peb"):
         raise AnalysisError(f"kind = {kind!r}: allowed: 'hve', 'peb' or a loop")
-    other = {c.key for c in TABLE if c.kind != kind}
+    other = {c.key for c in TABLE if c.kind != kind} | {m for m, k in ONLY.items() if k != kind}
     return [m for m in METHODS if m not in other]
 
 

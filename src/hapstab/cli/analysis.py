@@ -50,7 +50,8 @@ def _kmax_command(kind: str) -> None:
     @click.option("--method", default="exact", show_default=True,
                   help="exact | " + " | ".join(m for m in methods_for(kind) if m != "exact"))
     @click.option("--approximation", default=None,
-                  help="For --method circle: forward | backward | tustin.")
+                  help="For --method circle: forward | backward | tustin; for llewellyn "
+                       "(peb): forward | backward.")
     def _cmd(method: str, approximation: str | None, as_json: bool, **kw: Any) -> None:
         from hapstab.analysis.methods import critical_stiffness, methods_for
 
@@ -58,9 +59,9 @@ def _kmax_command(kind: str) -> None:
         if method not in allowed:
             raise HapstabError(f"--method = {method!r}: unknown for {kind}; allowed: {', '.join(allowed)}")
         loop = make(kw, stiffness=1.0)
-        if approximation and method != "circle":
-            raise HapstabError(f"--approximation = {approximation!r}: applies to --method circle only "
-                               f"(got --method {method})")
+        if approximation and method not in ("circle", "llewellyn"):
+            raise HapstabError(f"--approximation = {approximation!r}: applies to --method circle "
+                               f"or llewellyn only (got --method {method})")
         opts = {"approximation": approximation} if approximation else {}
         res = critical_stiffness(loop, method=method, **opts)
         rows = [("critical stiffness", f"{fmt(res.critical_stiffness)} N/m"),

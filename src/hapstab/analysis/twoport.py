@@ -1,0 +1,213 @@
+"""Absolute stability of the sampled-data teleoperator as a two-port (Llewellyn).
+
+The paper's two-port is the device side of the loop, ``P(z) = G^{-1}(z) = diag(b) +
+Hc(z) X(z)`` (eq. 30 generalised; :func:`hapstab.analysis.circle.loop_inverse`), between
+the port velocities (through the approximation X of the hold) and the forces; the
+terminations (operator with the master's mass, environment with the slave's) close it.
+The circle criterion asks P to be passive. Llewellyn's criterion asks less: that the
+two-port be stable with *every* pair of passive terminations,
+
+* Re p11 >= 0 and Re p22 >= 0,
+* eta = (2 Re p11 Re p22 - Re(p12 p21)) / |p12 p21| >= 1,
+
+on the whole unit circle, with p_ij analytic outside it and any pole on it simple with
+a residue k such that k / z0 is real and >= 0 for p11 and p22 (Adams & Hannaford's form).
+For spring-damper controllers and the forward or backward approximation P's poles are
+z = 0 (delays, 1/z) and z = 1, simple, with residue T Hc(1) = T [[K_m, -K_m], [-K_s, K_s]]:
+the conditions on it hold for every K >= 0.
+
+Where p12 = p21 (equal controllers, or proportional ones B_m/K_m = B_s/K_s after the port
+scaling) Llewellyn's inequality is the passivity one: the paper's PEB gets the circle
+criterion's K_max exactly. It allows more where the channels differ.
+
+Numerics: near w = 0, |p12 p21| ~ 1/w^2 and eta -> 1, so ``eta - 1`` from eta itself is
+rounding. hapstab evaluates the equivalent ``Re p11 Re p22 >= (Re sqrt(p12) sqrt(p21))^2``
+(since |w| + Re w = 2 (Re sqrt w)^2 for w = p12 p21), which has no cancellation, and
+reports the margin ``min(Re p11, Re p22, sqrt(Re p11 Re p22) - |Re sqrt(p12 p21)|)`` in
+N*s/m: >= 0 exactly where the conditions hold (plus a rounding slack, :data:`SLACK`).
+
+References
+----------
+F. B. Llewellyn, "Some fundamental properties of transmission systems", Proc. IRE 40,
+1952; R. J. Adams and B. Hannaford, "Stable haptic interaction with virtual
+environments", IEEE Trans. Robot. Autom. 15(3), 1999; K. Hashtrudi-Zaad and S. E.
+Salcudean, "Analysis of control architectures for teleoperation systems with impedance/
+admittance master and slave manipulators", Int. J. Robotics Research 20(6), 2001; the
+paper, eq. (30) and Theorem 2.1.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from hapstab.analysis.circle import _approx, _stiffness_side, _x
+from hapstab.analysis.sweeps import refine_minimum, theta_grid
+from hapstab.engine.device_side import DeviceSide
+from hapstab.errors import AnalysisError
+from hapstab.models.controllers import spring_damper
+from hapstab.models.loops import TeleoperationLoop, require_loop, whole_delay
+from hapstab.results import CriticalStiffnessResult
+
+__all__ = ["llewellyn_margin", "critical_stiffness_llewellyn"]
+
+#: The approximations of X for which P's only unit-circle pole is z = 1 (Tustin adds one
+#: at z = -1, whose residue conditions are not implemented).
+APPROXIMATIONS = ("forward", "backward")
+
+
+def _side(loop: Any, approximation: Any) -> tuple[DeviceSide, str]:
+    require_loop(loop)
+    if loop.kind != "peb":
+        raise AnalysisError("method = 'llewellyn': a two-port criterion, for a "
+                            "TeleoperationLoop (peb); for the HVE use 'circle' or 'passivity'")
+    a = _approx(approximation)
+    if a not in APPROXIMATIONS:
+        raise AnalysisError(f"approximation = {approximation!r}: Llewellyn's test is "
+                            f"implemented for {', '.join(APPROXIMATIONS)}")
+    return _stiffness_side(loop), a
+
+
+def _parts(side: DeviceSide, a: str, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """P = A + K C at each angle: (A, C), each (N, 2, 2)."""
+    X = _x(a, theta, side.period_s)[:, None, None]
+    A = np.diag(side.damping)[None] + X * side.controller_matrix(theta, "B")
+    return A, X * side.controller_matrix(theta, "K")
+
+
+#: Rounding slack of the margin, relative to the largest |p_ij| at the angle: the products
+#: carry ~1e-16 of |P| (near w = 0, |P| ~ K T / w is large); 1e-13 |P| is a thousand times
+#: that rounding and, even at the grid's first angle, ~1e-6 of a margin's scale K T (a
+#: larger slack biased K_max upwards, by 2e-7 at 1e-10).
+SLACK = 1e-13
+
+
+def _margin_of(P: np.ndarray) -> np.ndarray:
+    """Llewellyn's margin (N*s/m) of P (..., 2, 2) plus its rounding slack."""
+    r11, r22 = P[..., 0, 0].real, P[..., 1, 1].real
+    q = np.abs((np.sqrt(P[..., 0, 1]) * np.sqrt(P[..., 1, 0])).real)
+    cross = np.sqrt(np.maximum(r11, 0) * np.maximum(r22, 0)) - q
+    slack = SLACK * np.abs(P).max(axis=(-2, -1))
+    return np.minimum(np.minimum(r11, r22), cross) + slack
+
+
+def _margin(A: np.ndarray, C: np.ndarray, K: float) -> np.ndarray:
+    """Llewellyn's margin at each angle for stiffness K (see the module notes)."""
+    return _margin_of(A + K * C)
+
+
+def llewellyn_margin(loop: TeleoperationLoop, approximation: str = "forward",
+                     theta: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Llewellyn's margin of the two-port at the loop's own K, on the unit circle.
+
+    Parameters
+    ----------
+    loop : TeleoperationLoop
+        Spring-damper controllers, whole-sample delays.
+    approximation : {"forward", "backward"}
+        X(z) as in the circle criterion.
+    theta : array, optional
+        Angles in (0, pi] (default: a grid dense enough for the delay).
+
+    Returns
+    -------
+    (theta, margin) : arrays
+        ``margin >= 0`` where Re p11 >= 0, Re p22 >= 0 and eta >= 1 (N*s/m; it includes
+        the rounding slack :data:`SLACK`).
+    """
+    side, a = _side(loop, approximation)
+    th = theta_grid(side.oscillations) if theta is None else np.asarray(theta, float)
+    A, C = _parts(side, a, th)
+    K = spring_damper(loop.master_controller, "master_controller").stiffness   # the loop's K
+    return th, _margin(A, C, K)
+
+
+def critical_stiffness_llewellyn(loop: TeleoperationLoop, approximation: str = "forward"
+                                 ) -> CriticalStiffnessResult:
+    """Largest K for which the two-port is absolutely stable (Llewellyn) for every K in
+    (0, K]: a geometric scan of K, the first K whose margin is negative on the unit circle
+    (minimum over angles refined by golden section), then bisection to 1e-9 relative.
+
+    Parameters
+    ----------
+    loop : TeleoperationLoop
+        Spring-damper controllers (K is the master's; K_s/K_m kept), whole-sample delays.
+    approximation : {"forward", "backward"}
+        X(z) as in the circle criterion.
+
+    Returns
+    -------
+    CriticalStiffnessResult
+        ``method="llewellyn"``; details: the worst angle and eta there.
+    """
+    side, a = _side(loop, approximation)
+    T, n = side.period_s, whole_delay(loop, "Llewellyn's test")
+    th = theta_grid(side.oscillations)
+    A, C = _parts(side, a, th)
+
+    def worst(K: float) -> tuple[float, float]:
+        def f(t: np.ndarray) -> np.ndarray:
+            At, Ct = _parts(side, a, np.atleast_1d(t))
+            return _margin(At, Ct, K)
+        return refine_minimum(f, th, _margin(A, C, K))
+
+    tol = 0.0        # (the margin carries its own rounding slack, SLACK)
+    if worst(0.0)[1] < -tol:
+        return _result(0.0, a, T, n, worst(0.0)[0],
+                       "not absolutely stable at K = 0: the virtual damping takes more than "
+                       "the device damping gives")
+    K_hi = _first_failure(A, C, tol)
+    if K_hi is None:
+        return _result(math.inf, a, T, n, None, "absolutely stable for every K up to 1e12 N/m")
+    lo, hi = _below(K_hi), K_hi
+    while lo > 0 and worst(lo)[1] < -tol:   # the grid passed lo; the refined minimum must too
+        lo, hi = _below(lo), lo
+    # 1e-12 of the loop's stiffness scale b/T is zero (a margin exactly 0 at K = 0 ends
+    # there, up to the slack)
+    zero = 1e-12 * float(np.max(side.damping)) / T
+    while hi - lo > 1e-9 * hi and hi > zero:     # to 1e-9 relative: far below any design use
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if worst(mid)[1] >= -tol else (lo, mid)
+    if hi <= zero:
+        return _result(0.0, a, T, n, worst(hi)[0], "not absolutely stable for any K > 0")
+    th_w = worst(hi)[0]
+    return _result(lo, a, T, n, th_w, f"Llewellyn's conditions fail beyond K_max, first at "
+                                      f"w = {th_w / T:.6g} rad/s")
+
+
+#: Ratio of successive K of the scan: a failure window narrower than 1 % of K between two
+#: scan points on the angle grid would be missed (the conditions are smooth in K).
+SCAN_STEP = 1.01
+
+
+#: The scan's first K (N/m): below any device's K_max.
+SCAN_START = 1e-6
+
+
+def _below(K: float) -> float:
+    """The scan point before K (0 before the first)."""
+    return K / SCAN_STEP if K / SCAN_STEP >= SCAN_START else 0.0
+
+
+def _first_failure(A: np.ndarray, C: np.ndarray, tol: float) -> float | None:
+    """The first K of a geometric scan (1e-6 to 1e12 N/m) whose margin on the angle grid
+    is below ``-tol``; None if there is none."""
+    # SCAN_START to 1e12 N/m (beyond any device), SCAN_STEP apart
+    Ks = np.exp(np.arange(math.log(SCAN_START), math.log(1e12), math.log(SCAN_STEP)))
+    for chunk in np.array_split(Ks, max(1, Ks.size * A.shape[0] // 2_000_000)):
+        m = _margin_of(A[None] + chunk[:, None, None, None] * C[None]).min(axis=1)
+        bad = np.flatnonzero(m < -tol)
+        if bad.size:
+            return float(chunk[bad[0]])
+    return None
+
+
+def _result(K: float, a: str, T: float, n: int, theta: float | None,
+            why: str) -> CriticalStiffnessResult:
+    f_hz = theta / (2 * math.pi * T) if theta is not None else float("nan")
+    return CriticalStiffnessResult(
+        float(K), "llewellyn", ((0.0, float(K)),) if K > 0 else (),
+        f"Llewellyn's absolute stability of the two-port G^-1 (eq. 30), {a} approximation: "
+        f"{why}", T, n, f_hz, {"approximation": a})
