@@ -28,6 +28,8 @@ RUNS = [
     ("boundary", ["boundary", "hve", "--period", "0.001,0.002", "-n", "0,2"]),
     ("boundary", ["boundary", "peb", "--rate", "500Hz,1kHz", "--delay-s", "2ms,5ms"]),
     ("passivity", ["passivity", "hve", "-K", "5"]),
+    ("twoport", ["twoport", "peb", "-K", "5", "-n", "2"]),
+    ("kmax", ["kmax", "peb", "--method", "llewellyn", "-n", "2"]),
     ("passivity", ["passivity", "peb", "-K", "5", "--method", "passivity"]),
     ("audit", ["audit", "hve", "--delay", "2"]),
     ("region", ["region", "hve", "--K", "0:100", "--B", "0:1", "--resolution", "8"]),

@@ -115,11 +115,12 @@ def test_llewellyn_is_a_bound_for_passive_terminations_in_a_seeded_campaign():
     assert checked >= 30 and not found, found[:3]
 
 
-def test_with_the_backward_approximation_llewellyn_is_not_a_bound():
+@pytest.mark.parametrize("approximation", ["backward", "tustin"])
+def test_with_other_approximations_llewellyn_is_not_a_bound(approximation):
     """As for the circle criterion, only the forward approximation bounds the exact loop:
-    the same campaign with backward finds loops unstable below its K_max (53 of 190 pairs
-    in a run of 60 loops; these 4 loops already show it)."""
-    _checked, found = _campaign(8, 4, 5, "backward")
+    the same campaign finds loops unstable below the K_max of backward (53 of 190 pairs in
+    a run of 60 loops) and Tustin (65 of 250); these 4 loops already show it."""
+    _checked, found = _campaign(8, 4, 5, approximation)
     assert found and all(h.critical_stiffness(lp).critical_stiffness < K for lp, K in found)
 
 
@@ -138,5 +139,28 @@ def test_the_cli_gives_llewellyn_for_peb_and_refuses_it_for_the_hve():
     assert r.exit_code == 2 and "unknown for hve" in r.stderr
     with pytest.raises(h.AnalysisError, match="a two-port criterion"):
         critical_stiffness_llewellyn(h.paper_hve())
-    with pytest.raises(h.AnalysisError, match="implemented for forward, backward"):
-        critical_stiffness_llewellyn(h.paper_peb(), "tustin")
+    with pytest.raises(h.AnalysisError, match="unknown; allowed: forward, backward, tustin"):
+        critical_stiffness_llewellyn(h.paper_peb(), "bilinear")
+
+
+def test_the_test_at_one_stiffness_agrees_with_k_max(tmp_path):
+    from hapstab.analysis.twoport import llewellyn_test
+
+    loop = h.paper_peb(1e-3, 4).replace(
+        master=h.Device(0.015, 0.5), slave=h.Device(0.015, 0.5),
+        master_controller=h.SpringDamper(1.0, 0.05), slave_controller=h.SpringDamper(1.0, 0.15))
+    K = critical_stiffness_llewellyn(loop).critical_stiffness
+    below, above = (llewellyn_test(loop.with_stiffness(K * f)) for f in (0.99, 1.01))
+    assert below.absolutely_stable and below.margin >= 0
+    assert not above.absolutely_stable and above.margin < 0
+    assert above.eta_min < 1 or min(above.margins) < 0
+    csv = tmp_path / "t.csv"
+    r = CliRunner().invoke(cli, ["twoport", "peb", "-K", f"{1.01 * K}", "-n", "4",
+                                 "--master-damping", "0.5", "--slave-damping", "0.5",
+                                 "--virtual-damping", "0.05", "--slave-virtual-damping", "0.15",
+                                 "--csv", str(csv), "--plot", str(tmp_path / "t.png"), "--json"])
+    assert r.exit_code == 0, r.stderr
+    d = json.loads(r.stdout)
+    assert d["verdict"] == "not absolutely stable" and d["margin"] == pytest.approx(above.margin)
+    assert csv.read_text().splitlines()[0] == "frequency_rad_s,margin_N_s_per_m,eta"
+    assert (tmp_path / "t.png").read_bytes()[:4] == b"\x89PNG"

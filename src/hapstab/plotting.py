@@ -408,3 +408,31 @@ def plot_region(res: Any, ax: Any = None) -> Any:
                                       else ""), fontsize=9)
     ax.legend(loc="best", fontsize=8)
     return ax
+
+
+def plot_twoport(res: Any, ax: Any = None) -> Any:
+    """Llewellyn's margin (N*s/m) and eta against frequency: absolutely stable where the
+    margin is >= 0 (eta >= 1) at every frequency."""
+    axs = _panels(ax, 2, (7, 5.5))
+    top, bottom = axs
+    f = res.frequency_rad_s / (2 * np.pi)
+    top.semilogx(f, res.margins, "-", lw=1.0, color="tab:blue", label="margin")
+    top.axhline(0.0, color="k", lw=0.8)
+    top.plot([res.worst_frequency_hz], [res.margin], "o", color="tab:red",
+             label=f"worst: {res.margin:.3g} N*s/m at {res.worst_frequency_hz:.3g} Hz")
+    top.set_ylabel("Llewellyn margin (N*s/m)")
+    top.set_title(f"{res.verdict}: K = {res.stiffness:g} N/m, T = {res.period * 1e3:g} ms, "
+                  f"{res.approximation} approximation", fontsize=9)
+    bottom.semilogx(f, res.eta, "-", lw=1.0, color="tab:green", label="eta")
+    bottom.axhline(1.0, color="k", lw=0.8, ls="--", label="eta = 1")
+    bottom.set_ylabel("eta")
+    bottom.set_xlabel("frequency (Hz)")
+    finite = res.eta[np.isfinite(res.eta)]
+    if finite.size:
+        # eta grows without bound where the coupling fades: show the part near 1
+        bottom.set_ylim(min(0.0, float(np.percentile(finite, 1))),
+                        min(max(2.0, float(np.percentile(finite, 50))), 10.0))
+    for a in axs:
+        a.grid(True, which="both", alpha=0.3)
+        a.legend(fontsize=8, loc="best")
+    return axs

@@ -12,7 +12,7 @@ two-port be stable with *every* pair of passive terminations,
 
 on the whole unit circle, with p_ij analytic outside it and any pole on it simple with
 a residue k such that k / z0 is real and >= 0 for p11 and p22 (Adams & Hannaford's form).
-For spring-damper controllers and the forward or backward approximation P's poles are
+For spring-damper controllers and the forward, backward or Tustin approximation, P's poles are
 z = 0 (delays, 1/z) and z = 1, simple, with residue T Hc(1) = T [[K_m, -K_m], [-K_s, K_s]]:
 the conditions on it hold for every K >= 0.
 
@@ -39,6 +39,7 @@ paper, eq. (30) and Theorem 2.1.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -49,13 +50,9 @@ from hapstab.engine.device_side import DeviceSide
 from hapstab.errors import AnalysisError
 from hapstab.models.controllers import spring_damper
 from hapstab.models.loops import TeleoperationLoop, require_loop, whole_delay
-from hapstab.results import CriticalStiffnessResult
+from hapstab.results import CriticalStiffnessResult, Result, jsonable, write_csv
 
-__all__ = ["llewellyn_margin", "critical_stiffness_llewellyn"]
-
-#: The approximations of X for which P's only unit-circle pole is z = 1 (Tustin adds one
-#: at z = -1, whose residue conditions are not implemented).
-APPROXIMATIONS = ("forward", "backward")
+__all__ = ["llewellyn_margin", "critical_stiffness_llewellyn", "llewellyn_test", "TwoPortResult"]
 
 
 def _side(loop: Any, approximation: Any) -> tuple[DeviceSide, str]:
@@ -63,11 +60,7 @@ def _side(loop: Any, approximation: Any) -> tuple[DeviceSide, str]:
     if loop.kind != "peb":
         raise AnalysisError("method = 'llewellyn': a two-port criterion, for a "
                             "TeleoperationLoop (peb); for the HVE use 'circle' or 'passivity'")
-    a = _approx(approximation)
-    if a not in APPROXIMATIONS:
-        raise AnalysisError(f"approximation = {approximation!r}: Llewellyn's test is "
-                            f"implemented for {', '.join(APPROXIMATIONS)}")
-    return _stiffness_side(loop), a
+    return _stiffness_side(loop), _approx(approximation)   # forward, backward or tustin
 
 
 def _parts(side: DeviceSide, a: str, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -106,7 +99,7 @@ def llewellyn_margin(loop: TeleoperationLoop, approximation: str = "forward",
     ----------
     loop : TeleoperationLoop
         Spring-damper controllers, whole-sample delays.
-    approximation : {"forward", "backward"}
+    approximation : {"forward", "backward", "tustin"}
         X(z) as in the circle criterion.
     theta : array, optional
         Angles in (0, pi] (default: a grid dense enough for the delay).
@@ -134,7 +127,7 @@ def critical_stiffness_llewellyn(loop: TeleoperationLoop, approximation: str = "
     ----------
     loop : TeleoperationLoop
         Spring-damper controllers (K is the master's; K_s/K_m kept), whole-sample delays.
-    approximation : {"forward", "backward"}
+    approximation : {"forward", "backward", "tustin"}
         X(z) as in the circle criterion.
 
     Returns
@@ -211,3 +204,114 @@ def _result(K: float, a: str, T: float, n: int, theta: float | None,
         float(K), "llewellyn", ((0.0, float(K)),) if K > 0 else (),
         f"Llewellyn's absolute stability of the two-port G^-1 (eq. 30), {a} approximation: "
         f"{why}", T, n, f_hz, {"approximation": a})
+
+
+@dataclass(frozen=True)
+class TwoPortResult(Result):
+    """Llewellyn's test of the two-port at one stiffness, over the unit circle.
+
+    Attributes
+    ----------
+    absolutely_stable : bool
+        Whether Re p11 >= 0, Re p22 >= 0 and eta >= 1 at every angle.
+    margin : float
+        Smallest margin over the angles, N*s/m (see the module notes).
+    worst_frequency_rad_s, worst_frequency_hz : float
+        Where it is smallest.
+    eta_min : float
+        Smallest eta = (2 Re p11 Re p22 - Re p12 p21) / |p12 p21| away from w -> 0 (where
+        it tends to 1), on the angles above 1e-3 rad/sample.
+    frequency_rad_s, margins, eta : arrays
+        The curves (for the plot and the CSV).
+    stiffness, period : float
+        K (N/m) and T (s).
+    approximation : str
+        X(z).
+    reason : str
+        The verdict in words.
+    """
+
+    absolutely_stable: bool
+    margin: float
+    worst_frequency_rad_s: float
+    worst_frequency_hz: float
+    eta_min: float
+    frequency_rad_s: np.ndarray = field(repr=False)
+    margins: np.ndarray = field(repr=False)
+    eta: np.ndarray = field(repr=False)
+    stiffness: float
+    period: float
+    approximation: str
+    reason: str
+
+    @property
+    def verdict(self) -> str:
+        return "absolutely stable" if self.absolutely_stable else "not absolutely stable"
+
+    def to_dict(self) -> dict[str, Any]:
+        return jsonable({"verdict": self.verdict, "absolutely_stable": self.absolutely_stable,
+                         "margin": self.margin, "worst_frequency_rad_s": self.worst_frequency_rad_s,
+                         "worst_frequency_hz": self.worst_frequency_hz, "eta_min": self.eta_min,
+                         "stiffness": self.stiffness, "period_s": self.period,
+                         "approximation": self.approximation, "reason": self.reason})
+
+    def to_csv(self, path: Any) -> None:
+        """One row per angle: frequency_rad_s, margin_N_s_per_m, eta.
+
+        Parameters
+        ----------
+        path : str, os.PathLike or file object
+            Where to write (a path is written atomically, see :mod:`hapstab.outputs`).
+        """
+        write_csv(path, ["frequency_rad_s", "margin_N_s_per_m", "eta"],
+                  zip(self.frequency_rad_s, self.margins, self.eta, strict=True))
+
+    def plot(self, ax: Any = None) -> Any:
+        from hapstab.plotting import plot_twoport
+        return plot_twoport(self, ax)
+
+
+def llewellyn_test(loop: TeleoperationLoop, approximation: str = "forward") -> TwoPortResult:
+    """Llewellyn's absolute stability of the two-port at the loop's own K.
+
+    Parameters
+    ----------
+    loop : TeleoperationLoop
+        Spring-damper controllers (K is the master's), whole-sample delays.
+    approximation : {"forward", "backward", "tustin"}
+        X(z) as in the circle criterion.
+
+    Returns
+    -------
+    TwoPortResult
+
+    References
+    ----------
+    Llewellyn 1952; Adams and Hannaford 1999 (see the module docstring).
+    """
+    side, a = _side(loop, approximation)
+    T = side.period_s
+    K = spring_damper(loop.master_controller, "master_controller").stiffness
+    th = theta_grid(side.oscillations)
+    A, C = _parts(side, a, th)
+
+    def f(t: np.ndarray) -> np.ndarray:
+        At, Ct = _parts(side, a, np.atleast_1d(t))
+        return _margin(At, Ct, K)
+
+    margins = _margin(A, C, K)
+    th_w, m = refine_minimum(f, th, margins)
+    P = A + K * C
+    w = P[:, 0, 1] * P[:, 1, 0]
+    with np.errstate(all="ignore"):
+        eta = (2 * P[:, 0, 0].real * P[:, 1, 1].real - w.real) / np.abs(w)
+    # eta -> 1 as w -> 0 is rounding there: its minimum is read above 1e-3 rad/sample
+    away = th > 1e-3
+    eta_min = float(np.nanmin(eta[away])) if away.any() else float("nan")
+    ok = bool(m >= 0)
+    why = (f"Llewellyn's conditions hold at every frequency (margin {m:.6g} N*s/m)" if ok else
+           f"Llewellyn's conditions fail at w = {th_w / T:.6g} rad/s (margin {m:.6g} N*s/m): "
+           "some pair of passive terminations makes the loop unstable")
+    return TwoPortResult(ok, float(m), th_w / T, th_w / (2 * math.pi * T), eta_min, th / T,
+                         margins, eta, float(K), T, a,
+                         f"two-port G^-1 (eq. 30), {a} approximation: {why}")

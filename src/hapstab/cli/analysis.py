@@ -51,7 +51,7 @@ def _kmax_command(kind: str) -> None:
                   help="exact | " + " | ".join(m for m in methods_for(kind) if m != "exact"))
     @click.option("--approximation", default=None,
                   help="For --method circle: forward | backward | tustin; for llewellyn "
-                       "(peb): forward | backward.")
+                       "(peb): forward | backward | tustin.")
     def _cmd(method: str, approximation: str | None, as_json: bool, **kw: Any) -> None:
         from hapstab.analysis.methods import critical_stiffness, methods_for
 

@@ -125,3 +125,42 @@ def _audit_table(res: Any) -> None:
 for _kind in LOOP_KINDS:
     _passivity_command(_kind)
     _audit_command(_kind)
+
+
+@click.group("twoport", short_help="Absolute stability (Llewellyn) of the PEB two-port at K.")
+def twoport_cmd() -> None:
+    """Is the teleoperator absolutely stable (Llewellyn: stable with every pair of passive
+    terminations) at a stiffness K? Margin and eta against frequency."""
+
+
+@twoport_cmd.command("peb")
+@loop_options("peb")
+@click.option("--stiffness", "-K", type=NONNEG, required=True, help="K in N/m (the master's).")
+@click.option("--approximation", default="forward", show_default=True,
+              help="X(z): forward (a bound for the exact loop in every campaign) | backward | "
+                   "tustin (neither of these is).")
+@click.option("--plot", "plot_path", type=click.Path(dir_okay=False), default=None,
+              help="Write the margin and eta against frequency (PNG, SVG, PDF).")
+@click.option("--csv", "csv_path", type=click.Path(dir_okay=False), default=None,
+              help="Write frequency_rad_s, margin_N_s_per_m, eta per angle.")
+def _twoport_peb(stiffness: float, approximation: str, plot_path: str | None,
+                 csv_path: str | None, as_json: bool, **kw: Any) -> None:
+    """Llewellyn's absolute stability of the PEB two-port G^-1(z) at stiffness K: verdict,
+    margin in N*s/m, worst frequency, eta."""
+    from hapstab.analysis.twoport import llewellyn_test
+    from hapstab.cli.files import check_files, write_files
+
+    check_files(csv_path, plot_path, as_json)
+    loop = LOOP_KINDS["peb"](kw, stiffness)
+    res = llewellyn_test(loop, approximation)  # type: ignore[arg-type]  # peb builds one
+    files = write_files(res, csv_path, plot_path)
+    d = {**res.to_dict(), "files": files}
+    rows = [("verdict", res.verdict),
+            ("margin", f"{res.margin:.6g} N*s/m ("
+                       + ("damping to spare" if res.margin >= 0 else "damping missing") + ")"),
+            ("worst frequency", f"{res.worst_frequency_hz:.6g} Hz "
+                                f"({res.worst_frequency_rad_s:.6g} rad/s)"),
+            ("smallest eta", f"{res.eta_min:.6g} (>= 1 needed; away from w = 0)"),
+            ("why", res.reason), *[("wrote", f) for f in files]]
+    emit(d, as_json, lambda: rich_table(f"two-port, peb, K = {stiffness:g} N/m", rows, loop),
+         loop)
