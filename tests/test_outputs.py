@@ -262,7 +262,7 @@ def test_signals_are_held_during_a_commit_and_delivered_after():
     import hapstab.outputs as outputs
 
     reached = False
-    with pytest.raises(KeyboardInterrupt), outputs._signals_held():
+    with pytest.raises(KeyboardInterrupt), outputs.signals_held():
         os.kill(os.getpid(), signal.SIGINT)
         time.sleep(0.05)
         reached = True

@@ -26,7 +26,7 @@ from typing import IO, Any
 from hapstab.errors import ArgumentTypeError, HapstabError
 
 __all__ = ["OutputError", "check_target", "Outputs", "atomic_file", "writing", "figure_to",
-           "write_folder"]
+           "write_folder", "signals_held"]
 
 
 class OutputError(HapstabError):
@@ -195,7 +195,7 @@ class Outputs:
         done: list[tuple[str, str | None, bool]] = []   # (target, _previous_version, in place)
         # a signal is held until the files are all replaced or all put back (a Ctrl-C
         # between two renames would leave a mix); it is delivered right after
-        with _signals_held():
+        with signals_held():
             try:
                 for tmp, target, name, in_place in self._pending:
                     with self._failing(target, name):
@@ -384,8 +384,14 @@ def _previous_version(target: str, keep: bool, in_place: bool = False) -> str | 
 
 
 @contextlib.contextmanager
-def _signals_held() -> Iterator[None]:
-    """Hold SIGINT, SIGTERM and SIGHUP (delivered when the block ends)."""
+def signals_held() -> Iterator[None]:
+    """Hold SIGINT, SIGTERM and SIGHUP inside the block; they are delivered when it ends
+    (so that files are all replaced or all put back, and a staging folder is removed).
+
+    Yields
+    ------
+    None
+    """
     import signal
 
     sigs = {signal.SIGINT, signal.SIGTERM, signal.SIGHUP}

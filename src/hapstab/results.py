@@ -298,16 +298,11 @@ class BoundaryResult(Result):
                          "critical_stiffness": self.critical_stiffness})
 
     def rows(self) -> list[dict[str, Any]]:
-        out = []
-        for i, d in enumerate(self.delays):
-            for j, T in enumerate(self.periods):
-                row = {"period_s": float(T), "delay_samples": float(d) / float(T)
-                       if self.delay_unit == "s" else float(d),
-                       "critical_stiffness": float(self.critical_stiffness[i, j])}
-                if self.delay_unit == "s":
-                    row = {"period_s": float(T), "delay_s": float(d), **row}
-                out.append(row)
-        return out
+        seconds = self.delay_unit == "s"
+        return [{"period_s": float(T), **({"delay_s": float(d)} if seconds else {}),
+                 "delay_samples": float(d) / float(T) if seconds else float(d),
+                 "critical_stiffness": float(self.critical_stiffness[i, j])}
+                for i, d in enumerate(self.delays) for j, T in enumerate(self.periods)]
 
     def to_csv(self, path: Any) -> None:
         """Write one row per (delay, period): period_s, [delay_s,] delay_samples,

@@ -91,6 +91,16 @@ def _margin(A: np.ndarray, C: np.ndarray, K: float) -> np.ndarray:
     return _margin_of(A + K * C)
 
 
+def _worst(side: DeviceSide, a: str, th: np.ndarray, margins: np.ndarray,
+           K: float) -> tuple[float, float]:
+    """(angle, margin) of the smallest margin at K: the grid's ``margins`` refined by
+    golden section between grid points."""
+    def f(t: np.ndarray) -> np.ndarray:
+        At, Ct = _parts(side, a, np.atleast_1d(t))
+        return _margin(At, Ct, K)
+    return refine_minimum(f, th, margins)
+
+
 def llewellyn_margin(loop: TeleoperationLoop, approximation: str = "forward",
                      theta: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Llewellyn's margin of the two-port at the loop's own K, on the unit circle.
@@ -141,10 +151,7 @@ def critical_stiffness_llewellyn(loop: TeleoperationLoop, approximation: str = "
     A, C = _parts(side, a, th)
 
     def worst(K: float) -> tuple[float, float]:
-        def f(t: np.ndarray) -> np.ndarray:
-            At, Ct = _parts(side, a, np.atleast_1d(t))
-            return _margin(At, Ct, K)
-        return refine_minimum(f, th, _margin(A, C, K))
+        return _worst(side, a, th, _margin(A, C, K), K)
 
     tol = 0.0        # (the margin carries its own rounding slack, SLACK)
     if worst(0.0)[1] < -tol:
@@ -295,12 +302,8 @@ def llewellyn_test(loop: TeleoperationLoop, approximation: str = "forward") -> T
     th = theta_grid(side.oscillations)
     A, C = _parts(side, a, th)
 
-    def f(t: np.ndarray) -> np.ndarray:
-        At, Ct = _parts(side, a, np.atleast_1d(t))
-        return _margin(At, Ct, K)
-
     margins = _margin(A, C, K)
-    th_w, m = refine_minimum(f, th, margins)
+    th_w, m = _worst(side, a, th, margins, K)
     P = A + K * C
     w = P[:, 0, 1] * P[:, 1, 0]
     with np.errstate(all="ignore"):

@@ -24,7 +24,7 @@ import click
 from hapstab.cli.options import ARGV, console, progress, provenance
 from hapstab.cli.study import BASE, Study, StudyError, load_study, loop_commands, study_defaults
 from hapstab.errors import HapstabError
-from hapstab.outputs import OutputError, Outputs, _signals_held
+from hapstab.outputs import OutputError, Outputs, signals_held
 from hapstab.results import dumps
 
 #: What each analysis writes besides its JSON (the command's own --csv / --plot).
@@ -58,7 +58,7 @@ def run_cmd(study_path: str, out_dir: str | None, only: tuple[str, ...], as_json
                     tick(1)
         written = _commit(study, stage, out_dir, results)
     finally:
-        with _signals_held():               # a second Ctrl-C must not leave it behind
+        with signals_held():               # a second Ctrl-C must not leave it behind
             shutil.rmtree(stage, ignore_errors=True)
     manifest = _manifest(study, results, written)
     if as_json:
