@@ -90,9 +90,11 @@ def port_scaling(loop: HapticLoop | TeleoperationLoop, scaling: str | None = "au
     """Diagonal port weights D used as D G^{-1}(z).
 
     With C_m != C_s the residue (25) at z = 1, ``T [[K_m, -K_m], [-K_s, K_s]]``,
-    is not Hermitian and G^{-1} is never PR for K > 0. Weighting port i by
-    k_last / k_i (k_i its stiffness per unit K, :func:`~hapstab.models.stiffness_ratios`;
-    for PEB the master by K_s/K_m) makes it Hermitian; stability still follows,
+    is not Hermitian and G^{-1} is never PR for K > 0 (nor with position/force
+    scaling, ``T [[alpha beta K_m, -beta K_m], [-alpha K_s, K_s]]``). Weighting the
+    master by K_s/K_m (times alpha/beta with scaling;
+    :meth:`~hapstab.engine.device_side.DeviceSide.port_weights`) makes it Hermitian;
+    stability still follows,
     because D times a diagonal passive termination is passive (the multiplier K of
     Theorem 2.1 plays the same role). Equal controllers give D = I, the paper's test.
 

@@ -45,6 +45,10 @@ def _peb(loop, name: str) -> tuple[float, float, float, float]:
         raise AnalysisError(f"method = {name!r}: derived for C_m = C_s (equal K and B)")
     if not loop.symmetric_delay:
         raise AnalysisError(f"method = {name!r}: derived for equal delays in both directions")
+    if loop.scaled:
+        raise AnalysisError(f"method = {name!r}: derived without scaling (position_scale = "
+                            f"{loop.position_scale:g}, force_scale = {loop.force_scale:g}; "
+                            "both must be 1)")
     b = min(loop.master.damping, loop.slave.damping)
     return b, cm.damping, loop.period, loop.delay_in_samples
 

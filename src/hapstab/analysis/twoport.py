@@ -13,7 +13,8 @@ two-port be stable with *every* pair of passive terminations,
 on the whole unit circle, with p_ij analytic outside it and any pole on it simple with
 a residue k such that k / z0 is real and >= 0 for p11 and p22 (Adams & Hannaford's form).
 For spring-damper controllers and the forward, backward or Tustin approximation, P's poles are
-z = 0 (delays, 1/z) and z = 1, simple, with residue T Hc(1) = T [[K_m, -K_m], [-K_s, K_s]]:
+z = 0 (delays, 1/z) and z = 1, simple, with residue T Hc(1) = T [[ab K_m, -b K_m], [-a K_s, K_s]]
+(a, b: position and force scaling, 1 without):
 the conditions on it hold for every K >= 0.
 
 Where p12 = p21 (equal controllers, or proportional ones B_m/K_m = B_s/K_s after the port

@@ -202,6 +202,14 @@ def loop_options(kind: str, ranges: bool = False) -> Callable:
             click.option("--slave-virtual-damping", "slave_virtual_damping", type=REAL, default=None,
                          help="Slave virtual damping B_s in N*s/m, any sign (default: "
                               "--virtual-damping, i.e. C_m = C_s)."),
+            click.option("--scaling-position", "position_scale", type=POS, default=1.0,
+                         show_default=True,
+                         help="Position scaling alpha > 0: the slave follows alpha times the "
+                              "master's motion."),
+            click.option("--scaling-force", "force_scale", type=POS, default=1.0,
+                         show_default=True,
+                         help="Force scaling beta > 0: the operator feels beta times the "
+                              "environment's force."),
         ]
     return _stack(
         *devices, *timing,
@@ -275,7 +283,9 @@ def peb_loop(kw: dict[str, Any], stiffness: float = 0.0) -> TeleoperationLoop:
                              Device(kw["slave_mass"], kw["slave_damping"]), cm, cs,
                              parse_impedance(kw["operator"], "--operator"),
                              parse_impedance(kw["environment"], "--environment"),
-                             _period(kw), kw["delay"])
+                             _period(kw), kw["delay"],
+                             position_scale=kw.get("position_scale", 1.0),
+                             force_scale=kw.get("force_scale", 1.0))
     fwd, bwd, ds = kw.get("delay_forward"), kw.get("delay_backward"), kw.get("delay_s")
     if ds is not None and (fwd is not None or bwd is not None or given("delay")):
         raise HapstabError("--delay-s with --delay or --delay-forward/--delay-backward: give the "

@@ -78,9 +78,13 @@ class DeviceSide:
     def port_weights(self, scaling: str | None = "auto") -> tuple[float, ...]:
         """Diagonal port weights D that make the residue of D Hc X at z = 1 Hermitian.
 
-        Port i is weighted by ``k_last / k_i`` (k_i its stiffness per unit K), so
-        ``D diag(k)`` is a multiple of the identity; equal stiffnesses give D = I.
-        See :func:`hapstab.analysis.circle.port_scaling` for why stability still follows.
+        The residue is T Hc_K(1) K with ``Hc_K(1)_ij = k_i S_ij`` (k_i a channel's
+        stiffness per unit K, S_ij the sum of its signs on port j). For two ports the
+        master is weighted by ``d_0 = k_1 S_10 / (k_0 S_01)`` (the slave by 1), so that
+        ``D Hc_K(1)`` is symmetric: K_s/K_m for unequal PEB controllers, times
+        alpha/beta with position and force scaling. Equal, unscaled controllers give
+        D = I. See :func:`hapstab.analysis.circle.port_scaling` for why stability still
+        follows (D must be positive: S_01 and S_10 of one sign).
 
         Parameters
         ----------
@@ -98,10 +102,16 @@ class DeviceSide:
         """
         if not (scaling is None or isinstance(scaling, str)) or scaling not in ("auto", None, "none"):
             raise AnalysisError(f"scaling = {scaling!r}: allowed: 'auto' or None")
-        k = self.ratios
-        if scaling == "auto" and k is not None and min(k) > 0 and len(set(k)) > 1:
-            return tuple(k[-1] / ki for ki in k)
-        return tuple(1.0 for _ in range(self.ports))
+        ones = tuple(1.0 for _ in range(self.ports))
+        if scaling != "auto" or self.ratios is None or self.ports != 2:
+            return ones
+        S = np.zeros((2, 2))
+        for i, ch in enumerate(self.channels):
+            for j, s, _ in ch.terms:
+                S[i, j] += self.ratios[i] * s
+        if S[0, 1] * S[1, 0] > 0 and S[0, 1] != S[1, 0]:
+            return (float(S[1, 0] / S[0, 1]), 1.0)
+        return ones
 
     def controller_matrix(self, theta: np.ndarray, part: str | None = None) -> np.ndarray:
         """Hc(e^{j theta}), shape ``(N, p, p)``.

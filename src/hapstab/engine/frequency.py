@@ -20,12 +20,13 @@ unit circle is
 and det M = F0 + K F1 + K^2 F2 is evaluated at any angle in O(1) operations,
 whatever the delay: ``z^-n = e^{-j n theta}`` is a phase, never n states.
 
-Rigid-body mode: when every port is free (no spring to ground) and every error
-signal is a difference (each column of s sums to zero: PEB without operator or
-environment), det M has the factor y for every K. It is divided out exactly: the
-sum of the rows is divided by y analytically (divided differences of the delay
-phase and of the fractional-delay numerators), which is the quotient by the
-common translation.
+Rigid-body mode: when every port is free (no spring to ground) and a constant
+displacement gives every controller a zero input (PEB without operator or
+environment, scaled or not: the rigid-body rule of
+:func:`~hapstab.engine.structure.rigid_modes`), det M has the factor y for every K.
+It is divided out exactly: each d_j = y dhat_j, and Delta = T00 T11 - T01 T10 is
+divided by y analytically (divided differences of the delay phase and of the
+fractional-delay numerators), which is the quotient by the common translation.
 
 References
 ----------
@@ -163,23 +164,28 @@ class LoopResponse:
 
     def _two_port(self, idx, theta, rho, b, pj) -> tuple[Jet, Jet, Jet]:
         """T00, T11 and Delta = T00 T11 - T01 T10 (or Delta / y with a rigid mode) for
-        the position-error structure: channel i measures its own port undelayed (+1)
-        and the other port with delay n_i + f_i (-1), eq. (20).
+        the position-error structure: channel i measures its own port undelayed (sign
+        a_i) and the other port with delay n_i + f_i (sign c_i); eq. (20) has a_i = 1,
+        c_i = -1, position/force scaling a_0 = alpha beta, c_0 = -beta, c_1 = -alpha.
 
         With P_j^f = N_j + e_j, e_j = z^-1 y D_j^f (module doc) and w the round-trip
-        phase: Delta = N0 N1 (1 - w) - w (e0 N1 + N0 e1 + e0 e1), and
-        (1 - w)/y = w G_n (a geometric sum), e_j / y = z^-1 D_j^f: no cancellation,
-        so F2 = Delta k0 k1 is 0 without delay, exactly.
+        phase: Delta = (a0 a1 - c0 c1) N0 N1 + c0 c1 Delta_1 with Delta_1 = N0 N1 (1 - w)
+        - w (e0 N1 + N0 e1 + e0 e1), and (1 - w)/y = w G_n (a geometric sum), e_j / y =
+        z^-1 D_j^f: no cancellation, so F2 = Delta k0 k1 is 0 without delay, exactly.
+        A rigid mode needs a0 a1 = c0 c1 (the rigid-body rule), so Delta / y = c0 c1
+        Delta_1 / y.
         """
         own, cross = [], []
         for i, ch in enumerate(self.terms):
             mine = [t for t in ch if t[0] == i]
             other = [t for t in ch if t[0] != i]
-            if len(ch) != 2 or len(mine) != 1 or mine[0][1:] != (1.0, 0, 0.0) or other[0][1] != -1.0:
+            if len(ch) != 2 or len(mine) != 1 or mine[0][2:] != (0, 0.0) or not mine[0][1] \
+                    or not other[0][1]:
                 raise AnalysisError("two-port loop: only the position-error structure of eq. (20) "
                                     "is supported by the exact analysis")
             own.append(mine[0])
             cross.append(other[0])
+        a0a1, c0c1 = own[0][1] * own[1][1], cross[0][1] * cross[1][1]
         N0, N1 = pj("N", 0), pj("N", 1)
         n_rt = cross[0][2] + cross[1][2]
         # e_j / y of port j measured by the other channel (channel 1 measures port 0)
@@ -207,7 +213,13 @@ class LoopResponse:
             if e[0] is not None and e[1] is not None:
                 corr = corr + e[0] * e[1]
             delta = base - (corr if w is None else w * corr)
-        return N0, N1, delta
+        if c0c1 != 1.0:
+            delta = delta.scale(c0c1)
+        if a0a1 != c0c1:
+            delta = delta + (N0 * N1).scale(a0a1 - c0c1)
+        T00 = N0 if own[0][1] == 1.0 else N0.scale(own[0][1])
+        T11 = N1 if own[1][1] == 1.0 else N1.scale(own[1][1])
+        return T00, T11, delta
 
 
 # ---------------------------------------------------------------------- building

@@ -8,6 +8,7 @@ samples (``e_i = sum_j s_ij z^-n_ij x_j``).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from fractions import Fraction
 
 import numpy as np
 
@@ -102,10 +103,11 @@ def port_is_free(port: Port, period_s: float) -> bool:
 
 
 def rigid_modes(structure: LoopStructure, period_s: float) -> int:
-    """The rigid-body rule (its one definition): the loop has one mode at z = 1 that
-    no controller moves when every port is free and every controller input is a
-    difference of positions (each column of the signs s_ij sums to zero, e.g. PEB
-    without operator or environment): a common translation of all ports.
+    """The rigid-body rule (its one definition): the modes at z = 1 that no controller
+    moves. A constant displacement x of the ports with no spring to ground that gives
+    every controller a zero input (``S x = 0``, ``S_ij`` the sum of channel i's signs on
+    port j) is an equilibrium for every K: a common translation of PEB's free master
+    and slave (x = [1, 1]), or x = [1, alpha] with position scaling alpha.
 
     Parameters
     ----------
@@ -117,14 +119,35 @@ def rigid_modes(structure: LoopStructure, period_s: float) -> int:
     Returns
     -------
     int
-        0 or 1.
+        The dimension of that set of displacements (0 or 1 for the loops hapstab builds),
+        computed in exact rational arithmetic on the signs.
     """
-    col = np.zeros(len(structure.ports))
-    for ch in structure.channels:
+    p = len(structure.ports)
+    rows = [[Fraction(0)] * p for _ in structure.channels]
+    for r, ch in zip(rows, structure.channels, strict=True):
         for j, sign, _ in ch.terms:
-            col[j] += sign
-    free = all(port_is_free(pt, period_s) for pt in structure.ports)
-    return int(free and bool(np.all(col == 0)))
+            r[j] += Fraction(sign)
+    for j, pt in enumerate(structure.ports):
+        if not port_is_free(pt, period_s):       # a grounded port cannot move
+            rows.append([Fraction(int(i == j)) for i in range(p)])
+    return p - _rank(rows)
+
+
+def _rank(rows: list[list[Fraction]]) -> int:
+    """Rank of a small matrix, exactly (Gaussian elimination on fractions)."""
+    m = [list(r) for r in rows]
+    rank, cols = 0, len(m[0]) if m else 0
+    for c in range(cols):
+        piv = next((i for i in range(rank, len(m)) if m[i][c] != 0), None)
+        if piv is None:
+            continue
+        m[rank], m[piv] = m[piv], m[rank]
+        for i in range(len(m)):
+            if i != rank and m[i][c] != 0:
+                f = m[i][c] / m[rank][c]
+                m[i] = [a - f * b for a, b in zip(m[i], m[rank], strict=True)]
+        rank += 1
+    return rank
 
 
 def periods_of(loop: HapticLoop | TeleoperationLoop, periods: object = None) -> np.ndarray:
@@ -183,9 +206,10 @@ def structure_of(loop: HapticLoop | TeleoperationLoop) -> LoopStructure:
             (Channel(0, loop.controller, ((0, 1.0, loop.delay_in_samples),)),))
     if isinstance(loop, TeleoperationLoop):
         fwd, bwd = loop.forward_delay_in_samples, loop.backward_delay_in_samples
+        a, b = loop.position_scale, loop.force_scale       # eq. (20) when both are 1
         return LoopStructure(
             (Port(loop.master, loop.operator, "master"), Port(loop.slave, loop.environment, "slave")),
-            (Channel(0, loop.master_controller, ((0, 1.0, 0.0), (1, -1.0, bwd))),   # eq. (20)
-             Channel(1, loop.slave_controller, ((1, 1.0, 0.0), (0, -1.0, fwd)))))
+            (Channel(0, loop.master_controller, ((0, b * a, 0.0), (1, -b, bwd))),
+             Channel(1, loop.slave_controller, ((1, 1.0, 0.0), (0, -a, fwd)))))
     require_loop(loop)
     raise AssertionError("unreachable: require_loop accepts only the two kinds above")

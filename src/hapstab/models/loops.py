@@ -13,10 +13,7 @@ import dataclasses
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
-import numpy as np
-
 from hapstab.errors import (
-    MAX_DELAY_SAMPLES,
     AnalysisError,
     ArgumentTypeError,
     ModelError,
@@ -31,73 +28,11 @@ from hapstab.models.controllers import (
     spring_damper,
     stiffness_ratios,
 )
+from hapstab.models.delays import DELAY_SNAP, check_fraction, delay_from_seconds, split_delay
 from hapstab.models.parts import Device, Impedance
-from hapstab.tolerances import DELAY_SNAP
 
 __all__ = ["split_delay", "DELAY_SNAP", "HapticLoop", "TeleoperationLoop", "delay_from_seconds",
            "whole_delay", "require_loop", "describe", "parameters"]
-
-
-def _check_fraction(name: str, value: Any) -> float:
-    v = check_real(name, value, nonnegative=True)
-    if not v < 1.0:
-        raise ModelError(f"{name} = {v}: must be in [0, 1) (the part of t_d/T beyond whole samples)")
-    return v
-
-
-# the one snap rule of hapstab: split_delay, with DELAY_SNAP (hapstab.tolerances)
-
-
-def split_delay(d: float) -> tuple[int, float]:
-    """Whole samples and a fraction in [0, 1) of a delay of ``d`` samples.
-
-    Parameters
-    ----------
-    d : float
-        Delay in samples, >= 0.
-
-    Returns
-    -------
-    (int, float)
-        ``n`` and ``f`` with ``d = n + f``; ``f = 0`` when ``d`` is within
-        :data:`DELAY_SNAP` of a whole number (so t_d = nT gives exactly the
-        integer-delay model).
-    """
-    n = round(d)
-    if abs(d - n) <= DELAY_SNAP * max(1.0, d):
-        return n, 0.0
-    n = int(np.floor(d))
-    return n, float(min(d - n, np.nextafter(1.0, 0.0)))
-
-
-def delay_from_seconds(name: str, seconds: Any, period: float) -> tuple[int, float]:
-    """Split a delay in seconds into whole samples and a fraction in [0, 1), by
-    the rule of :func:`split_delay`.
-
-    Parameters
-    ----------
-    name : str
-        The delay's name in the error message (e.g. ``"delay_s"``).
-    seconds : float
-        The delay t_d in s, finite and >= 0.
-    period : float
-        The sampling period T in s.
-
-    Returns
-    -------
-    (int, float)
-        n and f with t_d = (n + f) T, 0 <= f < 1.
-
-    Raises
-    ------
-    ModelError
-        If ``seconds`` is negative, not finite or longer than ``MAX_DELAY_SAMPLES`` samples.
-    """
-    d = check_real(name, seconds, nonnegative=True) / period
-    if not d <= MAX_DELAY_SAMPLES:
-        raise ModelError(f"{name} = {seconds!r}: {d:.4g} samples at T = {period:g} s; at most "
-                         f"{MAX_DELAY_SAMPLES} (the exact model carries one state per sample)")
-    return split_delay(d)
 
 
 def _check_controller(name: str, c: Any) -> Controller:
@@ -148,7 +83,7 @@ class HapticLoop:
         object.__setattr__(self, "period", check_period("period", self.period))
         object.__setattr__(self, "delay_samples", check_delay("delay_samples", self.delay_samples))
         object.__setattr__(self, "fractional_delay",
-                           _check_fraction("fractional_delay", self.fractional_delay))
+                           check_fraction("fractional_delay", self.fractional_delay))
         if self.device.mass + self.operator.mass <= 0:
             raise ModelError("operator mass: device mass plus operator mass must be > 0")
 
@@ -205,9 +140,18 @@ class HapticLoop:
 
 @dataclass(frozen=True)
 class TeleoperationLoop:
-    """Sampled-data position-error-based bilateral teleoperation (Fig. 3, eq. 19-21).
+    """Sampled-data position-error-based bilateral teleoperation (Fig. 3, eq. 19-21),
+    optionally with position and force scaling.
 
-    F_m = C_m(z) [X_m - z^-n X_s],  F_s = C_s(z) [X_s - z^-n X_m]  (eq. 20).
+    F_m = beta C_m(z) [alpha X_m - z^-n X_s],  F_s = C_s(z) [X_s - alpha z^-n X_m];
+
+    with alpha = beta = 1 this is eq. (20) exactly. The scaled ideal response is
+    x_s = alpha x_m in free motion and, with C_m = C_s, a master force beta times the
+    slave's in steady contact: the operator feels beta times the environment's force
+    (Yokokohji & Yoshikawa's scaled ideal response; the paper's ref. [10], Jazayeri
+    & Tavakoli 2013, analyses scaled sampled-data teleoperators). K (``with_stiffness``,
+    K_max) is still the master controller's stiffness, so the master's net position gain
+    is alpha beta K.
 
     Parameters
     ----------
@@ -229,6 +173,17 @@ class TeleoperationLoop:
     fractional_delay_backward : float or None
         The same for slave -> master; ``None``: the same as ``fractional_delay``.
         Usually set through :meth:`with_delays_s`.
+    position_scale : float
+        alpha > 0: the slave follows alpha times the master's motion (default 1).
+    force_scale : float
+        beta > 0: the master's controller force is scaled by beta (default 1).
+
+    References
+    ----------
+    Y. Yokokohji and T. Yoshikawa, "Bilateral control of master-slave manipulators for
+    ideal kinesthetic coupling", IEEE Trans. Robot. Autom. 10(5), 1994 (scaled ideal
+    response); A. Jazayeri and M. Tavakoli, Control Engineering Practice 21(8), 2013
+    (the paper's [10]).
     """
 
     master: Device
@@ -242,8 +197,12 @@ class TeleoperationLoop:
     delay_backward_samples: int | None = None
     fractional_delay: float = 0.0
     fractional_delay_backward: float | None = None
+    position_scale: float = 1.0
+    force_scale: float = 1.0
 
     def __post_init__(self) -> None:
+        for nm in ("position_scale", "force_scale"):
+            object.__setattr__(self, nm, check_real(nm, getattr(self, nm), positive=True))
         for nm in ("master", "slave"):
             if not isinstance(getattr(self, nm), Device):
                 raise ModelError(f"{nm} = {getattr(self, nm)!r}: must be a Device")
@@ -254,13 +213,13 @@ class TeleoperationLoop:
         object.__setattr__(self, "period", check_period("period", self.period))
         object.__setattr__(self, "delay_samples", check_delay("delay_samples", self.delay_samples))
         object.__setattr__(self, "fractional_delay",
-                           _check_fraction("fractional_delay", self.fractional_delay))
+                           check_fraction("fractional_delay", self.fractional_delay))
         if self.delay_backward_samples is not None:
             object.__setattr__(self, "delay_backward_samples",
                                check_delay("delay_backward_samples", self.delay_backward_samples))
         if self.fractional_delay_backward is not None:
             object.__setattr__(self, "fractional_delay_backward",
-                               _check_fraction("fractional_delay_backward",
+                               check_fraction("fractional_delay_backward",
                                                self.fractional_delay_backward))
         for dev, z, nm in ((self.master, self.operator, "operator"),
                            (self.slave, self.environment, "environment")):
@@ -339,7 +298,13 @@ class TeleoperationLoop:
                 "master": self.master.to_dict(), "slave": self.slave.to_dict(),
                 "operator": self.operator.to_dict(), "environment": self.environment.to_dict(),
                 "master_controller": self.master_controller.to_dict(),
-                "slave_controller": self.slave_controller.to_dict()}
+                "slave_controller": self.slave_controller.to_dict(),
+                "position_scale": self.position_scale, "force_scale": self.force_scale}
+
+    @property
+    def scaled(self) -> bool:
+        """Whether position or force scaling is on (alpha or beta not 1)."""
+        return self.position_scale != 1.0 or self.force_scale != 1.0
 
     def _repr_html_(self) -> str:
         from hapstab.results import html_table
@@ -440,6 +405,8 @@ def headline(loop: HapticLoop | TeleoperationLoop) -> str:
         delay = f"t_d = {loop.delay_s * 1e3:.4g} ms" + (
             f" / {loop.delay_backward_s * 1e3:.4g} ms" if loop.delay_backward_s != loop.delay_s
             else "")
+        if loop.scaled:
+            parts.append(f"scaling alpha = {loop.position_scale:g}, beta = {loop.force_scale:g}")
     else:
         parts = [dev("device", loop.device), term("operator", loop.operator)]
         delay = f"t_d = {loop.delay_s * 1e3:.4g} ms"
