@@ -87,7 +87,7 @@ def test_range_mistakes_are_one_line_naming_the_option(args, needle):
 
 @pytest.mark.parametrize("spec", ["1ms:10ms", "0.001:0.01:10", "1ms:10ms:10"])
 def test_one_range_syntax_count_optional_units_allowed(spec):
-    from hapstab.cli.options import parse_range
+    from hapstab.cli.ranges import parse_range
 
     np.testing.assert_allclose(parse_range(spec, "--period", "s"), np.linspace(1e-3, 1e-2, 10),
                                rtol=1e-12)

@@ -27,6 +27,12 @@ rounding. hapstab evaluates the equivalent ``Re p11 Re p22 >= (Re sqrt(p12) sqrt
 reports the margin ``min(Re p11, Re p22, sqrt(Re p11 Re p22) - |Re sqrt(p12 p21)|)`` in
 N*s/m: >= 0 exactly where the conditions hold (plus a rounding slack, :data:`SLACK`).
 
+Bounded impedance: a designer who knows that every operator (environment) has at least
+b_h_min (b_e_min) of damping asks for stability only with terminations b_min + Z', Z'
+passive; that is Llewellyn's test on P + diag(b_h_min, b_e_min) (``operator_damping_min``,
+``environment_damping_min``; Haddadi & Hashtrudi-Zaad 2010 bound the terminations in the
+same spirit).
+
 References
 ----------
 F. B. Llewellyn, "Some fundamental properties of transmission systems", Proc. IRE 40,
@@ -34,11 +40,14 @@ F. B. Llewellyn, "Some fundamental properties of transmission systems", Proc. IR
 environments", IEEE Trans. Robot. Autom. 15(3), 1999; K. Hashtrudi-Zaad and S. E.
 Salcudean, "Analysis of control architectures for teleoperation systems with impedance/
 admittance master and slave manipulators", Int. J. Robotics Research 20(6), 2001; the
-paper, eq. (30) and Theorem 2.1.
+paper, eq. (30) and Theorem 2.1; A. Haddadi and K. Hashtrudi-Zaad, "Bounded-impedance
+absolute stability of bilateral teleoperation control systems", IEEE Trans. Haptics 3(1),
+2010.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 from typing import Any
@@ -48,7 +57,7 @@ import numpy as np
 from hapstab.analysis.circle import _approx, _stiffness_side, _x
 from hapstab.analysis.sweeps import refine_minimum, theta_grid
 from hapstab.engine.device_side import DeviceSide
-from hapstab.errors import AnalysisError
+from hapstab.errors import AnalysisError, check_real
 from hapstab.models.controllers import spring_damper
 from hapstab.models.loops import TeleoperationLoop, require_loop, whole_delay
 from hapstab.results import CriticalStiffnessResult, Result, jsonable, write_csv
@@ -56,12 +65,32 @@ from hapstab.results import CriticalStiffnessResult, Result, jsonable, write_csv
 __all__ = ["llewellyn_margin", "critical_stiffness_llewellyn", "llewellyn_test", "TwoPortResult"]
 
 
-def _side(loop: Any, approximation: Any) -> tuple[DeviceSide, str]:
+def _side(loop: Any, approximation: Any, bounds: tuple[Any, Any] = (0.0, 0.0)
+          ) -> tuple[DeviceSide, str]:
+    """The device side with the terminations' least damping moved into it (bounded
+    impedance, :func:`_damping_bounds`), and the approximation's name."""
     require_loop(loop)
     if loop.kind != "peb":
         raise AnalysisError("method = 'llewellyn': a two-port criterion, for a "
                             "TeleoperationLoop (peb); for the HVE use 'circle' or 'passivity'")
-    return _stiffness_side(loop), _approx(approximation)   # forward, backward or tustin
+    side = _stiffness_side(loop)
+    extra = _damping_bounds(*bounds)
+    if any(extra):
+        side = dataclasses.replace(side, damping=side.damping + np.array(extra, float))
+    return side, _approx(approximation)   # forward, backward or tustin
+
+
+def _damping_bounds(operator_min: Any, environment_min: Any) -> tuple[float, float]:
+    """The least damping (N*s/m) known of the operator and of the environment.
+
+    Bounded impedance: a termination Z = b_min + Z' with Z' passive is a passive Z' on
+    the two-port whose p11 (or p22) gained b_min, so Llewellyn's conditions are tested
+    on P + diag(b_h_min, b_e_min). Only the real parts of p11 and p22 enter them, so a
+    termination's least mass or stiffness (imaginary at s = j w) would change nothing;
+    its least damping is what a designer who knows the operator roughly can use.
+    """
+    return (check_real("operator_damping_min", operator_min, nonnegative=True),
+            check_real("environment_damping_min", environment_min, nonnegative=True))
 
 
 def _parts(side: DeviceSide, a: str, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -128,7 +157,9 @@ def llewellyn_margin(loop: TeleoperationLoop, approximation: str = "forward",
     return th, _margin(A, C, K)
 
 
-def critical_stiffness_llewellyn(loop: TeleoperationLoop, approximation: str = "forward"
+def critical_stiffness_llewellyn(loop: TeleoperationLoop, approximation: str = "forward",
+                                 operator_damping_min: float = 0.0,
+                                 environment_damping_min: float = 0.0
                                  ) -> CriticalStiffnessResult:
     """Largest K for which the two-port is absolutely stable (Llewellyn) for every K in
     (0, K]: a geometric scan of K, the first K whose margin is negative on the unit circle
@@ -140,13 +171,18 @@ def critical_stiffness_llewellyn(loop: TeleoperationLoop, approximation: str = "
         Spring-damper controllers (K is the master's; K_s/K_m kept), whole-sample delays.
     approximation : {"forward", "backward", "tustin"}
         X(z) as in the circle criterion.
+    operator_damping_min, environment_damping_min : float
+        Bounded impedance: the least damping (N*s/m, >= 0) every operator and every
+        environment is known to have; default 0, Llewellyn's "every passive termination".
+        Haddadi and Hashtrudi-Zaad 2010 (bounded-impedance absolute stability).
 
     Returns
     -------
     CriticalStiffnessResult
-        ``method="llewellyn"``; details: the worst angle and eta there.
+        ``method="llewellyn"``; details: the approximation and the damping bounds.
     """
-    side, a = _side(loop, approximation)
+    bounds = _damping_bounds(operator_damping_min, environment_damping_min)
+    side, a = _side(loop, approximation, bounds)
     T, n = side.period_s, whole_delay(loop, "Llewellyn's test")
     th = theta_grid(side.oscillations)
     A, C = _parts(side, a, th)
@@ -158,10 +194,11 @@ def critical_stiffness_llewellyn(loop: TeleoperationLoop, approximation: str = "
     if worst(0.0)[1] < -tol:
         return _result(0.0, a, T, n, worst(0.0)[0],
                        "not absolutely stable at K = 0: the virtual damping takes more than "
-                       "the device damping gives")
+                       "the device damping gives", bounds)
     K_hi = _first_failure(A, C, tol)
     if K_hi is None:
-        return _result(math.inf, a, T, n, None, "absolutely stable for every K up to 1e12 N/m")
+        return _result(math.inf, a, T, n, None, "absolutely stable for every K up to 1e12 N/m",
+                       bounds)
     lo, hi = _below(K_hi), K_hi
     while lo > 0 and worst(lo)[1] < -tol:   # the grid passed lo; the refined minimum must too
         lo, hi = _below(lo), lo
@@ -172,10 +209,11 @@ def critical_stiffness_llewellyn(loop: TeleoperationLoop, approximation: str = "
         mid = 0.5 * (lo + hi)
         lo, hi = (mid, hi) if worst(mid)[1] >= -tol else (lo, mid)
     if hi <= zero:
-        return _result(0.0, a, T, n, worst(hi)[0], "not absolutely stable for any K > 0")
+        return _result(0.0, a, T, n, worst(hi)[0], "not absolutely stable for any K > 0",
+                       bounds)
     th_w = worst(hi)[0]
     return _result(lo, a, T, n, th_w, f"Llewellyn's conditions fail beyond K_max, first at "
-                                      f"w = {th_w / T:.6g} rad/s")
+                                      f"w = {th_w / T:.6g} rad/s", bounds)
 
 
 #: Ratio of successive K of the scan: a failure window narrower than 1 % of K between two
@@ -206,12 +244,22 @@ def _first_failure(A: np.ndarray, C: np.ndarray, tol: float) -> float | None:
 
 
 def _result(K: float, a: str, T: float, n: int, theta: float | None,
-            why: str) -> CriticalStiffnessResult:
+            why: str, bounds: tuple[float, float] = (0.0, 0.0)) -> CriticalStiffnessResult:
     f_hz = theta / (2 * math.pi * T) if theta is not None else float("nan")
     return CriticalStiffnessResult(
         float(K), "llewellyn", ((0.0, float(K)),) if K > 0 else (),
-        f"Llewellyn's absolute stability of the two-port G^-1 (eq. 30), {a} approximation: "
-        f"{why}", T, n, f_hz, {"approximation": a})
+        f"Llewellyn's absolute stability of the two-port G^-1 (eq. 30), {a} approximation"
+        f"{_terminations(bounds)}: {why}", T, n, f_hz,
+        {"approximation": a, "operator_damping_min": bounds[0],
+         "environment_damping_min": bounds[1]})
+
+
+def _terminations(bounds: tuple[float, float]) -> str:
+    """How the terminations are bounded, for the reason ("" for every passive pair)."""
+    if not any(bounds):
+        return ""
+    return (f", terminations with damping of at least {bounds[0]:g} (operator) and "
+            f"{bounds[1]:g} N*s/m (environment)")
 
 
 @dataclass(frozen=True)
@@ -237,6 +285,8 @@ class TwoPortResult(Result):
         X(z).
     reason : str
         The verdict in words.
+    damping_bounds : (float, float)
+        The least operator and environment damping assumed (N*s/m; 0: every passive pair).
     """
 
     absolutely_stable: bool
@@ -251,6 +301,7 @@ class TwoPortResult(Result):
     period: float
     approximation: str
     reason: str
+    damping_bounds: tuple[float, float] = (0.0, 0.0)
 
     @property
     def verdict(self) -> str:
@@ -261,7 +312,9 @@ class TwoPortResult(Result):
                          "margin": self.margin, "worst_frequency_rad_s": self.worst_frequency_rad_s,
                          "worst_frequency_hz": self.worst_frequency_hz, "eta_min": self.eta_min,
                          "stiffness": self.stiffness, "period_s": self.period,
-                         "approximation": self.approximation, "reason": self.reason})
+                         "approximation": self.approximation, "reason": self.reason,
+                         "operator_damping_min": self.damping_bounds[0],
+                         "environment_damping_min": self.damping_bounds[1]})
 
     def to_csv(self, path: Any) -> None:
         """One row per angle: frequency_rad_s, margin_N_s_per_m, eta.
@@ -279,7 +332,9 @@ class TwoPortResult(Result):
         return plot_twoport(self, ax)
 
 
-def llewellyn_test(loop: TeleoperationLoop, approximation: str = "forward") -> TwoPortResult:
+def llewellyn_test(loop: TeleoperationLoop, approximation: str = "forward",
+                   operator_damping_min: float = 0.0,
+                   environment_damping_min: float = 0.0) -> TwoPortResult:
     """Llewellyn's absolute stability of the two-port at the loop's own K.
 
     Parameters
@@ -288,6 +343,9 @@ def llewellyn_test(loop: TeleoperationLoop, approximation: str = "forward") -> T
         Spring-damper controllers (K is the master's), whole-sample delays.
     approximation : {"forward", "backward", "tustin"}
         X(z) as in the circle criterion.
+    operator_damping_min, environment_damping_min : float
+        Bounded impedance: the least damping (N*s/m) of every operator and environment
+        (see :func:`critical_stiffness_llewellyn`); default 0, every passive pair.
 
     Returns
     -------
@@ -295,9 +353,12 @@ def llewellyn_test(loop: TeleoperationLoop, approximation: str = "forward") -> T
 
     References
     ----------
-    Llewellyn 1952; Adams and Hannaford 1999 (see the module docstring).
+    Llewellyn 1952; Adams and Hannaford 1999 (see the module docstring); A. Haddadi and
+    K. Hashtrudi-Zaad, "Bounded-impedance absolute stability of bilateral teleoperation
+    control systems", IEEE Trans. Haptics 3(1), 2010.
     """
-    side, a = _side(loop, approximation)
+    bounds = _damping_bounds(operator_damping_min, environment_damping_min)
+    side, a = _side(loop, approximation, bounds)
     T = side.period_s
     K = spring_damper(loop.master_controller, "master_controller").stiffness
     th = theta_grid(side.oscillations)
@@ -318,4 +379,5 @@ def llewellyn_test(loop: TeleoperationLoop, approximation: str = "forward") -> T
            "some pair of passive terminations makes the loop unstable")
     return TwoPortResult(ok, float(m), th_w / T, th_w / (2 * math.pi * T), eta_min, th / T,
                          margins, eta, float(K), T, a,
-                         f"two-port G^-1 (eq. 30), {a} approximation: {why}")
+                         f"two-port G^-1 (eq. 30), {a} approximation{_terminations(bounds)}: "
+                         f"{why}", bounds)

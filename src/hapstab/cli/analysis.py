@@ -11,17 +11,17 @@ import numpy as np
 from hapstab.cli.options import (
     LOOP_KINDS,
     NONNEG,
+    bounds_of,
     console,
+    damping_bound_options,
     emit,
     fmt,
     given,
     loop_options,
-    parse_delays,
-    parse_periods,
-    parse_range,
     provenance,
     rich_table,
 )
+from hapstab.cli.ranges import parse_delays, parse_periods, parse_range
 from hapstab.errors import MAX_DELAY_SAMPLES, PERIOD_RANGE, HapstabError
 from hapstab.results import dumps
 
@@ -47,6 +47,7 @@ def _kmax_command(kind: str) -> None:
 
     @kmax.command(kind)
     @loop_options(kind)
+    @damping_bound_options(kind)
     @click.option("--method", default="exact", show_default=True,
                   help="exact | " + " | ".join(m for m in methods_for(kind) if m != "exact"))
     @click.option("--approximation", default=None,
@@ -58,11 +59,12 @@ def _kmax_command(kind: str) -> None:
         allowed = methods_for(kind)
         if method not in allowed:
             raise HapstabError(f"--method = {method!r}: unknown for {kind}; allowed: {', '.join(allowed)}")
+        bounds = bounds_of(kw, method)
         loop = make(kw, stiffness=1.0)
         if approximation and method not in ("circle", "llewellyn"):
             raise HapstabError(f"--approximation = {approximation!r}: applies to --method circle "
                                f"or llewellyn only (got --method {method})")
-        opts = {"approximation": approximation} if approximation else {}
+        opts = {"approximation": approximation, **bounds} if approximation else dict(bounds)
         res = critical_stiffness(loop, method=method, **opts)
         rows = [("critical stiffness", f"{fmt(res.critical_stiffness)} N/m"),
                 ("method", res.method),

@@ -14,7 +14,9 @@ from hapstab.cli.options import (
     LOOP_KINDS,
     NONNEG,
     POS,
+    bounds_of,
     console,
+    damping_bound_options,
     emit,
     fmt,
     loop_options,
@@ -135,6 +137,7 @@ def twoport_cmd() -> None:
 
 @twoport_cmd.command("peb")
 @loop_options("peb")
+@damping_bound_options("peb")
 @click.option("--stiffness", "-K", type=NONNEG, required=True, help="K in N/m (the master's).")
 @click.option("--approximation", default="forward", show_default=True,
               help="X(z): forward (a bound for the exact loop in every campaign) | backward | "
@@ -151,8 +154,9 @@ def _twoport_peb(stiffness: float, approximation: str, plot_path: str | None,
     from hapstab.cli.files import check_files, write_files
 
     check_files(csv_path, plot_path, as_json)
+    bounds = bounds_of(kw, "llewellyn")
     loop = LOOP_KINDS["peb"](kw, stiffness)
-    res = llewellyn_test(loop, approximation)  # type: ignore[arg-type]  # peb builds one
+    res = llewellyn_test(loop, approximation, **bounds)  # type: ignore[arg-type]  # peb builds one
     files = write_files(res, csv_path, plot_path)
     d = {**res.to_dict(), "files": files}
     rows = [("verdict", res.verdict),

@@ -14,9 +14,9 @@ from hapstab.cli.options import (
     fmt,
     given,
     loop_options,
-    parse_range,
     rich_table,
 )
+from hapstab.cli.ranges import parse_range
 from hapstab.errors import HapstabError
 
 

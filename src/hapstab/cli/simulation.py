@@ -17,11 +17,11 @@ from hapstab.cli.options import (
     Number,
     emit,
     loop_options,
-    parse_periods,
     progress,
     provenance,
     rich_table,
 )
+from hapstab.cli.ranges import parse_periods
 from hapstab.outputs import write_folder
 from hapstab.results import dumps
 
