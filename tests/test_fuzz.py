@@ -50,7 +50,7 @@ def _commands():
 COMMANDS = _commands()
 NEEDS = {"region": ["--K", "0:100", "--B", "0:1", "--resolution", "12"], "reproduce": ["fig5"],
          "check": ["-K", "5"], "passivity": ["-K", "5"], "simulate": ["-K", "5"],
-         "run": ["study.toml"], "twoport": ["-K", "5"]}
+         "run": ["study.toml"], "twoport": ["-K", "5"], "transparency": ["-K", "5"]}
 #: The study the fuzz's `run` invocations use (written in the test's folder).
 STUDY = 'kind = "hve"\n[loop]\ndelay = 2\n[[variant]]\nname = "b"\nvirtual-damping = 1\n[run.kmax]\n'
 

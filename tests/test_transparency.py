@@ -11,8 +11,10 @@ import math
 
 import numpy as np
 import pytest
+from click.testing import CliRunner
 
 import hapstab as h
+from hapstab.cli.main import cli
 
 
 def _peb(T=1e-3, n=0, Km=10.0, Bm=0.0, Ks=None, Bs=None, env=None, nb=None, bm=0.02, bs=0.03,
@@ -292,3 +294,34 @@ def test_the_result_protocol(tmp_path):
     plt.close("all")
     page = res._repr_html_()
     assert page.startswith("<table>") and "TransparencyResult" in page
+
+
+# ----------------------------------------------------------------------------- CLI
+def test_the_cli(tmp_path):
+    args = ["transparency", "peb", "-K", "8", "-n", "2", "--environment", "spring:50",
+            "--frequencies", "0.5:200:25", "--csv", str(tmp_path / "t.csv"),
+            "--plot", str(tmp_path / "t.png"), "--json"]
+    r = CliRunner().invoke(cli, args)
+    assert r.exit_code == 0, r.stderr
+    d = json.loads(r.stdout)
+    assert d["felt_stiffness_N_per_m"] == pytest.approx(
+        {"free": 0.0, "environment": 8 * 50 / 58, "rigid": 8.0}, abs=1e-12)
+    f = np.array(d["frequencies_hz"])
+    assert f.size == 25 and f[0] == pytest.approx(0.5) and f[-1] == pytest.approx(200.0)
+    assert np.diff(np.log(f)) == pytest.approx(np.full(24, np.log(400) / 24))   # log-spaced
+    loop = h.paper_peb(1e-3, 2, 8.0).replace(environment=h.spring(50.0))
+    ref = h.transparency(loop, frequencies_hz=f)
+    got = np.array([c["re"] + 1j * c["im"] for c in d["felt_impedance_N_s_per_m"]["environment"]])
+    assert got == pytest.approx(ref.felt_environment, rel=1e-12)
+    assert (tmp_path / "t.png").read_bytes()[:4] == b"\x89PNG"
+    assert (tmp_path / "t.csv").read_text().startswith("frequency_hz,")
+    r = CliRunner().invoke(cli, ["transparency", "peb", "-K", "8"])
+    assert r.exit_code == 0 and "felt stiffness" in r.stdout
+    for bad, word in [(["--frequencies", "1:600"], "--frequencies"),
+                      (["--frequencies", "x"], "--frequencies"),
+                      (["--approximation", "bilinear"], "approximation")]:
+        r = CliRunner().invoke(cli, ["transparency", "peb", "-K", "8", *bad])
+        assert r.exit_code == 2 and len(r.stderr.splitlines()) == 1, r.stderr
+        assert r.stderr.startswith("hapstab: error: ") and word in r.stderr
+    r = CliRunner().invoke(cli, ["transparency", "peb"])
+    assert r.exit_code == 2 and "--stiffness" in r.stderr
