@@ -50,7 +50,7 @@ def _commands():
 COMMANDS = _commands()
 NEEDS = {"region": ["--K", "0:100", "--B", "0:1", "--resolution", "12"], "reproduce": ["fig5"],
          "check": ["-K", "5"], "passivity": ["-K", "5"], "simulate": ["-K", "5"],
-         "run": ["study.toml"], "twoport": ["-K", "5"]}
+         "run": ["study.toml"], "twoport": ["-K", "5"], "transparency": ["-K", "5"]}
 #: The study the fuzz's `run` invocations use (written in the test's folder).
 STUDY = 'kind = "hve"\n[loop]\ndelay = 2\n[[variant]]\nname = "b"\nvirtual-damping = 1\n[run.kmax]\n'
 
@@ -150,6 +150,7 @@ TAKES_A_LOOP = {
     "critical_stiffness_simulation": lambda L: h.critical_stiffness_simulation(L),
     "positive_real": lambda G: h.positive_real(G, 1e-3),
     "circle_criterion": lambda G: h.circle_criterion(G, 1.0, 1e-3),
+    "transparency": lambda L: h.transparency(L),
 }
 
 BAD_VALUES = {
@@ -220,6 +221,13 @@ BAD_VALUES = {
     "best_damping resolution 'x'": lambda: h.best_damping(LOOP, resolution="x"),
     "best_damping resolution 10**7": lambda: h.best_damping(LOOP, resolution=10 ** 7),
     "boundary 10**6 periods": lambda: h.boundary(LOOP, np.linspace(1e-3, 2e-3, 10 ** 6), [0]),
+    "transparency of an HVE": lambda: h.transparency(LOOP),
+    "transparency frequencies nan": lambda: h.transparency(PEB, frequencies_hz=[math.nan]),
+    "transparency frequencies 1e308": lambda: h.transparency(PEB, frequencies_hz=1e308),
+    "transparency frequencies 'x'": lambda: h.transparency(PEB, frequencies_hz="x"),
+    "transparency frequencies []": lambda: h.transparency(PEB, frequencies_hz=[]),
+    "transparency environment 'x'": lambda: h.transparency(PEB, environment="x"),
+    "transparency approximation 3": lambda: h.transparency(PEB, approximation=3),
 }
 
 API_CALLS = ([(f"{name}({bad!r:.20})", (lambda f=f, b=bad: f(b)))

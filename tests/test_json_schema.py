@@ -29,6 +29,9 @@ RUNS = [
     ("boundary", ["boundary", "peb", "--rate", "500Hz,1kHz", "--delay-s", "2ms,5ms"]),
     ("passivity", ["passivity", "hve", "-K", "5"]),
     ("twoport", ["twoport", "peb", "-K", "5", "-n", "2"]),
+    ("transparency", ["transparency", "peb", "-K", "5", "-n", "2", "--frequencies", "1:500:20"]),
+    ("transparency", ["transparency", "peb", "-K", "0", "--environment", "none",   # nulls
+                      "--frequencies", "0.1,1"]),
     ("kmax", ["kmax", "peb", "--method", "llewellyn", "-n", "2"]),
     ("passivity", ["passivity", "peb", "-K", "5", "--method", "passivity"]),
     ("audit", ["audit", "hve", "--delay", "2"]),

@@ -29,6 +29,7 @@ def _results():
         h.best_damping(loop, resolution=8),
         h.simulate(loop.with_stiffness(50.0), 0.2),
         h.simulate(loop.with_stiffness(50.0), 0.2).verdict,
+        h.transparency(peb.with_stiffness(3.0)),
     ]
 
 

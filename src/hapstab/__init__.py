@@ -19,6 +19,7 @@ from hapstab.analysis.positive_real import (
     positive_real,
 )
 from hapstab.analysis.regions import RegionResult, stability_region
+from hapstab.analysis.transparency import TransparencyResult, transparency
 from hapstab.budget import BudgetError
 from hapstab.engine.system import SampledSystem, build
 from hapstab.errors import AnalysisError, ArgumentTypeError, HapstabError, ModelError
@@ -49,5 +50,5 @@ __all__ = [
     "loop_inverse", "sampled_passivity", "PassivityResult", "audit", "AuditResult",
     "stability_region", "RegionResult", "best_damping", "BestDampingResult", "simulate",
     "SimulationResult", "critical_stiffness_simulation", "ArgumentTypeError", "BudgetError",
-    "OutputError",
+    "OutputError", "transparency", "TransparencyResult",
 ]

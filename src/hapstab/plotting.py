@@ -436,3 +436,45 @@ def plot_twoport(res: Any, ax: Any = None) -> Any:
         a.grid(True, which="both", alpha=0.3)
         a.legend(fontsize=8, loc="best")
     return axs
+
+
+def plot_transparency(res: Any, ax: Any = None) -> Any:
+    """Bode-style transparency: |Z_felt| and its phase in free motion, with the
+    environment and against a rigid one (the band between free and rigid is the Z-width),
+    and the tracking |X_s/X_m| and its error |1 - X_s/X_m|.
+
+    Parameters
+    ----------
+    res : TransparencyResult
+        The curves.
+    ax : sequence of 3 matplotlib Axes, optional
+        Where to draw the three panels; a new figure when omitted.
+
+    Returns
+    -------
+    array of 3 matplotlib Axes
+    """
+    mag, phase, track = _panels(ax, 3, (7, 7.5))
+    f = res.frequencies_hz
+    curves = (("free motion", res.felt_free, "tab:green"),
+              ("environment", res.felt_environment, "tab:blue"),
+              ("rigid", res.felt_rigid, "tab:red"))
+    for label, z, color in curves:
+        mag.loglog(f, np.abs(z), "-", lw=1.0, color=color, label=label)
+        phase.semilogx(f, np.degrees(np.angle(z)), "-", lw=1.0, color=color, label=label)
+    mag.fill_between(f, np.abs(res.felt_free), np.abs(res.felt_rigid), color="0.85",
+                     label="free to rigid (Z-width)")
+    mag.set_ylabel("|Z_felt| (N*s/m)")
+    mag.set_title(f"felt impedance and tracking: T = {res.period_s * 1e3:g} ms, delays "
+                  f"{res.delay_samples[0]}/{res.delay_samples[1]} samples, "
+                  f"{res.approximation} approximation", fontsize=9)
+    phase.set_ylabel("phase of Z_felt (deg)")
+    track.loglog(f, np.abs(res.tracking), "-", lw=1.0, color="tab:blue", label="|X_s/X_m|")
+    track.loglog(f, np.abs(res.tracking_error), "--", lw=1.0, color="tab:orange",
+                 label="|1 - X_s/X_m|")
+    track.set_ylabel("tracking")
+    track.set_xlabel("frequency (Hz)")
+    for a in (mag, phase, track):
+        a.grid(True, which="both", alpha=0.3)
+        a.legend(fontsize=8, loc="best")
+    return np.array([mag, phase, track], dtype=object)

@@ -240,7 +240,8 @@ def _register() -> None:
     from hapstab.cli import analysis, paper, regions, run, simulation
 
     for cmd in (analysis.kmax, analysis.check, analysis.boundary_cmd, analysis.demo,
-                paper.passivity_cmd, paper.twoport_cmd, paper.audit_cmd, regions.region,
+                paper.passivity_cmd, paper.twoport_cmd, paper.transparency_cmd,
+                paper.audit_cmd, regions.region,
                 regions.best, simulation.simulate_cmd, simulation.reproduce_cmd, run.run_cmd):
         cli.add_command(cmd)
         _describe(cmd)
