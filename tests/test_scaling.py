@@ -165,3 +165,17 @@ def test_cli_scaling_options():
     assert d["critical_stiffness"] == want.critical_stiffness
     bad = CliRunner().invoke(cli, ["kmax", "peb", "--scaling-force", "-1"])
     assert bad.exit_code == 2 and "--scaling-force" in bad.output
+
+
+def test_scaled_teleoperator_displays_alpha_beta_times_the_environment():
+    """Statics by hand: x_s = alpha x_m and F_h = beta F_e in steady contact with a stiff
+    controller, so the operator feels alpha beta k_e; with C_m = C_s = K and a spring k_e
+    the slave settles where K (alpha x_m - x_s) = k_e x_s: K_felt = alpha beta K k_e /
+    (K + k_e), tracking x_s / x_m = alpha K / (K + k_e)."""
+    a, b, K, ke = 2.0, 0.25, 400.0, 50.0
+    loop = h.paper_peb(stiffness=K).replace(position_scale=a, force_scale=b,
+                                           environment=h.spring(ke))
+    res = h.transparency(loop)
+    assert res.felt_stiffness_environment == pytest.approx(a * b * K * ke / (K + ke), rel=1e-9)
+    assert res.felt_stiffness_rigid == pytest.approx(a * b * K, rel=1e-9)
+    assert res.static_tracking == pytest.approx(a * K / (K + ke), rel=1e-9)

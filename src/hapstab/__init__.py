@@ -20,6 +20,7 @@ from hapstab.analysis.positive_real import (
 )
 from hapstab.analysis.regions import RegionResult, stability_region
 from hapstab.analysis.transparency import TransparencyResult, transparency
+from hapstab.analysis.twoport import TwoPortResult, llewellyn_test
 from hapstab.budget import BudgetError
 from hapstab.engine.system import SampledSystem, build
 from hapstab.errors import AnalysisError, ArgumentTypeError, HapstabError, ModelError
@@ -50,5 +51,5 @@ __all__ = [
     "loop_inverse", "sampled_passivity", "PassivityResult", "audit", "AuditResult",
     "stability_region", "RegionResult", "best_damping", "BestDampingResult", "simulate",
     "SimulationResult", "critical_stiffness_simulation", "ArgumentTypeError", "BudgetError",
-    "OutputError", "transparency", "TransparencyResult",
+    "OutputError", "transparency", "TransparencyResult", "llewellyn_test", "TwoPortResult",
 ]

@@ -73,7 +73,7 @@ def _side(loop: Any, approximation: Any, bounds: tuple[Any, Any] = (0.0, 0.0)
     if loop.kind != "peb":
         raise AnalysisError("method = 'llewellyn': a two-port criterion, for a "
                             "TeleoperationLoop (peb); for the HVE use 'circle' or 'passivity'")
-    side = _stiffness_side(loop)
+    side = _stiffness_side(loop, "Llewellyn's test")
     extra = _damping_bounds(*bounds)
     if any(extra):
         side = dataclasses.replace(side, damping=side.damping + np.array(extra, float))

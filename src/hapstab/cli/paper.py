@@ -22,9 +22,9 @@ from hapstab.cli.options import (
     emit,
     fmt,
     loop_options,
-    parse_range,
     rich_table,
 )
+from hapstab.cli.ranges import parse_range
 from hapstab.errors import HapstabError
 
 if TYPE_CHECKING:
