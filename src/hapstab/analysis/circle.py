@@ -20,6 +20,17 @@ stability limit with passive terminations. Backward difference and Tustin are
 not bounds: at n = 0 they accept every K (Re{z/(z-1)} = 1/2 and
 Re{(z+1)/(z-1)} = 0 on the circle), although the loop goes unstable.
 
+A finite sector (Theorem 2.1 with K = diag(k_i)) tests ``K^{-1} + G(z)`` with
+G = (G^{-1})^{-1} (:func:`loop_transfer`: for two ports the factor z - 1 of
+det G^{-1}'s numerator is divided out analytically). The theorem's feedback is
+*memoryless*: a termination f_i = -phi_i(v_i) with 0 <= v phi(v) <= k_i v^2, e.g. a
+damper c_i <= k_i. The device mass is not memoryless, so the finite-sector K_max is
+a bound only when the devices' masses are negligible (m_i << b_i T: the velocity
+settles within a sample and the forward-difference model is the exact loop). With
+the paper's masses it is not (PEB, n = 1, k = 0.1: 14.31 N/m against an exact
+10.004 N/m with nothing attached); backward difference and Tustin are not bounds
+even then. The passive limit (no sector) is the bound for any passive termination.
+
 References
 ----------
 The paper, Section 3 (eq. 14-18) and Section 4 (eq. 24-34).
@@ -43,13 +54,13 @@ from hapstab.analysis.positive_real import (
 from hapstab.analysis.sweeps import psd_limit, refine_minimum, theta_grid
 from hapstab.engine.device_side import DeviceSide, device_side
 from hapstab.engine.system import build
-from hapstab.errors import AnalysisError
+from hapstab.errors import AnalysisError, ModelError
 from hapstab.models.controllers import SpringDamper
 from hapstab.models.loops import HapticLoop, TeleoperationLoop, require_loop, whole_delay
 from hapstab.results import CriticalStiffnessResult
 from hapstab.tolerances import PSD_SLACK
 
-__all__ = ["APPROXIMATIONS", "loop_inverse", "port_scaling", "circle_test",
+__all__ = ["APPROXIMATIONS", "loop_inverse", "loop_transfer", "port_scaling", "circle_test",
            "critical_stiffness_circle"]
 
 APPROXIMATIONS = ("forward", "backward", "tustin")
@@ -154,6 +165,110 @@ def loop_inverse(loop: HapticLoop | TeleoperationLoop, approximation: str = "for
     return RationalMatrix(nums, dens)
 
 
+def _zpow(k: int) -> np.ndarray:
+    return np.concatenate([[1.0], np.zeros(k)])
+
+
+def loop_transfer(loop: HapticLoop | TeleoperationLoop, approximation: str = "forward",
+                  scaling: str | None = "auto") -> RationalMatrix:
+    """G(z) = (D G^{-1}(z))^{-1}: velocity per force of the loop without its terminations.
+
+    For the HVE simply ``1 / G^{-1}``. For two ports it is built as
+    ``adj(M) diag(c_j / D_j) / q`` from ``G^{-1} = diag(D_i / ((z - 1) c_i)) M(z)``,
+    ``c_i = hd_i z^N_i`` (controller denominator times the row's longest delay), so that
+    M is polynomial, ``M = (z - 1) diag(b_i c_i) + diag(hn_i xn) S(z)`` with
+    ``S_ij = s_ij z^(N_i - n_ij)``. A position-error loop has det S(1) = 0 (S(1) =
+    [[1, -1], [-1, 1]]): det M = (z - 1) q(z) with
+
+        q = (z - 1) a_1 a_2 + a_1 h_2 S_22 + a_2 h_1 S_11 + h_1 h_2 det S(z) / (z - 1)
+
+    (a_i = b_i c_i, h_i = hn_i xn), so the factor (z - 1) that G^{-1}'s pole at z = 1
+    leaves in both ``diag((z - 1) c_j)`` and the determinant is divided out analytically,
+    not by root-finding; det S(z) / (z - 1) divides a polynomial of a few signed
+    coefficients (e.g. ``z^2n - 1``), exactly for unit signs. The powers of z the delays
+    and the controllers leave in both are exact zero coefficients and cancel exactly.
+    (Inverting G^{-1} elementwise instead left (z - 1)^k in both, which root-finding
+    split into spurious poles at |z| ~ 1 + 1e-4.)
+
+    Parameters
+    ----------
+    loop : HapticLoop or TeleoperationLoop
+        The loop (delays a whole number of samples).
+    approximation : {"forward", "backward", "tustin"}
+        X(z), the approximation of Z{v/s}.
+    scaling : {"auto", None}
+        Port weighting D (see :func:`port_scaling`).
+
+    Returns
+    -------
+    RationalMatrix
+        Its poles are the zeros of det G^{-1}(z): the loop's own poles with massless
+        devices and nothing attached (for forward difference exactly those of the
+        sampled-data loop in that limit).
+    """
+    a = _approx(approximation)
+    side = _side(loop)
+    if side.ports == 1:
+        return loop_inverse(loop, a, scaling).inverse()
+    if side.ports != 2:
+        raise AnalysisError(f"loop_transfer: {side.ports} ports; implemented for one and two")
+    return _two_port_transfer(side, a, side.port_weights(scaling))
+
+
+#: det S(1) of the channels' signs counts as 0 below this relative to its two products:
+#: signs (or scale factors) multiplied in pairs carry a few round-offs, far below this
+_SINGULAR_SIGNS = 1e-12
+
+
+def _two_port_transfer(side: DeviceSide, a: str, D: tuple[float, ...]) -> RationalMatrix:
+    """:func:`loop_transfer` for two ports (see there for the construction)."""
+    pm, pa = np.polymul, np.polyadd
+    T = side.period_s
+    xn, z1 = _x_poly(a, T)
+    c: list[np.ndarray] = [np.ones(1), np.ones(1)]
+    be: list[np.ndarray] = [np.zeros(1), np.zeros(1)]
+    S: list[list[np.ndarray]] = [[np.zeros(1), np.zeros(1)], [np.zeros(1), np.zeros(1)]]
+    for ch in side.channels:
+        i = ch.port
+        hn, hd = (np.asarray(v, float) for v in ch.controller.transfer(T))
+        N = max(int(d) for _, _, d in ch.terms)
+        for j, s, d in ch.terms:
+            S[i][j] = pa(S[i][j], s * _zpow(N - int(d)))
+        c[i], be[i] = pm(hd, _zpow(N)), pm(hn, xn)
+    al = [side.damping[i] * c[i] for i in (0, 1)]
+    M = [[pa(pm(z1, al[i]) if i == j else np.zeros(1), pm(be[i], S[i][j])) for j in (0, 1)]
+         for i in (0, 1)]
+    d1, d2 = pm(S[0][0], S[1][1]), pm(S[0][1], S[1][0])
+    top: np.ndarray = np.ones(1)
+    if abs(d1.sum() - d2.sum()) <= _SINGULAR_SIGNS * (np.abs(d1).sum() + np.abs(d2).sum()):
+        sigma = np.polydiv(np.polysub(d1, d2), z1)[0]  # partial sums of a few signs: exact
+        q: np.ndarray = pa(pa(pm(z1, pm(al[0], al[1])), pm(pm(be[0], be[1]), sigma)),
+               pa(pm(pm(al[0], be[1]), S[1][1]), pm(pm(al[1], be[0]), S[0][0])))
+    else:   # det S(1) != 0: det M has no factor z - 1, which stays in the numerators
+        q = np.polysub(pm(M[0][0], M[1][1]), pm(M[0][1], M[1][0]))
+        top = z1
+    adj = [[M[1][1], -M[0][1]], [-M[1][0], M[0][0]]]
+    nums = [[pm(pm(adj[i][j], c[j]), top) / D[j] for j in (0, 1)] for i in (0, 1)]
+    try:
+        return RationalMatrix(nums, [[q, q], [q, q]])
+    except ModelError as e:   # G^-1(inf) singular, e.g. no device damping with forward
+        raise AnalysisError(f"G(z) = (G^-1(z))^-1 is not proper ({e}): G^-1 is singular at "
+                            "z = inf (e.g. devices without damping); Theorem 2.1 needs a "
+                            "proper G") from None
+
+
+def _weighted_sector(sector: Any, D: tuple[float, ...]) -> Any:
+    """The sector of D phi: the weighted loop D G^-1 sees each termination's force times
+    D_i, so a termination in [0, k_i] is a nonlinearity in [0, D_i k_i] there."""
+    if all(d == 1.0 for d in D):
+        return sector
+    try:
+        ks = np.broadcast_to(np.asarray(sector, dtype=float), (len(D),))
+    except (TypeError, ValueError):
+        return sector  # circle_criterion names the error
+    return [float(d * k) for d, k in zip(D, ks, strict=True)]
+
+
 def circle_test(loop: HapticLoop | TeleoperationLoop, approximation: str = "forward",
                 sector: Any = None, scaling: str | None = "auto", *,
                 max_memory: float | None = None,
@@ -165,9 +280,11 @@ def circle_test(loop: HapticLoop | TeleoperationLoop, approximation: str = "forw
     loop : HapticLoop or TeleoperationLoop
     approximation : {"forward", "backward", "tustin"}
     sector : float, sequence of float or None
-        Sector [0, k_i] of the termination(s) (operator plus device mass as a
-        memoryless nonlinearity, Theorem 2.1): tests ``K^{-1} + G(z)``. ``None``
-        (default) is the passive limit: G^{-1}(z) PR (equivalently G(z) PR).
+        Sector [0, k_i] of each termination as a memoryless map from the port's
+        velocity to force (Theorem 2.1; e.g. a damper c_i <= k_i, on a device of
+        negligible mass, see the module notes): tests ``K^{-1} + G(z)``, with the
+        port weights D as ``(D K)^{-1} + G D^{-1}`` (the weighted loop sees D_i phi_i).
+        ``None`` (default) is the passive limit: G^{-1}(z) PR (equivalently G(z) PR).
     scaling : {"auto", None}
         Port weighting for PEB, see :func:`port_scaling`.
     max_memory, max_seconds : float, optional
@@ -181,22 +298,19 @@ def circle_test(loop: HapticLoop | TeleoperationLoop, approximation: str = "forw
         Verdict, failing condition of Definition 1, margin and worst frequency.
     """
     require_loop(loop)
-    N = build(loop).order
+    sysm = build(loop)
+    N = sysm.order
     # measured: 8 s (no sector) and 27 s (a sector) at N = 2004, 1.7 and 5.6 eigenvalue
-    # problems of that size: charged as 2 and 6
-    problems = 2 if sector is None else 6
+    # problems of that size: charged as 2 and 6; PEB with a sector (the roots of det G^-1
+    # once, of four numerators, and the sweep) 30 s at N = 2004 (n = 1000): charged as 7
+    problems = 2 if sector is None else (6 if sysm.n_ports == 1 else 7)
     budget.check(budget.Cost(f"circle_test: roots of a {N}-state loop's polynomials",
                              64.0 * N * N, problems * budget.eig_seconds(N)),
                  max_memory, max_seconds)
-    Ginv = loop_inverse(loop, approximation, scaling)
     if sector is None:
-        return positive_real(Ginv, loop.period)
-    if Ginv.m > 1:
-        # inverting the 2x2 G^-1 leaves uncancelled factors at z = 1, which root-finding
-        # splits into spurious poles off the circle: refuse rather than answer wrongly
-        raise AnalysisError("sector: a finite sector is supported for the HVE only; for PEB use the "
-                            "passive limit (no sector)")
-    return circle_criterion(Ginv.inverse(), sector, loop.period)
+        return positive_real(loop_inverse(loop, approximation, scaling), loop.period)
+    G = loop_transfer(loop, approximation, scaling)
+    return circle_criterion(G, _weighted_sector(sector, port_scaling(loop, scaling)), loop.period)
 
 
 # ----------------------------------------------------------------- K_max, fast path
@@ -262,7 +376,10 @@ def critical_stiffness_circle(loop: HapticLoop | TeleoperationLoop, approximatio
         found by bracketing and bisection of :func:`circle_test` (bisection to
         1e-6 relative; the PR test of G = (G^{-1})^{-1} itself resolves about
         1e-4 relative, because Re G vanishes like w^2 as w -> 0). Never below
-        the passive limit. ``None``: passive limit (fast, exact up to rounding).
+        the passive limit, nor above the limit of the loop with nothing attached
+        (c_i = 0 is in every sector). A stability bound only for devices of
+        negligible mass (see the module notes). ``None``: passive limit (fast,
+        exact up to rounding).
     scaling : {"auto", None}
         PEB port weighting, see :func:`port_scaling`.
 

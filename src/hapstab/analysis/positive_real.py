@@ -20,8 +20,9 @@ functions and their application to system stability", Proc. IEE 116(1), 1969
 
 from __future__ import annotations
 
+import functools
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -57,10 +58,11 @@ class _Element:
     poles: np.ndarray
 
     @classmethod
-    def from_poly(cls, num: np.ndarray, den: np.ndarray) -> _Element:
+    def from_poly(cls, num: np.ndarray, den: np.ndarray,
+                  roots: Callable[[np.ndarray], np.ndarray] = np.roots) -> _Element:
         if not np.any(num):
             return cls(0.0, np.zeros(0, complex), np.zeros(0, complex))
-        zs, ps = list(_snap(np.roots(num))), list(_snap(np.roots(den)))
+        zs, ps = list(_snap(roots(num))), list(_snap(roots(den)))
         keep = []
         for p in ps:  # cancel common roots (e.g. (z-1) in B(z-1)/(Tz) * T/(z-1))
             d = [abs(p - z) for z in zs]
@@ -124,8 +126,21 @@ class RationalMatrix:
                     raise ModelError(f"G[{i}][{j}] denominator: must not be zero")
                 if np.any(self.num[i][j]) and self.num[i][j].size > self.den[i][j].size:
                     raise ModelError(f"G[{i}][{j}]: must be proper (deg num <= deg den)")
-        self.elements = [[_Element.from_poly(self.num[i][j], self.den[i][j]) for j in range(m)]
-                         for i in range(m)]
+
+    @functools.cached_property
+    def elements(self) -> list[list[_Element]]:
+        """Each element in product form, found when first needed (one eigenvalue problem
+        per distinct polynomial: elements sharing a denominator share its roots)."""
+        found: dict[bytes, np.ndarray] = {}
+
+        def roots(p: np.ndarray) -> np.ndarray:
+            key = p.tobytes()
+            if key not in found:
+                found[key] = np.roots(p)
+            return found[key].copy()
+
+        return [[_Element.from_poly(self.num[i][j], self.den[i][j], roots) for j in range(self.m)]
+                for i in range(self.m)]
 
     @classmethod
     def scalar(cls, num: Any, den: Any) -> RationalMatrix:

@@ -161,6 +161,9 @@ def psd_limit(A: np.ndarray, C: np.ndarray, tol: np.ndarray | float = 0.0) -> np
     q0 = a11 * a22 - np.abs(a12) ** 2
     q1 = a11 * c22 + a22 * c11 - 2.0 * np.real(a12 * np.conj(c12))
     q2 = c11 * c22 - np.abs(c12) ** 2
+    # det C that is 0 to rounding (~500 eps of its scale, as for q0 below) is 0: else a
+    # singular C (e.g. K T [[1, 1], [1, 1]]) puts a root at K ~ 1e16 where there is none
+    q2 = np.where(np.abs(q2) <= 1e-13 * (np.abs(c11) + np.abs(c22)) ** 2, 0.0, q2)
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         disc = q1 * q1 - 4.0 * q0 * q2
         sq = np.sqrt(np.maximum(disc, 0.0))
