@@ -284,3 +284,11 @@ def test_backward_and_tustin_are_not_bounds(a, expected):
     Km = kmax(h.paper_peb(delay_samples=2), 0.1, a)
     assert Km == pytest.approx(expected, rel=1e-3)
     assert not stable(peb(n=2, K=Km))
+
+
+def test_the_result_says_when_it_is_not_a_bound():
+    # the cases above: the reason says so, naming m/(bT) (750 for the paper's PEB devices)
+    res = h.critical_stiffness(h.paper_peb(delay_samples=1), method="circle", sector=0.1)
+    assert "NOT a stability bound for this loop" in res.reason and "750" in res.reason
+    light = h.critical_stiffness(peb(n=1), method="circle", sector=0.1)
+    assert "NOT" not in light.reason and "negligible mass" in light.reason

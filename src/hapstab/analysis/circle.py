@@ -53,6 +53,7 @@ from hapstab.analysis.positive_real import (
 )
 from hapstab.analysis.sweeps import psd_limit, refine_minimum, theta_grid
 from hapstab.engine.device_side import DeviceSide, device_side
+from hapstab.engine.structure import structure_of
 from hapstab.engine.system import build
 from hapstab.errors import AnalysisError, ModelError
 from hapstab.models.controllers import SpringDamper
@@ -423,6 +424,25 @@ def critical_stiffness_circle(loop: HapticLoop | TeleoperationLoop, approximatio
          "port_scaling": list(D), "sector": None})
 
 
+def _inertia_note(loop: Any) -> str:
+    """What the finite-sector K_max is worth for this loop: a bound only for memoryless
+    terminations on devices of negligible mass (module notes), so say m / (b T)."""
+    side = device_side(loop, "the circle criterion")
+    masses = [d.mass for d in _devices(loop)]
+    ratio = max(m / (b * loop.period) if b > 0 else math.inf
+                for m, b in zip(masses, side.damping, strict=True))
+    # m = b T: the device's velocity settles in one sample, far from memoryless
+    if ratio >= 1:
+        return (f"NOT a stability bound for this loop: its devices have m/(bT) = {ratio:.3g} "
+                "(the theorem needs memoryless terminations, devices of negligible mass)")
+    return (f"a stability bound only for memoryless terminations in the sector on devices "
+            f"of negligible mass (m/(bT) << 1; here {ratio:.3g})")
+
+
+def _devices(loop: Any) -> list[Any]:
+    return [pt.device for pt in structure_of(loop).ports]
+
+
 def _sector_kmax(loop: Any, a: str, sector: Any, scaling: str | None) -> CriticalStiffnessResult:
     """K_max of K^{-1} + G(z) PR by bracketing then bisection (relative 1e-6),
     starting from the passive limit (PR of G implies PR of K^{-1} + G) and assuming
@@ -467,7 +487,7 @@ def _sector_kmax(loop: Any, a: str, sector: Any, scaling: str | None) -> Critica
     K = lo
     res = circle_test(loop.with_stiffness(hi), a, sector, scaling) if math.isfinite(hi) else None
     reason = (f"circle criterion (Theorem 2.1) with sector [0, {', '.join(f'{k:g}' for k in ks)}], "
-              f"{a} approximation: K^-1 + G(z) is PR for K <= K_max")
+              f"{a} approximation: K^-1 + G(z) is PR for K <= K_max; {_inertia_note(loop)}")
     f_hz = res.worst_frequency_hz if res is not None else float("nan")
     return CriticalStiffnessResult(
         float(K), "circle", ((0.0, float(K)),) if K > 0 else (), reason, loop.period,
