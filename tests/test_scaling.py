@@ -105,9 +105,10 @@ def test_only_alpha_beta_matters_for_stability(seed):
     assert k * ab == pytest.approx(k_equiv, rel=1e-9)
 
 
-def test_free_scaled_teleoperator_has_its_rigid_mode_at_alpha():
+@pytest.mark.parametrize("a, b", [(3.0, 0.5), (0.1, 3.0)])   # 0.1 * 3 is not exact in binary
+def test_free_scaled_teleoperator_has_its_rigid_mode_at_alpha(a, b):
     loop = h.paper_peb(delay_samples=4).replace(operator=None, environment=None,
-                                                position_scale=3.0, force_scale=0.5)
+                                                position_scale=a, force_scale=b)
     sysm = build(loop)
     assert sysm.rigid_modes == 1
     res = h.critical_stiffness(loop)
@@ -120,6 +121,10 @@ def test_free_scaled_teleoperator_has_its_rigid_mode_at_alpha():
     K = res.critical_stiffness
     assert rho(K * 0.999) < 1 < rho(K * 1.001)
     assert h.stability(loop.with_stiffness(0.5 * K)).verdict == "marginal"
+    # only alpha beta matters: the same as position scaling alone by alpha beta (the
+    # certified crossings of two loops whose signs differ in rounding only)
+    alone = loop.replace(position_scale=a * b, force_scale=1.0)
+    assert h.critical_stiffness(alone).critical_stiffness == pytest.approx(K, rel=1e-9)
 
 
 def test_slave_follows_alpha_times_the_master():

@@ -119,16 +119,27 @@ def rigid_modes(structure: LoopStructure, period_s: float) -> int:
     Returns
     -------
     int
-        The dimension of that set of displacements (0 or 1 for the loops hapstab builds),
-        computed in exact rational arithmetic on the signs.
+        The dimension of that set of displacements (0 or 1 for the loops hapstab builds):
+        for two free ports, whether ``S00 S11 == S01 S10`` as the exact core computes it;
+        otherwise the rank of the signs (and grounded ports) in exact rational arithmetic.
     """
     p = len(structure.ports)
+    free = [port_is_free(pt, period_s) for pt in structure.ports]
+    S = np.zeros((len(structure.channels), p))
+    for i, ch in enumerate(structure.channels):
+        for j, sign, _ in ch.terms:
+            S[i, j] += sign
+    if S.shape == (2, 2) and all(free) and np.any(S):
+        # the products as the exact core forms them (a0 a1 == c0 c1): a scaled pair's
+        # signs alpha beta, -beta, -alpha, 1 carry alpha beta rounded once, and the model
+        # means the exact product, whose translation [1, alpha] is the rigid mode
+        return int(S[0, 0] * S[1, 1] == S[0, 1] * S[1, 0])
     rows = [[Fraction(0)] * p for _ in structure.channels]
     for r, ch in zip(rows, structure.channels, strict=True):
         for j, sign, _ in ch.terms:
             r[j] += Fraction(sign)
-    for j, pt in enumerate(structure.ports):
-        if not port_is_free(pt, period_s):       # a grounded port cannot move
+    for j in range(p):
+        if not free[j]:                          # a grounded port cannot move
             rows.append([Fraction(int(i == j)) for i in range(p)])
     return p - _rank(rows)
 
