@@ -240,10 +240,8 @@ def damping_bound_options(kind: str) -> Callable:
 def bounds_of(kw: dict[str, Any], method: str) -> dict[str, float]:
     """The damping bounds given (taken out of ``kw``), refused unless ``method`` is
     llewellyn."""
-    given_ = {k: kw.pop(k) for k in ("operator_damping_min", "environment_damping_min")
-              if kw.get(k) is not None}
-    kw.pop("operator_damping_min", None)
-    kw.pop("environment_damping_min", None)
+    popped = {k: kw.pop(k, None) for k in ("operator_damping_min", "environment_damping_min")}
+    given_ = {k: v for k, v in popped.items() if v is not None}
     if given_ and method != "llewellyn":
         name = "--" + next(iter(given_)).replace("_", "-")
         raise HapstabError(f"{name}: applies to --method llewellyn only (got --method {method})")
