@@ -13,13 +13,14 @@ from fractions import Fraction
 import numpy as np
 
 from hapstab.errors import ModelError, check_period
-from hapstab.models.controllers import DiscreteController, SpringDamper
+from hapstab.models.controllers import DiscreteController, SpringDamper, stiffness_ratios
+from hapstab.models.fourchannel import FourChannelLoop
 from hapstab.models.loops import HapticLoop, TeleoperationLoop, require_loop, split_delay
 from hapstab.models.parts import Device, Impedance
 
 __all__ = ['Port', 'Channel', 'LoopStructure', 'structure_of', 'split_delay', 'port_is_free',
            'periods_of',
-           'rigid_modes', 'FREE_SPRING']
+           'rigid_modes', 'FREE_SPRING', 'channel_ratios', 'position_gains']
 
 
 @dataclass(frozen=True)
@@ -53,12 +54,17 @@ class Channel:
         H(z).
     terms : tuple of (int, float, float)
         ``(j, sign_j, delay_j)``: the measured port, its sign and its delay in samples
-        (may be fractional).
+        (may be fractional for positions).
+    measures : {"position", "force"}
+        What the terms sample: the ports' positions, or the force each port's
+        termination applies to its device just before the sample (kT^-; whole delays).
+        A port may have several channels; their forces add.
     """
 
     port: int
     controller: SpringDamper | DiscreteController
     terms: tuple[tuple[int, float, float], ...]  # (measured port j, sign, delay in samples)
+    measures: str = "position"
 
 
 @dataclass(frozen=True)
@@ -71,10 +77,20 @@ class LoopStructure:
         The devices with their terminations.
     channels : tuple of Channel
         The controllers and what each one measures.
+    reference : int
+        The position channel whose stiffness K names (:func:`channel_ratios`).
     """
 
     ports: tuple[Port, ...]
     channels: tuple[Channel, ...]
+    reference: int = 0
+
+    @property
+    def simple(self) -> bool:
+        """One position channel per port, channel i on port i (the HVE and PEB)."""
+        return all(ch.port == i and ch.measures == "position"
+                   for i, ch in enumerate(self.channels)) and \
+            len(self.channels) == len(self.ports)
 
 
 #: A spring to ground with k T^2 / m below this moves the port's pole at z = 1 by
@@ -102,12 +118,64 @@ def port_is_free(port: Port, period_s: float) -> bool:
     return bool(port.termination.stiffness * float(period_s) ** 2 / mass < FREE_SPRING)
 
 
+def channel_ratios(structure: LoopStructure) -> tuple[float, ...] | None:
+    """Each channel's stiffness per unit K: the one rule by which every analysis varies K.
+
+    K is the stiffness of the reference channel (``structure.reference``); every other
+    position channel keeps its stiffness ratio to it
+    (:func:`~hapstab.models.controllers.stiffness_ratios`); force channels have none (0).
+
+    Parameters
+    ----------
+    structure : LoopStructure
+        The loop.
+
+    Returns
+    -------
+    tuple of float or None
+        One ratio per channel; ``None`` when K cannot be varied: a position channel is
+        not a :class:`SpringDamper`, or the reference stiffness is 0 while another is not.
+    """
+    chs = structure.channels
+    pos = [i for i, ch in enumerate(chs) if ch.measures == "position"]
+    if not all(isinstance(chs[i].controller, SpringDamper) for i in pos):
+        return None
+    order = [structure.reference] + [i for i in pos if i != structure.reference]
+    ratios = stiffness_ratios([chs[i].controller.stiffness for i in order])  # type: ignore[union-attr]
+    if ratios is None:
+        return None
+    out = [0.0] * len(chs)
+    for i, r in zip(order, ratios, strict=True):
+        out[i] = r
+    return tuple(out)
+
+
+def position_gains(structure: LoopStructure) -> np.ndarray:
+    """``S_ij``: the constant-displacement gain of port i's controllers on port j's
+    position per unit K, as the exact core forms it (the rigid-body rule's matrix).
+
+    For the HVE and PEB (one channel per port) the signs alone: a channel's stiffness
+    scales its whole row, which leaves the null space alone. With several channels per
+    port each sign is weighted by its channel's stiffness ratio (a damper-only channel
+    exerts no force at a constant displacement); force channels measure nothing there.
+    """
+    p = len(structure.ports)
+    ratios = None if structure.simple else channel_ratios(structure)
+    S = np.zeros((p, p))
+    for c, ch in enumerate(structure.channels):
+        if ch.measures != "position":
+            continue
+        for j, sign, _ in ch.terms:
+            S[ch.port, j] += sign if ratios is None else ratios[c] * sign
+    return S
+
+
 def rigid_modes(structure: LoopStructure, period_s: float) -> int:
     """The rigid-body rule (its one definition): the modes at z = 1 that no controller
     moves. A constant displacement x of the ports with no spring to ground that gives
-    every controller a zero input (``S x = 0``, ``S_ij`` the sum of channel i's signs on
-    port j) is an equilibrium for every K: a common translation of PEB's free master
-    and slave (x = [1, 1]), or x = [1, alpha] with position scaling alpha.
+    every controller a zero force (``S x = 0``, :func:`position_gains`) is an
+    equilibrium for every K: a common translation of PEB's free master and slave
+    (x = [1, 1]), or x = [1, alpha] with position scaling alpha.
 
     Parameters
     ----------
@@ -121,23 +189,17 @@ def rigid_modes(structure: LoopStructure, period_s: float) -> int:
     int
         The dimension of that set of displacements (0 or 1 for the loops hapstab builds):
         for two free ports, whether ``S00 S11 == S01 S10`` as the exact core computes it;
-        otherwise the rank of the signs (and grounded ports) in exact rational arithmetic.
+        otherwise the rank of S (and grounded ports) in exact rational arithmetic.
     """
     p = len(structure.ports)
     free = [port_is_free(pt, period_s) for pt in structure.ports]
-    S = np.zeros((len(structure.channels), p))
-    for i, ch in enumerate(structure.channels):
-        for j, sign, _ in ch.terms:
-            S[i, j] += sign
+    S = position_gains(structure)
     if S.shape == (2, 2) and all(free) and np.any(S):
         # the products as the exact core forms them (a0 a1 == c0 c1): a scaled pair's
         # signs alpha beta, -beta, -alpha, 1 carry alpha beta rounded once, and the model
         # means the exact product, whose translation [1, alpha] is the rigid mode
         return int(S[0, 0] * S[1, 1] == S[0, 1] * S[1, 0])
-    rows = [[Fraction(0)] * p for _ in structure.channels]
-    for r, ch in zip(rows, structure.channels, strict=True):
-        for j, sign, _ in ch.terms:
-            r[j] += Fraction(sign)
+    rows = [[Fraction(float(v)) for v in row] for row in S]
     for j in range(p):
         if not free[j]:                          # a grounded port cannot move
             rows.append([Fraction(int(i == j)) for i in range(p)])
@@ -215,6 +277,8 @@ def structure_of(loop: HapticLoop | TeleoperationLoop) -> LoopStructure:
         return LoopStructure(
             (Port(loop.device, loop.operator, "device"),),
             (Channel(0, loop.controller, ((0, 1.0, loop.delay_in_samples),)),))
+    if isinstance(loop, FourChannelLoop):
+        return _four_channel(loop)
     if isinstance(loop, TeleoperationLoop):
         fwd, bwd = loop.forward_delay_in_samples, loop.backward_delay_in_samples
         a, b = loop.position_scale, loop.force_scale       # eq. (20) when both are 1
@@ -224,3 +288,26 @@ def structure_of(loop: HapticLoop | TeleoperationLoop) -> LoopStructure:
              Channel(1, loop.slave_controller, ((1, 1.0, 0.0), (0, -a, fwd)))))
     require_loop(loop)
     raise AssertionError("unreachable: require_loop accepts only the two kinds above")
+
+
+def _four_channel(loop: FourChannelLoop) -> LoopStructure:
+    """Lawrence's architecture as channels: u = -F_c (the force a controller resists
+    with), so u_m = C_m x_m - C_4' z^-n_b x_s - C_6 Ft_m - C_2 z^-n_b Ft_s and
+    u_s = C_s x_s - C_1 z^-n_f x_m - C_3 z^-n_f Ft_m - C_5 Ft_s, Ft_j the force of
+    port j's termination on its device (F_h = Ft_m, F_e = -Ft_s). Force channels with a
+    gain of 0 are left out."""
+    fwd, bwd = loop.forward_delay_in_samples, loop.backward_delay_in_samples
+    chans = [Channel(0, loop.master_controller, ((0, 1.0, 0.0),)),
+             Channel(0, loop.master_from_slave, ((1, -1.0, bwd),)),
+             Channel(1, loop.slave_controller, ((1, 1.0, 0.0),)),
+             Channel(1, loop.slave_from_master, ((0, -1.0, fwd),))]
+    for port, gain, j, d in ((0, loop.master_force_feedback, 0, 0.0),
+                             (0, loop.force_to_master, 1, bwd),
+                             (1, loop.force_to_slave, 0, fwd),
+                             (1, loop.slave_force_feedback, 1, 0.0)):
+        if gain != 0.0:
+            chans.append(Channel(port, DiscreteController((gain,), (1.0,)), ((j, -1.0, d),),
+                                 "force"))
+    return LoopStructure(
+        (Port(loop.master, loop.operator, "master"), Port(loop.slave, loop.environment, "slave")),
+        tuple(chans), reference=2 * loop.stiffness_reference)
