@@ -225,6 +225,10 @@ def _two_port_transfer(side: DeviceSide, a: str, D: tuple[float, ...]) -> Ration
     """:func:`loop_transfer` for two ports (see there for the construction)."""
     pm, pa = np.polymul, np.polyadd
     T = side.period_s
+    if len(side.channels) != 2:
+        raise AnalysisError("circle criterion with a finite sector: derived for one controller "
+                            "per port (PEB); this loop has several (C_1 or C_4 apart from C_s, "
+                            "C_m); use sector=None or the exact analysis")
     xn, z1 = _x_poly(a, T)
     c: list[np.ndarray] = [np.ones(1), np.ones(1)]
     be: list[np.ndarray] = [np.zeros(1), np.zeros(1)]

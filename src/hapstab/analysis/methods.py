@@ -43,7 +43,7 @@ METHODS: dict[str, Callable[..., CriticalStiffnessResult]] = {
     "simulation": critical_stiffness_simulation,
 }
 #: Methods for one loop kind only (besides the closed forms derived for one).
-ONLY = {"llewellyn": "peb"}
+ONLY = {"llewellyn": ("peb", "4ch")}
 
 def methods_for(kind: Any) -> list[str]:
     """Method names that apply to loops of ``kind``: every method but the closed
@@ -51,9 +51,9 @@ def methods_for(kind: Any) -> list[str]:
 
     Parameters
     ----------
-    kind : {"hve", "peb"} or a loop
-        The loop kind (haptic virtual environment or position-error-based
-        teleoperator), or a loop, whose kind is taken.
+    kind : {"hve", "peb", "4ch"} or a loop
+        The loop kind (haptic virtual environment, position-error-based or
+        4-channel teleoperator), or a loop, whose kind is taken.
 
     Returns
     -------
@@ -61,9 +61,10 @@ def methods_for(kind: Any) -> list[str]:
         Names accepted by :func:`critical_stiffness` for that kind.
     """
     kind = getattr(kind, "kind", kind)
-    if not isinstance(kind, str) or kind not in ("hve", "peb"):
-        raise AnalysisError(f"kind = {kind!r}: allowed: 'hve', 'peb' or a loop")
-    other = {c.key for c in TABLE if c.kind != kind} | {m for m, k in ONLY.items() if k != kind}
+    if not isinstance(kind, str) or kind not in ("hve", "peb", "4ch"):
+        raise AnalysisError(f"kind = {kind!r}: allowed: 'hve', 'peb', '4ch' or a loop")
+    other = {c.key for c in TABLE if c.kind != kind} | {m for m, k in ONLY.items()
+                                                       if kind not in k}
     return [m for m in METHODS if m not in other]
 
 

@@ -89,9 +89,10 @@ NYQUIST_SLACK = 1e-12
 
 def _side(loop: Any) -> DeviceSide:
     require_loop(loop)
-    if loop.kind != "peb":
+    if loop.kind not in ("peb", "4ch"):
         raise AnalysisError(f"loop: transparency is a teleoperator's (master and slave); got "
-                            f"a loop of kind {loop.kind!r}; allowed: 'peb' (TeleoperationLoop)")
+                            f"a loop of kind {loop.kind!r}; allowed: 'peb' (TeleoperationLoop) "
+                            "or '4ch' (FourChannelLoop)")
     fwd, bwd = loop.forward_delay_in_samples, loop.backward_delay_in_samples
     if fwd != int(fwd) or bwd != int(bwd):
         raise AnalysisError(f"transparency: derived for whole-sample delays (t_d = nT); this "

@@ -57,8 +57,8 @@ import numpy as np
 from hapstab.analysis.circle import _approx, _stiffness_side, _x
 from hapstab.analysis.sweeps import refine_minimum, theta_grid
 from hapstab.engine.device_side import DeviceSide
+from hapstab.engine.structure import own_stiffness, structure_of
 from hapstab.errors import AnalysisError, check_real
-from hapstab.models.controllers import spring_damper
 from hapstab.models.loops import TeleoperationLoop, require_loop, whole_delay
 from hapstab.results import CriticalStiffnessResult, Result, jsonable, write_csv
 
@@ -70,9 +70,10 @@ def _side(loop: Any, approximation: Any, bounds: tuple[Any, Any] = (0.0, 0.0)
     """The device side with the terminations' least damping moved into it (bounded
     impedance, :func:`_damping_bounds`), and the approximation's name."""
     require_loop(loop)
-    if loop.kind != "peb":
+    if loop.kind not in ("peb", "4ch"):
         raise AnalysisError("method = 'llewellyn': a two-port criterion, for a "
-                            "TeleoperationLoop (peb); for the HVE use 'circle' or 'passivity'")
+                            "TeleoperationLoop (peb) or a FourChannelLoop (4ch); for the HVE "
+                            "use 'circle' or 'passivity'")
     side = _stiffness_side(loop, "Llewellyn's test")
     extra = _damping_bounds(*bounds)
     if any(extra):
@@ -153,7 +154,7 @@ def llewellyn_margin(loop: TeleoperationLoop, approximation: str = "forward",
     side, a = _side(loop, approximation)
     th = theta_grid(side.oscillations) if theta is None else np.asarray(theta, float)
     A, C = _parts(side, a, th)
-    K = spring_damper(loop.master_controller, "master_controller").stiffness   # the loop's K
+    K = own_stiffness(structure_of(loop))   # the loop's K
     return th, _margin(A, C, K)
 
 
@@ -360,7 +361,7 @@ def llewellyn_test(loop: TeleoperationLoop, approximation: str = "forward",
     bounds = _damping_bounds(operator_damping_min, environment_damping_min)
     side, a = _side(loop, approximation, bounds)
     T = side.period_s
-    K = spring_damper(loop.master_controller, "master_controller").stiffness
+    K = own_stiffness(structure_of(loop))
     th = theta_grid(side.oscillations)
     A, C = _parts(side, a, th)
 

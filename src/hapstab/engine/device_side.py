@@ -13,7 +13,9 @@ condition on ``diag(b)`` and ``(1 - z^-1) Hc(z)`` (Colgate and Schenkel). Both
 take Hc from here, built from the same :class:`~hapstab.engine.structure.LoopStructure`
 as the time-domain engine, so a new loop kind needs only its structure.
 
-K is varied by :func:`~hapstab.models.controllers.stiffness_ratios` (K_s/K_m kept).
+K is varied by :func:`~hapstab.engine.structure.channel_ratios` (K_s/K_m kept). A port
+may have several position channels (Lawrence's 4-channel architecture without force
+gains); their forces add in row i of Hc. Force channels are refused here.
 
 References
 ----------
@@ -27,9 +29,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hapstab.engine.structure import Channel, structure_of
+from hapstab.engine.structure import Channel, channel_ratios, structure_of
 from hapstab.errors import AnalysisError
-from hapstab.models.controllers import SpringDamper, stiffness_ratios
+from hapstab.models.controllers import SpringDamper
 from hapstab.models.loops import HapticLoop, TeleoperationLoop, split_delay
 
 __all__ = ["DeviceSide", "device_side", "PARTS"]
@@ -73,7 +75,10 @@ class DeviceSide:
     def oscillations(self) -> int:
         """Oscillations over theta in [0, pi] of a p x p determinant of Hc: the sum over
         channels of the longest delay, plus 2 (a grid density for sweeps)."""
-        return sum(max(int(d) for _, _, d in ch.terms) for ch in self.channels) + 2
+        most = [0] * self.ports
+        for ch in self.channels:
+            most[ch.port] = max(most[ch.port], *(int(d) for _, _, d in ch.terms))
+        return sum(most) + 2
 
     def port_weights(self, scaling: str | None = "auto") -> tuple[float, ...]:
         """Diagonal port weights D that make the residue of D Hc X at z = 1 Hermitian.
@@ -106,9 +111,9 @@ class DeviceSide:
         if scaling != "auto" or self.ratios is None or self.ports != 2:
             return ones
         S = np.zeros((2, 2))
-        for i, ch in enumerate(self.channels):
+        for c, ch in enumerate(self.channels):
             for j, s, _ in ch.terms:
-                S[i, j] += self.ratios[i] * s
+                S[ch.port, j] += self.ratios[c] * s
         if S[0, 1] * S[1, 0] > 0 and S[0, 1] != S[1, 0]:
             return (float(S[1, 0] / S[0, 1]), 1.0)
         return ones
@@ -139,11 +144,11 @@ class DeviceSide:
             raise AnalysisError("controllers: K cannot be varied in this loop (needs spring-damper "
                                 "controllers with the master's stiffness > 0 if the slave's is)")
         out = np.zeros((th.size, self.ports, self.ports), complex)
-        for i, ch in enumerate(self.channels):
+        for c, ch in enumerate(self.channels):
             h = _response(ch.controller, th, self.period_s, part,
-                          self.ratios[i] if self.ratios is not None else 1.0)
+                          self.ratios[c] if self.ratios is not None else 1.0)
             for j, s, d in ch.terms:
-                out[:, i, j] += s * np.exp(-1j * int(d) * th) * h
+                out[:, ch.port, j] += s * np.exp(-1j * int(d) * th) * h
         return out
 
     def controller_polynomials(self) -> tuple[list[list[np.ndarray]], list[list[np.ndarray]]]:
@@ -157,7 +162,8 @@ class DeviceSide:
         p = self.ports
         nums = [[np.zeros(1) for _ in range(p)] for _ in range(p)]
         dens = [[np.ones(1) for _ in range(p)] for _ in range(p)]
-        for i, ch in enumerate(self.channels):
+        for ch in self.channels:
+            i = ch.port
             hn, hd = (np.asarray(a, float) for a in ch.controller.transfer(self.period_s))
             for j, s, d in ch.terms:
                 if np.any(nums[i][j]):
@@ -203,6 +209,10 @@ def device_side(loop: HapticLoop | TeleoperationLoop, what: str) -> DeviceSide:
         conditions are derived for t_d = nT.
     """
     st = structure_of(loop)
+    if any(ch.measures != "position" for ch in st.channels):
+        raise AnalysisError(f"{what}: derived for controllers that measure positions; this loop "
+                            "also feeds back measured forces (force gains C_2, C_3, C_5, C_6), "
+                            "use the exact analysis")
     channels = []
     for ch in st.channels:
         terms = []
@@ -213,9 +223,7 @@ def device_side(loop: HapticLoop | TeleoperationLoop, what: str) -> DeviceSide:
                                     f"(t_d = nT); this loop has t_d = {d:g} T")
             terms.append((j, s, float(n)))
         channels.append(Channel(ch.port, ch.controller, tuple(terms)))
-    ctrls = [ch.controller for ch in st.channels]
-    ratios = (stiffness_ratios([c.stiffness for c in ctrls])  # type: ignore[union-attr]
-              if all(isinstance(c, SpringDamper) for c in ctrls) else None)
+    ratios = channel_ratios(st)
     return DeviceSide(float(loop.period), tuple(pt.name for pt in st.ports),
                       np.array([pt.device.damping for pt in st.ports], float), tuple(channels),
                       ratios)

@@ -39,6 +39,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -51,10 +52,17 @@ from hapstab.engine.discs import (
     poly_jet,
     zero,
 )
-from hapstab.engine.structure import periods_of, port_is_free, rigid_modes, structure_of
+from hapstab.engine.expansion import generic_coefficients
+from hapstab.engine.structure import (
+    channel_ratios,
+    periods_of,
+    port_is_free,
+    rigid_modes,
+    structure_of,
+)
 from hapstab.engine.zoh import expm_batched, port_matrices
 from hapstab.errors import AnalysisError
-from hapstab.models.controllers import SpringDamper, stiffness_ratios
+from hapstab.models.controllers import SpringDamper
 from hapstab.models.loops import HapticLoop, TeleoperationLoop, split_delay
 
 __all__ = ["LoopResponse", "loop_response", "stack_responses"]
@@ -74,6 +82,8 @@ class PortPoly:
     Nt: dict[float, np.ndarray]   # fraction f -> (L, q+1): z^-1 Nt / d is the f-delayed measurement
     D: dict[float, np.ndarray]    # fraction f -> (L, q): (Nt - (1 + y) N) / y
     err: dict[str, np.ndarray]    # coefficient error bounds, same shapes
+    R: np.ndarray | None = None   # (L, q) c adj(yI - E) Gamma: the termination's force
+    mz_M: np.ndarray | None = None   # (L,) termination mass / port mass
 
 
 @dataclass
@@ -107,15 +117,28 @@ class LoopResponse:
     q: int
     rigid: int
     periods: np.ndarray
+    channel_ports: tuple[int, ...] = ()
+    kinds: tuple[str, ...] = ()
+    gain: np.ndarray | None = None
+    free: tuple[bool, ...] = ()
 
     @property
     def size(self) -> int:
         return self.periods.size
 
     @property
+    def simple(self) -> bool:
+        """One position channel per port, channel i on port i (the HVE and PEB)."""
+        return self.channel_ports == tuple(range(len(self.ports))) and \
+            all(k == "position" for k in self.kinds)
+
+    @property
     def phase_rate(self) -> int:
         """Oscillations of det M over theta in [0, pi] (round-trip delay + order)."""
-        return sum(max(t[2] + int(np.ceil(t[3])) for t in ch) for ch in self.terms) + self.q + 2
+        most = [0] * len(self.ports)
+        for port, ch in zip(self.channel_ports, self.terms, strict=True):
+            most[port] = max(most[port], *(t[2] + int(np.ceil(t[3])) for t in ch))
+        return sum(most) + self.q + 2
 
     # ------------------------------------------------------------------ evaluation
     def coefficients(self, idx: np.ndarray, theta: np.ndarray, rho: np.ndarray) -> list[Jet]:
@@ -141,6 +164,8 @@ class LoopResponse:
 
         shape = theta.shape
         p = len(self.ports)
+        if not self.simple:
+            return generic_coefficients(self, idx, theta, rho, b, self._poly_of(idx, b, pj))
         hb = [b["1-zinv"].scale(self.beta[idx, j]) for j in range(p)]
         ku = [self.k[idx, j] * self.scale[idx] for j in range(p)]
         if p == 1:
@@ -161,6 +186,22 @@ class LoopResponse:
         F1 = Y0.scale(ku[0]) + Y1.scale(ku[1]) + Delta * (hb[0].scale(ku[1]) + hb[1].scale(ku[0]))
         F2 = Delta.scale(ku[0] * ku[1])
         return [F0, F1, F2]
+
+    def _poly_of(self, idx: np.ndarray, b: dict[str, Jet], pj: Any) -> Any:
+        """Port polynomials by name for :func:`generic_coefficients`: ``d0, dhat1, N0``
+        and the termination force's numerator ``R_j = -c adj(yI - E) Gamma - (m_z/M)
+        z^-1 d_j`` (``Rhat_j`` = R_j / y for a free port: its constant term is 0)."""
+        def poly(name: str) -> Jet:
+            j = int(name[-1])
+            if name.startswith(("d", "N")):
+                return pj(name[:-1], j)
+            pp, hat = self.ports[j], name.startswith("Rhat")
+            assert pp.R is not None and pp.mz_M is not None   # a force channel measures j
+            r = pp.R[:, 1:] if hat else pp.R
+            e = pp.err["R"][:, 1:] if hat else pp.err["R"]
+            held = (b["zinv"] * pj("dhat" if hat else "d", j)).scale(pp.mz_M[idx])
+            return -(poly_jet(r[idx], e[idx], b["y"]) + held)
+        return poly
 
     def _two_port(self, idx, theta, rho, b, pj) -> tuple[Jet, Jet, Jet]:
         """T00, T11 and Delta = T00 T11 - T01 T10 (or Delta / y with a rigid mode) for
@@ -233,8 +274,11 @@ def _zoh(A: np.ndarray, T: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _port_poly(A: np.ndarray, Bv: np.ndarray, free: bool, T: np.ndarray,
-               fractions: Sequence[float]) -> PortPoly:
-    """Polynomials of one port (state [x, v, rest...], position = state 0)."""
+               fractions: Sequence[float], force: np.ndarray | None = None,
+               mz_M: float = 0.0) -> PortPoly:
+    """Polynomials of one port (state [x, v, rest...], position = state 0); with
+    ``force`` (the row c of the termination's force, ``Ft = -c s + (m_z/M) u_old``)
+    also the numerator of its force at kT^-."""
     L, q = T.size, A.shape[0]
     _Phi, S = _zoh(A, T)
     E = A[None] @ S                                  # Phi - I, accurate for small T
@@ -286,7 +330,11 @@ def _port_poly(A: np.ndarray, Bv: np.ndarray, free: bool, T: np.ndarray,
         err[f"Nt{f}"] = COEF_REL * (np.abs(nt) + np.abs(Gf)[:, None] * scale_d
                                     + np.pad(np.abs(part), ((0, 0), (0, 1))))
         err[f"D{f}"] = (err[f"Nt{f}"] + COEF_REL * np.abs(onepy_N))[:, 1:]
-    return PortPoly(d, dhat, N, Nt, D, err)
+    R = None
+    if force is not None:
+        R = np.einsum("lki,i->lk", V, force)[:, ::-1]          # ascending, degree q-1
+        err["R"] = COEF_REL * (np.abs(R) + np.einsum("lki,i->lk", np.abs(V), np.abs(force))[:, ::-1])
+    return PortPoly(d, dhat, N, Nt, D, err, R, np.full(L, mz_M) if force is not None else None)
 
 
 def loop_response(loop: HapticLoop | TeleoperationLoop,
@@ -301,44 +349,26 @@ def loop_response(loop: HapticLoop | TeleoperationLoop,
     """
     st = structure_of(loop)
     T = periods_of(loop, periods)
-    ctrls = [ch.controller for ch in st.channels if isinstance(ch.controller, SpringDamper)]
-    if len(ctrls) != len(st.channels):
+    pos = [ch for ch in st.channels if ch.measures == "position"]
+    ctrls = [ch.controller for ch in pos if isinstance(ch.controller, SpringDamper)]
+    if len(ctrls) != len(pos):
         raise AnalysisError("controller: critical stiffness needs SpringDamper controllers "
                             "(a general H(z) has no stiffness K to vary)")
-    ratios = stiffness_ratios([c.stiffness for c in ctrls])
+    ratios = channel_ratios(st)
     if ratios is None:
         raise AnalysisError("controllers: the master's stiffness is 0 and the slave's is not, so "
                             "K_s/K_m is undefined; give the master a stiffness > 0 to vary K")
-    ratio = np.array(ratios)
     terms = tuple(tuple((j, float(s), *split_delay(d)) for j, s, d in ch.terms)
                   for ch in st.channels)
-    fracs: dict[int, set[float]] = {j: set() for j in range(len(st.ports))}
-    for ch in terms:
-        for j, _, _, f in ch:
-            if f:
-                fracs[j].add(f)
-    ports, masses = [], []
-    for j, pt in enumerate(st.ports):
-        A, Bm, _ = port_matrices(pt)
-        fr = port_is_free(pt, float(T.max()))   # then the spring is dropped
-        if fr:
-            A = A.copy()
-            A[1, 0] = 0.0
-        masses.append(pt.device.mass + pt.termination.mass)
-        ports.append(_port_poly(A, Bm, fr, T, sorted(fracs[j])))
-    for j, pp in enumerate(ports):
-        arrays = [pp.d, pp.N, *list(pp.Nt.values()), *list(pp.D.values())]
-        if not all(np.all(np.isfinite(a)) for a in arrays) or not np.any(pp.N):
-            pt = st.ports[j]
-            raise AnalysisError(
-                f"{pt.name} mass = {pt.device.mass:g} kg, {pt.name} damping = "
-                f"{pt.device.damping:g} N*s/m at T = {T.min():g}..{T.max():g} s: cannot analyse, "
-                "the discretised plant over- or underflows double precision")
+    ports, masses = _ports(st, T, terms)
     p = len(ports)
     rigid = rigid_modes(st, float(T.max()))
     q = sum(pp.d.shape[1] - 1 for pp in ports) - rigid
     scale = 2.0 ** np.round(np.log2(min(masses) / T ** 2))
-    beta = np.array([[c.damping for c in ctrls]]) / T[:, None]
+    beta = np.array([[c.damping if ch.measures == "position" else 0.0  # type: ignore[union-attr]
+                      for ch, c in ((ch, ch.controller) for ch in st.channels)]]) / T[:, None]
+    gain = np.array([[ch.controller.num[0] if ch.measures == "force" else 0.0  # type: ignore[union-attr]
+                      for ch in st.channels]]) * np.ones((T.size, 1))
     # |B| T / m beyond 1e8: the damper's pole pair is beyond double precision's reach
     ratio_B = np.abs(beta).max(axis=1) * T ** 2 / min(masses) if beta.size else np.zeros(T.size)
     if not (np.all(np.isfinite(scale)) and np.all(scale > 0)):
@@ -347,13 +377,50 @@ def loop_response(loop: HapticLoop | TeleoperationLoop,
                             "loop's stiffness scale m/T^2 leaves double precision")
     if not np.all(ratio_B <= 1e8):
         names = ", ".join(f"{st.ports[ch.port].name} virtual damping = {c.damping:g} N*s/m"
-                          for ch, c in zip(st.channels, ctrls, strict=True))
+                          for ch, c in zip(pos, ctrls, strict=True))
         raise AnalysisError(f"{names}: cannot analyse |B| T / m = {ratio_B.max():.3g} (at most "
                             "1e8; the loop's poles then lie beyond double precision)")
-    resp = LoopResponse(terms, ports, np.broadcast_to(ratio, (T.size, p)).copy(), beta, scale,
-                        q, rigid, T)
+    free = tuple(port_is_free(pt, float(T.max())) for pt in st.ports)
+    resp = LoopResponse(terms, ports, np.broadcast_to(np.array(ratios), (T.size, len(terms))).copy(),
+                        beta, scale, q, rigid, T, tuple(ch.port for ch in st.channels),
+                        tuple(ch.measures for ch in st.channels), gain, free)
+    if p != len(ports) or (p > 2 and not resp.simple):
+        raise AnalysisError("loop: the exact analysis takes one or two ports")
     _check_finite(resp, ctrls)
     return resp
+
+
+def _ports(st: Any, T: np.ndarray, terms: tuple) -> tuple[list[PortPoly], list[float]]:
+    """Each port's polynomials (with the termination force's where a force channel
+    measures it) and its mass."""
+    fracs: dict[int, set[float]] = {j: set() for j in range(len(st.ports))}
+    forced = {j for ch in st.channels if ch.measures == "force" for j, _, _ in ch.terms}
+    for ch in terms:
+        for j, _, _, f in ch:
+            if f:
+                fracs[j].add(f)
+    ports, masses = [], []
+    for j, pt in enumerate(st.ports):
+        A, Bm, Cf = port_matrices(pt)
+        fr = port_is_free(pt, float(T.max()))   # then the spring is dropped
+        if fr:
+            A, Cf = A.copy(), Cf.copy()
+            A[1, 0], Cf[0, 0] = 0.0, 0.0
+        M = pt.device.mass + pt.termination.mass
+        masses.append(M)
+        mz = pt.termination.mass
+        force = (Cf[0] + mz * A[1]) if j in forced else None
+        ports.append(_port_poly(A, Bm, fr, T, sorted(fracs[j]), force, mz / M))
+    for j, pp in enumerate(ports):
+        arrays = [pp.d, pp.N, *list(pp.Nt.values()), *list(pp.D.values())]
+        arrays += [pp.R] if pp.R is not None else []
+        if not all(np.all(np.isfinite(a)) for a in arrays) or not np.any(pp.N):
+            pt = st.ports[j]
+            raise AnalysisError(
+                f"{pt.name} mass = {pt.device.mass:g} kg, {pt.name} damping = "
+                f"{pt.device.damping:g} N*s/m at T = {T.min():g}..{T.max():g} s: cannot analyse, "
+                "the discretised plant over- or underflows double precision")
+    return ports, masses
 
 
 def _check_finite(resp: LoopResponse, ctrls) -> None:
@@ -385,7 +452,10 @@ def stack_responses(resps: Sequence[LoopResponse]) -> LoopResponse:
                               cat([x.N for x in ps]),
                               {f: cat([x.Nt[f] for x in ps]) for f in ps[0].Nt},
                               {f: cat([x.D[f] for x in ps]) for f in ps[0].D},
-                              {k: cat([x.err[k] for x in ps]) for k in ps[0].err}))
+                              {k: cat([x.err[k] for x in ps]) for k in ps[0].err},
+                              None if ps[0].R is None else cat([x.R for x in ps]),
+                              None if ps[0].mz_M is None else cat([x.mz_M for x in ps])))
     return LoopResponse(r0.terms, ports, cat([r.k for r in resps]), cat([r.beta for r in resps]),
                         cat([r.scale for r in resps]), r0.q, r0.rigid,
-                        cat([r.periods for r in resps]))
+                        cat([r.periods for r in resps]), r0.channel_ports, r0.kinds,
+                        cat([r.gain for r in resps]), r0.free)

@@ -20,7 +20,7 @@ from hapstab.models.parts import Device, Impedance
 
 __all__ = ['Port', 'Channel', 'LoopStructure', 'structure_of', 'split_delay', 'port_is_free',
            'periods_of',
-           'rigid_modes', 'FREE_SPRING', 'channel_ratios', 'position_gains']
+           'rigid_modes', 'FREE_SPRING', 'channel_ratios', 'position_gains', 'own_stiffness']
 
 
 @dataclass(frozen=True)
@@ -148,6 +148,29 @@ def channel_ratios(structure: LoopStructure) -> tuple[float, ...] | None:
     for i, r in zip(order, ratios, strict=True):
         out[i] = r
     return tuple(out)
+
+
+def own_stiffness(structure: LoopStructure) -> float:
+    """The loop's own K: the stiffness of its reference channel (N/m).
+
+    Parameters
+    ----------
+    structure : LoopStructure
+        The loop, with spring-damper position controllers.
+
+    Returns
+    -------
+    float
+
+    Raises
+    ------
+    ModelError
+        The reference controller is not a :class:`SpringDamper`.
+    """
+    c = structure.channels[structure.reference].controller
+    if not isinstance(c, SpringDamper):
+        raise ModelError("controller: a SpringDamper is needed to vary the stiffness")
+    return c.stiffness
 
 
 def position_gains(structure: LoopStructure) -> np.ndarray:

@@ -129,7 +129,8 @@ class FourChannelLoop(TeleoperationLoop):
             raise AnalysisError("master_controller, slave_controller: both local stiffnesses are 0 "
                                 "while a transmitted one is not, so K is undefined; give C_m or "
                                 "C_s a stiffness > 0 to vary K")
-        new = {names[i]: cs[i].with_stiffness(K * r) for i, r in zip(order, ratios, strict=True)}
+        new: dict[str, Any] = {names[i]: cs[i].with_stiffness(K * r)
+                               for i, r in zip(order, ratios, strict=True)}
         return dataclasses.replace(self, **new)
 
     def with_controllers(self, controller: Controller) -> FourChannelLoop:

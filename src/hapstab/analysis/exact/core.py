@@ -21,9 +21,9 @@ from hapstab import budget
 from hapstab.analysis.exact.crossings import analyse, winding
 from hapstab.analysis.exact.stable_set import StableSet
 from hapstab.engine.frequency import LoopResponse, loop_response
+from hapstab.engine.structure import channel_ratios, structure_of
 from hapstab.engine.system import build
 from hapstab.errors import AnalysisError
-from hapstab.models.controllers import SpringDamper
 from hapstab.models.loops import HapticLoop, TeleoperationLoop, describe
 from hapstab.results import CriticalStiffnessResult, StabilityResult
 from hapstab.tolerances import NEWTON_ANGLE_STEP, POLE_ON_CIRCLE
@@ -63,11 +63,9 @@ def exact_kmax_batch(loop: HapticLoop | TeleoperationLoop,
 
 # ---------------------------------------------------------------------- stability
 def _spring_dampers(loop: HapticLoop | TeleoperationLoop) -> bool:
-    cs = loop.controllers
-    sds = [c for c in cs if isinstance(c, SpringDamper)]
-    if len(sds) != len(cs):
-        return False
-    return not (sds[0].stiffness == 0 and any(c.stiffness > 0 for c in sds))
+    """Whether the loop's K can be varied (the exact core's characteristic function
+    then applies): spring-damper position controllers and a defined K rule."""
+    return channel_ratios(structure_of(loop)) is not None
 
 
 def _polish_pole(resp: LoopResponse, u: float, z0: complex) -> complex:
