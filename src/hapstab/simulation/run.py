@@ -146,6 +146,10 @@ def simulate(loop: HapticLoop | TeleoperationLoop, duration: float, *,
                             quantizer)
     sysm = build(loop)
     p = sysm.n_ports
+    if sysm.held_f is not None and "resolution" in nl:
+        raise ModelError(f"resolution = {resolution}: encoder quantisation with a measured force "
+                         "(a FourChannelLoop's force channel) is not simulated yet; allowed: "
+                         "None, or force gains of 0")
     budget.check(budget.simulation_cost(M, sysm.order, p, dense), max_memory, max_seconds)
     roles = roles_of(loop, sysm)
     t = np.arange(M + 1) * T
@@ -158,6 +162,10 @@ def simulate(loop: HapticLoop | TeleoperationLoop, duration: float, *,
     s0 = make_initial_state(sysm, roles, initial_position, initial_velocity, initial_state, measure)
     springs = np.array([pt.termination.stiffness for pt in structure_of(loop).ports])
     rest = _rest(rest_position, s0[pos_idx], p)
+    if roles.held_f.size and initial_state is None:
+        # a force measured at the first sample sees the hand at rest: the spring's offset
+        s0 = make_initial_state(sysm, roles, initial_position, initial_velocity, None, measure,
+                                held_force=springs * rest)
     Fd = F + springs * rest              # a spring relaxed at r: -k (x - r) = -k x + k r
     contact = None
     if not nl:
