@@ -30,8 +30,8 @@ Two layers, both written from scratch (nothing here imports hapstab):
    may measure the force F_t the port's termination applies to its device just before
    the sample, with a fixed (K-independent) gain. The termination (mass m_z, damping
    b_z, spring k_z) is pushed by the exogenous force f and pushes the device with F_t,
-   so m_z a = f - b_z v - k_z x - F_t; the whole port obeys M a = f - u - b v - k x (M, b, k the totals). Just before
-   the sample both forces still hold their previous-sample values, so
+   so m_z a = f - b_z v - k_z x - F_t; the whole port obeys M a = f - u - b v - k x
+   (M, b, k the totals). Just before the sample both forces still hold their previous-sample values, so
    a(kT^-) = (f_old - u_old - b v - k x) / M and F_t = f_old - m_z a - b_z v - k_z x:
    two more states per measured port, u_old (the port's controller force over the
    previous sample) and f_old, and one register per sample of delay of F_t.

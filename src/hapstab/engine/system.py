@@ -28,10 +28,20 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from hapstab.engine.forces import ForceLayout, force_layout, force_selector, held_states
-from hapstab.engine.forces import termination_rows
-from hapstab.engine.structure import (LoopStructure, channel_ratios, periods_of, rigid_modes,
-                                      structure_of)
+from hapstab.engine.forces import (
+    ForceLayout,
+    force_layout,
+    force_selector,
+    held_states,
+    termination_rows,
+)
+from hapstab.engine.structure import (
+    LoopStructure,
+    channel_ratios,
+    periods_of,
+    rigid_modes,
+    structure_of,
+)
 from hapstab.engine.zoh import discretize, port_matrices
 from hapstab.errors import ModelError
 from hapstab.models.controllers import DiscreteController, SpringDamper

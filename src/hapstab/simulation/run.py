@@ -88,10 +88,11 @@ def simulate(loop: HapticLoop | TeleoperationLoop, duration: float, *,
     duration : float
         Seconds; ``round(duration / T)`` samples are taken.
     force : force spec, optional
-        Exogenous operator force on the device (HVE) / master (PEB); see
-        :func:`force_samples`. Held over each sample.
+        Exogenous operator force on the device (HVE) / master (a teleoperator: PEB or
+        the 4-channel loop); see :func:`force_samples`. Held over each sample; a
+        4-channel loop's force channels measure it as part of the operator's force.
     environment_force : force spec, optional
-        Exogenous environment force on the slave (PEB only).
+        Exogenous environment force on the slave (teleoperators only).
     initial_position, initial_velocity : float or sequence
         Per port (a scalar applies to every port). The loop's history is at rest
         at the initial position (delay registers and controller states consistent).
@@ -109,7 +110,8 @@ def simulate(loop: HapticLoop | TeleoperationLoop, duration: float, *,
     saturation : float, optional
         Actuator force limit |u| <= saturation (N), each port.
     resolution : float, optional
-        Encoder resolution Δ (m).
+        Encoder resolution Δ (m). Not with a measured force (a 4-channel loop's force
+        gains) yet.
     quantizer : {"floor", "nearest"}
         ``floor``: the controller sees ``Δ floor(x / Δ)`` (an encoder's count);
         ``nearest``: the nearest multiple of Δ, ties away from zero.
