@@ -25,6 +25,19 @@ Two layers, both written from scratch (nothing here imports hapstab):
      function det(zI - A(K)) = z^R det(D(z) + C(z) E(z) N(z)) evaluated with mpmath
      (ZOH by ``mpmath.expm``), which needs no N x N matrix at high precision.
 
+3. The 4-channel extension (:func:`four_channel_loop`, :func:`step_loop`): a
+   :class:`Control` may act on another port than its index (a port's controls add), and
+   may measure the force F_t the port's termination applies to its device just before
+   the sample, with a fixed (K-independent) gain. The termination (mass m_z, damping
+   b_z, spring k_z) is pushed by the exogenous force f and pushes the device with F_t,
+   so m_z a = f - b_z v - k_z x - F_t; the whole port obeys M a = f - u - b v - k x
+   (M, b, k the totals). Just before the sample both forces still hold their previous-sample values, so
+   a(kT^-) = (f_old - u_old - b v - k x) / M and F_t = f_old - m_z a - b_z v - k_z x:
+   two more states per measured port, u_old (the port's controller force over the
+   previous sample) and f_old, and one register per sample of delay of F_t.
+   :func:`step_loop` steps the same physics sample by sample with explicit histories,
+   no closed-loop matrix.
+
 Rigid-body mode (free PEB: no operator, no environment, every error a difference of
 positions). The vector with every position and every delay register equal to 1 and
 every velocity 0 is an exact eigenvector of A(K) at z = 1 for every K (equal
@@ -222,6 +235,8 @@ class Port:
     mass: float
     damping: float
     stiffness: float = 0.0
+    term_mass: float = 0.0       # the termination's share of mass (for a measured force)
+    term_damping: float = 0.0    # and of damping (its stiffness is all of ``stiffness``)
 
 
 @dataclass(frozen=True)
@@ -237,11 +252,20 @@ class Control:
         B of this controller, N*s/m, any sign.
     terms : tuple of (port, sign, delay)
         The error signal; delays in whole samples.
+    port : int
+        The port it acts on (-1: its own index in ``Loop.controls``).
+    force : bool
+        The terms sample the termination forces F_t at kT^- instead of positions.
+    fixed : float
+        A K-independent gain on e[k] (N/m, or N/N for a force).
     """
 
     gain: float
     damping: float
     terms: tuple[tuple[int, float, int], ...]
+    port: int = -1
+    force: bool = False
+    fixed: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -256,8 +280,21 @@ class Loop:
     def rigid(self) -> bool:
         """True when equal positions of every port give zero error everywhere and no
         port is tied to ground: the K-independent rigid-body mode at z = 1."""
-        return (all(p.stiffness == 0 for p in self.ports)
+        return (all(p.stiffness == 0 for p in self.ports) and not self.extended
                 and all(sum(s for _, s, _ in c.terms) == 0 for c in self.controls))
+
+    @property
+    def extended(self) -> bool:
+        """Uses the 4-channel extension (controls on other ports, forces, fixed gains):
+        :func:`matrices` and :func:`step_loop` only, not the 50-digit referee."""
+        return (len(self.controls) != len(self.ports)
+                or any(c.port not in (-1, i) or c.force or c.fixed
+                       for i, c in enumerate(self.controls)))
+
+    def port_of(self, i: int) -> int:
+        """The port control i acts on."""
+        c = self.controls[i]
+        return i if c.port == -1 else c.port
 
 
 def hve_loop(m: float, b: float, T: float, n: int, B: float = 0.0, operator=None) -> Loop:
@@ -295,6 +332,48 @@ def peb_loop(mm: float, bm: float, ms: float, bs: float, T: float, n_forward: in
                  Control(float(ratio), Bs, ((1, 1.0, 0), (0, -1.0, int(n_forward))))), T)
 
 
+def four_channel_loop(master: tuple[float, float], slave: tuple[float, float], T: float,
+                      n_forward: int, n_backward: int, local_m: tuple[float, float],
+                      local_s: tuple[float, float], from_master: tuple[float, float],
+                      from_slave: tuple[float, float], c2: float = 0.0, c3: float = 0.0,
+                      c5: float = 0.0, c6: float = 0.0, operator=None,
+                      environment=None) -> Loop:
+    """Lawrence's 4-channel teleoperator in the Hashtrudi-Zaad & Salcudean signs.
+
+    The master's and slave's controller forces (what the actuators apply) are
+    ``F_cm = -C_m x_m + C_4' z^-nb x_s + C_6 F_h - C_2 z^-nb F_e`` and
+    ``F_cs = -C_s x_s + C_1 z^-nf x_m + C_3 z^-nf F_h - C_5 F_e``, with
+    F_h = F_t,master (the operator's push on the master) and F_e = -F_t,slave (the
+    slave's push on the environment), both at kT^-. Here u = -F_c.
+
+    Parameters
+    ----------
+    master, slave : (mass, damping)
+        The devices.
+    local_m, local_s, from_master, from_slave : (gain, B)
+        C_m, C_s, C_1 (on the delayed master position) and C_4' (on the delayed slave
+        position) as g K + B (z - 1)/(T z).
+    c2, c3, c5, c6 : float
+        The force gains (N/N).
+    operator, environment
+        Terminations, see :func:`termination`.
+    """
+    om, ob, ok = termination(operator)
+    em, eb, ek = termination(environment)
+    ports = (Port(master[0] + om, master[1] + ob, ok, om, ob),
+             Port(slave[0] + em, slave[1] + eb, ek, em, eb))
+    nf, nb = int(n_forward), int(n_backward)
+    controls = [Control(local_m[0], local_m[1], ((0, 1.0, 0),), port=0),
+                Control(from_slave[0], from_slave[1], ((1, -1.0, nb),), port=0),
+                Control(local_s[0], local_s[1], ((1, 1.0, 0),), port=1),
+                Control(from_master[0], from_master[1], ((0, -1.0, nf),), port=1)]
+    # u_m += -C_6 F_h + C_2 F_e = -C_6 Ft_m - C_2 Ft_s;  u_s += -C_3 Ft_m - C_5 Ft_s
+    for port, g, j, d in ((0, c6, 0, 0), (0, c2, 1, nb), (1, c3, 0, nf), (1, c5, 1, 0)):
+        if g:
+            controls.append(Control(0.0, 0.0, ((j, -1.0, d),), port=port, force=True, fixed=g))
+    return Loop(ports, tuple(controls), T)
+
+
 def scale(loop: Loop) -> tuple[float, float]:
     """(smallest, largest) stiffness scale m/T^2 over the ports, N/m."""
     ms = [p.mass for p in loop.ports]
@@ -309,51 +388,43 @@ def _zoh(port: Port, T: float) -> tuple[np.ndarray, np.ndarray]:
     return Ad, Bd[:, 0]
 
 
-def _depths(loop: Loop) -> list[int]:
-    """Registers kept for each port: deepest delay used (+1 when B needs e[k-1])."""
+def _depths(loop: Loop, force: bool = False) -> list[int]:
+    """Registers kept for each port's position (or force): deepest delay used (+1 when B
+    needs e[k-1])."""
     depth = [0] * len(loop.ports)
     for c in loop.controls:
+        if c.force != force:
+            continue
         for j, _, d in c.terms:
             depth[j] = max(depth[j], d + (1 if c.damping != 0 else 0))
     return depth
+
+
+def _force_row(port: Port, j: int, N: int, u_old: int, f_old: int) -> np.ndarray:
+    """F_t of port j at kT^- from the state (module docstring, item 3)."""
+    M, mz = port.mass, port.term_mass
+    r = np.zeros(N)
+    # a = (f_old - u_old - b v - k x) / M;  F_t = f_old - mz a - b_z v - k_z x
+    r[2 * j] = -port.stiffness + mz * port.stiffness / M
+    r[2 * j + 1] = -port.term_damping + mz * port.damping / M
+    r[u_old] = mz / M
+    r[f_old] = 1.0 - mz / M
+    return r
 
 
 @functools.lru_cache(maxsize=64)
 def matrices(loop: Loop) -> tuple[np.ndarray, np.ndarray]:
     """(A0, A1): the closed loop at the sampling instants is A(K) = A0 + K A1.
 
-    State: [x_0, v_0, x_1, v_1, ..., registers of port 0, registers of port 1, ...];
-    register l of port j holds x_j[k - 1 - l]. With a rigid-body mode
-    (:attr:`Loop.rigid`) the returned pair is deflated: one row and column fewer,
+    State: [x_0, v_0, x_1, v_1, ..., registers of port 0, registers of port 1, ...,
+    then for each port whose force is measured: u_old, f_old, its force registers];
+    register l of port j holds x_j[k - 1 - l] (or F_t,j[k - 1 - l]). With a rigid-body
+    mode (:attr:`Loop.rigid`) the returned pair is deflated: one row and column fewer,
     the eigenvalue 1 of the rigid mode removed exactly (see the module docstring).
     """
-    p, T = len(loop.ports), loop.period
-    depth = _depths(loop)
-    n_pl = 2 * p
-    off_r = n_pl + np.concatenate([[0], np.cumsum(depth)]).astype(int)
-    N = int(off_r[-1])
-
-    def delayed(j: int, d: int) -> np.ndarray:
-        r = np.zeros(N)
-        r[2 * j if d == 0 else off_r[j] + d - 1] = 1.0
-        return r
-
-    A0, A1 = np.zeros((N, N)), np.zeros((N, N))
-    for j in range(p):
-        for step in range(depth[j]):   # shift registers
-            A0[off_r[j] + step, 2 * j if step == 0 else off_r[j] + step - 1] = 1.0
-    for i, (port, c) in enumerate(zip(loop.ports, loop.controls, strict=True)):
-        Ad, bd = _zoh(port, T)
-        u0, u1 = np.zeros(N), np.zeros(N)
-        for j, s, d in c.terms:
-            u1 += c.gain * s * delayed(j, d)
-            if c.damping != 0:
-                u0 += (c.damping / T) * s * (delayed(j, d) - delayed(j, d + 1))
-        sl = slice(2 * i, 2 * i + 2)
-        A0[sl, sl] += Ad
-        A0[sl] -= np.outer(bd, u0)         # the actuator force opposes u
-        A1[sl] -= np.outer(bd, u1)
+    A0, A1, _ = full_matrices(loop)
     if loop.rigid:
+        N, n_pl = A0.shape[0], 2 * len(loop.ports)
         v = np.zeros(N)
         v[0:n_pl:2] = 1.0
         v[n_pl:] = 1.0
@@ -365,6 +436,104 @@ def matrices(loop: Loop) -> tuple[np.ndarray, np.ndarray]:
         H = np.eye(N) - 2.0 * np.outer(w, w) / (w @ w)          # H u = e1, H = H^T = H^-1
         A0, A1 = (H @ A0 @ H)[1:, 1:], (H @ A1 @ H)[1:, 1:]
     return A0, A1
+
+
+def full_matrices(loop: Loop) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(A0, A1, G): A(K) = A0 + K A1 undeflated, and G (N, p), the exogenous force's
+    input: s[k+1] = A(K) s[k] + G f[k] (:func:`matrices` for the layout)."""
+    p, T = len(loop.ports), loop.period
+    depth, fdepth = _depths(loop), _depths(loop, force=True)
+    measured = sorted({j for c in loop.controls if c.force for j, _, _ in c.terms})
+    n_pl = 2 * p
+    off_r = n_pl + np.concatenate([[0], np.cumsum(depth)]).astype(int)
+    N = int(off_r[-1])
+    u_old, f_old, off_fr = {}, {}, {}
+    for j in measured:
+        u_old[j], f_old[j], off_fr[j] = N, N + 1, N + 2
+        N += 2 + fdepth[j]
+    ft = {j: _force_row(loop.ports[j], j, N, u_old[j], f_old[j]) for j in measured}
+
+    def delayed(j: int, d: int, force: bool) -> np.ndarray:
+        if force and d == 0:
+            return ft[j]
+        r = np.zeros(N)
+        r[(off_fr[j] if force else off_r[j]) + d - 1 if d else 2 * j] = 1.0
+        return r
+
+    A0, A1, G = np.zeros((N, N)), np.zeros((N, N)), np.zeros((N, p))
+    for j in range(p):
+        for step in range(depth[j]):   # shift registers
+            A0[off_r[j] + step, 2 * j if step == 0 else off_r[j] + step - 1] = 1.0
+    for j in measured:
+        for step in range(fdepth[j]):
+            if step == 0:
+                A0[off_fr[j]] = ft[j]
+            else:
+                A0[off_fr[j] + step, off_fr[j] + step - 1] = 1.0
+        G[f_old[j], j] = 1.0
+    u0, u1 = np.zeros((p, N)), np.zeros((p, N))
+    for i, c in enumerate(loop.controls):
+        pi = loop.port_of(i)
+        for j, s, d in c.terms:
+            u1[pi] += c.gain * s * delayed(j, d, c.force)
+            u0[pi] += c.fixed * s * delayed(j, d, c.force)
+            if c.damping != 0:
+                u0[pi] += (c.damping / T) * s * (delayed(j, d, c.force)
+                                                 - delayed(j, d + 1, c.force))
+    for i, port in enumerate(loop.ports):
+        Ad, bd = _zoh(port, T)
+        sl = slice(2 * i, 2 * i + 2)
+        A0[sl, sl] += Ad
+        A0[sl] -= np.outer(bd, u0[i])         # the actuator force opposes u
+        A1[sl] -= np.outer(bd, u1[i])
+        G[sl, i] = bd
+        if i in u_old:
+            A0[u_old[i]], A1[u_old[i]] = u0[i], u1[i]
+    return A0, A1, G
+
+
+def step_loop(loop: Loop, K: float, f: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Step the loop sample by sample from rest at 0 under the exogenous forces f (M, p)
+    held over each sample, from the physics with explicit histories (no closed-loop
+    matrix; module docstring, item 3).
+
+    Returns
+    -------
+    X : (M + 1, p) positions at the samples; U : (M + 1, p) controller forces u[k]
+    (the actuator applies -u).
+    """
+    p, T, M = len(loop.ports), loop.period, f.shape[0]
+    zoh = [_zoh(port, T) for port in loop.ports]
+    xv = np.zeros((p, 2))
+    u_old, f_old = np.zeros(p), np.zeros(p)
+    hist_x, hist_f = [np.zeros(p)], [np.zeros(p)]       # newest last; before 0: at rest
+    X, U = np.zeros((M + 1, p)), np.zeros((M + 1, p))
+
+    def past(h: list, j: int, d: int) -> float:
+        return float(h[-1 - d][j]) if d < len(h) else 0.0
+
+    for k in range(M + 1):
+        x, v = xv[:, 0].copy(), xv[:, 1].copy()
+        ft = np.zeros(p)
+        for j, pt in enumerate(loop.ports):
+            a = (f_old[j] - u_old[j] - pt.damping * v[j] - pt.stiffness * x[j]) / pt.mass
+            ft[j] = f_old[j] - pt.term_mass * a - pt.term_damping * v[j] - pt.stiffness * x[j]
+        hist_x[-1], hist_f[-1] = x, ft
+        u = np.zeros(p)
+        for i, c in enumerate(loop.controls):
+            h = hist_f if c.force else hist_x
+            e = sum(s * past(h, j, d) for j, s, d in c.terms)
+            e1 = sum(s * past(h, j, d + 1) for j, s, d in c.terms)
+            u[loop.port_of(i)] += (c.gain * K + c.fixed) * e + (c.damping / T) * (e - e1)
+        X[k], U[k] = x, u
+        if k == M:
+            break
+        for j, (Ad, bd) in enumerate(zoh):
+            xv[j] = Ad @ xv[j] + bd * (f[k, j] - u[j])
+        u_old, f_old = u, f[k].copy()
+        hist_x.append(None)
+        hist_f.append(None)
+    return X, U
 
 
 def radius(loop: Loop, K) -> np.ndarray:
@@ -473,6 +642,7 @@ def char_fn(loop: Loop, K, z, dps: int = MP_DPS):
     det(zI - A_cl) = det(zI - A_ol) det(I + L(z)) with A_ol's blocks 2 x 2 plants
     and shift registers, cleared of the plants' denominators:
     M_ij = delta_ij d_j(z) + C_i(z) sum sign z^-delay n_j(z)."""
+    assert not loop.extended, "the referee knows one position controller per port only"
     with mpmath.workdps(dps):
         z = mpmath.mpc(z)
         K = mpmath.mpf(K)
@@ -615,6 +785,7 @@ def char_poly_mp(loop: Loop, K, dps: int = 40) -> list:
     """Coefficients (highest first) of z^R g(z) = det(zI - A(K)) at ``dps`` digits
     (rigid factor (z - 1) kept), built from the 2 x 2 return difference by
     polynomial arithmetic, for an all-roots check with ``mpmath.polyroots``."""
+    assert not loop.extended, "one position controller per port only"
     with mpmath.workdps(dps):
         pl = _mp_plants(loop, dps)
         T, K = mpmath.mpf(loop.period), mpmath.mpf(K)

@@ -219,8 +219,9 @@ def _search(kmax: Any, Bs: np.ndarray, span: float, advance: Any
 
 
 def loop_delays(loop: Loop) -> list[float]:
-    """The loop's delays in samples (one for the HVE, both directions for PEB)."""
-    if loop.kind == "peb":
+    """The loop's delays in samples (one for the HVE, both directions for a
+    teleoperator: PEB or the 4-channel loop)."""
+    if loop.kind != "hve":
         return [loop.forward_delay_in_samples, loop.backward_delay_in_samples]  # type: ignore[union-attr]
     return [loop.delay_in_samples]
 

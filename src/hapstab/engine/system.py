@@ -1,15 +1,18 @@
 """The one engine: the exact discrete-time model of a sampled-data loop.
 
 A loop is a set of *ports* (a device with the impedance rigidly attached to it)
-and one discrete controller per port acting on a signed sum of delayed position
-samples (``e_i = sum_j s_ij z^-n_ij x_j``).  The continuous part of each port is
+and discrete controllers (channels), each acting on its port with a signed sum of
+delayed position samples (``e_c = sum_j s_cj z^-n_cj x_j``) or of delayed samples of
+the forces the terminations apply (:mod:`hapstab.engine.forces`); a port's channels
+add.  The continuous part of each port is
 discretised exactly for a zero-order hold (matrix exponential), the delays are
 shift registers and each controller is realised in state space.  The closed loop
 at the sampling instants is then ``s[k+1] = A_cl s[k] + B_ext f_ext[k]``.
 
 For spring-damper controllers the stiffness enters only the controller's direct
-feed-through, so ``A_cl(K) = A0 + K * B1 @ C1`` with ``rank(B1 @ C1)`` equal to the
-number of ports; the analyses rely on this affine structure.
+feed-through, so ``A_cl(K) = A0 + K * B1 @ C1`` with ``B1`` and ``C1`` of one column
+and row per port (K varied by :func:`~hapstab.engine.structure.channel_ratios`); the
+analyses rely on this affine structure.
 
 Everything is batched over sampling periods: arrays carry a leading axis P.
 
@@ -25,10 +28,23 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from hapstab.engine.structure import LoopStructure, periods_of, rigid_modes, structure_of
+from hapstab.engine.forces import (
+    ForceLayout,
+    force_layout,
+    force_selector,
+    held_states,
+    termination_rows,
+)
+from hapstab.engine.structure import (
+    LoopStructure,
+    channel_ratios,
+    periods_of,
+    rigid_modes,
+    structure_of,
+)
 from hapstab.engine.zoh import discretize, port_matrices
 from hapstab.errors import ModelError
-from hapstab.models.controllers import DiscreteController, SpringDamper, stiffness_ratios
+from hapstab.models.controllers import DiscreteController, SpringDamper
 from hapstab.models.loops import HapticLoop, TeleoperationLoop, split_delay
 
 __all__ = ['SampledSystem', 'build']
@@ -95,10 +111,17 @@ class SampledSystem:
     labels : list of str
         The ports' names (``device``; ``master``, ``slave``).
     varies_with_K : bool
-        False when K cannot be varied (a controller without a stiffness, or a master
-        stiffness of 0 with a slave's > 0): then ``B1 @ C1`` is zero.
+        False when K cannot be varied (a position controller without a stiffness, or
+        a reference stiffness of 0 with another > 0): then ``B1 @ C1`` is zero.
     E : (p, N) or None
-        The controller input of each port, ``e_i = E_i s`` (delays included).
+        The controller input of each port, ``e_i = E_i s`` (delays included), when
+        every port has one position channel (``LoopStructure.simple``: the HVE, PEB);
+        ``None`` otherwise (see ``E_channels``).
+    E_channels : (C, N) or None
+        The input of each channel (positions, or termination forces at kT^-).
+    held_u, held_f : (p,) int arrays or None
+        The state holding each port's controller / exogenous force of the previous
+        sample (-1: none); only ports whose force a channel measures have them.
     fixed_reason : str
         Why K cannot be varied (empty when it can).
     rigid_modes : int
@@ -125,6 +148,9 @@ class SampledSystem:
     E: np.ndarray | None = None
     fixed_reason: str = ""
     rigid_modes: int = 0
+    E_channels: np.ndarray | None = None
+    held_u: np.ndarray | None = None
+    held_f: np.ndarray | None = None
 
     @property
     def order(self) -> int:
@@ -160,6 +186,7 @@ class _Layout:
     frac: dict[tuple[int, float], int]      # (port, fraction) -> registers after it
     off_f: dict[tuple[int, float], int]     # (port, fraction) -> its state
     N: int
+    force: ForceLayout                      # held forces and force registers (last)
 
 
 def _plant(st: LoopStructure, T: np.ndarray) -> tuple[np.ndarray, ...]:
@@ -184,13 +211,14 @@ def _layout(st: LoopStructure, off_p: np.ndarray, qs: list[int]) -> _Layout:
     (register l of port j holds x_j[k-1-l]). A fractional part f > 0 is a state
     r = x_j(kT - fT), exact from the previous sample and the force held over it
     (ZOH), with its own registers (after the controller states, so the layout of
-    integer-delay loops is unchanged).
+    integer-delay loops is unchanged). Force measurements come last
+    (:func:`~hapstab.engine.forces.force_layout`).
     """
     p, n_plant = len(st.ports), int(off_p[-1])
     depth = [0] * p
     frac: dict[tuple[int, float], int] = {}
     for ch in st.channels:
-        for j, _, d in ch.terms:
+        for j, _, d in ch.terms if ch.measures == "position" else ():
             n, f = split_delay(d)
             if f == 0.0:
                 depth[j] = max(depth[j], n)
@@ -203,43 +231,51 @@ def _layout(st: LoopStructure, off_p: np.ndarray, qs: list[int]) -> _Layout:
     for key in sorted(frac):
         off_f[key] = N
         N += 1 + frac[key]
-    return _Layout(off_p, n_plant, depth, off_r, off_c, frac, off_f, N)
+    fl = force_layout(st, N)
+    return _Layout(off_p, n_plant, depth, off_r, off_c, frac, off_f, fl.N, fl)
 
 
-def _selectors(st: LoopStructure, lay: _Layout) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Position and velocity selectors (p, N), and the error selectors E (p, N):
-    e_i = E_i s, the signed sum of delayed positions each controller acts on."""
+def _selectors(st: LoopStructure, lay: _Layout, R: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Position and velocity selectors (p, N), and the error selectors E (C, N) of the
+    channels: e_c = E_c s, the signed sum of delayed positions (or of the delayed
+    termination forces ``R s``, :func:`~hapstab.engine.forces.termination_rows`)
+    each controller acts on."""
     p, N = len(st.ports), lay.N
     pos, vel = np.zeros((p, N)), np.zeros((p, N))
     for i in range(p):
         pos[i, lay.off_p[i]], vel[i, lay.off_p[i] + 1] = 1.0, 1.0
-    E = np.zeros((p, N))
-    for ch in st.channels:
+    E = np.zeros((len(st.channels), N))
+    for c, ch in enumerate(st.channels):
         for j, sgn, d in ch.terms:
             n, f = split_delay(d)
-            if f:
-                E[ch.port, lay.off_f[(j, f)] + n] += sgn     # r itself (n = 0) or register n-1
+            if ch.measures == "force":
+                E[c] += sgn * force_selector(lay.force, R, j, n)
+            elif f:
+                E[c, lay.off_f[(j, f)] + n] += sgn     # r itself (n = 0) or register n-1
             elif n == 0:
-                E[ch.port] += sgn * pos[j]
+                E[c] += sgn * pos[j]
             else:
-                E[ch.port, lay.off_r[j] + n - 1] += sgn
+                E[c, lay.off_r[j] + n - 1] += sgn
     return pos, vel, E
 
 
 def _controllers(st: LoopStructure, parts: Sequence[tuple[np.ndarray, ...]], lay: _Layout,
-                 E: np.ndarray, P: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The controllers' forces u = F_u0 s + K F_u1 s and their own state updates
-    (the controller rows of A0)."""
+                 E: np.ndarray, P: int, ratios: Sequence[float]
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The controllers' forces u = F_u0 s + K F_u1 s (each port's channels added, the
+    K-part of channel c scaled by ``ratios[c]``) and their own state updates (the
+    controller rows of A0)."""
     p, N = len(st.ports), lay.N
     Fu0, Fu1, A0 = np.zeros((P, p, N)), np.zeros((P, p, N)), np.zeros((P, N, N))
-    for ch, (Ah, Bh, Ch, Dfix, Dk) in zip(st.channels, parts, strict=True):
+    for c, (ch, (Ah, Bh, Ch, Dfix, Dk)) in enumerate(zip(st.channels, parts, strict=True)):
         i = ch.port
-        cs = slice(lay.off_c[i], lay.off_c[i + 1])
+        cs = slice(lay.off_c[c], lay.off_c[c + 1])
         Fu0[:, i, cs] = Ch[:, 0, :]
-        Fu0[:, i, :] += Dfix[:, None] * E[i]
-        Fu1[:, i, :] = Dk[:, None] * E[i]
+        Fu0[:, i, :] += Dfix[:, None] * E[c]
+        Fu1[:, i, :] += (Dk * ratios[c])[:, None] * E[c]
         A0[:, cs, cs] = Ah
-        A0[:, cs, :] += Bh[:, :, :1] * E[i][None, None, :]
+        A0[:, cs, :] += Bh[:, :, :1] * E[c][None, None, :]
     return Fu0, Fu1, A0
 
 
@@ -286,36 +322,45 @@ class _KPart:
 
 
 def _stiffness(st: LoopStructure, k: _KPart, Bd: np.ndarray, lay: _Layout,
-               gam_of: dict[tuple[int, float], np.ndarray]) -> _KPart:
-    """Which K the loop varies: the (master's) stiffness, with K_s/K_m kept; or none
-    (a general H(z), or K_m = 0 < K_s, whose own stiffnesses are folded in)."""
-    ks = [ch.controller.stiffness if isinstance(ch.controller, SpringDamper) else 0.0
-          for ch in st.channels]
-    if not all(isinstance(ch.controller, SpringDamper) for ch in st.channels):
-        k.varies, k.K_own[:] = False, 0.0
+               gam_of: dict[tuple[int, float], np.ndarray], E: np.ndarray) -> _KPart:
+    """Which K the loop varies: the reference channel's stiffness, every other
+    position channel's kept in ratio (:func:`~hapstab.engine.structure.channel_ratios`,
+    already applied to the K-part by :func:`_controllers`); or none (a general H(z),
+    or a reference stiffness of 0 with another > 0), when every spring-damper's own
+    stiffness is folded into the fixed part."""
+    sd = [isinstance(ch.controller, SpringDamper) for ch in st.channels]
+    pos = [ch.measures == "position" for ch in st.channels]
+    ref = st.channels[st.reference].controller
+    if channel_ratios(st) is not None:
+        k.K_own[:] = ref.stiffness        # type: ignore[union-attr]
+        return k
+    if not all(s for s, q in zip(sd, pos, strict=True) if q):
         k.fixed_reason = ("controller: critical stiffness needs SpringDamper controllers (a "
                           "general H(z) has no stiffness K to vary)")
+    else:
+        k.fixed_reason = ("controllers: the stiffness K names is 0 and another controller's "
+                          "is not, so their ratio is undefined; give it a stiffness > 0 to "
+                          "vary K")
+        if st.simple:
+            k.fixed_reason = ("controllers: the master's stiffness is 0 and the slave's is not, "
+                              "so K_s/K_m is undefined; give the master a stiffness > 0 to "
+                              "vary K")
+    k.varies, k.K_own = False, np.zeros_like(k.K_own)
+    if not any(sd):
         return k
-    k.K_own[:] = ks[0]
-    ratios = stiffness_ratios(ks)
-    if len(set(ks)) == 1:
-        return k
-    if ratios is not None:
-        # unequal K_m, K_s: K is the master's stiffness, K_s/K_m is kept fixed
-        scale = np.array(ratios)
-        k.C1, k.Fu1 = k.C1 * scale[None, :, None], k.Fu1 * scale[None, :, None]
-        return k
-    # K_m = 0 < K_s: no ratio to keep; the loop is exact with every port's own K
-    # folded into the fixed part, and K cannot be varied
-    own = np.array(ks)[None, :, None] * k.Fu1
+    # no ratio to keep: the loop is exact with every channel's own K folded into the
+    # fixed part, and K cannot be varied
+    own = np.zeros_like(k.Fu1)
+    for c, ch in enumerate(st.channels):
+        if sd[c]:
+            own[:, ch.port, :] += ch.controller.stiffness * E[c]    # type: ignore[union-attr]
     k.Fu0 = k.Fu0 + own
     k.A0[:, :lay.n_plant, :] -= Bd @ own
     for (j, f), r0 in lay.off_f.items():
         k.A0[:, r0, :] -= gam_of[(j, f)][:, None] * own[:, j, :]
-    k.Fu1, k.C1, k.K_own = np.zeros_like(k.Fu1), np.zeros_like(k.C1), np.zeros_like(k.K_own)
-    k.varies = False
-    k.fixed_reason = ("controllers: the master's stiffness is 0 and the slave's is not, so "
-                      "K_s/K_m is undefined; give the master a stiffness > 0 to vary K")
+    for j, u in lay.force.u_old.items():
+        k.A0[:, u, :] += own[:, j, :]
+    k.Fu1, k.C1 = np.zeros_like(k.Fu1), np.zeros_like(k.C1)
     return k
 
 
@@ -339,7 +384,9 @@ def build(loop: HapticLoop | TeleoperationLoop,
     """Assemble the exact closed loop of ``loop`` for each sampling period.
 
     The state is: each port's plant (ZOH), the whole-sample delay registers, the
-    controller states, then the fractional-delay states with their registers.
+    controller states, the fractional-delay states with their registers, then for
+    every port whose force a channel measures its held forces and force registers
+    (:mod:`hapstab.engine.forces`).
 
     Parameters
     ----------
@@ -360,8 +407,10 @@ def build(loop: HapticLoop | TeleoperationLoop,
     Ac, Bc, Cf, Ad, Bd, off_p = _plant(st, T)
     parts = [_controller_parts(ch.controller, T) for ch in st.channels]
     lay = _layout(st, off_p, [pa[0].shape[1] for pa in parts])
-    pos, vel, E = _selectors(st, lay)
-    Fu0, Fu1, A0 = _controllers(st, parts, lay, E, P)
+    R = termination_rows(st, lay.force, Ac, Cf, off_p)
+    pos, vel, E = _selectors(st, lay, R)
+    ratios = channel_ratios(st) or (1.0,) * len(st.channels)
+    Fu0, Fu1, A0 = _controllers(st, parts, lay, E, P, ratios)
     n, p = lay.n_plant, len(st.ports)
     A0[:, :n, :n] = Ad
     A0[:, :n, :] -= Bd @ Fu0
@@ -369,11 +418,16 @@ def build(loop: HapticLoop | TeleoperationLoop,
     B_ext, B1 = np.zeros((P, lay.N, p)), np.zeros((P, lay.N, p))
     B_ext[:, :n, :], B1[:, :n, :] = Bd, -Bd
     gam_of = _fractional(A0, B_ext, B1, Fu0, Ac, Bc, T, lay)
+    held_states(A0, B_ext, B1, Fu0, lay.force, R)
     # C1 rows: the K-part of each port's force; same for every period
-    k = _stiffness(st, _KPart(A0, Fu0, Fu1, Fu1.copy(), np.zeros(P), True, ""), Bd, lay, gam_of)
+    k = _stiffness(st, _KPart(A0, Fu0, Fu1, Fu1.copy(), np.zeros(P), True, ""), Bd, lay, gam_of,
+                   E)
     _check_finite(st, T, [k.A0, k.C1, k.Fu0, B_ext, B1])
+    held = [np.array([d.get(j, -1) for j in range(p)]) if d else None
+            for d in (lay.force.u_old, lay.force.f_old)]
     return SampledSystem(periods=T, A0=k.A0, B1=B1, C1=k.C1, stiffness=k.K_own, B_ext=B_ext,
                          F_u0=k.Fu0, F_u1=k.Fu1, pos=pos, vel=vel, Ac=Ac, Bc=Bc, Cf=Cf,
                          n_plant=n, labels=[pt.name for pt in st.ports], varies_with_K=k.varies,
-                         E=E, fixed_reason=k.fixed_reason,
-                         rigid_modes=rigid_modes(st, float(T.max())))
+                         E=E if st.simple else None, fixed_reason=k.fixed_reason,
+                         rigid_modes=rigid_modes(st, float(T.max())), E_channels=E,
+                         held_u=held[0], held_f=held[1])

@@ -88,10 +88,11 @@ def simulate(loop: HapticLoop | TeleoperationLoop, duration: float, *,
     duration : float
         Seconds; ``round(duration / T)`` samples are taken.
     force : force spec, optional
-        Exogenous operator force on the device (HVE) / master (PEB); see
-        :func:`force_samples`. Held over each sample.
+        Exogenous operator force on the device (HVE) / master (a teleoperator: PEB or
+        the 4-channel loop); see :func:`force_samples`. Held over each sample; a
+        4-channel loop's force channels measure it as part of the operator's force.
     environment_force : force spec, optional
-        Exogenous environment force on the slave (PEB only).
+        Exogenous environment force on the slave (teleoperators only).
     initial_position, initial_velocity : float or sequence
         Per port (a scalar applies to every port). The loop's history is at rest
         at the initial position (delay registers and controller states consistent).
@@ -109,7 +110,8 @@ def simulate(loop: HapticLoop | TeleoperationLoop, duration: float, *,
     saturation : float, optional
         Actuator force limit |u| <= saturation (N), each port.
     resolution : float, optional
-        Encoder resolution Δ (m).
+        Encoder resolution Δ (m). Not with a measured force (a 4-channel loop's force
+        gains) yet.
     quantizer : {"floor", "nearest"}
         ``floor``: the controller sees ``Δ floor(x / Δ)`` (an encoder's count);
         ``nearest``: the nearest multiple of Δ, ties away from zero.
@@ -146,6 +148,10 @@ def simulate(loop: HapticLoop | TeleoperationLoop, duration: float, *,
                             quantizer)
     sysm = build(loop)
     p = sysm.n_ports
+    if sysm.held_f is not None and "resolution" in nl:
+        raise ModelError(f"resolution = {resolution}: encoder quantisation with a measured force "
+                         "(a FourChannelLoop's force channel) is not simulated yet; allowed: "
+                         "None, or force gains of 0")
     budget.check(budget.simulation_cost(M, sysm.order, p, dense), max_memory, max_seconds)
     roles = roles_of(loop, sysm)
     t = np.arange(M + 1) * T
@@ -158,6 +164,10 @@ def simulate(loop: HapticLoop | TeleoperationLoop, duration: float, *,
     s0 = make_initial_state(sysm, roles, initial_position, initial_velocity, initial_state, measure)
     springs = np.array([pt.termination.stiffness for pt in structure_of(loop).ports])
     rest = _rest(rest_position, s0[pos_idx], p)
+    if roles.held_f.size and initial_state is None:
+        # a force measured at the first sample sees the hand at rest: the spring's offset
+        s0 = make_initial_state(sysm, roles, initial_position, initial_velocity, None, measure,
+                                held_force=springs * rest)
     Fd = F + springs * rest              # a spring relaxed at r: -k (x - r) = -k x + k r
     contact = None
     if not nl:

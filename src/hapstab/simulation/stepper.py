@@ -14,7 +14,11 @@ the matrices themselves (not from the engine's layout):
   wall offset) is applied when they are read. Quantisation is memoryless, so a
   register that stores the true position and is quantised when read gives exactly
   what a register of quantised samples gives.
-* the remaining rows (controller states) are updated from the measured state.
+* the **held forces** (``sysm.held_u``, ``held_f``: the controller and exogenous
+  force of the previous sample, kept for a force measurement at kT^-) take the force
+  actually applied (after saturation) and the exogenous force.
+* the remaining rows (controller states, force registers) are updated from the
+  measured state.
 
 Without nonlinear elements this is exactly ``s[k+1] = A_cl s[k] + G f[k]``.
 
@@ -50,7 +54,9 @@ class Roles:
     pos_entries: np.ndarray   # indices of position entries
     pos_port: np.ndarray      # their port
     physical: np.ndarray      # bool mask (N,)
-    E: np.ndarray             # controller input selectors (p, N)
+    E: np.ndarray | None      # controller input selectors (p, N); None: several per port
+    held_u: np.ndarray        # (port, state) pairs of the held controller forces (h, 2)
+    held_f: np.ndarray        # (port, state) pairs of the held exogenous forces (h, 2)
 
 
 def roles_of(loop: HapticLoop | TeleoperationLoop, sysm: SampledSystem) -> Roles:
@@ -61,11 +67,13 @@ def roles_of(loop: HapticLoop | TeleoperationLoop, sysm: SampledSystem) -> Roles
     pos_idx = np.argmax(sysm.pos, axis=1)
     plant_port = np.searchsorted(pos_idx, np.arange(npl), side="right") - 1
     port_of = {int(i): j for j, i in enumerate(pos_idx)}
+    held = [_held(h) for h in (sysm.held_u, sysm.held_f)]
+    skip = {int(i) for h in held for i in h[:, 1]}
     changed = True
     while changed:                       # registers chain: copy of a copy of a position
         changed = False
         for i in range(npl, N):
-            if i in port_of:
+            if i in port_of or i in skip:
                 continue
             if np.any(G[i]):             # a position sampled between samples (fractional delay)
                 cols = np.flatnonzero(A_free[i, :npl])
@@ -80,14 +88,24 @@ def roles_of(loop: HapticLoop | TeleoperationLoop, sysm: SampledSystem) -> Roles
     phys[:npl] = True
     phys[pe] = True
     return Roles(A, G, Fu, A_free, pe, np.array([port_of[i] for i in pe], dtype=int), phys,
-                 np.asarray(sysm.E))   # the engine's error selectors (delays included)
+                 None if sysm.E is None else np.asarray(sysm.E), held[0], held[1])
+
+
+def _held(h: np.ndarray | None) -> np.ndarray:
+    """(port, state) pairs of a held-force index array (-1: the port has none)."""
+    if h is None:
+        return np.zeros((0, 2), dtype=int)
+    ports = np.flatnonzero(np.asarray(h) >= 0)
+    return np.stack([ports, np.asarray(h)[ports]], axis=1).astype(int)
 
 
 def initial_state(sysm: SampledSystem, roles: Roles, x0: Any, v0: Any, full: Any,
-                  measure: Callable[[np.ndarray], np.ndarray]) -> np.ndarray:
+                  measure: Callable[[np.ndarray], np.ndarray],
+                  held_force: np.ndarray | None = None) -> np.ndarray:
     """The initial closed-loop state: given in full, or the plant at (x0, v0) with a
-    history at rest at x0 (every stored position x0 of its port; controller states
-    the fixed point of their own update).
+    history at rest at x0 (every stored position x0 of its port; the exogenous force
+    held over the previous sample ``held_force`` (p,), default 0; controller states,
+    held controller forces and force registers the fixed point of their own update).
 
     Raises
     ------
@@ -113,6 +131,10 @@ def initial_state(sysm: SampledSystem, roles: Roles, x0: Any, v0: Any, full: Any
     s[roles.pos_entries] = vals[0][roles.pos_port]
     s[pos_idx + 1] = vals[1]
     ctrl = ~roles.physical
+    if roles.held_f.size:
+        hf = np.zeros(p) if held_force is None else np.asarray(held_force, float)
+        s[roles.held_f[:, 1]] = hf[roles.held_f[:, 0]]
+        ctrl[roles.held_f[:, 1]] = False
     if ctrl.any():
         sm = measure(s)
         Acc = roles.A[np.ix_(ctrl, ctrl)]
@@ -137,7 +159,8 @@ def step_nonlinear(roles: Roles, s0: np.ndarray, F: np.ndarray, M: int,
     """
     ph, ct = roles.physical, ~roles.physical
     Af, Gp, Ac = roles.A_free[ph], roles.G[ph], roles.A[ct]
-    Fu, E0 = roles.Fu, roles.E[0]
+    Fu = roles.Fu
+    E0 = roles.E[0] if roles.E is not None else np.zeros(s0.size)   # the wall's (HVE) reading
     S = np.empty((M + 1, s0.size))
     U = np.empty((M + 1, Fu.shape[0]))
     C = np.zeros(M + 1, bool) if has_wall else None
@@ -160,6 +183,8 @@ def step_nonlinear(roles: Roles, s0: np.ndarray, F: np.ndarray, M: int,
         nxt = np.empty_like(s)
         nxt[ph] = Af @ s + Gp @ (F[k] - u)
         nxt[ct] = Ac @ sm
+        nxt[roles.held_u[:, 1]] = u[roles.held_u[:, 0]]     # the force actually applied
+        nxt[roles.held_f[:, 1]] = F[k][roles.held_f[:, 0]]
         s = nxt
         if not np.all(np.isfinite(s)):
             S[k + 1:] = np.inf
