@@ -97,7 +97,9 @@ def _side(loop: Any) -> DeviceSide:
     if fwd != int(fwd) or bwd != int(bwd):
         raise AnalysisError(f"transparency: derived for whole-sample delays (t_d = nT); this "
                             f"loop has delay forward {fwd:g} and delay backward {bwd:g} samples")
-    return device_side(loop, "transparency")   # any controllers the device side supports
+    side = device_side(loop, "transparency", forces=True)   # any controllers it supports
+    side.check_forces("transparency")
+    return side
 
 
 def _frequencies(frequencies_hz: Any, side: DeviceSide) -> np.ndarray:
@@ -120,9 +122,10 @@ def _frequencies(frequencies_hz: Any, side: DeviceSide) -> np.ndarray:
 
 
 def _impedance(side: DeviceSide, a: str, theta: np.ndarray) -> np.ndarray:
-    """P(e^{j theta}) = diag(b) + Hc X, shape (N, 2, 2) (eq. 30 generalised)."""
+    """P(e^{j theta}) = diag(b) + Hc X, shape (N, 2, 2) (eq. 30 generalised); with force
+    channels (I - G_f)^-1 (P + jw M) - jw M (:meth:`DeviceSide.with_forces`)."""
     X = _x(a, theta, side.period_s)[:, None, None]
-    return np.diag(side.damping)[None] + X * side.controller_matrix(theta)
+    return side.with_forces(np.diag(side.damping)[None] + X * side.controller_matrix(theta), theta)
 
 
 def _hybrid(Z: np.ndarray) -> np.ndarray:
@@ -149,7 +152,8 @@ def _terminated(P: np.ndarray, s: np.ndarray, masses: tuple[float, float],
 def _static(side: DeviceSide, k_e: float) -> tuple[float, float]:
     """(felt stiffness N/m, tracking) as w -> 0 against a spring k_e (inf: rigid), from
     Hc(1); NaN where a controller's DC gain is not finite or the slave is held by nothing."""
-    H = side.controller_matrix(np.zeros(1))[0]
+    # the static stiffness: (I - G_f(1))^-1 Hc(1) with force channels (no mass at DC)
+    H = side.with_forces(side.controller_matrix(np.zeros(1)), np.zeros(1), "K")[0]
     if math.isinf(k_e):
         return float(H[0, 0].real), 0.0
     den = H[1, 1] + k_e

@@ -74,9 +74,12 @@ def _side(loop: Any, approximation: Any, bounds: tuple[Any, Any] = (0.0, 0.0)
         raise AnalysisError("method = 'llewellyn': a two-port criterion, for a "
                             "TeleoperationLoop (peb) or a FourChannelLoop (4ch); for the HVE "
                             "use 'circle' or 'passivity'")
-    side = _stiffness_side(loop, "Llewellyn's test")
+    side = _stiffness_side(loop, "Llewellyn's test", forces=True)
+    side.check_forces("Llewellyn's test")
     extra = _damping_bounds(*bounds)
-    if any(extra):
+    if any(extra) and side.forces:     # after the force feedback (DeviceSide.with_forces)
+        side = dataclasses.replace(side, extra_damping=np.array(extra, float))
+    elif any(extra):
         side = dataclasses.replace(side, damping=side.damping + np.array(extra, float))
     return side, _approx(approximation)   # forward, backward or tustin
 
@@ -98,7 +101,8 @@ def _parts(side: DeviceSide, a: str, theta: np.ndarray) -> tuple[np.ndarray, np.
     """P = A + K C at each angle: (A, C), each (N, 2, 2)."""
     X = _x(a, theta, side.period_s)[:, None, None]
     A = np.diag(side.damping)[None] + X * side.controller_matrix(theta, "B")
-    return A, X * side.controller_matrix(theta, "K")
+    C = X * side.controller_matrix(theta, "K")
+    return side.with_forces(A, theta), side.with_forces(C, theta, "K")
 
 
 #: Rounding slack of the margin, relative to the largest |p_ij| at the angle: the products
@@ -193,13 +197,15 @@ def critical_stiffness_llewellyn(loop: TeleoperationLoop, approximation: str = "
 
     tol = 0.0        # (the margin carries its own rounding slack, SLACK)
     if worst(0.0)[1] < -tol:
-        return _result(0.0, a, T, n, worst(0.0)[0],
-                       "not absolutely stable at K = 0: the virtual damping takes more than "
-                       "the device damping gives", bounds)
+        why = ("the force feedback (through the devices' masses) and the virtual damping take "
+               "more than the damping gives" if side.forces else
+               "the virtual damping takes more than the device damping gives")
+        return _result(0.0, a, T, n, worst(0.0)[0], f"not absolutely stable at K = 0: {why}",
+                       bounds, side)
     K_hi = _first_failure(A, C, tol)
     if K_hi is None:
         return _result(math.inf, a, T, n, None, "absolutely stable for every K up to 1e12 N/m",
-                       bounds)
+                       bounds, side)
     lo, hi = _below(K_hi), K_hi
     while lo > 0 and worst(lo)[1] < -tol:   # the grid passed lo; the refined minimum must too
         lo, hi = _below(lo), lo
@@ -211,10 +217,10 @@ def critical_stiffness_llewellyn(loop: TeleoperationLoop, approximation: str = "
         lo, hi = (mid, hi) if worst(mid)[1] >= -tol else (lo, mid)
     if hi <= zero:
         return _result(0.0, a, T, n, worst(hi)[0], "not absolutely stable for any K > 0",
-                       bounds)
+                       bounds, side)
     th_w = worst(hi)[0]
     return _result(lo, a, T, n, th_w, f"Llewellyn's conditions fail beyond K_max, first at "
-                                      f"w = {th_w / T:.6g} rad/s", bounds)
+                                      f"w = {th_w / T:.6g} rad/s", bounds, side)
 
 
 #: Ratio of successive K of the scan: a failure window narrower than 1 % of K between two
@@ -244,13 +250,28 @@ def _first_failure(A: np.ndarray, C: np.ndarray, tol: float) -> float | None:
     return None
 
 
+#: What the test is worth with force channels (README, "Lawrence's 4-channel architecture").
+FORCE_CAVEAT = ("; with measured forces this two-port ignores their sampling (a stiff "
+                "termination's force is sampled like a virtual wall's), so it is NOT a stability "
+                "bound in general: a seeded campaign found loops unstable below it with C_3, C_5 "
+                "or C_6 (none with C_2 alone); confirm with the exact analysis")
+
+
+def _two_port_name(side: DeviceSide) -> str:
+    """Which two-port the test ran on (with force channels, not eq. 30's)."""
+    if side.forces:
+        return ("two-port (I - G_f)^-1 (G^-1 + jw M) - jw M (measured forces fed back through "
+                "G_f, the devices' masses M at s = jw)")
+    return "two-port G^-1 (eq. 30)"
+
+
 def _result(K: float, a: str, T: float, n: int, theta: float | None,
-            why: str, bounds: tuple[float, float] = (0.0, 0.0)) -> CriticalStiffnessResult:
+            why: str, bounds: tuple[float, float], side: DeviceSide) -> CriticalStiffnessResult:
     f_hz = theta / (2 * math.pi * T) if theta is not None else float("nan")
     return CriticalStiffnessResult(
         float(K), "llewellyn", ((0.0, float(K)),) if K > 0 else (),
-        f"Llewellyn's absolute stability of the two-port G^-1 (eq. 30), {a} approximation"
-        f"{_terminations(bounds)}: {why}", T, n, f_hz,
+        f"Llewellyn's absolute stability of the {_two_port_name(side)}, {a} approximation"
+        f"{_terminations(bounds)}: {why}{FORCE_CAVEAT if side.forces else ''}", T, n, f_hz,
         {"approximation": a, "operator_damping_min": bounds[0],
          "environment_damping_min": bounds[1]})
 
@@ -380,5 +401,5 @@ def llewellyn_test(loop: TeleoperationLoop, approximation: str = "forward",
            "some pair of passive terminations makes the loop unstable")
     return TwoPortResult(ok, float(m), th_w / T, th_w / (2 * math.pi * T), eta_min, th / T,
                          margins, eta, float(K), T, a,
-                         f"two-port G^-1 (eq. 30), {a} approximation{_terminations(bounds)}: "
-                         f"{why}", bounds)
+                         f"{_two_port_name(side)}, {a} approximation{_terminations(bounds)}: "
+                         f"{why}{FORCE_CAVEAT if side.forces else ''}", bounds)

@@ -25,6 +25,7 @@ Systems 14(1), 1997.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -58,6 +59,15 @@ class DeviceSide:
     ratios : tuple of float or None
         Each controller's stiffness per unit K; ``None`` when K cannot be varied
         (a controller that is not a spring-damper, or K_m = 0 < K_s).
+    forces : tuple of Channel
+        Force channels (constant gains on the terminations' measured forces), only
+        where the analysis asked for them (:meth:`with_forces`).
+    masses : (p,) array
+        Each device's mass in kg (used with force channels only).
+    extra_damping : (p,) array or None
+        Least damping of the terminations (bounded impedance), added to the device side
+        after the force feedback (:meth:`with_forces`); without force channels it is
+        added to ``damping`` instead.
     """
 
     period_s: float
@@ -65,6 +75,58 @@ class DeviceSide:
     damping: np.ndarray
     channels: tuple[Channel, ...]
     ratios: tuple[float, ...] | None
+    forces: tuple[Channel, ...] = ()
+    masses: np.ndarray | None = None
+    extra_damping: np.ndarray | None = None
+
+    def force_matrix(self, theta: np.ndarray) -> np.ndarray:
+        """G_f(e^{j theta}), (N, p, p): u = Hc x + G_f F_t (F_t the terminations' forces)."""
+        th = np.atleast_1d(np.asarray(theta, float))
+        out = np.zeros((th.size, self.ports, self.ports), complex)
+        for ch in self.forces:
+            g = float(ch.controller.num[0])                   # type: ignore[union-attr]
+            for j, s, d in ch.terms:
+                out[:, ch.port, j] += s * g * np.exp(-1j * int(d) * th)
+        return out
+
+    def with_forces(self, P: np.ndarray, theta: np.ndarray, part: str | None = None
+                    ) -> np.ndarray:
+        """The device side seen by the terminations once the measured forces are fed back.
+
+        The sensor sits between device and termination: m s v + P v = F_t - G_f F_t, so
+        F_t = (I - G_f)^-1 (P + j w M) v (M the devices' masses, s = j w). The masses
+        are moved back to the terminations (as without force channels), which leaves
+        det(P + Z_terminations) and Llewellyn's conditions unchanged: the result is
+        ``(I - G_f)^-1 (P + j w M) - j w M``, or ``(I - G_f)^-1 P`` for the K-part
+        (``part="K"``, no mass). Without force channels, ``P`` itself.
+        """
+        if not self.forces:
+            return P
+        th = np.atleast_1d(np.asarray(theta, float))
+        L = np.linalg.inv(np.eye(self.ports)[None] - self.force_matrix(th))
+        if part == "K":
+            return L @ P
+        assert self.masses is not None
+        jwM = (1j * th / self.period_s)[:, None, None] * np.diag(self.masses)[None]
+        out = L @ (P + jwM) - jwM
+        return out if self.extra_damping is None else out + np.diag(self.extra_damping)[None]
+
+    def check_forces(self, what: str) -> None:
+        """Refuse force feedback that is unstable on its own: a zero of det(I - G_f(z))
+        on or outside the unit circle makes the two-port unstable, which Llewellyn's
+        conditions (and transparency) assume it is not."""
+        if not self.forces:
+            return
+        poly = _force_determinant(self.forces, self.ports)
+        roots: np.ndarray = (np.polynomial.polynomial.polyroots(poly) if np.count_nonzero(poly[1:])
+                             else np.zeros(0))
+        # |r| = |1/z| <= 1 + 1e-9: a zero on or outside the circle to the roots' accuracy
+        # (a few digits short of double precision for these low-degree polynomials)
+        if (len(roots) == 0 and poly[0] == 0) or np.any(np.abs(roots) <= 1.0 + 1e-9):
+            bad = max((1.0 / abs(r) for r in roots if r != 0), default=math.inf)
+            raise AnalysisError(f"{what}: the force feedback alone is unstable (det(I - G_f(z)) "
+                                f"has a zero at |z| = {bad:.6g} >= 1: check C_2 C_3 against "
+                                "(1 + C_5)(1 + C_6)); the test needs a stable two-port")
 
     @property
     def ports(self) -> int:
@@ -76,7 +138,7 @@ class DeviceSide:
         """Oscillations over theta in [0, pi] of a p x p determinant of Hc: the sum over
         channels of the longest delay, plus 2 (a grid density for sweeps)."""
         most = [0] * self.ports
-        for ch in self.channels:
+        for ch in (*self.channels, *self.forces):
             most[ch.port] = max(most[ch.port], *(int(d) for _, _, d in ch.terms))
         return sum(most) + 2
 
@@ -188,7 +250,22 @@ def _response(c: object, theta: np.ndarray, T: float, part: str | None, ratio: f
     return np.polyval(num, z) / np.polyval(den, z)
 
 
-def device_side(loop: HapticLoop | TeleoperationLoop, what: str) -> DeviceSide:
+def _force_determinant(forces: tuple[Channel, ...], p: int) -> np.ndarray:
+    """det(I - G_f) as a polynomial in r = 1/z (ascending coefficients)."""
+    P = np.polynomial.polynomial
+    depth = 1 + max(int(d) for ch in forces for _, _, d in ch.terms)
+    E = [[np.eye(1, depth, 0)[0] * float(i == j) for j in range(p)] for i in range(p)]
+    for ch in forces:
+        g = float(ch.controller.num[0])                       # type: ignore[union-attr]
+        for j, s, d in ch.terms:
+            E[ch.port][j][int(d)] -= s * g
+    if p == 1:
+        return E[0][0]
+    return P.polysub(P.polymul(E[0][0], E[1][1]), P.polymul(E[0][1], E[1][0]))
+
+
+def device_side(loop: HapticLoop | TeleoperationLoop, what: str,
+                forces: bool = False) -> DeviceSide:
     """The loop cut at its terminations (see the module notes).
 
     Parameters
@@ -197,6 +274,9 @@ def device_side(loop: HapticLoop | TeleoperationLoop, what: str) -> DeviceSide:
         Any loop kind the engine's :func:`~hapstab.engine.structure.structure_of` builds.
     what : str
         The analysis that needs it, named in errors (e.g. ``"the circle criterion"``).
+    forces : bool
+        Whether the analysis takes force channels (:meth:`DeviceSide.with_forces`);
+        otherwise they are refused.
 
     Returns
     -------
@@ -206,14 +286,15 @@ def device_side(loop: HapticLoop | TeleoperationLoop, what: str) -> DeviceSide:
     ------
     AnalysisError
         A delay that is not a whole number of samples: the frequency-domain
-        conditions are derived for t_d = nT.
+        conditions are derived for t_d = nT; force channels where not taken.
     """
     st = structure_of(loop)
-    if any(ch.measures != "position" for ch in st.channels):
+    if not forces and any(ch.measures != "position" for ch in st.channels):
         raise AnalysisError(f"{what}: derived for controllers that measure positions; this loop "
                             "also feeds back measured forces (force gains C_2, C_3, C_5, C_6), "
                             "use the exact analysis")
-    channels = []
+    channels: list[Channel] = []
+    force_channels: list[Channel] = []
     for ch in st.channels:
         terms = []
         for j, s, d in ch.terms:
@@ -222,8 +303,13 @@ def device_side(loop: HapticLoop | TeleoperationLoop, what: str) -> DeviceSide:
                 raise AnalysisError(f"{what}: derived for a whole number of samples of delay "
                                     f"(t_d = nT); this loop has t_d = {d:g} T")
             terms.append((j, s, float(n)))
-        channels.append(Channel(ch.port, ch.controller, tuple(terms)))
+        ch_whole = Channel(ch.port, ch.controller, tuple(terms), ch.measures)
+        (channels if ch.measures == "position" else force_channels).append(ch_whole)
     ratios = channel_ratios(st)
+    if ratios is not None:
+        ratios = tuple(r for r, ch in zip(ratios, st.channels, strict=True)
+                       if ch.measures == "position")
     return DeviceSide(float(loop.period), tuple(pt.name for pt in st.ports),
                       np.array([pt.device.damping for pt in st.ports], float), tuple(channels),
-                      ratios)
+                      ratios, tuple(force_channels),
+                      np.array([pt.device.mass for pt in st.ports], float))

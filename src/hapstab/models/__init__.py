@@ -2,6 +2,7 @@
 validated when built, SI units."""
 
 from hapstab.models.controllers import Controller, DiscreteController, SpringDamper
+from hapstab.models.fourchannel import FourChannelLoop
 from hapstab.models.loops import (
                                   HapticLoop,
                                   Loop,
@@ -20,4 +21,4 @@ from hapstab.models.parts import (
 
 __all__ = ["Device", "Impedance", "NO_IMPEDANCE", "spring", "mass_spring_damper",
            "parse_impedance", "SpringDamper", "DiscreteController", "Controller", "HapticLoop",
-           "TeleoperationLoop", "Loop", "delay_from_seconds", "whole_delay"]
+           "TeleoperationLoop", "FourChannelLoop", "Loop", "delay_from_seconds", "whole_delay"]

@@ -18,13 +18,12 @@ from typing import Any, ClassVar
 
 from hapstab.errors import AnalysisError, ModelError, check_real
 from hapstab.models.controllers import Controller, SpringDamper, spring_damper, stiffness_ratios
-from hapstab.models.loops import TeleoperationLoop, _check_controller
+from hapstab.models.loops import FORCE_NAMES, TeleoperationLoop, _check_controller
 
 __all__ = ["FourChannelLoop", "FORCE_GAINS"]
 
 #: The four force gains (dimensionless, N per N), Lawrence's name of each.
-FORCE_GAINS = {"force_to_master": "C_2", "force_to_slave": "C_3",
-               "slave_force_feedback": "C_5", "master_force_feedback": "C_6"}
+FORCE_GAINS = FORCE_NAMES
 
 
 @dataclass(frozen=True)

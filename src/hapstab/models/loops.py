@@ -407,11 +407,26 @@ def headline(loop: HapticLoop | TeleoperationLoop) -> str:
             else "")
         if loop.scaled:
             parts.append(f"scaling alpha = {loop.position_scale:g}, beta = {loop.force_scale:g}")
+        gains = getattr(loop, "force_gains", None)        # Lawrence's 4-channel loop
+        if gains is not None:
+            c1, c4 = loop.controllers[2:]
+            parts.append(f"C_1 {_gain(c1)}, C_4' {_gain(c4)}, " + ", ".join(
+                f"{FORCE_NAMES[k]} = {v:g}" for k, v in gains().items() if v))
     else:
         parts = [dev("device", loop.device), term("operator", loop.operator)]
         delay = f"t_d = {loop.delay_s * 1e3:.4g} ms"
     n = loop.delay_in_samples
     return "; ".join([*parts, f"T = {loop.period * 1e3:.4g} ms, {delay} ({n:.4g} samples)"])
+
+
+#: Lawrence's names of the 4-channel loop's force gains (for headlines).
+FORCE_NAMES = {"force_to_master": "C_2", "force_to_slave": "C_3", "slave_force_feedback": "C_5",
+               "master_force_feedback": "C_6"}
+
+
+def _gain(c: Controller) -> str:
+    """A position controller in a headline: ``K 10, B 0.5`` or ``H(z)``."""
+    return f"K {c.stiffness:g}, B {c.damping:g}" if isinstance(c, SpringDamper) else "H(z)"
 
 
 def require_loop(loop: Any, name: str = "loop") -> None:
