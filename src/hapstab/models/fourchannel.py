@@ -58,6 +58,10 @@ class FourChannelLoop(TeleoperationLoop):
         local position controllers C_m and C_s.
     delay_samples, delay_backward_samples : int
         Whole samples of delay master -> slave (C_1, C_3) and slave -> master (C_4, C_2).
+    fractional_delay, fractional_delay_backward : float
+        Must be 0: whole samples only (refused otherwise).
+    position_scale, force_scale : float
+        Must be 1: scale the channels' gains instead (refused otherwise).
     slave_from_master : SpringDamper or None
         C_1: the slave's controller on the delayed master position (``None``: C_s).
     master_from_slave : SpringDamper or None
