@@ -164,3 +164,24 @@ def test_the_test_at_one_stiffness_agrees_with_k_max(tmp_path):
     assert d["verdict"] == "not absolutely stable" and d["margin"] == pytest.approx(above.margin)
     assert csv.read_text().splitlines()[0] == "frequency_rad_s,margin_N_s_per_m,eta"
     assert (tmp_path / "t.png").read_bytes()[:4] == b"\x89PNG"
+
+
+@pytest.mark.parametrize("nf, nb", [(1, 3), (0, 4), (4, 0)])
+def test_unequal_whole_delays_are_the_round_trip(nf, nb):
+    """Llewellyn's conditions see the delays only through p12 p21 (Re p11, Re p22 carry
+    none), and the loop with any terminations only through T01 T10: both depend on the
+    round trip alone, so (nf, nb) must give exactly what (2, 2) gives, and the exact
+    K_max agrees too (a check of the claim, not of the code: the exact core multiplies
+    the two phases separately)."""
+    dev = h.Device(0.3, 2.0)
+
+    def loop(f, b):
+        return h.TeleoperationLoop(dev, dev, h.SpringDamper(100, 0.5), h.SpringDamper(50, 0.3),
+                                   h.spring(1.0), h.spring(100.0), delay_samples=f,
+                                   delay_backward_samples=b)
+    ref, asym = loop(2, 2), loop(nf, nb)
+    assert h.critical_stiffness(asym, "llewellyn").critical_stiffness == \
+        h.critical_stiffness(ref, "llewellyn").critical_stiffness
+    assert h.critical_stiffness(asym).critical_stiffness == \
+        pytest.approx(h.critical_stiffness(ref).critical_stiffness, rel=1e-12)
+    assert h.llewellyn_test(asym.with_stiffness(500.0)).absolutely_stable

@@ -91,10 +91,12 @@ def _x(a: str, theta: np.ndarray, T: float) -> np.ndarray:
     return -0.5j * T * np.cos(theta / 2) / s + 0j
 
 
-def _side(loop: Any, what: str = "the circle criterion", forces: bool = False) -> DeviceSide:
+def _side(loop: Any, what: str = "the circle criterion", forces: bool = False,
+          equal_delays: bool = True) -> DeviceSide:
     require_loop(loop)
-    whole_delay(loop, what)  # the paper's t_d = nT, equal both ways
-    return device_side(loop, what, forces)
+    if equal_delays:
+        whole_delay(loop, what)  # the paper's t_d = nT, equal both ways
+    return device_side(loop, what, forces)   # whole samples of delay on every channel
 
 
 def port_scaling(loop: HapticLoop | TeleoperationLoop, scaling: str | None = "auto"
@@ -341,9 +343,9 @@ def _affine_kmax(parts: Any, oscillations: int) -> tuple[float, float]:
     return refine_minimum(k_of, th, k_of(th))[::-1]
 
 
-def _stiffness_side(loop: Any, what: str = "the circle criterion", forces: bool = False
-                    ) -> DeviceSide:
-    side = _side(loop, what, forces)
+def _stiffness_side(loop: Any, what: str = "the circle criterion", forces: bool = False,
+                    equal_delays: bool = True) -> DeviceSide:
+    side = _side(loop, what, forces, equal_delays)
     if not all(isinstance(ch.controller, SpringDamper) for ch in side.channels):
         raise AnalysisError("critical stiffness: needs SpringDamper controller(s) "
                             "(a DiscreteController has no stiffness to vary)")

@@ -59,7 +59,7 @@ from hapstab.analysis.sweeps import refine_minimum, theta_grid
 from hapstab.engine.device_side import DeviceSide
 from hapstab.engine.structure import own_stiffness, structure_of
 from hapstab.errors import AnalysisError, check_real
-from hapstab.models.loops import TeleoperationLoop, require_loop, whole_delay
+from hapstab.models.loops import TeleoperationLoop, require_loop
 from hapstab.results import CriticalStiffnessResult, Result, jsonable, write_csv
 
 __all__ = ["llewellyn_margin", "critical_stiffness_llewellyn", "llewellyn_test", "TwoPortResult"]
@@ -74,7 +74,9 @@ def _side(loop: Any, approximation: Any, bounds: tuple[Any, Any] = (0.0, 0.0)
         raise AnalysisError("method = 'llewellyn': a two-port criterion, for a "
                             "TeleoperationLoop (peb) or a FourChannelLoop (4ch); for the HVE "
                             "use 'circle' or 'passivity'")
-    side = _stiffness_side(loop, "Llewellyn's test", forces=True)
+    # any whole delays: the conditions see the delays only through p12 p21, i.e. the
+    # round trip (and so does the loop with any terminations)
+    side = _stiffness_side(loop, "Llewellyn's test", forces=True, equal_delays=False)
     side.check_forces("Llewellyn's test")
     extra = _damping_bounds(*bounds)
     if any(extra) and side.forces:     # after the force feedback (DeviceSide.with_forces)
@@ -188,7 +190,7 @@ def critical_stiffness_llewellyn(loop: TeleoperationLoop, approximation: str = "
     """
     bounds = _damping_bounds(operator_damping_min, environment_damping_min)
     side, a = _side(loop, approximation, bounds)
-    T, n = side.period_s, whole_delay(loop, "Llewellyn's test")
+    T, n = side.period_s, int(loop.delay_in_samples)   # (the forward delay)
     th = theta_grid(side.oscillations)
     A, C = _parts(side, a, th)
 
