@@ -273,12 +273,36 @@ def _zoh(A: np.ndarray, T: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return E[:, :n, :n], E[:, :n, n:]
 
 
+def _leverrier(E: np.ndarray, G: np.ndarray, d_desc: np.ndarray, kappa: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """Leverrier on vectors: adj(yI - E) Gamma = sum_k y^(q-1-k) v_k; returns V (L, q, q),
+    row k = v_k, and magnitudes that bound its error: E and Gamma come from the matrix
+    exponential, accurate relative to their largest entry (normwise, not per entry: a
+    stiff port's position entries are far smaller than its velocity entries) times
+    ``kappa`` = 1 + ||A T|| (scaling and squaring amplifies its rounding with the norm), and
+    each step adds |E| |v| + |d_k| |Gamma|."""
+    q = E.shape[1]
+    Eabs, Gabs = np.abs(E), np.abs(G)
+    e_norm, g_norm = kappa * Eabs.max(axis=(1, 2)), kappa * Gabs.max(axis=1)
+    g_mag = Gabs + g_norm[:, None]
+    v, mag = G.copy(), g_mag
+    vs, mags = [v], [mag]
+    for k in range(1, q):
+        v = np.einsum("lij,lj->li", E, v) + d_desc[:, k:k + 1] * G
+        mag = (np.einsum("lij,lj->li", Eabs, mag) + e_norm[:, None] * mag.sum(axis=1, keepdims=True)
+               + np.abs(d_desc[:, k:k + 1]) * g_mag)
+        vs.append(v)
+        mags.append(mag)
+    return np.stack(vs, axis=1), np.stack(mags, axis=1)
+
+
 def _port_poly(A: np.ndarray, Bv: np.ndarray, free: bool, T: np.ndarray,
-               fractions: Sequence[float], force: np.ndarray | None = None,
+               fractions: Sequence[float], force: tuple[np.ndarray, np.ndarray] | None = None,
                mz_M: float = 0.0) -> PortPoly:
     """Polynomials of one port (state [x, v, rest...], position = state 0); with
-    ``force`` (the row c of the termination's force, ``Ft = -c s + (m_z/M) u_old``)
-    also the numerator of its force at kT^-."""
+    ``force`` = (c, |c|-bound), the row of the termination's force
+    (``Ft = -c s + (m_z/M) u_old``) and the magnitudes it was summed from, also the
+    numerator of its force at kT^-."""
     L, q = T.size, A.shape[0]
     _Phi, S = _zoh(A, T)
     E = A[None] @ S                                  # Phi - I, accurate for small T
@@ -295,13 +319,8 @@ def _port_poly(A: np.ndarray, Bv: np.ndarray, free: bool, T: np.ndarray,
     d_desc = d_desc.real
     if free:
         d_desc[:, -1] = 0.0                           # exactly: a root at y = 0
-    # Leverrier on vectors: adj(yI - E) Gamma = sum_k y^(q-1-k) v_k
-    v = G[:, :, 0].copy()
-    vs = [v]
-    for k in range(1, q):
-        v = np.einsum("lij,lj->li", E, v) + d_desc[:, k:k + 1] * G[:, :, 0]
-        vs.append(v)
-    V = np.stack(vs, axis=1)                          # (L, q, q): row k = v_k
+    kappa = 1.0 + T * np.abs(A).sum(axis=1).max()
+    V, Vmag = _leverrier(E, G[:, :, 0], d_desc, kappa)
     N = V[:, ::-1, 0]                                 # ascending: coefficient of y^(q-1-k)
     d = d_desc[:, ::-1].copy()
     # magnitudes that rounding acts on: coefficients of prod (y + |delta_i|)
@@ -310,7 +329,7 @@ def _port_poly(A: np.ndarray, Bv: np.ndarray, free: bool, T: np.ndarray,
         mag = np.concatenate([mag, np.zeros((L, 1))], axis=1)
         mag[:, 1:] += np.abs(delta[:, i:i + 1]) * mag[:, :-1]
     scale_d = mag[:, ::-1]
-    err = {"d": COEF_REL * scale_d, "N": COEF_REL * (np.abs(N) + np.abs(V).max(axis=2)[:, ::-1])}
+    err = {"d": COEF_REL * scale_d, "N": COEF_REL * (np.abs(N) + Vmag[:, ::-1, 0])}
     dhat = d[:, 1:] if free else np.zeros((L, 0))
     err["dhat"] = err["d"][:, 1:] if free else np.zeros((L, 0))
     Nt, D = {}, {}
@@ -332,8 +351,11 @@ def _port_poly(A: np.ndarray, Bv: np.ndarray, free: bool, T: np.ndarray,
         err[f"D{f}"] = (err[f"Nt{f}"] + COEF_REL * np.abs(onepy_N))[:, 1:]
     R = None
     if force is not None:
-        R = np.einsum("lki,i->lk", V, force)[:, ::-1]          # ascending, degree q-1
-        err["R"] = COEF_REL * (np.abs(R) + np.einsum("lki,i->lk", np.abs(V), np.abs(force))[:, ::-1])
+        c, c_mag = force
+        R = np.einsum("lki,i->lk", V, c)[:, ::-1]              # ascending, degree q-1
+        if free:
+            R[:, 0] = 0.0          # exactly: c[0] = 0 and adj(-E) Gamma is along e_0
+        err["R"] = COEF_REL * (np.abs(R) + np.einsum("lki,i->lk", Vmag, c_mag)[:, ::-1])
     return PortPoly(d, dhat, N, Nt, D, err, R, np.full(L, mz_M) if force is not None else None)
 
 
@@ -409,7 +431,10 @@ def _ports(st: Any, T: np.ndarray, terms: tuple) -> tuple[list[PortPoly], list[f
         M = pt.device.mass + pt.termination.mass
         masses.append(M)
         mz = pt.termination.mass
-        force = (Cf[0] + mz * A[1]) if j in forced else None
+        # c = Cf + m_z A[1]: b_z - m_z b / M and k_z - m_z k / M may cancel, so their
+        # rounding is bounded by the terms' magnitudes
+        force = ((Cf[0] + mz * A[1], np.abs(Cf[0]) + mz * np.abs(A[1])) if j in forced
+                 else None)
         ports.append(_port_poly(A, Bm, fr, T, sorted(fracs[j]), force, mz / M))
     for j, pp in enumerate(ports):
         arrays = [pp.d, pp.N, *list(pp.Nt.values()), *list(pp.D.values())]
