@@ -8,6 +8,7 @@ from typing import Any
 import click
 import numpy as np
 
+from hapstab.cli.fourchannel import refuse_force_gains
 from hapstab.cli.options import (
     LOOP_KINDS,
     NONNEG,
@@ -18,8 +19,10 @@ from hapstab.cli.options import (
     emit,
     fmt,
     given,
+    kind_methods,
     loop_options,
     provenance,
+    refuse_method,
     rich_table,
 )
 from hapstab.cli.ranges import parse_delays, parse_periods, parse_range
@@ -44,20 +47,22 @@ def boundary_cmd() -> None:
 
 def _kmax_command(kind: str) -> None:
     make = LOOP_KINDS[kind]
-    from hapstab.analysis.methods import methods_for
 
     @kmax.command(kind)
     @loop_options(kind)
     @damping_bound_options(kind)
     @click.option("--method", default="exact", show_default=True,
-                  help="exact | " + " | ".join(m for m in methods_for(kind) if m != "exact"))
+                  help="exact | " + " | ".join(m for m in kind_methods(kind) if m != "exact"))
     @click.option("--approximation", default=None,
                   help="For --method circle: forward | backward | tustin; for llewellyn "
                        "(peb, 4ch): forward | backward | tustin.")
     def _cmd(method: str, approximation: str | None, as_json: bool, **kw: Any) -> None:
-        from hapstab.analysis.methods import critical_stiffness, methods_for
+        from hapstab.analysis.methods import critical_stiffness
 
-        allowed = methods_for(kind)
+        refuse_method(kind, method)
+        if method != "exact":
+            refuse_force_gains(kw, f"--method {method}")
+        allowed = kind_methods(kind)
         if method not in allowed:
             raise HapstabError(f"--method = {method!r}: unknown for {kind}; allowed: {', '.join(allowed)}")
         bounds = bounds_of(kw, method)
@@ -121,6 +126,9 @@ def _boundary_command(kind: str) -> None:
         from hapstab.cli.files import check_files, write_files
 
         check_files(csv_path, plot_path, as_json)
+        refuse_method(kind, method)
+        if method != "exact":
+            refuse_force_gains(kw, f"--method {method}")
         periods, axis = _grid_periods(kw)
         rows_s = None if kw["delay_s"] is None else parse_range(kw["delay_s"], "--delay-s", "s",
                                                                 values=">= 0")

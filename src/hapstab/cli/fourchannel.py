@@ -16,15 +16,30 @@ from typing import Any
 import click
 
 from hapstab.cli.options import RATIO, REAL, Number, _period, with_delays
-from hapstab.errors import HapstabError
+from hapstab.errors import HapstabError, ModelError
 from hapstab.models.controllers import SpringDamper
 from hapstab.models.fourchannel import FourChannelLoop
 from hapstab.models.parts import Device, parse_impedance
 
 __all__ = ["four_channel_options", "four_channel_loop"]
 
-#: A transmitted controller's stiffness over K: 0 (none) ... 1e6, as the slave's ratio.
-TRANSMITTED_RATIO = Number(nonnegative=True, span=(0.0, 1e6))
+#: The span of a stiffness ratio other than 0 (the slave's, --slave-stiffness-ratio).
+RATIO_SPAN = RATIO.span or (1e-6, 1e6)
+
+
+class TransmittedRatio(Number):
+    """A transmitted controller's stiffness over K: 0 (none), or 1e-6...1e6 as the
+    slave's ratio (beyond, the loop's numbers overflow)."""
+
+    def convert(self, value: Any, param: Any, ctx: Any) -> float:
+        v = super().convert(value, param, ctx)
+        if v != 0 and not RATIO_SPAN[0] <= v <= RATIO_SPAN[1]:
+            self.fail(f"{value!r}: must be 0 or between {RATIO_SPAN[0]:g} and {RATIO_SPAN[1]:g}",
+                      param, ctx)
+        return v
+
+
+TRANSMITTED_RATIO = TransmittedRatio(nonnegative=True)
 
 
 class MasterRatio(Number):
@@ -39,6 +54,9 @@ class MasterRatio(Number):
                       "(C_m a damper only; K is the slave's stiffness)", param, ctx)
         return v
 
+
+#: A force gain (N/N): any sign; beyond 1e6 the loop's numbers overflow (as for ratios).
+GAIN = Number(span=(-1e6, 1e6))
 
 #: The force gains: option, parameter, Lawrence's name and what it does.
 FORCE_OPTIONS = (
@@ -70,19 +88,19 @@ def four_channel_options() -> tuple[Callable, list[Callable]]:
         click.option("--c1-stiffness-ratio", "c1_stiffness_ratio", type=TRANSMITTED_RATIO,
                      default=None,
                      help="C_1 (the slave's controller on the delayed master position): its "
-                          "stiffness over K, 0...1e6 (default: the slave's ratio, C_1 = C_s)."),
+                          "stiffness over K, 0 or 1e-6...1e6 (default: the slave's ratio, C_1 = C_s)."),
         click.option("--c1-virtual-damping", "c1_virtual_damping", type=REAL, default=None,
                      help="C_1's virtual damping in N*s/m (default: C_s's B)."),
         click.option("--c4-stiffness-ratio", "c4_stiffness_ratio", type=TRANSMITTED_RATIO,
                      default=None,
                      help="C_4 here is the master's controller on the delayed slave position, "
                           "with PEB's sign (Lawrence's -C_4; PEB is C_4 = C_m, C_1 = C_s): its "
-                          "stiffness over K, 0...1e6 (default: the master's ratio)."),
+                          "stiffness over K, 0 or 1e-6...1e6 (default: the master's ratio)."),
         click.option("--c4-virtual-damping", "c4_virtual_damping", type=REAL, default=None,
                      help="C_4's virtual damping in N*s/m (default: C_m's B, --virtual-damping)."),
     ]
-    own += [click.option(flag, name, type=REAL, default=0.0, show_default=True,
-                         help=f"{what}; N/N, any real.")
+    own += [click.option(flag, name, type=GAIN, default=0.0, show_default=True,
+                         help=f"{what}; N/N, any sign, -1e6...1e6.")
             for flag, name, what in FORCE_OPTIONS]
     return ratio, own
 
@@ -112,8 +130,27 @@ def four_channel_loop(kw: dict[str, Any], stiffness: float = 0.0) -> FourChannel
                            _period(kw), kw["delay"],
                            slave_from_master=SpringDamper(r1 * stiffness, B1),
                            master_from_slave=SpringDamper(r4 * stiffness, B4), **gains)
-    return with_delays(loop, kw)  # type: ignore[return-value]  # replace keeps the class
+    try:
+        return with_delays(loop, kw)  # type: ignore[return-value]  # replace keeps the class
+    except ModelError as e:        # (a fractional delay): name the option that gave it
+        given = [f"--{k.replace('_', '-')} = {kw[k]:g}"
+                 for k in ("delay_forward", "delay_backward", "delay_s") if kw.get(k) is not None]
+        if not given:
+            raise
+        raise ModelError(f"{', '.join(given)}: {e}") from None
 
 
 def _or(value: float | None, default: float) -> float:
     return default if value is None else value
+
+
+def refuse_force_gains(kw: dict[str, Any], what: str) -> None:
+    """Refuse a force gain given to an analysis derived for position-measuring
+    controllers (passivity, circle, Llewellyn, transparency), naming its option; a
+    loop of another kind has none."""
+    for flag, name, _ in FORCE_OPTIONS:
+        if kw.get(name, 0.0) != 0.0:
+            raise HapstabError(f"{flag} = {kw[name]:g}: {what} is derived for controllers that "
+                               "measure positions; a 4ch loop with force gains (--c2, --c3, --c5, "
+                               "--c6: C_2, C_3, C_5, C_6) has the exact analysis only (kmax, "
+                               "boundary, best-damping); allowed here: 0")

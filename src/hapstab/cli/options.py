@@ -122,7 +122,8 @@ class Delay(click.ParamType):
 
 
 POS, NONNEG, REAL = Number(positive=True), Number(nonnegative=True), Number()
-#: K_s/K_m: scaled teleoperators use 1e-3...1e3; beyond 1e6 the loop's numbers overflow
+#: K_s/K_m and the scaling factors: scaled teleoperators use 1e-3...1e3; beyond 1e6 the
+#: loop's numbers overflow
 RATIO = Number(positive=True, span=(1e-6, 1e6))
 
 
@@ -216,14 +217,14 @@ def _teleoperator_options(kind: str) -> list[Callable]:
             "--slave-stiffness-ratio", "slave_stiffness_ratio", type=RATIO, default=1.0,
             show_default=True, help="K_s / K_m, 1e-6...1e6: the slave's stiffness is this times "
                                     "the master's (K is the master's; the ratio is kept as K varies).")
-        own = [click.option("--scaling-position", "position_scale", type=POS, default=1.0,
+        own = [click.option("--scaling-position", "position_scale", type=RATIO, default=1.0,
                             show_default=True,
-                            help="Position scaling alpha > 0: the slave follows alpha times the "
-                                 "master's motion."),
-               click.option("--scaling-force", "force_scale", type=POS, default=1.0,
+                            help="Position scaling alpha, 1e-6...1e6: the slave follows alpha "
+                                 "times the master's motion."),
+               click.option("--scaling-force", "force_scale", type=RATIO, default=1.0,
                             show_default=True,
-                            help="Force scaling beta > 0: the operator feels beta times the "
-                                 "environment's force.")]
+                            help="Force scaling beta, 1e-6...1e6: the operator feels beta times "
+                                 "the environment's force.")]
     return [
         click.option("--master-mass", type=POS, default=0.015, show_default=True, help="kg"),
         click.option("--master-damping", type=NONNEG, default=0.02, show_default=True, help="N*s/m"),
@@ -361,6 +362,26 @@ def four_channel_loop(kw: dict[str, Any], stiffness: float = 0.0) -> Teleoperati
 #: loop's channels yet (only those equal to PEB's), so ``check 4ch`` and ``simulate 4ch``
 #: are left out and ``region 4ch`` refuses force gains; add "4ch" here when it does.
 STATE_SPACE_KINDS = ("hve", "peb")
+
+def kind_methods(kind: str) -> list[str]:
+    """The K_max methods the commands offer for ``kind``: the library's
+    (:func:`~hapstab.analysis.methods.methods_for`) but simulation where the engine
+    does not build the kind's state-space model (:data:`STATE_SPACE_KINDS`)."""
+    from hapstab.analysis.methods import methods_for
+
+    return [m for m in methods_for(kind) if m != "simulation" or kind in STATE_SPACE_KINDS]
+
+
+def refuse_method(kind: str, method: str) -> None:
+    """A method the library has for ``kind`` but the commands do not offer (a 4ch loop's
+    simulation), refused naming why."""
+    from hapstab.analysis.methods import methods_for
+
+    if method in methods_for(kind) and method not in kind_methods(kind):
+        raise HapstabError(f"--method = {method!r}: a {kind} loop is not simulated yet (the "
+                           "engine's state-space model does not take its channels); allowed: "
+                           f"{', '.join(kind_methods(kind))}")
+
 
 #: loop kind -> its builder from the command's options
 LOOP_KINDS: dict[str, Callable[..., HapticLoop | TeleoperationLoop]] = {

@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING, Any
 import click
 import numpy as np
 
+from hapstab.cli.fourchannel import refuse_force_gains
 from hapstab.cli.options import (
     LOOP_KINDS,
     NONNEG,
@@ -60,6 +61,8 @@ def _passivity_command(kind: str) -> None:
                        "(Theorem 2.1); default: passive limit.")
     def _cmd(stiffness: float, method: str, approximation: str | None, sector: float | None,
              as_json: bool, **kw: Any) -> None:
+        refuse_force_gains(kw, "the circle criterion" if method == "circle"
+                           else "sampled-data passivity")
         loop = make(kw, stiffness)
         res: Any
         if method == "circle":
@@ -165,6 +168,7 @@ def _twoport_command(kind: str) -> None:
         from hapstab.cli.files import check_files, write_files
 
         check_files(csv_path, plot_path, as_json)
+        refuse_force_gains(kw, "Llewellyn's test")
         bounds = bounds_of(kw, "llewellyn")
         loop = make(kw, stiffness)
         res = llewellyn_test(loop, approximation, **bounds)  # type: ignore[arg-type]  # a teleoperator
@@ -240,6 +244,7 @@ def _transparency_command(kind: str) -> None:
         from hapstab.cli.files import check_files, write_files
 
         check_files(csv_path, plot_path, as_json)
+        refuse_force_gains(kw, "transparency")
         loop = make(kw, stiffness)
         res = transparency(loop, approximation,  # type: ignore[arg-type]  # a teleoperator
                            _frequencies(frequencies, loop.period))

@@ -90,7 +90,7 @@ def _plan(study: Study, root: click.Group, only: tuple[str, ...]
             raise StudyError(f"{study.where(command, 'run')}run.{command}: not a loop command; "
                              f"allowed: {', '.join(loop_commands(root))}")
     kinds = {command: kind_command(study, root.commands[command], command,  # type: ignore[arg-type]
-                                   study.where(command, "run") + "run.")
+                                   study.where(command) + "run.")
              for command in study.run}
     return [(variant, command, study_defaults(study, kinds[command], command, variant, []))
             for variant in study.variants if not only or variant in only

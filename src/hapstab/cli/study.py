@@ -382,8 +382,10 @@ def kind_command(study: Study, group: click.Group, command: str, where: str = ""
     (``check`` takes no 4ch loop)."""
     cmd = group.commands.get(study.kind)
     if cmd is None:
-        raise StudyError(f"{where or study.path + ': '}{command}: has no {study.kind} loop "
-                         f"(its kinds: {', '.join(group.commands)})")
+        names = list(group.commands)
+        raise StudyError(f"{where or study.path + ': '}{command} takes "
+                         f"{', '.join(names[:-1])}{' or ' if len(names) > 1 else ''}{names[-1]} "
+                         f"loops, not the study's {study.kind}")
     return cmd
 
 
