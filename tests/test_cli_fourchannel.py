@@ -234,3 +234,10 @@ def test_a_study_file_describes_a_4ch_loop(tmp_path):
     _one_line_error(run("check", "--study", p, "-K", "5"), "check", "4ch")
     p.write_text(STUDY.replace('c2 = 1', 'scaling-position = 2'))
     _one_line_error(run("kmax", "--study", p), "scaling-position")
+
+
+@pytest.mark.parametrize("kind", ['"5ch"', '["4ch"]', "{a = 1}", "4"])
+def test_a_study_of_an_unknown_kind_is_one_line(tmp_path, kind):
+    p = tmp_path / "k.toml"
+    p.write_text(f"kind = {kind}\n[run.kmax]\n")
+    _one_line_error(run("kmax", "--study", p), "kind", '"4ch"')

@@ -362,6 +362,9 @@ def four_channel_loop(kw: dict[str, Any], stiffness: float = 0.0) -> Teleoperati
 #: loop's channels yet (only those equal to PEB's), so ``check 4ch`` and ``simulate 4ch``
 #: are left out and ``region 4ch`` refuses force gains; add "4ch" here when it does.
 STATE_SPACE_KINDS = ("hve", "peb")
+#: Loop kinds the paper's closed forms are derived for (``audit``, region's "paper"
+#: overlay); a 4ch loop has none.
+PAPER_KINDS = ("hve", "peb")
 
 def kind_methods(kind: str) -> list[str]:
     """The K_max methods the commands offer for ``kind``: the library's

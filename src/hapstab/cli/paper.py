@@ -16,6 +16,7 @@ from hapstab.cli.fourchannel import refuse_force_gains
 from hapstab.cli.options import (
     LOOP_KINDS,
     NONNEG,
+    PAPER_KINDS,
     POS,
     bounds_of,
     console,
@@ -129,10 +130,6 @@ def _audit_table(res: Any) -> None:
                   f"[red]{r.flag}[/red]" if r.flag else "ok")
     console().print(t)
 
-
-#: Loop kinds the paper's closed forms are derived for (audit compares them); a 4ch loop
-#: has none.
-PAPER_KINDS = ("hve", "peb")
 
 for _kind in LOOP_KINDS:
     _passivity_command(_kind)

@@ -8,6 +8,7 @@ import click
 
 from hapstab.cli.options import (
     LOOP_KINDS,
+    PAPER_KINDS,
     POS,
     REAL,
     STATE_SPACE_KINDS,
@@ -162,10 +163,6 @@ def _best_command(kind: str) -> None:
              loop)
 
     _cmd.__doc__ = f"The virtual damping B that maximises K_max of the {kind.upper()} loop."
-
-
-#: Loop kinds the paper's closed forms (the "paper" overlay) are derived for.
-PAPER_KINDS = ("hve", "peb")
 
 
 def _overlays(kind: str) -> tuple[str, ...]:

@@ -143,7 +143,7 @@ def load_study(path: Any, name: str = "--study") -> Study:
             raise StudyError(f"{p}{_at(text, key)}: unknown key {key!r}; allowed: "
                              f"{', '.join(sorted(known))}")
     kind = data.get("kind")
-    if kind not in LOOP_KINDS:
+    if not isinstance(kind, str) or kind not in LOOP_KINDS:     # (a TOML list is unhashable)
         raise StudyError(f"{p}{_at(text, 'kind')}: kind = {kind!r}: allowed: "
                          + ", ".join(f'"{k}"' for k in LOOP_KINDS))
     title = data.get("title", "")
