@@ -250,7 +250,7 @@ def test_a_one_second_period_warns_of_a_unit_mistake():
 @pytest.mark.parametrize("args,needle", [
     (("kmax", "hve", "-T", "1furlong"), "unknown unit 'furlong'; allowed: s, ms, us"),
     (("kmax", "hve", "-T", "1ms", "--rate", "1kHz"), "--period and --rate: give one"),
-    (("kmax", "--mass", "0.3"), "the loop kind (hve or peb) comes first, its options after it, "
+    (("kmax", "--mass", "0.3"), "the loop kind (hve, peb or 4ch) comes first, its options after it, "
                                 "e.g. hapstab kmax hve --mass 0.3"),
 ])
 def test_unit_and_order_mistakes_are_explained(args, needle):

@@ -48,9 +48,18 @@ def _commands():
 
 
 COMMANDS = _commands()
+#: (every loop kind of a command, hve, peb and 4ch, needs the same)
 NEEDS = {"region": ["--K", "0:100", "--B", "0:1", "--resolution", "12"], "reproduce": ["fig5"],
          "check": ["-K", "5"], "passivity": ["-K", "5"], "simulate": ["-K", "5"],
          "run": ["study.toml"], "twoport": ["-K", "5"], "transparency": ["-K", "5"]}
+#: 4ch loops each command takes, one option of them then hostile: force reflection (C_m
+#: a damper, C_4 = 0, C_2 = 1) for the exact K_max, a force gain for the best damping,
+#: equal position controllers for the region, unequal ones for the position-only tests.
+FORCE_REFLECTION = ["--master-stiffness-ratio", "0", "--c4-stiffness-ratio", "0", "--c2", "1",
+                    "-B", "0.5", "--environment", "spring:1000"]
+FOURCH = {"kmax": FORCE_REFLECTION, "boundary": FORCE_REFLECTION, "region": ["-n", "2"],
+          "best-damping": ["--c2", "1", "--environment", "spring:1000"]}
+POSITION_ONLY = ["--c1-stiffness-ratio", "2", "--c4-virtual-damping", "0.3", "-n", "1"]
 #: The study the fuzz's `run` invocations use (written in the test's folder).
 STUDY = 'kind = "hve"\n[loop]\ndelay = 2\n[[variant]]\nname = "b"\nvirtual-damping = 1\n[run.kmax]\n'
 
@@ -77,6 +86,13 @@ def _invocations(n, seed):
               (["kmax", "hve", "--damping", "1e300"], ["--damping"]),
               (["kmax", "hve", "-B", "1e300"], ["-B"]),
               (["best-damping", "hve", "--max-damping", "0"], ["--max-damping"])]
+    # 4ch: a loop each command takes, with one hostile option
+    fourch = [(path, opts) for path, opts in COMMANDS if path[1:] == ["4ch"]]
+    for _ in range(30):
+        path, opts = rng.choice(fourch)
+        o = rng.choice(opts)
+        calls.append(([*path, *NEEDS.get(path[0], []), *FOURCH.get(path[0], POSITION_ONLY), o,
+                       rng.choice(HOSTILE)], [o]))
     # study files: the group-level --study / --variant, hostile values
     for _ in range(20):
         calls.append((["kmax", "hve", "--study", rng.choice(HOSTILE)], ["--study"]))

@@ -43,6 +43,10 @@ RUNS = [
     ("demo", ["demo"]),
     ("run", ["run", "study.toml"]),
     ("kmax", ["kmax", "--study", "study.toml", "--variant", "stiff"]),
+    ("kmax", ["kmax", "4ch", "--master-stiffness-ratio", "0", "--c4-stiffness-ratio", "0",
+              "--c2", "1", "--environment", "spring:1000", "-B", "0.5", "-n", "2"]),
+    ("twoport", ["twoport", "4ch", "-K", "5", "-n", "2", "--c1-stiffness-ratio", "2"]),
+    ("region", ["region", "4ch", "--K", "0:100", "--B", "0:1", "--resolution", "6"]),
     ("error", ["kmax", "hve", "--delay", "x"]),
     ("error", ["simulate", "hve", "-K", "9", "--duration", "1e9"]),              # budget
 ]

@@ -365,6 +365,14 @@ def paper_condition(loop: Any) -> ClosedForm:
     Returns
     -------
     ClosedForm
+
+    Raises
+    ------
+    AnalysisError
+        A loop of a kind the paper has no condition for (a 4-channel teleoperator).
     """
+    if loop.kind not in PAPER:
+        raise AnalysisError(f"loop kind {loop.kind!r}: no paper condition applies (the paper's "
+                            f"closed forms are for {' and '.join(PAPER)} loops)")
     key = PAPER[loop.kind][0 if loop.delay_in_samples == 0 else 1]
     return next(c for c in TABLE if c.key == key)

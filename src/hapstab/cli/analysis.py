@@ -1,4 +1,4 @@
-"""``hapstab kmax | check | boundary hve|peb`` and ``hapstab demo``."""
+"""``hapstab kmax | check | boundary hve|peb|4ch`` and ``hapstab demo``."""
 
 from __future__ import annotations
 
@@ -8,17 +8,21 @@ from typing import Any
 import click
 import numpy as np
 
+from hapstab.cli.fourchannel import refuse_force_gains
 from hapstab.cli.options import (
     LOOP_KINDS,
     NONNEG,
+    STATE_SPACE_KINDS,
     bounds_of,
     console,
     damping_bound_options,
     emit,
     fmt,
     given,
+    kind_methods,
     loop_options,
     provenance,
+    refuse_method,
     rich_table,
 )
 from hapstab.cli.ranges import parse_delays, parse_periods, parse_range
@@ -43,20 +47,22 @@ def boundary_cmd() -> None:
 
 def _kmax_command(kind: str) -> None:
     make = LOOP_KINDS[kind]
-    from hapstab.analysis.methods import methods_for
 
     @kmax.command(kind)
     @loop_options(kind)
     @damping_bound_options(kind)
     @click.option("--method", default="exact", show_default=True,
-                  help="exact | " + " | ".join(m for m in methods_for(kind) if m != "exact"))
+                  help="exact | " + " | ".join(m for m in kind_methods(kind) if m != "exact"))
     @click.option("--approximation", default=None,
                   help="For --method circle: forward | backward | tustin; for llewellyn "
-                       "(peb): forward | backward | tustin.")
+                       "(peb, 4ch): forward | backward | tustin.")
     def _cmd(method: str, approximation: str | None, as_json: bool, **kw: Any) -> None:
-        from hapstab.analysis.methods import critical_stiffness, methods_for
+        from hapstab.analysis.methods import critical_stiffness
 
-        allowed = methods_for(kind)
+        refuse_method(kind, method)
+        if method != "exact":
+            refuse_force_gains(kw, f"--method {method}")
+        allowed = kind_methods(kind)
         if method not in allowed:
             raise HapstabError(f"--method = {method!r}: unknown for {kind}; allowed: {', '.join(allowed)}")
         bounds = bounds_of(kw, method)
@@ -120,6 +126,9 @@ def _boundary_command(kind: str) -> None:
         from hapstab.cli.files import check_files, write_files
 
         check_files(csv_path, plot_path, as_json)
+        refuse_method(kind, method)
+        if method != "exact":
+            refuse_force_gains(kw, f"--method {method}")
         periods, axis = _grid_periods(kw)
         rows_s = None if kw["delay_s"] is None else parse_range(kw["delay_s"], "--delay-s", "s",
                                                                 values=">= 0")
@@ -174,7 +183,8 @@ def _boundary_table(res: Any) -> None:
 
 for _kind in LOOP_KINDS:
     _kmax_command(_kind)
-    _check_command(_kind)
+    if _kind in STATE_SPACE_KINDS:        # (its verdict comes from the state-space model)
+        _check_command(_kind)
     _boundary_command(_kind)
 
 

@@ -16,7 +16,7 @@ import click
 import numpy as np
 
 from hapstab.cli.files import STDOUT_TAKEN
-from hapstab.cli.options import ARGV, provenance
+from hapstab.cli.options import ARGV, LOOP_KINDS, provenance
 from hapstab.errors import HapstabError
 from hapstab.results import dumps
 
@@ -60,8 +60,9 @@ class HapstabGroup(click.Group):
                                   default_map=default_map, **extra)
             _flush_stdout(argv)
         except click.exceptions.ClickException as e:
-            hint = _kind_hint(argv, e.format_message())
-            _fail(argv, (e.format_message().rstrip(".") + hint) if hint else e.format_message())
+            msg = e.format_message()
+            hint = _kind_hint(argv, msg)      # (a better hint than click's guess, if any)
+            _fail(argv, (msg.split(" Did you mean")[0].rstrip(".") + hint) if hint else msg)
         except HapstabError as e:
             _fail(argv, str(e))
         except _BrokenPipe:
@@ -167,14 +168,23 @@ def _kind_hint(argv: list[str], message: str = "") -> str:
     ``region ... -B 0:20``: the window is ``--B`` (two dashes)."""
     if argv and argv[0] == "region" and "'--virtual-damping' / '-B'" in message:
         return "; the region's window of B is --B lo:hi (two dashes); -B is the virtual damping"
+    if argv[1:2] == ["4ch"] and "No such option" in message and "--scaling-" in message:
+        return ("; a 4ch loop has no scaling factors: scale the channels' gains instead "
+                "(--c1-/--c4-stiffness-ratio, --c2, --c3)")
     group = cli.commands.get(argv[0]) if argv else None
     if not isinstance(group, click.Group) or len(argv) < 2 or argv[1] in group.commands:
         return ""
+    names = list(group.commands)
+    kinds = f"{', '.join(names[:-1])} or {names[-1]}" if len(names) > 1 else names[0]
+    if argv[1] in LOOP_KINDS:                       # a kind this command does not take
+        return f"; {argv[0]} takes {kinds} loops, not {argv[1]}"
     if not argv[1].startswith("-") or argv[1] in ("-h", "--help"):
         return ""
-    kinds = " or ".join(group.commands)
+    opt = argv[1].split("=")[0]
+    kind = next((k for k, c in group.commands.items()
+                 if any(opt in p.opts for p in c.params)), next(iter(group.commands)))
     return (f"; the loop kind ({kinds}) comes first, its options after it, e.g. "
-            f"hapstab {argv[0]} {next(iter(group.commands))} {' '.join(argv[1:])}")
+            f"hapstab {argv[0]} {kind} {' '.join(argv[1:])}")
 
 
 def _flush_stdout(argv: list[str]) -> None:
@@ -229,9 +239,10 @@ def _quiet_stdout() -> None:
 @click.option("--variant", metavar="NAME", expose_value=False,
               help="With --study: use this [[variant]] of the study (default: its [loop]).")
 def cli() -> None:
-    """Exact stability and critical stiffness of sampled-data, delayed haptic (hve) and
-    PEB teleoperation (peb) loops. Defaults are the paper's simulation study (the API's
-    hapstab.paper_hve() / paper_peb())."""
+    """Exact stability and critical stiffness of sampled-data, delayed haptic (hve), PEB
+    teleoperation (peb) and Lawrence's 4-channel teleoperation (4ch) loops. Defaults are
+    the paper's simulation study (the API's hapstab.paper_hve() / paper_peb(); 4ch's
+    defaults are PEB's, with no force channel)."""
 
 
 
@@ -248,7 +259,7 @@ def _register() -> None:
 
 
 def _describe(cmd: click.Command) -> None:
-    """Give every loop-kind subcommand (hve, peb) the description its builder wrote as
+    """Give every loop-kind subcommand (hve, peb, 4ch) the description its builder wrote as
     ``_cmd.__doc__``, after click had built the command (and read no help)."""
     if isinstance(cmd, click.Group):
         for sub in cmd.commands.values():

@@ -1,5 +1,6 @@
-"""What the commands share: number and delay types, the loop options of hve and
-peb, and the output (one JSON object, or a table)."""
+"""What the commands share: number and delay types, the loop options of hve, peb and
+4ch (4ch's own in :mod:`hapstab.cli.fourchannel`), and the output (one JSON object, or
+a table)."""
 
 from __future__ import annotations
 
@@ -121,7 +122,8 @@ class Delay(click.ParamType):
 
 
 POS, NONNEG, REAL = Number(positive=True), Number(nonnegative=True), Number()
-#: K_s/K_m: scaled teleoperators use 1e-3...1e3; beyond 1e6 the loop's numbers overflow
+#: K_s/K_m and the scaling factors: scaled teleoperators use 1e-3...1e3; beyond 1e6 the
+#: loop's numbers overflow
 RATIO = Number(positive=True, span=(1e-6, 1e6))
 
 
@@ -161,17 +163,19 @@ def _timing_options(kind: str, ranges: bool) -> list[Callable]:
             click.option("--delay", "-n", "delay", type=Delay(), default=0, show_default=True,
                          help="Delay n in whole samples (t_d = n T)."),
             click.option("--delay-s", "delay_s", type=Quantity("s", nonnegative=True), default=None,
-                         help="Delay in seconds or with a unit (20ms), any value (fractional "
-                              "samples modelled exactly); instead of --delay."),
+                         help="Delay in seconds or with a unit (20ms), "
+                              + ("a whole number of samples (4ch takes no fractional delay)"
+                                 if kind == "4ch" else
+                                 "any value (fractional samples modelled exactly)")
+                              + "; instead of --delay."),
         ]
-        if kind == "peb":
+        if kind in ("peb", "4ch"):
+            whole = "whole samples only" if kind == "4ch" else "fractional allowed"
             timing += [
                 click.option("--delay-forward", "delay_forward", type=NONNEG, default=None,
-                             help="Master->slave delay in samples (fractional allowed; "
-                                  "default --delay)."),
+                             help=f"Master->slave delay in samples ({whole}; default --delay)."),
                 click.option("--delay-backward", "delay_backward", type=NONNEG, default=None,
-                             help="Slave->master delay in samples (fractional allowed; "
-                                  "default --delay)."),
+                             help=f"Slave->master delay in samples ({whole}; default --delay)."),
             ]
     return timing
 
@@ -188,44 +192,58 @@ def loop_options(kind: str, ranges: bool = False) -> Callable:
                          help="Device damping b in N*s/m."),
         ]
     else:
-        devices = [
-            click.option("--master-mass", type=POS, default=0.015, show_default=True, help="kg"),
-            click.option("--master-damping", type=NONNEG, default=0.02, show_default=True, help="N*s/m"),
-            click.option("--slave-mass", type=POS, default=0.015, show_default=True, help="kg"),
-            click.option("--slave-damping", type=NONNEG, default=0.02, show_default=True, help="N*s/m"),
-            click.option("--environment", default="spring:1", show_default=True,
-                         help="Environment impedance: none | spring:k | msd:m,b,k."),
-            click.option("--slave-stiffness-ratio", "slave_stiffness_ratio", type=RATIO, default=1.0,
-                         show_default=True,
-                         help="K_s / K_m, 1e-6...1e6: the slave's stiffness is this times the master's "
-                              "(K is the master's; the ratio is kept as K varies)."),
-            click.option("--slave-virtual-damping", "slave_virtual_damping", type=REAL, default=None,
-                         help="Slave virtual damping B_s in N*s/m, any sign (default: "
-                              "--virtual-damping, i.e. C_m = C_s)."),
-            click.option("--scaling-position", "position_scale", type=POS, default=1.0,
-                         show_default=True,
-                         help="Position scaling alpha > 0: the slave follows alpha times the "
-                              "master's motion."),
-            click.option("--scaling-force", "force_scale", type=POS, default=1.0,
-                         show_default=True,
-                         help="Force scaling beta > 0: the operator feels beta times the "
-                              "environment's force."),
-        ]
+        devices = _teleoperator_options(kind)
     return _stack(
         *devices, *timing,
         click.option("--virtual-damping", "-B", type=REAL, default=0.0, show_default=True,
                      help="Virtual damping B in N*s/m (H(z) = K + B(z-1)/(Tz), eq. 23); any sign "
-                          "(B < 0 cancels device damping or friction)."),
+                          "(B < 0 cancels device damping or friction)"
+                          + ("; C_m's." if kind == "4ch" else ".")),
         click.option("--operator", default="spring:1", show_default=True,
                      help="Operator impedance: none | spring:k | msd:m,b,k."),
         click.option("--json", "as_json", is_flag=True, help="Print one JSON object on stdout."),
     )
 
 
+def _teleoperator_options(kind: str) -> list[Callable]:
+    """The devices, environment and slave controller of peb and 4ch; peb's scaling, or
+    4ch's transmitted controllers and force gains (:mod:`hapstab.cli.fourchannel`)."""
+    if kind == "4ch":
+        from hapstab.cli.fourchannel import four_channel_options
+
+        ratio, own = four_channel_options()
+    else:
+        ratio = click.option(
+            "--slave-stiffness-ratio", "slave_stiffness_ratio", type=RATIO, default=1.0,
+            show_default=True, help="K_s / K_m, 1e-6...1e6: the slave's stiffness is this times "
+                                    "the master's (K is the master's; the ratio is kept as K varies).")
+        own = [click.option("--scaling-position", "position_scale", type=RATIO, default=1.0,
+                            show_default=True,
+                            help="Position scaling alpha, 1e-6...1e6: the slave follows alpha "
+                                 "times the master's motion."),
+               click.option("--scaling-force", "force_scale", type=RATIO, default=1.0,
+                            show_default=True,
+                            help="Force scaling beta, 1e-6...1e6: the operator feels beta times "
+                                 "the environment's force.")]
+    return [
+        click.option("--master-mass", type=POS, default=0.015, show_default=True, help="kg"),
+        click.option("--master-damping", type=NONNEG, default=0.02, show_default=True, help="N*s/m"),
+        click.option("--slave-mass", type=POS, default=0.015, show_default=True, help="kg"),
+        click.option("--slave-damping", type=NONNEG, default=0.02, show_default=True, help="N*s/m"),
+        click.option("--environment", default="spring:1", show_default=True,
+                     help="Environment impedance: none | spring:k | msd:m,b,k."),
+        ratio,
+        click.option("--slave-virtual-damping", "slave_virtual_damping", type=REAL, default=None,
+                     help="Slave virtual damping B_s in N*s/m, any sign (default: "
+                          "--virtual-damping, i.e. C_m = C_s)."),
+        *own,
+    ]
+
+
 def damping_bound_options(kind: str) -> Callable:
-    """Bounded impedance for Llewellyn's test (peb only): the least damping of every
-    operator and environment (none for other kinds)."""
-    if kind != "peb":
+    """Bounded impedance for Llewellyn's test (peb and 4ch): the least damping of every
+    operator and environment (none for the HVE)."""
+    if kind not in ("peb", "4ch"):
         return _stack()
     return _stack(
         click.option("--operator-damping-min", "operator_damping_min", type=NONNEG, default=None,
@@ -312,6 +330,12 @@ def peb_loop(kw: dict[str, Any], stiffness: float = 0.0) -> TeleoperationLoop:
                              _period(kw), kw["delay"],
                              position_scale=kw.get("position_scale", 1.0),
                              force_scale=kw.get("force_scale", 1.0))
+    return with_delays(loop, kw)
+
+
+def with_delays(loop: TeleoperationLoop, kw: dict[str, Any]) -> TeleoperationLoop:
+    """A teleoperator's delays from --delay-s or --delay-forward / --delay-backward
+    (its --delay is the default of a side not given); a 4ch loop refuses fractional ones."""
     fwd, bwd, ds = kw.get("delay_forward"), kw.get("delay_backward"), kw.get("delay_s")
     if ds is not None and (fwd is not None or bwd is not None or given("delay")):
         raise HapstabError("--delay-s with --delay or --delay-forward/--delay-backward: give the "
@@ -326,9 +350,45 @@ def peb_loop(kw: dict[str, Any], stiffness: float = 0.0) -> TeleoperationLoop:
     return loop
 
 
+def four_channel_loop(kw: dict[str, Any], stiffness: float = 0.0) -> TeleoperationLoop:
+    """Build the 4-channel teleoperator (:func:`hapstab.cli.fourchannel.four_channel_loop`)."""
+    from hapstab.cli.fourchannel import four_channel_loop as build
+
+    return build(kw, stiffness)
+
+
+#: Loop kinds whose state-space model (:func:`hapstab.engine.system.build`: ``check``,
+#: ``simulate``, ``region``'s D-decomposition) the engine builds. It does not build a 4ch
+#: loop's channels yet (only those equal to PEB's), so ``check 4ch`` and ``simulate 4ch``
+#: are left out and ``region 4ch`` refuses force gains; add "4ch" here when it does.
+STATE_SPACE_KINDS = ("hve", "peb")
+#: Loop kinds the paper's closed forms are derived for (``audit``, region's "paper"
+#: overlay); a 4ch loop has none.
+PAPER_KINDS = ("hve", "peb")
+
+def kind_methods(kind: str) -> list[str]:
+    """The K_max methods the commands offer for ``kind``: the library's
+    (:func:`~hapstab.analysis.methods.methods_for`) but simulation where the engine
+    does not build the kind's state-space model (:data:`STATE_SPACE_KINDS`)."""
+    from hapstab.analysis.methods import methods_for
+
+    return [m for m in methods_for(kind) if m != "simulation" or kind in STATE_SPACE_KINDS]
+
+
+def refuse_method(kind: str, method: str) -> None:
+    """A method the library has for ``kind`` but the commands do not offer (a 4ch loop's
+    simulation), refused naming why."""
+    from hapstab.analysis.methods import methods_for
+
+    if method in methods_for(kind) and method not in kind_methods(kind):
+        raise HapstabError(f"--method = {method!r}: a {kind} loop is not simulated yet (the "
+                           "engine's state-space model does not take its channels); allowed: "
+                           f"{', '.join(kind_methods(kind))}")
+
+
 #: loop kind -> its builder from the command's options
 LOOP_KINDS: dict[str, Callable[..., HapticLoop | TeleoperationLoop]] = {
-    "hve": hve_loop, "peb": peb_loop}
+    "hve": hve_loop, "peb": peb_loop, "4ch": four_channel_loop}
 
 
 #: The command line being run (set by the group): every JSON output echoes it.

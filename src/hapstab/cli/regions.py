@@ -8,8 +8,10 @@ import click
 
 from hapstab.cli.options import (
     LOOP_KINDS,
+    PAPER_KINDS,
     POS,
     REAL,
+    STATE_SPACE_KINDS,
     emit,
     fmt,
     given,
@@ -29,10 +31,12 @@ def _range(spec: str, name: str, signed: bool = False) -> tuple[float, float]:
 
 
 def _equal_controllers(kw: dict[str, Any]) -> None:
-    """A K-B region and the best damping are defined for C_m = C_s: refuse the PEB
-    options that make the controllers differ, naming the one given."""
+    """A K-B region and the best damping are defined for C_m = C_s (and, for 4ch,
+    C_1 = C_4 = C_m): refuse the options that make the controllers differ, naming the
+    one given."""
     ratio, B_s = kw.get("slave_stiffness_ratio", 1.0), kw.get("slave_virtual_damping")
-    if ratio != 1.0:
+    _equal_channels(kw)
+    if ratio is not None and ratio != 1.0:
         raise HapstabError(f"--slave-stiffness-ratio = {ratio:g}: a K-B region / best damping is "
                            "defined for C_m = C_s; allowed here: 1 (the default)")
     if B_s is not None:
@@ -45,6 +49,39 @@ def _equal_controllers(kw: dict[str, Any]) -> None:
                            "--max-damping (best-damping)")
 
 
+def _equal_channels(kw: dict[str, Any]) -> None:
+    """4ch: refuse a master without stiffness and C_1 / C_4 options that make them
+    differ from C_m = C_s."""
+    if kw.get("master_stiffness_ratio", 1.0) != 1.0:
+        raise HapstabError(f"--master-stiffness-ratio = {kw['master_stiffness_ratio']:g}: a K-B "
+                           "region / best damping varies K and B of every position controller "
+                           "alike; allowed here: 1 (the default)")
+    for c in ("c1", "c4"):
+        r, b = kw.get(f"{c}_stiffness_ratio"), kw.get(f"{c}_virtual_damping")
+        if r is not None and r != 1.0:
+            raise HapstabError(f"--{c}-stiffness-ratio = {r:g}: a K-B region / best damping is "
+                               "defined for C_1 = C_4 = C_m = C_s; allowed here: 1 (the default)")
+        if b is not None:
+            raise HapstabError(f"--{c}-virtual-damping = {b:g}: a K-B region / best damping is "
+                               "defined for C_1 = C_4 = C_m = C_s (B is the swept variable); "
+                               "allowed here: not given")
+
+
+def _no_force_channels(kind: str, kw: dict[str, Any]) -> None:
+    """region 4ch: the D-decomposition needs the state-space model, which the engine
+    does not build for force channels yet; refuse a force gain, naming it."""
+    if kind in STATE_SPACE_KINDS:
+        return
+    from hapstab.cli.fourchannel import FORCE_OPTIONS
+
+    for flag, name, _ in FORCE_OPTIONS:
+        if kw.get(name, 0.0) != 0.0:
+            raise HapstabError(f"{flag} = {kw[name]:g}: region {kind} draws the K-B region with "
+                               "the loop's state-space model, which hapstab does not build for "
+                               "force channels yet; allowed here: 0 (kmax and best-damping "
+                               f"{kind} take force gains)")
+
+
 def _region_command(kind: str) -> None:
     make = LOOP_KINDS[kind]
 
@@ -55,8 +92,10 @@ def _region_command(kind: str) -> None:
                   help="Virtual damping window lo:hi in N*s/m, either sign (e.g. -2:20).")
     @click.option("--resolution", type=click.IntRange(2, 2000), default=200, show_default=True,
                   help="Rows (B values) and grid columns (K values).")
-    @click.option("--overlay", "overlays", default="paper,passivity,circle", show_default=True,
-                  help="Comma list drawn on the plot: paper, passivity, circle (or none).")
+    @click.option("--overlay", "overlays", default=",".join(_overlays(kind)), show_default=True,
+                  help=f"Comma list drawn on the plot: {', '.join(_overlays(kind))} (or none)"
+                       + ("; the paper's conditions are for hve and peb." if kind not in
+                          PAPER_KINDS else "."))
     @click.option("--plot", "plot_path", type=click.Path(dir_okay=False), default=None,
                   help="Write the K-B chart (PNG or SVG by extension).")
     @click.option("--csv", "csv_path", type=click.Path(dir_okay=False), default=None,
@@ -69,11 +108,13 @@ def _region_command(kind: str) -> None:
 
         check_files(csv_path, plot_path, as_json)
         _equal_controllers(kw)
+        _no_force_channels(kind, kw)
         K, B = _range(K_spec, "--K"), _range(B_spec, "--B", signed=True)
         names = [o.strip() for o in overlays.split(",") if o.strip() and o.strip() != "none"]
         for o in names:
-            if o != "paper" and o not in METHODS:
-                raise HapstabError(f"--overlay = {o!r}: unknown; allowed: paper, passivity, circle, none")
+            if o not in _overlays(kind) or (o != "paper" and o not in METHODS):
+                raise HapstabError(f"--overlay = {o!r}: unknown for {kind}; allowed: "
+                                   f"{', '.join(_overlays(kind))}, none")
         ov = names if plot_path else []
         loop = make(kw, 1.0)
         res = stability_region(loop, K, B, resolution, overlays=ov)
@@ -122,6 +163,12 @@ def _best_command(kind: str) -> None:
              loop)
 
     _cmd.__doc__ = f"The virtual damping B that maximises K_max of the {kind.upper()} loop."
+
+
+def _overlays(kind: str) -> tuple[str, ...]:
+    """What region can draw over a loop of ``kind``: the paper's condition (hve, peb
+    only), passivity and the circle criterion."""
+    return (("paper",) if kind in PAPER_KINDS else ()) + ("passivity", "circle")
 
 
 @click.group()

@@ -22,7 +22,15 @@ from typing import Any
 import click
 
 from hapstab.cli.options import ARGV, console, progress, provenance
-from hapstab.cli.study import BASE, Study, StudyError, load_study, loop_commands, study_defaults
+from hapstab.cli.study import (
+    BASE,
+    Study,
+    StudyError,
+    kind_command,
+    load_study,
+    loop_commands,
+    study_defaults,
+)
 from hapstab.errors import HapstabError
 from hapstab.outputs import OutputError, Outputs, signals_held
 from hapstab.results import dumps
@@ -81,9 +89,10 @@ def _plan(study: Study, root: click.Group, only: tuple[str, ...]
         if not isinstance(root.commands.get(command), click.Group):
             raise StudyError(f"{study.where(command, 'run')}run.{command}: not a loop command; "
                              f"allowed: {', '.join(loop_commands(root))}")
-    return [(variant, command,
-             study_defaults(study, root.commands[command].commands[study.kind],  # type: ignore[attr-defined]
-                            command, variant, []))
+    kinds = {command: kind_command(study, root.commands[command], command,  # type: ignore[arg-type]
+                                   study.where(command) + "run.")
+             for command in study.run}
+    return [(variant, command, study_defaults(study, kinds[command], command, variant, []))
             for variant in study.variants if not only or variant in only
             for command in study.run]
 

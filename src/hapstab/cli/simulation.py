@@ -14,6 +14,7 @@ from hapstab.cli.options import (
     LOOP_KINDS,
     NONNEG,
     POS,
+    STATE_SPACE_KINDS,
     Number,
     emit,
     loop_options,
@@ -39,7 +40,7 @@ def _simulate_command(kind: str) -> None:
     make = LOOP_KINDS[kind]
     extra = [click.option("--environment-force", default=None,
                           help="Exogenous environment force on the slave (same forms as --force).")
-             ] if kind == "peb" else [
+             ] if kind != "hve" else [
         click.option("--wall", type=Number(), default=None,
                      help="Unilateral virtual wall at x = WALL m: force only while x > WALL."),
         click.option("--wall-pulls", is_flag=True,
@@ -94,7 +95,7 @@ def _run(kind: str, loop: Any, duration: float, force: str, x0: float, rest: flo
     from hapstab.simulation.run import simulate
 
     opts: dict[str, Any] = dict(options)
-    if kind == "peb":
+    if kind != "hve":
         opts["environment_force"] = None if environment_force in (None, "none") else environment_force
         x_init: Any = [x0, 0.0]
         rest_pos: Any = None if rest is None else [rest, 0.0]
@@ -159,7 +160,7 @@ def _doubling(rate: float) -> str:
     return f": {'doubles' if rate > 0 else 'halves'} every {math.log(2) / abs(rate):.3g} s"
 
 
-for _kind in LOOP_KINDS:
+for _kind in STATE_SPACE_KINDS:
     _simulate_command(_kind)
 
 

@@ -38,6 +38,7 @@ from typing import Any
 
 import click
 
+from hapstab.cli.options import LOOP_KINDS
 from hapstab.errors import HapstabError
 
 if sys.version_info >= (3, 11):
@@ -71,7 +72,7 @@ class Study:
     ----------
     path : str
         The file.
-    kind : {"hve", "peb"}
+    kind : {"hve", "peb", "4ch"}
         The loop kind.
     title : str
         What the study is about (may be empty).
@@ -142,8 +143,9 @@ def load_study(path: Any, name: str = "--study") -> Study:
             raise StudyError(f"{p}{_at(text, key)}: unknown key {key!r}; allowed: "
                              f"{', '.join(sorted(known))}")
     kind = data.get("kind")
-    if kind not in ("hve", "peb"):
-        raise StudyError(f"{p}{_at(text, 'kind')}: kind = {kind!r}: allowed: \"hve\", \"peb\"")
+    if not isinstance(kind, str) or kind not in LOOP_KINDS:     # (a TOML list is unhashable)
+        raise StudyError(f"{p}{_at(text, 'kind')}: kind = {kind!r}: allowed: "
+                         + ", ".join(f'"{k}"' for k in LOOP_KINDS))
     title = data.get("title", "")
     if not isinstance(title, str):
         raise StudyError(f"{p}{_at(text, 'title')}: title = {title!r:.40}: must be a string")
@@ -369,9 +371,22 @@ def take_study(argv: list[str], group: click.Group) -> tuple[list[str], dict[str
     elif rest[1] != study.kind:
         raise StudyError(f"--study = {path!r}: its kind is {study.kind!r}, not {rest[1]!r}; "
                          f"hapstab {command} {study.kind} ... (or leave the kind out)")
-    cmd = sub.commands[study.kind]
+    cmd = kind_command(study, sub, command)
     defaults = study_defaults(study, cmd, command, variant or BASE, rest[2:])
     return rest, {command: {study.kind: defaults}}
+
+
+def kind_command(study: Study, group: click.Group, command: str, where: str = "") -> click.Command:
+    """The study's loop kind under the loop command ``group`` (``kmax 4ch``), or a
+    StudyError (prefixed by ``where``, else the file) when that command has no such kind
+    (``check`` takes no 4ch loop)."""
+    cmd = group.commands.get(study.kind)
+    if cmd is None:
+        names = list(group.commands)
+        raise StudyError(f"{where or study.path + ': '}{command} takes "
+                         f"{', '.join(names[:-1])}{' or ' if len(names) > 1 else ''}{names[-1]} "
+                         f"loops, not the study's {study.kind}")
+    return cmd
 
 
 def loop_commands(group: click.Group) -> list[str]:
