@@ -113,7 +113,10 @@ def test_to_dict_and_errors():
 
 def test_the_verdict_column_agrees_with_the_closed_loop_eigenvalues():
     """The audit reads each row's verdict from the certified stable set; an independent
-    eigenvalue check of the closed loop at K (1 - 1e-6) must agree, on seeded loops."""
+    eigenvalue check of the closed loop at K (1 - 1e-4) must agree, on seeded loops. (Within
+    ~1e-6 of a crossing the certified count of poles outside may be undecidable once the
+    enclosures carry the matrix exponential's normwise error, and stability() then says
+    marginal, as it should.)"""
     import numpy as np
 
     rng = np.random.default_rng(20261124)
@@ -130,5 +133,5 @@ def test_the_verdict_column_agrees_with_the_closed_loop_eigenvalues():
         for r in h.audit(loop).rows:
             if r.exact_verdict == "-":
                 continue
-            v = h.stability(loop.with_stiffness(r.critical_stiffness * (1 - 1e-6))).verdict
+            v = h.stability(loop.with_stiffness(r.critical_stiffness * (1 - 1e-4))).verdict
             assert v == r.exact_verdict, (i, r.key, r.critical_stiffness, v, r.exact_verdict)

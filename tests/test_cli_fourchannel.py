@@ -63,15 +63,20 @@ FORCE_REFLECTION = ["--master-stiffness-ratio", "0", "--c4-stiffness-ratio", "0"
                     "--delay", "2", "--operator", "msd:0.5,5,500"]
 
 
-def test_force_reflection_equals_the_library_and_its_echo_validates():
-    r = run("kmax", "4ch", *FORCE_REFLECTION, "--json")
-    assert r.exit_code == 0, r.stderr
-    d = json.loads(r.stdout)
-    loop = FourChannelLoop(h.Device(0.015, 0.02), h.Device(0.015, 0.02),
+def _force_reflection_loop():
+    """FORCE_REFLECTION built in Python (K = the slave's stiffness = 1)."""
+    return FourChannelLoop(h.Device(0.015, 0.02), h.Device(0.015, 0.02),
                            h.SpringDamper(0.0, 0.5), h.SpringDamper(1.0, 0.8),
                            h.parse_impedance("msd:0.5,5,500"), h.spring(1000.0), 1e-3, 2,
                            slave_from_master=h.SpringDamper(1.0, 0.8),
                            master_from_slave=h.SpringDamper(0.0, 0.5), force_to_master=1.0)
+
+
+def test_force_reflection_equals_the_library_and_its_echo_validates():
+    r = run("kmax", "4ch", *FORCE_REFLECTION, "--json")
+    assert r.exit_code == 0, r.stderr
+    d = json.loads(r.stdout)
+    loop = _force_reflection_loop()
     assert d["critical_stiffness"] == pytest.approx(h.critical_stiffness(loop).critical_stiffness,
                                                     rel=1e-12)
     echo = d["inputs"]["loop"]
@@ -114,8 +119,11 @@ def test_boundary_of_a_force_reflecting_loop_validates():
     _validate("boundary", d)
 
 
-def test_twoport_refuses_force_gains_in_one_line_and_works_without():
-    _one_line_error(run("twoport", "4ch", "-K", "5", "--c2", "1"), "C_2", "force")
+def test_twoport_takes_force_gains_with_its_caveat_and_equals_peb_without():
+    r = run("twoport", "4ch", "-K", "5", "--c2", "1", "--json")
+    assert r.exit_code == 0, r.stderr
+    assert "NOT a stability bound" in json.loads(r.stdout)["reason"]
+    _one_line_error(run("passivity", "4ch", "-K", "5", "--c2", "1"), "C_2", "force")
     r = run("twoport", "4ch", "-K", "5", "-n", "2", "--json")
     assert r.exit_code == 0, r.stderr
     d = json.loads(r.stdout)
@@ -132,7 +140,10 @@ def test_position_only_analyses_run_and_force_gains_are_refused():
         r = run(*args, "--json")
         assert r.exit_code == 0, (args, r.stderr)
         _validate(name, json.loads(r.stdout))
-        _one_line_error(run(*args, "--c3", "0.5"), "C_3")
+        if name == "transparency":       # the two-port at the force sensors
+            assert run(*args, "--c3", "0.5").exit_code == 0
+        else:
+            _one_line_error(run(*args, "--c3", "0.5"), "C_3")
 
 
 @pytest.mark.parametrize("args, needles", [
@@ -145,7 +156,7 @@ def test_position_only_analyses_run_and_force_gains_are_refused():
     (["--delay-forward", "1.5"], ["fractional", "whole samples"]),
     (["--c1-stiffness-ratio", "-1"], ["--c1-stiffness-ratio"]),
     (["--method", "eq29"], ["eq29", "allowed"]),
-    (["--method", "simulation", "--c2", "1"], ["simulation", "allowed"]),
+    (["--method", "circle", "--c2", "1"], ["--c2", "allowed here: 0"]),
 ])
 def test_bad_values_are_one_line_and_exit_2(args, needles):
     _one_line_error(run("kmax", "4ch", *args), *needles)
@@ -171,7 +182,9 @@ def test_region_and_best_damping():
                     "paper", "allowed: passivity, circle")
     _one_line_error(run("region", "4ch", "--K", "0:100", "--B", "0:1", "--c4-stiffness-ratio",
                         "2"), "--c4-stiffness-ratio")
-    _one_line_error(run("region", "4ch", "--K", "0:100", "--B", "0:1", "--c2", "1"), "--c2")
+    r = run("region", "4ch", "--K", "0:100", "--B", "0:1", "--resolution", "6", "--c2", "1",
+            "--json")
+    assert r.exit_code == 0, r.stderr
     r = run("best-damping", "4ch", "--c2", "0.5", "--environment", "spring:1000", "-n", "2",
             "--json")
     assert r.exit_code == 0, r.stderr
@@ -229,9 +242,10 @@ def test_a_study_file_describes_a_4ch_loop(tmp_path):
     half = json.loads((out / "half" / "kmax.json").read_text())
     assert half["inputs"]["loop"]["force_to_master"] == 0.5
     # an analysis without a 4ch loop is named, before any work
+    p.write_text(STUDY + "[run.audit]\n")
+    _one_line_error(run("run", p, "--out", out), "audit", "4ch")
     p.write_text(STUDY + "[run.check]\nK = 5\n")
-    _one_line_error(run("run", p, "--out", out), "check", "4ch")
-    _one_line_error(run("check", "--study", p, "-K", "5"), "check", "4ch")
+    assert run("check", "--study", p, "-K", "5").exit_code == 0
     p.write_text(STUDY.replace('c2 = 1', 'scaling-position = 2'))
     _one_line_error(run("kmax", "--study", p), "scaling-position")
 
@@ -241,3 +255,22 @@ def test_a_study_of_an_unknown_kind_is_one_line(tmp_path, kind):
     p = tmp_path / "k.toml"
     p.write_text(f"kind = {kind}\n[run.kmax]\n")
     _one_line_error(run("kmax", "--study", p), "kind", '"4ch"')
+
+
+def test_check_and_simulate_take_force_gains():
+    """check 4ch agrees with the library's stability() of the same loop, and simulate
+    4ch gives the same verdict on both sides of the exact K_max (force reflection)."""
+    from hapstab import stability
+
+    d = json.loads(run("kmax", "4ch", *FORCE_REFLECTION, "--json").stdout)
+    K = d["critical_stiffness"]
+    for factor, verdict, seen in ((0.5, "stable", "bounded"), (1.5, "unstable", "unbounded")):
+        r = run("check", "4ch", *FORCE_REFLECTION, "-K", K * factor, "--json")
+        assert r.exit_code == 0, r.stderr
+        c = json.loads(r.stdout)
+        loop = _force_reflection_loop().with_stiffness(K * factor)
+        assert c["verdict"] == stability(loop).verdict == verdict
+        s = run("simulate", "4ch", *FORCE_REFLECTION, "-K", K * factor, "--duration", "3",
+                "--json")
+        assert s.exit_code == 0, s.stderr
+        assert json.loads(s.stdout)["verdict"] == seen

@@ -168,3 +168,58 @@ def test_to_dict_carries_every_gain() -> None:
     d = loop.to_dict()
     assert d["kind"] == "4ch" and d["force_to_slave"] == 0.5 and d["slave_force_feedback"] == -0.25
     assert d["slave_from_master"]["type"] == "spring-damper" and "position_scale" not in d
+
+
+# ------------------------------------------------ force channels against the brute force
+from references import brute  # noqa: E402  (the tests' own reference, no hapstab code)
+from test_fourchannel_engine import _four_channel  # noqa: E402  (hapstab's + brute's loop)
+
+
+@pytest.mark.parametrize("full", [False, True], ids=["force-reflection", "full"])
+@pytest.mark.parametrize("seed", range(6))
+def test_force_channel_k_max_matches_the_brute_scan(seed: int, full: bool) -> None:
+    """The exact core's K_max with force channels (termination force numerators, the held
+    input, unequal delays) against the brute force's eigenvalue scan and bisection of its
+    own closed loop. 1e-6: the scan brackets to 1e-10 but the eigenvalues of a loop whose
+    poles crowd z = 1 carry ~1e-8 of rounding."""
+    loop, bl, ref = _four_channel(np.random.default_rng(4000 + 100 * full + seed), full)
+    ex = critical_stiffness(loop).stable_intervals
+    scan = brute.stable_intervals(bl).intervals
+    assert len(ex) == len(scan), (ex, scan)
+    for (a0, a1), (b0, b1) in zip(ex, scan, strict=True):
+        for a, b in ((a0, b0), (a1, b1)):
+            assert (a == b == 0.0) or (math.isinf(a) and b > 1e12 * ref) or \
+                a == pytest.approx(float(b), rel=1e-6)
+
+
+def _second_radius(bl, K: float) -> float:
+    """Largest |z| but the eigenvalue nearest z = 1 (the rigid mode, which the brute
+    force does not deflate for 4-channel loops)."""
+    A0, A1, _ = brute.full_matrices(bl)
+    e = np.linalg.eigvals(A0 + K * A1)
+    return float(np.sort(np.abs(np.delete(e, np.argmin(np.abs(e - 1.0)))))[-1])
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_free_ports_with_a_force_channel_divide_the_rigid_mode(seed: int) -> None:
+    """No operator, a damper as environment: both ports free, so force reflection has a
+    rigid mode (x_m = x_s); det M is divided by z - 1 with Rhat, the force numerator over
+    y. The brute force's other eigenvalues cross |z| = 1 at the exact K_max."""
+    rng = np.random.default_rng(4400 + seed)
+    mm, ms = rng.uniform(0.1, 1, 2)
+    bm, bs = rng.uniform(0.1, 2, 2)
+    eb, kf, Bm, Bs = rng.uniform(0.5, 5), rng.uniform(0.2, 1.5), rng.uniform(0, 2), rng.uniform(0, 3)
+    nf, nb = (int(v) for v in rng.integers(0, 5, 2))
+    loop = FourChannelLoop(Device(mm, bm), Device(ms, bs), SpringDamper(0, Bm),
+                           SpringDamper(100, Bs), None, mass_spring_damper(0.0, eb, 0.0), 1e-3,
+                           nf, delay_backward_samples=nb, master_from_slave=SpringDamper(0, 0),
+                           force_to_master=kf)
+    assert loop_response(loop).rigid == 1
+    r = critical_stiffness(loop)
+    assert "rigid-body mode" in r.reason and 0 < r.critical_stiffness < math.inf
+    bl = brute.four_channel_loop((mm, bm), (ms, bs), 1e-3, nf, nb, (0.0, Bm), (1.0, Bs),
+                                 (1.0, Bs), (0.0, 0.0), c2=kf, environment=("msd", 0.0, eb, 0.0))
+    K = r.critical_stiffness
+    # 1e-4 either side: the eigenvalues next to the rigid mode at z = 1 are accurate to
+    # ~1e-8 here, the crossing's |z| moves by ~1e-6 over that step
+    assert _second_radius(bl, K * (1 - 1e-4)) < 1.0 < _second_radius(bl, K * (1 + 1e-4))

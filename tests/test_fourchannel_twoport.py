@@ -160,3 +160,24 @@ def test_force_reflection_campaign_llewellyn_is_a_bound() -> None:
 def test_force_reflection_campaign_llewellyn_is_a_bound_500() -> None:
     pairs, bad = _campaign(seed=2026, loops=100, per_loop=5)
     assert pairs == 500 and bad == 0
+
+
+def test_local_force_feedback_of_one_or_more_is_refused():
+    """The force read at kT^- lags the held input by a sample: C_6 = 2 alone closes
+    u[k] = -2 u[k-1] through a held-still port, a pole at z = -2 (the exact core finds
+    such loops unstable for every K)."""
+    for gains in ({"master_force_feedback": 2.0}, {"slave_force_feedback": -1.0},
+                  {"master_force_feedback": 1.0}):
+        with pytest.raises(h.AnalysisError, match="alone is unstable"):
+            h.llewellyn_test(_pf(**gains))
+    assert h.llewellyn_test(_pf(master_force_feedback=0.9)).margin < math.inf
+
+
+def test_transmitted_controllers_left_none_follow_the_local_ones():
+    dev = h.Device(0.3, 2.0)
+    loop = FourChannelLoop(dev, dev, h.SpringDamper(100, 0.5), h.SpringDamper(50, 0.3))
+    moved = loop.replace(slave_controller=h.SpringDamper(80, 0.1))
+    assert moved.position_controllers[2] == h.SpringDamper(80, 0.1)
+    assert moved.to_dict()["slave_from_master"]["stiffness_N_per_m"] == 80
+    assert loop.with_stiffness(10.0).position_controllers[2:] == (h.SpringDamper(5.0, 0.3),
+                                                                  h.SpringDamper(10.0, 0.5))

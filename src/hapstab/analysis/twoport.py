@@ -256,7 +256,8 @@ def _first_failure(A: np.ndarray, C: np.ndarray, tol: float) -> float | None:
 FORCE_CAVEAT = ("; with measured forces this two-port ignores their sampling (a stiff "
                 "termination's force is sampled like a virtual wall's), so it is NOT a stability "
                 "bound in general: a seeded campaign found loops unstable below it with C_3, C_5 "
-                "or C_6 (none with C_2 alone); confirm with the exact analysis")
+                "or C_6 (none with C_2 alone); C_5 and C_6 only scale a row of the two-port, "
+                "which Llewellyn's conditions do not see; confirm with the exact analysis")
 
 
 def _two_port_name(side: DeviceSide) -> str:

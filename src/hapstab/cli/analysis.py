@@ -60,7 +60,7 @@ def _kmax_command(kind: str) -> None:
         from hapstab.analysis.methods import critical_stiffness
 
         refuse_method(kind, method)
-        if method != "exact":
+        if method in ("circle", "passivity"):
             refuse_force_gains(kw, f"--method {method}")
         allowed = kind_methods(kind)
         if method not in allowed:
@@ -127,7 +127,7 @@ def _boundary_command(kind: str) -> None:
 
         check_files(csv_path, plot_path, as_json)
         refuse_method(kind, method)
-        if method != "exact":
+        if method in ("circle", "passivity"):
             refuse_force_gains(kw, f"--method {method}")
         periods, axis = _grid_periods(kw)
         rows_s = None if kw["delay_s"] is None else parse_range(kw["delay_s"], "--delay-s", "s",

@@ -152,5 +152,6 @@ def refuse_force_gains(kw: dict[str, Any], what: str) -> None:
         if kw.get(name, 0.0) != 0.0:
             raise HapstabError(f"{flag} = {kw[name]:g}: {what} is derived for controllers that "
                                "measure positions; a 4ch loop with force gains (--c2, --c3, --c5, "
-                               "--c6: C_2, C_3, C_5, C_6) has the exact analysis only (kmax, "
-                               "boundary, best-damping); allowed here: 0")
+                               "--c6: C_2, C_3, C_5, C_6) has the exact analysis (kmax, boundary, "
+                               "check, simulate, region, best-damping) and Llewellyn's test and "
+                               "transparency as approximations; allowed here: 0")

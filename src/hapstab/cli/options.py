@@ -358,10 +358,8 @@ def four_channel_loop(kw: dict[str, Any], stiffness: float = 0.0) -> Teleoperati
 
 
 #: Loop kinds whose state-space model (:func:`hapstab.engine.system.build`: ``check``,
-#: ``simulate``, ``region``'s D-decomposition) the engine builds. It does not build a 4ch
-#: loop's channels yet (only those equal to PEB's), so ``check 4ch`` and ``simulate 4ch``
-#: are left out and ``region 4ch`` refuses force gains; add "4ch" here when it does.
-STATE_SPACE_KINDS = ("hve", "peb")
+#: ``simulate``, ``region``'s D-decomposition) the engine builds: every kind.
+STATE_SPACE_KINDS = ("hve", "peb", "4ch")
 #: Loop kinds the paper's closed forms are derived for (``audit``, region's "paper"
 #: overlay); a 4ch loop has none.
 PAPER_KINDS = ("hve", "peb")

@@ -165,7 +165,6 @@ def _twoport_command(kind: str) -> None:
         from hapstab.cli.files import check_files, write_files
 
         check_files(csv_path, plot_path, as_json)
-        refuse_force_gains(kw, "Llewellyn's test")
         bounds = bounds_of(kw, "llewellyn")
         loop = make(kw, stiffness)
         res = llewellyn_test(loop, approximation, **bounds)  # type: ignore[arg-type]  # a teleoperator
@@ -241,7 +240,6 @@ def _transparency_command(kind: str) -> None:
         from hapstab.cli.files import check_files, write_files
 
         check_files(csv_path, plot_path, as_json)
-        refuse_force_gains(kw, "transparency")
         loop = make(kw, stiffness)
         res = transparency(loop, approximation,  # type: ignore[arg-type]  # a teleoperator
                            _frequencies(frequencies, loop.period))

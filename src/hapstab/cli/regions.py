@@ -11,7 +11,6 @@ from hapstab.cli.options import (
     PAPER_KINDS,
     POS,
     REAL,
-    STATE_SPACE_KINDS,
     emit,
     fmt,
     given,
@@ -67,21 +66,6 @@ def _equal_channels(kw: dict[str, Any]) -> None:
                                "allowed here: not given")
 
 
-def _no_force_channels(kind: str, kw: dict[str, Any]) -> None:
-    """region 4ch: the D-decomposition needs the state-space model, which the engine
-    does not build for force channels yet; refuse a force gain, naming it."""
-    if kind in STATE_SPACE_KINDS:
-        return
-    from hapstab.cli.fourchannel import FORCE_OPTIONS
-
-    for flag, name, _ in FORCE_OPTIONS:
-        if kw.get(name, 0.0) != 0.0:
-            raise HapstabError(f"{flag} = {kw[name]:g}: region {kind} draws the K-B region with "
-                               "the loop's state-space model, which hapstab does not build for "
-                               "force channels yet; allowed here: 0 (kmax and best-damping "
-                               f"{kind} take force gains)")
-
-
 def _region_command(kind: str) -> None:
     make = LOOP_KINDS[kind]
 
@@ -108,7 +92,6 @@ def _region_command(kind: str) -> None:
 
         check_files(csv_path, plot_path, as_json)
         _equal_controllers(kw)
-        _no_force_channels(kind, kw)
         K, B = _range(K_spec, "--K"), _range(B_spec, "--B", signed=True)
         names = [o.strip() for o in overlays.split(",") if o.strip() and o.strip() != "none"]
         for o in names:

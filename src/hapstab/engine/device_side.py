@@ -112,9 +112,10 @@ class DeviceSide:
         return out if self.extra_damping is None else out + np.diag(self.extra_damping)[None]
 
     def check_forces(self, what: str) -> None:
-        """Refuse force feedback that is unstable on its own: a zero of det(I - G_f(z))
-        on or outside the unit circle makes the two-port unstable, which Llewellyn's
-        conditions (and transparency) assume it is not."""
+        """Refuse force feedback that is unstable on its own: a zero of
+        det(I - z^-1 G_f(z)) (:func:`_force_determinant`) on or outside the unit circle
+        makes the sampled force loop unstable, which Llewellyn's conditions (and
+        transparency) assume it is not."""
         if not self.forces:
             return
         poly = _force_determinant(self.forces, self.ports)
@@ -124,9 +125,10 @@ class DeviceSide:
         # (a few digits short of double precision for these low-degree polynomials)
         if (len(roots) == 0 and poly[0] == 0) or np.any(np.abs(roots) <= 1.0 + 1e-9):
             bad = max((1.0 / abs(r) for r in roots if r != 0), default=math.inf)
-            raise AnalysisError(f"{what}: the force feedback alone is unstable (det(I - G_f(z)) "
-                                f"has a zero at |z| = {bad:.6g} >= 1: check C_2 C_3 against "
-                                "(1 + C_5)(1 + C_6)); the test needs a stable two-port")
+            raise AnalysisError(f"{what}: the force feedback alone is unstable (det(I - z^-1 "
+                                f"G_f(z)) has a zero at |z| = {bad:.6g} >= 1: |C_5|, |C_6| must "
+                                "be below 1 and C_2 C_3 small enough); the test needs a stable "
+                                "two-port")
 
     @property
     def ports(self) -> int:
@@ -251,14 +253,17 @@ def _response(c: object, theta: np.ndarray, T: float, part: str | None, ratio: f
 
 
 def _force_determinant(forces: tuple[Channel, ...], p: int) -> np.ndarray:
-    """det(I - G_f) as a polynomial in r = 1/z (ascending coefficients)."""
+    """det(I - z^-1 G_f) as a polynomial in r = 1/z (ascending coefficients): the force
+    read at kT^- is the one the held input of the previous sample produced, so a port
+    held still (a rigid termination) closes the force loop through one sample; C_6 = 2
+    alone has its pole at z = -2."""
     P = np.polynomial.polynomial
-    depth = 1 + max(int(d) for ch in forces for _, _, d in ch.terms)
+    depth = 2 + max(int(d) for ch in forces for _, _, d in ch.terms)
     E = [[np.eye(1, depth, 0)[0] * float(i == j) for j in range(p)] for i in range(p)]
     for ch in forces:
         g = float(ch.controller.num[0])                       # type: ignore[union-attr]
         for j, s, d in ch.terms:
-            E[ch.port][j][int(d)] -= s * g
+            E[ch.port][j][int(d) + 1] -= s * g      # measured one sample after it acts
     if p == 1:
         return E[0][0]
     return P.polysub(P.polymul(E[0][0], E[1][1]), P.polymul(E[0][1], E[1][0]))

@@ -320,10 +320,9 @@ def _four_channel(loop: FourChannelLoop) -> LoopStructure:
     port j's termination on its device (F_h = Ft_m, F_e = -Ft_s). Force channels with a
     gain of 0 are left out."""
     fwd, bwd = loop.forward_delay_in_samples, loop.backward_delay_in_samples
-    chans = [Channel(0, loop.master_controller, ((0, 1.0, 0.0),)),
-             Channel(0, loop.master_from_slave, ((1, -1.0, bwd),)),
-             Channel(1, loop.slave_controller, ((1, 1.0, 0.0),)),
-             Channel(1, loop.slave_from_master, ((0, -1.0, fwd),))]
+    cm, cs, c1, c4 = loop.position_controllers
+    chans = [Channel(0, cm, ((0, 1.0, 0.0),)), Channel(0, c4, ((1, -1.0, bwd),)),
+             Channel(1, cs, ((1, 1.0, 0.0),)), Channel(1, c1, ((0, -1.0, fwd),))]
     for port, gain, j, d in ((0, loop.master_force_feedback, 0, 0.0),
                              (0, loop.force_to_master, 1, bwd),
                              (1, loop.force_to_slave, 0, fwd),

@@ -87,10 +87,9 @@ class FourChannelLoop(TeleoperationLoop):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        for nm, own in (("slave_from_master", self.slave_controller),
-                        ("master_from_slave", self.master_controller)):
-            c = getattr(self, nm)
-            object.__setattr__(self, nm, own if c is None else _check_controller(nm, c))
+        for nm in ("slave_from_master", "master_from_slave"):   # None: follows C_s / C_m
+            if getattr(self, nm) is not None:
+                _check_controller(nm, getattr(self, nm))
         for nm in FORCE_GAINS:
             object.__setattr__(self, nm, check_real(nm, getattr(self, nm)))
         for nm in ("position_scale", "force_scale"):
@@ -104,9 +103,11 @@ class FourChannelLoop(TeleoperationLoop):
 
     @property
     def position_controllers(self) -> tuple[Controller, ...]:
-        """C_m, C_s, C_1, C_4' in the order K's rule reads them."""
-        return (self.master_controller, self.slave_controller, self.slave_from_master,
-                self.master_from_slave)
+        """C_m, C_s, C_1, C_4' (a C_1 or C_4' left None is C_s or C_m, also after
+        ``replace``), in the order K's rule reads them."""
+        c1 = self.slave_controller if self.slave_from_master is None else self.slave_from_master
+        c4 = self.master_controller if self.master_from_slave is None else self.master_from_slave
+        return (self.master_controller, self.slave_controller, c1, c4)
 
     @property
     def controllers(self) -> tuple[Controller, ...]:
@@ -133,14 +134,15 @@ class FourChannelLoop(TeleoperationLoop):
                                 "while a transmitted one is not, so K is undefined; give C_m or "
                                 "C_s a stiffness > 0 to vary K")
         new: dict[str, Any] = {names[i]: cs[i].with_stiffness(K * r)
-                               for i, r in zip(order, ratios, strict=True)}
+                               for i, r in zip(order, ratios, strict=True)
+                               if getattr(self, names[i]) is not None}   # None follows
         return dataclasses.replace(self, **new)
 
     def with_controllers(self, controller: Controller) -> FourChannelLoop:
         """The same loop with ``controller`` as every position controller (PEB's
         C_1 = C_s, C_4' = C_m, with C_m = C_s)."""
         return dataclasses.replace(self, master_controller=controller, slave_controller=controller,
-                                   slave_from_master=controller, master_from_slave=controller)
+                                   slave_from_master=None, master_from_slave=None)
 
     def force_gains(self) -> dict[str, float]:
         """The force gains by name (C_2, C_3, C_5, C_6)."""
@@ -151,7 +153,8 @@ class FourChannelLoop(TeleoperationLoop):
         d = super().to_dict()
         for nm in ("position_scale", "force_scale"):
             d.pop(nm)
-        d["slave_from_master"] = self.slave_from_master.to_dict()
-        d["master_from_slave"] = self.master_from_slave.to_dict()
+        c1, c4 = self.position_controllers[2:]
+        d["slave_from_master"] = c1.to_dict()
+        d["master_from_slave"] = c4.to_dict()
         d.update(self.force_gains())
         return d
