@@ -226,7 +226,7 @@ def test_simulate_matches_brute_stepping_on_stable_loops(full):
 
     rng, done = np.random.default_rng(6000 + full), 0
     while done < 3:
-        loop, bl, ref = _four_channel(rng, full)
+        loop, bl, _ref = _four_channel(rng, full)
         ivs = critical_stiffness(loop).stable_intervals
         if not ivs or not np.isfinite(ivs[0][1]):
             continue
