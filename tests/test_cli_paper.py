@@ -107,3 +107,13 @@ def test_bad_input_is_one_line_exit_2(args):
     assert err["inputs"]["command_line"] == ["hapstab", *args, "--json"]
     lines = res.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("hapstab: error:") and "Traceback" not in res.stderr
+
+
+def test_the_margin_names_its_unit_with_and_without_a_sector():
+    """G^-1 (and sampled passivity) is an impedance, its margin damping in N*s/m; with a
+    finite sector the test is on G + 1/k, an admittance."""
+    plain = run("passivity", "hve", "-K", "50", "--method", "circle")
+    sector = run("passivity", "hve", "-K", "50", "--method", "circle", "--sector", "100")
+    assert plain.exit_code == sector.exit_code == 0
+    assert "N*s/m (damping" in plain.stdout and "m/(N*s)" not in plain.stdout
+    assert "m/(N*s) (admittance of G + 1/k" in sector.stdout

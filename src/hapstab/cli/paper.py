@@ -35,6 +35,15 @@ if TYPE_CHECKING:
 _APPROX = ("forward", "backward", "tustin")
 
 
+def _margin_words(margin: float, sector: float | None) -> str:
+    """The margin with its unit: damping (N*s/m) for G^-1 and sampled passivity; with a
+    finite sector the test is on the loop transfer G + 1/k, an admittance (m/(N*s))."""
+    if sector is not None:
+        return (f"{margin:.6g} m/(N*s) (admittance of G + 1/k, "
+                + ("to spare" if margin >= 0 else "missing") + ")")
+    return f"{margin:.6g} N*s/m (" + ("damping to spare" if margin >= 0 else "damping missing") + ")"
+
+
 @click.group("passivity")
 def passivity_cmd() -> None:
     """Is the device side passive at a stiffness K (exact sampled-data passivity), or, with
@@ -84,9 +93,7 @@ def _passivity_command(kind: str) -> None:
             raise HapstabError(f"--method = {method!r}: allowed: circle, passivity")
         d = res.to_dict()
         d.update(stiffness=stiffness, method=method, approximation=approx, sector=sector)
-        rows = [("verdict", res.verdict),
-                ("margin", f"{res.margin:.6g} N*s/m ("
-                           + ("damping to spare" if res.margin >= 0 else "damping missing") + ")"),
+        rows = [("verdict", res.verdict), ("margin", _margin_words(res.margin, sector)),
                 ("worst frequency", f"{res.worst_frequency_hz:.6g} Hz "
                                     f"({res.worst_frequency_rad_s:.6g} rad/s)"),
                 ("failing condition", res.failed_condition or "none"),
