@@ -274,30 +274,35 @@ def _zoh(A: np.ndarray, T: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return E[:, :n, :n], E[:, :n, n:]
 
 
-def _leverrier(E: np.ndarray, G: np.ndarray, d_desc: np.ndarray, kappa: np.ndarray
-               ) -> tuple[np.ndarray, np.ndarray]:
+def _leverrier(E: np.ndarray, G: np.ndarray, d_desc: np.ndarray, kappa: np.ndarray,
+               T: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Leverrier on vectors: adj(yI - E) Gamma = sum_k y^(q-1-k) v_k; returns V (L, q, q),
     row k = v_k, and magnitudes that bound its error.
 
-    E and Gamma come from the matrix exponential, accurate relative to their largest
-    entry (normwise, not per entry: a stiff port's position entries carry the rounding
-    of its velocity terms; measured against 60 digits, per-entry bounds were up to 5,000
-    times short at 1e6 N/m, and bounds in units of position and T times velocity still 300
-    times), times ``kappa`` = 1 + the number of squarings (each squaring rounds again);
-    each step then adds |E| |v| + |d_k| |Gamma|."""
+    E and Gamma come from the matrix exponential, accurate normwise rather than per entry
+    (a stiff port's position entries carry the rounding of its larger velocity terms),
+    here in the state's natural units, positions and T times velocities (w = [1, T, ...]),
+    times ``kappa`` = 1 + the number of squarings (each squaring rounds again); each step
+    then adds |E| |v| + |d_k| |Gamma|. Measured against 60 digits this holds up to walls
+    whose resonance is below about a third of the sampling rate; at 1e6 N/m with T = 0.5
+    to 2 ms it is still up to 40 times short (a bound normwise across units holds there,
+    but made the exact core run out of memory on extreme loops)."""
     q = E.shape[1]
-    Eabs, Gabs = np.abs(E), np.abs(G)
-    e_norm, g_norm = kappa * Eabs.max(axis=(1, 2)), kappa * Gabs.max(axis=1)
-    g_mag = Gabs + g_norm[:, None]
+    w = np.ones((T.size, q))
+    w[:, 1:] = T[:, None]
+    Es = np.abs(E) * w[:, :, None] / w[:, None, :]            # diag(w) |E| diag(1/w)
+    Gs = np.abs(G) * w
+    e_norm, g_norm = kappa * Es.max(axis=(1, 2)), kappa * Gs.max(axis=1)
+    g_mag = Gs + g_norm[:, None]
     v, mag = G.copy(), g_mag
     vs, mags = [v], [mag]
     for k in range(1, q):
         v = np.einsum("lij,lj->li", E, v) + d_desc[:, k:k + 1] * G
-        mag = (np.einsum("lij,lj->li", Eabs, mag) + e_norm[:, None] * mag.sum(axis=1, keepdims=True)
+        mag = (np.einsum("lij,lj->li", Es, mag) + e_norm[:, None] * mag.sum(axis=1, keepdims=True)
                + np.abs(d_desc[:, k:k + 1]) * g_mag)
         vs.append(v)
         mags.append(mag)
-    return np.stack(vs, axis=1), np.stack(mags, axis=1)
+    return np.stack(vs, axis=1), np.stack(mags, axis=1) / w[:, None, :]
 
 
 def _port_poly(A: np.ndarray, Bv: np.ndarray, free: bool, T: np.ndarray,
@@ -327,7 +332,7 @@ def _port_poly(A: np.ndarray, Bv: np.ndarray, free: bool, T: np.ndarray,
     # engine.zoh.expm_batched takes it; the augmented matrix's norm is at least A T's)
     norm = np.maximum(T * np.abs(A).sum(axis=0).max(), DIVISOR_FLOOR)   # (log2 of 0 guarded)
     squarings = np.maximum(0.0, np.ceil(np.log2(norm / _THETA13)))
-    V, Vmag = _leverrier(E, G[:, :, 0], d_desc, 1.0 + squarings)
+    V, Vmag = _leverrier(E, G[:, :, 0], d_desc, 1.0 + squarings, T)
     N = V[:, ::-1, 0]                                 # ascending: coefficient of y^(q-1-k)
     d = d_desc[:, ::-1].copy()
     # magnitudes that rounding acts on: coefficients of prod (y + |delta_i|)
