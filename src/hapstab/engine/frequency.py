@@ -389,9 +389,14 @@ def loop_response(loop: HapticLoop | TeleoperationLoop,
         raise AnalysisError("controller: critical stiffness needs SpringDamper controllers "
                             "(a general H(z) has no stiffness K to vary)")
     ratios = channel_ratios(st)
-    if ratios is None:
+    if ratios is None and st.simple:
         raise AnalysisError("controllers: the master's stiffness is 0 and the slave's is not, so "
                             "K_s/K_m is undefined; give the master a stiffness > 0 to vary K")
+    if ratios is None:        # several controllers per port: K names the reference one's
+        ref = st.ports[st.channels[st.reference].port].name
+        raise AnalysisError(f"controllers: the {ref}'s local stiffness, which K names, is 0 "
+                            "while another controller's is not, so the ratios to K are "
+                            f"undefined; give the {ref} a stiffness > 0 to vary K")
     terms = tuple(tuple((j, float(s), *split_delay(d)) for j, s, d in ch.terms)
                   for ch in st.channels)
     ports, masses = _ports(st, T, terms)
