@@ -24,7 +24,13 @@ from hapstab.analysis.twoport import TwoPortResult, llewellyn_test
 from hapstab.budget import BudgetError
 from hapstab.engine.system import SampledSystem, build
 from hapstab.errors import AnalysisError, ArgumentTypeError, HapstabError, ModelError
-from hapstab.models.controllers import DiscreteController, SpringDamper
+from hapstab.models.controllers import (
+    AffineController,
+    DiscreteController,
+    FilteredSpringDamper,
+    SpringDamper,
+    VelocityFilter,
+)
 from hapstab.models.fourchannel import FourChannelLoop
 from hapstab.models.loops import HapticLoop, TeleoperationLoop
 from hapstab.models.parts import (
@@ -44,7 +50,8 @@ __version__ = "0.1.0"
 
 __all__ = [
     "Device", "Impedance", "NO_IMPEDANCE", "spring", "mass_spring_damper", "parse_impedance",
-    "SpringDamper", "DiscreteController", "HapticLoop", "TeleoperationLoop", "FourChannelLoop",
+    "SpringDamper", "FilteredSpringDamper", "VelocityFilter", "AffineController",
+    "DiscreteController", "HapticLoop", "TeleoperationLoop", "FourChannelLoop",
     "paper_hve",
     "paper_peb", "build", "SampledSystem", "stability", "critical_stiffness", "boundary",
     "methods_for", "colgate", "gil", "eq18", "eq29", "eq34", "gil2004", "HapstabError",

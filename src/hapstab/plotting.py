@@ -387,7 +387,7 @@ def plot_region(res: Any, ax: Any = None) -> Any:
     T = res.period
     Bl = np.array([B0, B1])
     for c in res.boundary["zm1"]:
-        ax.plot(c - 2 * Bl / T, Bl, "k-", lw=1.0)
+        ax.plot(c - res.boundary.get("zm1_B_per_s", 2 / T) * Bl, Bl, "k-", lw=1.0)
     styles = {"passivity": ("tab:blue", "--", "passivity (Colgate)"),
               "circle": ("tab:orange", "-.", "circle criterion (forward)"),
               "paper": ("tab:red", ":", "paper's condition")}

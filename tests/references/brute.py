@@ -258,6 +258,10 @@ class Control:
         The terms sample the termination forces F_t at kT^- instead of positions.
     fixed : float
         A K-independent gain on e[k] (N/m, or N/N for a force).
+    filt : tuple
+        The damper's velocity estimate: () the backward difference (e[k] - e[k-1])/T;
+        ("lowpass", a): w[k] = a w[k-1] + (1 - a)(e[k] - e[k-1])/T (one more state,
+        w[k-1]); ("average", N): (e[k] - e[k-N])/(N T).
     """
 
     gain: float
@@ -266,6 +270,7 @@ class Control:
     port: int = -1
     force: bool = False
     fixed: float = 0.0
+    filt: tuple = ()
 
 
 @dataclass(frozen=True)
@@ -297,15 +302,19 @@ class Loop:
         return i if c.port == -1 else c.port
 
 
-def hve_loop(m: float, b: float, T: float, n: int, B: float = 0.0, operator=None) -> Loop:
-    """The HVE: H(z) = K + B (z - 1)/(T z) on x[k - n]; operator per :func:`termination`."""
+def hve_loop(m: float, b: float, T: float, n: int, B: float = 0.0, operator=None,
+             filt: tuple = ()) -> Loop:
+    """The HVE: H(z) = K + B (z - 1)/(T z) on x[k - n]; operator per :func:`termination`;
+    ``filt`` the damper's velocity filter (:class:`Control`)."""
     om, ob, ok = termination(operator)
-    return Loop((Port(m + om, b + ob, ok),), (Control(1.0, B, ((0, 1.0, int(n)),)),), T)
+    return Loop((Port(m + om, b + ob, ok),), (Control(1.0, B, ((0, 1.0, int(n)),),
+                                                       filt=filt),), T)
 
 
 def peb_loop(mm: float, bm: float, ms: float, bs: float, T: float, n_forward: int,
              n_backward: int | None = None, B: float = 0.0, B_slave: float | None = None,
-             ratio: float = 1.0, operator=None, environment=None) -> Loop:
+             ratio: float = 1.0, operator=None, environment=None, filt: tuple = (),
+             filt_slave: tuple | None = None) -> Loop:
     """PEB teleoperation (eq. 20): F_m = C_m (x_m - z^-nb x_s), F_s = C_s (x_s - z^-nf x_m).
 
     Parameters
@@ -327,9 +336,11 @@ def peb_loop(mm: float, bm: float, ms: float, bs: float, T: float, n_forward: in
     Bs = B if B_slave is None else B_slave
     om, ob, ok = termination(operator)
     em, eb, ek = termination(environment)
+    fs = filt if filt_slave is None else filt_slave
     return Loop((Port(mm + om, bm + ob, ok), Port(ms + em, bs + eb, ek)),
-                (Control(1.0, B, ((0, 1.0, 0), (1, -1.0, int(nb)))),
-                 Control(float(ratio), Bs, ((1, 1.0, 0), (0, -1.0, int(n_forward))))), T)
+                (Control(1.0, B, ((0, 1.0, 0), (1, -1.0, int(nb))), filt=filt),
+                 Control(float(ratio), Bs, ((1, 1.0, 0), (0, -1.0, int(n_forward))),
+                         filt=fs)), T)
 
 
 def four_channel_loop(master: tuple[float, float], slave: tuple[float, float], T: float,
@@ -396,7 +407,8 @@ def _depths(loop: Loop, force: bool = False) -> list[int]:
         if c.force != force:
             continue
         for j, _, d in c.terms:
-            depth[j] = max(depth[j], d + (1 if c.damping != 0 else 0))
+            back = c.filt[1] if c.filt and c.filt[0] == "average" else 1
+            depth[j] = max(depth[j], d + (back if c.damping != 0 else 0))
     return depth
 
 
@@ -428,6 +440,8 @@ def matrices(loop: Loop) -> tuple[np.ndarray, np.ndarray]:
         v = np.zeros(N)
         v[0:n_pl:2] = 1.0
         v[n_pl:] = 1.0
+        nw = sum(1 for c in loop.controls if c.filt and c.filt[0] == "lowpass" and c.damping)
+        v[N - nw:] = 0.0           # a filtered velocity of a translation is 0
         u = v / np.linalg.norm(v)
         # exact eigenvector for every K (checked, not assumed)
         assert np.abs(A0 @ u - u).max() < 1e-12 and np.abs(A1 @ u).max() < 1e-12 * np.abs(A1).max()
@@ -452,6 +466,13 @@ def full_matrices(loop: Loop) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         u_old[j], f_old[j], off_fr[j] = N, N + 1, N + 2
         N += 2 + fdepth[j]
     ft = {j: _force_row(loop.ports[j], j, N, u_old[j], f_old[j]) for j in measured}
+    w_state = {}                     # low-pass filtered velocity w[k-1] of control i
+    for i, c in enumerate(loop.controls):
+        if c.filt and c.filt[0] == "lowpass" and c.damping != 0:
+            w_state[i] = N
+            N += 1
+    if w_state:
+        ft = {j: np.pad(r, (0, N - r.size)) for j, r in ft.items()}
 
     def delayed(j: int, d: int, force: bool) -> np.ndarray:
         if force and d == 0:
@@ -477,9 +498,21 @@ def full_matrices(loop: Loop) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         for j, s, d in c.terms:
             u1[pi] += c.gain * s * delayed(j, d, c.force)
             u0[pi] += c.fixed * s * delayed(j, d, c.force)
-            if c.damping != 0:
+            if c.damping != 0 and not c.filt:
                 u0[pi] += (c.damping / T) * s * (delayed(j, d, c.force)
                                                  - delayed(j, d + 1, c.force))
+            elif c.damping != 0 and c.filt[0] == "average":
+                Nf = c.filt[1]
+                u0[pi] += (c.damping / (Nf * T)) * s * (delayed(j, d, c.force)
+                                                        - delayed(j, d + Nf, c.force))
+            elif c.damping != 0:             # low-pass: w[k] = a w[k-1] + (1 - a) de / T
+                a = c.filt[1]
+                inc = (1.0 - a) / T * s * (delayed(j, d, c.force) - delayed(j, d + 1, c.force))
+                A0[w_state[i]] += inc
+                u0[pi] += c.damping * inc
+        if i in w_state:
+            A0[w_state[i], w_state[i]] += c.filt[1]
+            u0[pi, w_state[i]] += c.damping * c.filt[1]
     for i, port in enumerate(loop.ports):
         Ad, bd = _zoh(port, T)
         sl = slice(2 * i, 2 * i + 2)

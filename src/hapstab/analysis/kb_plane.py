@@ -13,6 +13,7 @@ Gil, Avello, Rubio, Florez 2004; Hulin, Preusche, Hirzinger 2008 (K-B charts).
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Any
 
 import numpy as np
@@ -20,7 +21,7 @@ import numpy as np
 from hapstab.engine.structure import structure_of
 from hapstab.engine.system import build
 from hapstab.errors import AnalysisError
-from hapstab.models.controllers import SpringDamper
+from hapstab.models.controllers import FilteredSpringDamper, SpringDamper
 from hapstab.models.loops import HapticLoop, TeleoperationLoop, require_loop
 from hapstab.tolerances import DIVISOR_FLOOR
 
@@ -49,17 +50,36 @@ def check_equal_gains(loop: Loop) -> float:
     """
     require_loop(loop)
     cs = loop.controllers
-    if not all(isinstance(c, SpringDamper) for c in cs):
-        raise AnalysisError("controller: a K-B region needs SpringDamper controllers (a "
-                            "SpringDamper virtual environment)")
+    if not all(isinstance(c, (SpringDamper, FilteredSpringDamper)) for c in cs):
+        raise AnalysisError("controller: a K-B region needs SpringDamper (or "
+                            "FilteredSpringDamper) controllers")
     if any(c != cs[0] for c in cs):
         raise AnalysisError("controllers: a K-B region is drawn for C_m = C_s (equal K and B)")
     return min(pt.device.damping for pt in structure_of(loop).ports)
 
 
 def with_gains(loop: Loop, K: float, B: float) -> Loop:
-    """The loop with stiffness K and virtual damping B on every controller."""
+    """The loop with stiffness K and virtual damping B on every controller (a velocity
+    filter kept)."""
+    c = loop.controllers[0]
+    if isinstance(c, FilteredSpringDamper):
+        return loop.with_controllers(dataclasses.replace(c, stiffness=K, damping=B))
     return loop.with_controllers(SpringDamper(K, B))
+
+
+def damper_factor(loop: Loop, theta: np.ndarray) -> np.ndarray | None:
+    """g(theta) with h = K + B g on |z| = 1: ``(1 - z^-1) F(z) / T`` for a filtered
+    damper (:class:`~hapstab.models.controllers.VelocityFilter`), ``None`` for eq. (23)'s
+    plain one (``(1 - z^-1)/T``, which :func:`_kb` takes in closed form)."""
+    vf = getattr(loop.controllers[0], "velocity_filter", None)
+    if vf is None:
+        return None
+    T = loop.period
+    z = np.exp(1j * theta)
+    num, den = vf.transfer(T)
+    # 1 - e^{-j theta} = 2j sin(theta/2) e^{-j theta/2}: no cancellation near theta = 0
+    diff = 2j * np.sin(theta / 2) * np.exp(-0.5j * theta)
+    return diff / T * np.polyval(num, z) / np.polyval(den, z)
 
 
 def _unit_loop(loop: Loop) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -90,12 +110,18 @@ def _follow(mu: np.ndarray) -> np.ndarray:
     return mu
 
 
-def _kb(mu: np.ndarray, th: np.ndarray, T: float) -> tuple[np.ndarray, np.ndarray]:
-    """(K, B) on |z| = 1 at angles ``th`` for each branch (columns), from h = 1/mu."""
+def _kb(mu: np.ndarray, th: np.ndarray, T: float, g: np.ndarray | None = None
+        ) -> tuple[np.ndarray, np.ndarray]:
+    """(K, B) on |z| = 1 at angles ``th`` for each branch (columns), from h = 1/mu =
+    K + B g (g = :func:`damper_factor`; ``None``: (1 - z^-1)/T)."""
     with np.errstate(all="ignore"):
         h = 1.0 / mu
-        K = h.real - h.imag * np.tan(th / 2)[:, None]
-        B = T * h.imag / np.sin(th)[:, None]
+        if g is None:
+            K = h.real - h.imag * np.tan(th / 2)[:, None]
+            B = T * h.imag / np.sin(th)[:, None]
+        else:
+            B = h.imag / g.imag[:, None]
+            K = h.real - B * g.real[:, None]
         bad = ~(np.isfinite(K) & np.isfinite(B) & (np.abs(mu) > DIVISOR_FLOOR))
     K[bad], B[bad] = np.nan, np.nan
     return K, B
@@ -106,7 +132,7 @@ def _kb(mu: np.ndarray, th: np.ndarray, T: float) -> tuple[np.ndarray, np.ndarra
 REFINE_STEP = 0.004
 
 
-def _refine(A0: np.ndarray, B1: np.ndarray, C1: np.ndarray, T: float, th: np.ndarray,
+def _refine(A0: np.ndarray, B1: np.ndarray, C1: np.ndarray, kb: Any, th: np.ndarray,
             mu: np.ndarray, window: tuple[tuple[float, float], tuple[float, float]],
             extra: int) -> tuple[np.ndarray, np.ndarray]:
     """Add angles where the boundary jumps across the window (where it turns fast with
@@ -115,7 +141,7 @@ def _refine(A0: np.ndarray, B1: np.ndarray, C1: np.ndarray, T: float, th: np.nda
     (K0, K1), (Bl, Bh) = window
     added = 0
     for _ in range(12):                       # each round halves the worst steps
-        K, B = _kb(mu, th, T)
+        K, B = kb(mu, th)
         u, v = (K - K0) / max(K1 - K0, DIVISOR_FLOOR), (B - Bl) / max(Bh - Bl, DIVISOR_FLOOR)
         inside = (u >= -0.1) & (u <= 1.1) & (v >= -0.1) & (v <= 1.1)
         step = np.hypot(np.diff(u, axis=0), np.diff(v, axis=0))
@@ -156,7 +182,8 @@ def d_decomposition(loop: Loop, n_theta: int = 4000,
     dict
         ``curves``: list of (m, 2) arrays of (K, B) for complex crossings (one per
         eigenvalue branch, theta from ~0 to pi); ``z1``: K of the vertical lines
-        (z = 1); ``zm1``: c of the lines K + 2B/T = c (z = -1).
+        (z = 1); ``zm1``: c of the lines K + g B = c (z = -1), ``zm1_B_per_s`` = g
+        (2/T without a velocity filter).
     """
     check_equal_gains(loop)
     T = loop.period
@@ -167,16 +194,23 @@ def d_decomposition(loop: Loop, n_theta: int = 4000,
     th = np.unique(np.concatenate([np.geomspace(1e-6, 0.2, n_theta // 2),
                                    np.linspace(0.2, np.pi - 1e-9, n_theta // 2)]))  # see above
     mu = _follow(_mu(A0, B1, C1, np.exp(1j * th)))
+
+    def kb(m: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return _kb(m, t, T, damper_factor(loop, t))
+
     if window is not None:
-        th, mu = _refine(A0, B1, C1, T, th, mu, window, n_theta)
-    K, B = _kb(mu, th, T)
+        th, mu = _refine(A0, B1, C1, kb, th, mu, window, n_theta)
+    K, B = kb(mu, th)
     curves = [np.column_stack([K[ok, i], B[ok, i]])
               for i in range(mu.shape[1]) for ok in [np.isfinite(K[:, i])]]
-    return {"curves": curves, **_real_lines(A0, B1, C1), "period": T}
+    g_pi = damper_factor(loop, np.array([np.pi]))
+    return {"curves": curves, **_real_lines(A0, B1, C1), "period": T,
+            "zm1_B_per_s": 2.0 / T if g_pi is None else float(g_pi[0].real)}
 
 
 def _real_lines(A0: np.ndarray, B1: np.ndarray, C1: np.ndarray) -> dict[str, list[float]]:
-    """The crossings at z = 1 (vertical lines K = const) and z = -1 (K + 2B/T = const)."""
+    """The crossings at z = 1 (vertical lines K = const) and z = -1 (K + g B = const,
+    g = 2/T, or ``zm1_B_per_s`` with a velocity filter)."""
     lines = {}
     for name, z in (("z1", 1.0), ("zm1", -1.0)):
         vals = []

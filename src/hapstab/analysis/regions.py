@@ -189,6 +189,7 @@ class RegionResult(Result):
             "rows": [{"virtual_damping": b, "stable_intervals": [list(x) for x in iv]}
                      for b, iv in zip(self.B_rows, self.intervals, strict=True)],
             "crossings_z1_K": self.boundary["z1"], "crossings_zm1_K_plus_2B_over_T": self.boundary["zm1"],
+            "crossings_zm1_B_per_s": self.boundary.get("zm1_B_per_s"),
             "agreement": self.agreement,
             "overlays": {k: v for k, v in self.overlays.items()},
         })

@@ -15,7 +15,12 @@ from typing import Any
 import click
 
 from hapstab.errors import PERIOD_RANGE, HapstabError
-from hapstab.models.controllers import SpringDamper
+from hapstab.models.controllers import (
+    Controller,
+    FilteredSpringDamper,
+    SpringDamper,
+    VelocityFilter,
+)
 from hapstab.models.loops import HapticLoop, TeleoperationLoop
 from hapstab.models.parts import Device, parse_impedance
 from hapstab.results import dumps
@@ -201,6 +206,10 @@ def loop_options(kind: str, ranges: bool = False) -> Callable:
                           + ("; C_m's." if kind == "4ch" else ".")),
         click.option("--operator", default="spring:1", show_default=True,
                      help="Operator impedance: none | spring:k | msd:m,b,k."),
+        *([] if kind == "4ch" else [click.option(
+            "--velocity-filter", default=None, metavar="lowpass:HZ|average:N",
+            help="The damper acts on a filtered velocity: a first-order low-pass of the "
+                 "backward difference (cutoff in Hz) or the mean of the last N differences.")]),
         click.option("--json", "as_json", is_flag=True, help="Print one JSON object on stdout."),
     )
 
@@ -303,10 +312,18 @@ def _period(kw: dict[str, Any]) -> float:
     return T
 
 
+def _spring_damper(K: float, B: float, kw: dict[str, Any]) -> Controller:
+    """Eq. (23)'s spring-damper, or with --velocity-filter its filtered form."""
+    vf = kw.get("velocity_filter")
+    if vf is None:
+        return SpringDamper(K, B)
+    return FilteredSpringDamper(K, B, VelocityFilter.parse(vf))
+
+
 def hve_loop(kw: dict[str, Any], stiffness: float = 0.0) -> HapticLoop:
     """Build the HVE from parsed options."""
     loop = HapticLoop(Device(kw["mass"], kw["damping"]),
-                      SpringDamper(stiffness, kw["virtual_damping"]),
+                      _spring_damper(stiffness, kw["virtual_damping"], kw),
                       parse_impedance(kw["operator"], "--operator"), _period(kw), kw["delay"])
     if kw.get("delay_s") is not None:
         if given("delay"):
@@ -321,8 +338,8 @@ def peb_loop(kw: dict[str, Any], stiffness: float = 0.0) -> TeleoperationLoop:
     B_s = --slave-virtual-damping (default B), so C_m = C_s unless they are given."""
     ratio = kw.get("slave_stiffness_ratio", 1.0)
     B_s = kw.get("slave_virtual_damping")
-    cm = SpringDamper(stiffness, kw["virtual_damping"])
-    cs = SpringDamper(ratio * stiffness, kw["virtual_damping"] if B_s is None else B_s)
+    cm = _spring_damper(stiffness, kw["virtual_damping"], kw)
+    cs = _spring_damper(ratio * stiffness, kw["virtual_damping"] if B_s is None else B_s, kw)
     loop = TeleoperationLoop(Device(kw["master_mass"], kw["master_damping"]),
                              Device(kw["slave_mass"], kw["slave_damping"]), cm, cs,
                              parse_impedance(kw["operator"], "--operator"),

@@ -47,8 +47,6 @@ from hapstab.engine.discs import (
     Jet,
     base_jets,
     delay_jet,
-    geometric_sum_jet,
-    one_minus_delay_jet,
     poly_jet,
     zero,
 )
@@ -60,9 +58,11 @@ from hapstab.engine.structure import (
     rigid_modes,
     structure_of,
 )
+from hapstab.engine.two_port import two_port
+from hapstab.engine.velocity import damper_jets, filter_order, filters_of, stack_filters
 from hapstab.engine.zoh import _THETA13, expm_batched, port_matrices
 from hapstab.errors import AnalysisError
-from hapstab.models.controllers import SpringDamper
+from hapstab.models.controllers import has_stiffness
 from hapstab.models.loops import HapticLoop, TeleoperationLoop, split_delay
 from hapstab.tolerances import DIVISOR_FLOOR
 
@@ -122,6 +122,7 @@ class LoopResponse:
     kinds: tuple[str, ...] = ()
     gain: np.ndarray | None = None
     free: tuple[bool, ...] = ()
+    filters: tuple = ()
 
     @property
     def size(self) -> int:
@@ -139,7 +140,7 @@ class LoopResponse:
         most = [0] * len(self.ports)
         for port, ch in zip(self.channel_ports, self.terms, strict=True):
             most[port] = max(most[port], *(t[2] + int(np.ceil(t[3])) for t in ch))
-        return sum(most) + self.q + 2
+        return sum(most) + self.q + 2 + sum(map(filter_order, self.filters))
 
     # ------------------------------------------------------------------ evaluation
     def coefficients(self, idx: np.ndarray, theta: np.ndarray, rho: np.ndarray) -> list[Jet]:
@@ -167,25 +168,33 @@ class LoopResponse:
         p = len(self.ports)
         if not self.simple:
             return generic_coefficients(self, idx, theta, rho, b, self._poly_of(idx, b, pj))
-        hb = [b["1-zinv"].scale(self.beta[idx, j]) for j in range(p)]
+        hb, ev, av = damper_jets(self.filters or (None,) * p, self.beta, idx, theta, rho, b)
+        ka = [e if a is None else a for a, e in zip(av, ev, strict=True)]   # K-part: a_j
         ku = [self.k[idx, j] * self.scale[idx] for j in range(p)]
         if p == 1:
             (j, s, n, f), = self.terms[0]
             T00 = measured(j, n, f).scale(s)
-            return [pj("d", 0) + T00 * hb[0], T00.scale(ku[0]), zero(shape)]
+            return [_times(pj("d", 0), ev[0]) + T00 * hb[0], _times(T00.scale(ku[0]), ka[0]),
+                    zero(shape)]
         # two ports: det(diag(d) + T diag(H)) = d0 d1 + d1 T00 H0 + d0 T11 H1 + Delta H0 H1
         # with Delta = T00 T11 - T01 T10 formed without cancellation (below); with a
         # rigid-body mode everything is divided by y (d_j = y dhat_j, Delta / y)
-        T00, T11, Delta = self._two_port(idx, theta, rho, b, pj)
+        T00, T11, Delta = two_port(self.terms, self.rigid, theta, rho, b, pj)
         if self.rigid:
             X = b["y"] * pj("dhat", 0) * pj("dhat", 1)
             Y0, Y1 = pj("dhat", 1) * T00, pj("dhat", 0) * T11
         else:
             X = pj("d", 0) * pj("d", 1)
             Y0, Y1 = pj("d", 1) * T00, pj("d", 0) * T11
-        F0 = X + Y0 * hb[0] + Y1 * hb[1] + Delta * hb[0] * hb[1]
-        F1 = Y0.scale(ku[0]) + Y1.scale(ku[1]) + Delta * (hb[0].scale(ku[1]) + hb[1].scale(ku[0]))
-        F2 = Delta.scale(ku[0] * ku[1])
+        # filtered velocity (engine.velocity): row j times e_j; e_j = 1 leaves these the
+        # unfiltered formulas operation for operation
+        e0, e1 = ev
+        a0, a1 = ka
+        F0 = (_times(_times(X, e0), e1) + _times(Y0 * hb[0], e1) + _times(Y1 * hb[1], e0)
+              + Delta * hb[0] * hb[1])
+        F1 = (_times(_times(Y0.scale(ku[0]), a0), e1) + _times(_times(Y1.scale(ku[1]), a1), e0)
+              + Delta * (_times(hb[0].scale(ku[1]), a1) + _times(hb[1].scale(ku[0]), a0)))
+        F2 = _times(_times(Delta.scale(ku[0] * ku[1]), a0), a1)
         return [F0, F1, F2]
 
     def _poly_of(self, idx: np.ndarray, b: dict[str, Jet], pj: Any) -> Any:
@@ -204,64 +213,10 @@ class LoopResponse:
             return -(poly_jet(r[idx], e[idx], b["y"]) + held)
         return poly
 
-    def _two_port(self, idx, theta, rho, b, pj) -> tuple[Jet, Jet, Jet]:
-        """T00, T11 and Delta = T00 T11 - T01 T10 (or Delta / y with a rigid mode) for
-        the position-error structure: channel i measures its own port undelayed (sign
-        a_i) and the other port with delay n_i + f_i (sign c_i); eq. (20) has a_i = 1,
-        c_i = -1, position/force scaling a_0 = alpha beta, c_0 = -beta, c_1 = -alpha.
 
-        With P_j^f = N_j + e_j, e_j = z^-1 y D_j^f (module doc) and w the round-trip
-        phase: Delta = (a0 a1 - c0 c1) N0 N1 + c0 c1 Delta_1 with Delta_1 = N0 N1 (1 - w)
-        - w (e0 N1 + N0 e1 + e0 e1), and (1 - w)/y = w G_n (a geometric sum), e_j / y =
-        z^-1 D_j^f: no cancellation, so F2 = Delta k0 k1 is 0 without delay, exactly.
-        A rigid mode needs a0 a1 = c0 c1 (the rigid-body rule), so Delta / y = c0 c1
-        Delta_1 / y.
-        """
-        own, cross = [], []
-        for i, ch in enumerate(self.terms):
-            mine = [t for t in ch if t[0] == i]
-            other = [t for t in ch if t[0] != i]
-            if len(ch) != 2 or len(mine) != 1 or mine[0][2:] != (0, 0.0) or not mine[0][1] \
-                    or not other[0][1]:
-                raise AnalysisError("two-port loop: only the position-error structure of eq. (20) "
-                                    "is supported by the exact analysis")
-            own.append(mine[0])
-            cross.append(other[0])
-        a0a1, c0c1 = own[0][1] * own[1][1], cross[0][1] * cross[1][1]
-        N0, N1 = pj("N", 0), pj("N", 1)
-        n_rt = cross[0][2] + cross[1][2]
-        # e_j / y of port j measured by the other channel (channel 1 measures port 0)
-        fr = {0: cross[1][3], 1: cross[0][3]}
-        ey = {j: (b["zinv"] * pj("D", j, fr[j]) if fr[j] else None) for j in (0, 1)}
-        w = delay_jet(theta, rho, n_rt) if n_rt else None
-        if self.rigid:
-            base = zero(theta.shape) if not n_rt else N0 * N1 * w * geometric_sum_jet(theta, rho, n_rt)
-            corr = zero(theta.shape)
-            if ey[0] is not None:
-                corr = corr + ey[0] * N1
-            if ey[1] is not None:
-                corr = corr + N0 * ey[1]
-            if ey[0] is not None and ey[1] is not None:
-                corr = corr + ey[0] * ey[1] * b["y"]
-            delta = base - (corr if w is None else w * corr)
-        else:
-            base = zero(theta.shape) if not n_rt else N0 * N1 * one_minus_delay_jet(theta, rho, n_rt)
-            corr = zero(theta.shape)
-            e = {j: (ey[j] * b["y"] if ey[j] is not None else None) for j in (0, 1)}
-            if e[0] is not None:
-                corr = corr + e[0] * N1
-            if e[1] is not None:
-                corr = corr + N0 * e[1]
-            if e[0] is not None and e[1] is not None:
-                corr = corr + e[0] * e[1]
-            delta = base - (corr if w is None else w * corr)
-        if c0c1 != 1.0:
-            delta = delta.scale(c0c1)
-        if a0a1 != c0c1:
-            delta = delta + (N0 * N1).scale(a0a1 - c0c1)
-        T00 = N0 if own[0][1] == 1.0 else N0.scale(own[0][1])
-        T11 = N1 if own[1][1] == 1.0 else N1.scale(own[1][1])
-        return T00, T11, delta
+def _times(a: Jet, e: Jet | None) -> Jet:
+    """a e, or a itself for e = 1 (no velocity filter)."""
+    return a if e is None else a * e
 
 
 # ---------------------------------------------------------------------- building
@@ -384,10 +339,11 @@ def loop_response(loop: HapticLoop | TeleoperationLoop,
     st = structure_of(loop)
     T = periods_of(loop, periods)
     pos = [ch for ch in st.channels if ch.measures == "position"]
-    ctrls = [ch.controller for ch in pos if isinstance(ch.controller, SpringDamper)]
+    ctrls = [ch.controller for ch in pos if has_stiffness(ch.controller)]
     if len(ctrls) != len(pos):
-        raise AnalysisError("controller: critical stiffness needs SpringDamper controllers "
-                            "(a general H(z) has no stiffness K to vary)")
+        raise AnalysisError("controller: critical stiffness needs SpringDamper (or "
+                            "FilteredSpringDamper) controllers (a general H(z) has no stiffness "
+                            "K to vary)")
     ratios = channel_ratios(st)
     if ratios is None and st.simple:
         raise AnalysisError("controllers: the master's stiffness is 0 and the slave's is not, so "
@@ -404,7 +360,7 @@ def loop_response(loop: HapticLoop | TeleoperationLoop,
     rigid = rigid_modes(st, float(T.max()))
     q = sum(pp.d.shape[1] - 1 for pp in ports) - rigid
     scale = 2.0 ** np.round(np.log2(min(masses) / T ** 2))
-    beta = np.array([[c.damping if ch.measures == "position" else 0.0  # type: ignore[union-attr]
+    beta = np.array([[getattr(c, "damping", 0.0) if ch.measures == "position" else 0.0
                       for ch, c in ((ch, ch.controller) for ch in st.channels)]]) / T[:, None]
     gain = np.array([[ch.controller.num[0] if ch.measures == "force" else 0.0  # type: ignore[union-attr]
                       for ch in st.channels]]) * np.ones((T.size, 1))
@@ -415,14 +371,24 @@ def loop_response(loop: HapticLoop | TeleoperationLoop,
         raise AnalysisError(f"{names}: cannot analyse at T = {T.min():g}..{T.max():g} s, the "
                             "loop's stiffness scale m/T^2 leaves double precision")
     if not np.all(ratio_B <= 1e8):
-        names = ", ".join(f"{st.ports[ch.port].name} virtual damping = {c.damping:g} N*s/m"
+        names = ", ".join(f"{st.ports[ch.port].name} virtual damping = "
+                          f"{getattr(c, 'damping', 0.0):g} N*s/m"
                           for ch, c in zip(pos, ctrls, strict=True))
         raise AnalysisError(f"{names}: cannot analyse |B| T / m = {ratio_B.max():.3g} (at most "
                             "1e8; the loop's poles then lie beyond double precision)")
     free = tuple(port_is_free(pt, float(T.max())) for pt in st.ports)
+    filters = filters_of([ch.controller for ch in st.channels], T)
+    if any(f is not None and f[0] == "affine" for f in filters) and \
+            not np.all(T == loop.period):
+        raise AnalysisError(f"period = {T.min():g}..{T.max():g} s: an AffineController's "
+                            f"coefficients belong to the loop's period {loop.period:g} s only")
+    if any(filters) and not (p == len(st.channels) and all(ch.port == i for i, ch in
+                                                           enumerate(st.channels))):
+        raise AnalysisError("velocity_filter: the exact analysis takes filtered velocity with one "
+                            "controller per port (HVE, PEB), not yet the 4-channel loop")
     resp = LoopResponse(terms, ports, np.broadcast_to(np.array(ratios), (T.size, len(terms))).copy(),
                         beta, scale, q, rigid, T, tuple(ch.port for ch in st.channels),
-                        tuple(ch.measures for ch in st.channels), gain, free)
+                        tuple(ch.measures for ch in st.channels), gain, free, filters)
     if p != len(ports) or (p > 2 and not resp.simple):
         raise AnalysisError("loop: the exact analysis takes one or two ports")
     _check_finite(resp, ctrls)
@@ -473,7 +439,8 @@ def _check_finite(resp: LoopResponse, ctrls) -> None:
     with np.errstate(all="ignore"):
         top = [np.abs(f.vc) * u for f, u in zip(F, (1.0, 1e10, 1e20), strict=True)]   # up to u = U_HI
     if not all(np.all(np.isfinite(t)) for t in top):
-        raise AnalysisError(f"virtual damping = {[c.damping for c in ctrls]} N*s/m, stiffness = "
+        damp = [getattr(c, "damping", 0.0) for c in ctrls]
+        raise AnalysisError(f"virtual damping = {damp} N*s/m, stiffness = "
                             f"{[c.stiffness for c in ctrls]} N/m: cannot analyse these "
                             "parameters, the loop's characteristic function overflows double "
                             "precision")
@@ -500,4 +467,5 @@ def stack_responses(resps: Sequence[LoopResponse]) -> LoopResponse:
     return LoopResponse(r0.terms, ports, cat([r.k for r in resps]), cat([r.beta for r in resps]),
                         cat([r.scale for r in resps]), r0.q, r0.rigid,
                         cat([r.periods for r in resps]), r0.channel_ports, r0.kinds,
-                        cat([r.gain for r in resps]), r0.free)
+                        cat([r.gain for r in resps]), r0.free,
+                        stack_filters([r.filters for r in resps]) if r0.filters else ())

@@ -13,7 +13,12 @@ from fractions import Fraction
 import numpy as np
 
 from hapstab.errors import ModelError, check_period
-from hapstab.models.controllers import DiscreteController, SpringDamper, stiffness_ratios
+from hapstab.models.controllers import (
+    Controller,
+    DiscreteController,
+    has_stiffness,
+    stiffness_ratios,
+)
 from hapstab.models.fourchannel import FourChannelLoop
 from hapstab.models.loops import HapticLoop, TeleoperationLoop, require_loop, split_delay
 from hapstab.models.parts import Device, Impedance
@@ -50,7 +55,7 @@ class Channel:
     ----------
     port : int
         Index of the port the force acts on.
-    controller : SpringDamper or DiscreteController
+    controller : SpringDamper, FilteredSpringDamper or DiscreteController
         H(z).
     terms : tuple of (int, float, float)
         ``(j, sign_j, delay_j)``: the measured port, its sign and its delay in samples
@@ -62,7 +67,7 @@ class Channel:
     """
 
     port: int
-    controller: SpringDamper | DiscreteController
+    controller: Controller
     terms: tuple[tuple[int, float, float], ...]  # (measured port j, sign, delay in samples)
     measures: str = "position"
 
@@ -138,7 +143,7 @@ def channel_ratios(structure: LoopStructure) -> tuple[float, ...] | None:
     """
     chs = structure.channels
     pos = [i for i, ch in enumerate(chs) if ch.measures == "position"]
-    if not all(isinstance(chs[i].controller, SpringDamper) for i in pos):
+    if not all(has_stiffness(chs[i].controller) for i in pos):
         return None
     order = [structure.reference] + [i for i in pos if i != structure.reference]
     ratios = stiffness_ratios([chs[i].controller.stiffness for i in order])  # type: ignore[union-attr]
@@ -168,7 +173,7 @@ def own_stiffness(structure: LoopStructure) -> float:
         The reference controller is not a :class:`SpringDamper`.
     """
     c = structure.channels[structure.reference].controller
-    if not isinstance(c, SpringDamper):
+    if not has_stiffness(c):
         raise ModelError("controller: a SpringDamper is needed to vary the stiffness")
     return c.stiffness
 

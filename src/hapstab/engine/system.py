@@ -44,43 +44,79 @@ from hapstab.engine.structure import (
 )
 from hapstab.engine.zoh import discretize, port_matrices
 from hapstab.errors import ModelError
-from hapstab.models.controllers import DiscreteController, SpringDamper
+from hapstab.models.controllers import (
+    AffineController,
+    Controller,
+    DiscreteController,
+    FilteredSpringDamper,
+    SpringDamper,
+    has_stiffness,
+)
 from hapstab.models.loops import HapticLoop, TeleoperationLoop, split_delay
 
 __all__ = ['SampledSystem', 'build']
 
 
-def _controller_parts(c: SpringDamper | DiscreteController, periods: np.ndarray
-                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Batched state-space (Ah, Bh, Ch, D_fixed, D_per_K) of H(z) = D_per_K*K + rest.
+def _controller_parts(c: Controller, periods: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Batched state-space (Ah, Bh, Ch, D_fixed, D_per_K, Ch_K) of H(z) = K H_K + rest:
+    u = Ch xi + D_fixed e + K (Ch_K xi + D_per_K e).
 
     For a spring-damper, H = K + B/T - (B/T) z^-1: one state, and K only in the
-    direct feed-through. A state with zero output (B = 0) is dropped.
+    direct feed-through. A state with zero output (B = 0) is dropped. A filtered
+    spring-damper is K + Q(z) with Q = (B/T)(1 - z^-1) F(z), realised per period (the
+    low-pass pole depends on T). An affine controller K P + Q: P's and Q's states side
+    by side, K on P's output.
     """
     P = periods.size
-    if isinstance(c, SpringDamper):
+    if isinstance(c, AffineController):
+        pn, pd, qn, qd = c.parts()
+        rep = lambda a: np.broadcast_to(a, (P, *a.shape)).copy()  # noqa: E731
+        Ap, Bp, Cp, Dp = _realize(rep(pn), rep(pd))
+        Aq, Bq, Cq, Dq = _realize(rep(qn), rep(qd))
+        p, q = Ap.shape[1], Aq.shape[1]
+        Ah = np.zeros((P, p + q, p + q))
+        Ah[:, :p, :p], Ah[:, p:, p:] = Ap, Aq
+        z = np.zeros((P, 1, p + q))
+        Ch, ChK = z.copy(), z.copy()
+        Ch[:, :, p:], ChK[:, :, :p] = Cq, Cp
+        return Ah, np.concatenate([Bp, Bq], axis=1), Ch, Dq, Dp, ChK
+    if isinstance(c, SpringDamper) or (isinstance(c, FilteredSpringDamper) and c.damping == 0):
         if c.damping == 0:
             return (np.zeros((P, 0, 0)), np.zeros((P, 0, 1)), np.zeros((P, 1, 0)),
-                    np.zeros(P), np.ones(P))
+                    np.zeros(P), np.ones(P), np.zeros((P, 1, 0)))
         BT = c.damping / periods
         return (np.zeros((P, 1, 1)), np.ones((P, 1, 1)), -BT[:, None, None],
-                BT.copy(), np.ones(P))
+                BT.copy(), np.ones(P), np.zeros((P, 1, 1)))
+    if isinstance(c, FilteredSpringDamper):
+        nums, dens = [], []
+        for T in periods:
+            fn, fd = c.velocity_filter.transfer(float(T))
+            nums.append(np.convolve(fn, [1.0, -1.0]) * (c.damping / T))
+            dens.append(np.concatenate([fd, [0.0]]))
+        Ah, Bh, Ch, D = _realize(np.array(nums), np.array(dens))
+        return Ah, Bh, Ch, D, np.ones(P), np.zeros_like(Ch)
+    assert isinstance(c, DiscreteController)
     num, den = np.array(c.num), np.array(c.den)
-    num = np.concatenate([np.zeros(den.size - num.size), num]) / den[0]
-    den = den / den[0]
-    q = den.size - 1
-    d = num[0]
-    r = num[1:] - d * den[1:]
-    Ah = np.zeros((q, q))
-    if q:
-        Ah[0, :] = -den[1:]
-        Ah[1:, :-1] = np.eye(q - 1)
-    Bh = np.zeros((q, 1))
-    if q:
-        Bh[0, 0] = 1.0
-    Ch = r[None, :]
+    num = np.concatenate([np.zeros(den.size - num.size), num])
     rep = lambda a: np.broadcast_to(a, (P, *a.shape)).copy()  # noqa: E731
-    return rep(Ah), rep(Bh), rep(Ch), np.full(P, d), np.zeros(P)
+    Ah, Bh, Ch, D = _realize(rep(num), rep(den))
+    return Ah, Bh, Ch, D, np.zeros(P), np.zeros_like(Ch)
+
+
+def _realize(num: np.ndarray, den: np.ndarray
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Controllable canonical (Ah, Bh, Ch, D) of num/den (P, q+1), highest power first."""
+    num, den = num / den[:, :1], den / den[:, :1]
+    P, q = den.shape[0], den.shape[1] - 1
+    d = num[:, 0]
+    Ah = np.zeros((P, q, q))
+    Bh = np.zeros((P, q, 1))
+    if q:
+        Ah[:, 0, :] = -den[:, 1:]
+        Ah[:, 1:, :-1] = np.eye(q - 1)
+        Bh[:, 0, 0] = 1.0
+    Ch = (num[:, 1:] - d[:, None] * den[:, 1:])[:, None, :]
+    return Ah, Bh, Ch, d
 
 
 @dataclass
@@ -262,21 +298,25 @@ def _selectors(st: LoopStructure, lay: _Layout, R: np.ndarray
 
 def _controllers(st: LoopStructure, parts: Sequence[tuple[np.ndarray, ...]], lay: _Layout,
                  E: np.ndarray, P: int, ratios: Sequence[float]
-                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[np.ndarray]]:
     """The controllers' forces u = F_u0 s + K F_u1 s (each port's channels added, the
-    K-part of channel c scaled by ``ratios[c]``) and their own state updates (the
-    controller rows of A0)."""
+    K-part of channel c scaled by ``ratios[c]``), their own state updates (the
+    controller rows of A0) and each channel's K-part per unit K, (P, N)."""
     p, N = len(st.ports), lay.N
     Fu0, Fu1, A0 = np.zeros((P, p, N)), np.zeros((P, p, N)), np.zeros((P, N, N))
-    for c, (ch, (Ah, Bh, Ch, Dfix, Dk)) in enumerate(zip(st.channels, parts, strict=True)):
+    krows = []
+    for c, (ch, (Ah, Bh, Ch, Dfix, Dk, ChK)) in enumerate(zip(st.channels, parts, strict=True)):
         i = ch.port
         cs = slice(lay.off_c[c], lay.off_c[c + 1])
         Fu0[:, i, cs] = Ch[:, 0, :]
         Fu0[:, i, :] += Dfix[:, None] * E[c]
-        Fu1[:, i, :] += (Dk * ratios[c])[:, None] * E[c]
+        kr = Dk[:, None] * E[c]
+        kr[:, cs] += ChK[:, 0, :]
+        krows.append(kr)
+        Fu1[:, i, :] += ratios[c] * kr
         A0[:, cs, cs] = Ah
         A0[:, cs, :] += Bh[:, :, :1] * E[c][None, None, :]
-    return Fu0, Fu1, A0
+    return Fu0, Fu1, A0, krows
 
 
 def _registers(A0: np.ndarray, pos: np.ndarray, lay: _Layout) -> None:
@@ -322,13 +362,13 @@ class _KPart:
 
 
 def _stiffness(st: LoopStructure, k: _KPart, Bd: np.ndarray, lay: _Layout,
-               gam_of: dict[tuple[int, float], np.ndarray], E: np.ndarray) -> _KPart:
+               gam_of: dict[tuple[int, float], np.ndarray], krows: list[np.ndarray]) -> _KPart:
     """Which K the loop varies: the reference channel's stiffness, every other
     position channel's kept in ratio (:func:`~hapstab.engine.structure.channel_ratios`,
     already applied to the K-part by :func:`_controllers`); or none (a general H(z),
     or a reference stiffness of 0 with another > 0), when every spring-damper's own
     stiffness is folded into the fixed part."""
-    sd = [isinstance(ch.controller, SpringDamper) for ch in st.channels]
+    sd = [has_stiffness(ch.controller) for ch in st.channels]
     pos = [ch.measures == "position" for ch in st.channels]
     ref = st.channels[st.reference].controller
     if channel_ratios(st) is not None:
@@ -353,7 +393,7 @@ def _stiffness(st: LoopStructure, k: _KPart, Bd: np.ndarray, lay: _Layout,
     own = np.zeros_like(k.Fu1)
     for c, ch in enumerate(st.channels):
         if sd[c]:
-            own[:, ch.port, :] += ch.controller.stiffness * E[c]    # type: ignore[union-attr]
+            own[:, ch.port, :] += ch.controller.stiffness * krows[c]    # type: ignore[union-attr]
     k.Fu0 = k.Fu0 + own
     k.A0[:, :lay.n_plant, :] -= Bd @ own
     for (j, f), r0 in lay.off_f.items():
@@ -372,8 +412,9 @@ def _check_finite(st: LoopStructure, T: np.ndarray, arrays: list[np.ndarray]) ->
     ports = "; ".join(f"{pt.name} mass {pt.device.mass:g} kg, damping {pt.device.damping:g} N*s/m"
                       for pt in st.ports)
     ctrls = "; ".join(f"{st.ports[ch.port].name} stiffness K = {ch.controller.stiffness:g} N/m, "
-                      f"{st.ports[ch.port].name} virtual damping B = {ch.controller.damping:g} N*s/m"
-                      if isinstance(ch.controller, SpringDamper) else "H(z)"
+                      f"{st.ports[ch.port].name} virtual damping B = "
+                      f"{getattr(ch.controller, 'damping', 0.0):g} N*s/m"
+                      if has_stiffness(ch.controller) else "H(z)"
                       for ch in st.channels)
     raise ModelError(f"period = {T.min():g} s: the sampled model overflows double precision with "
                      f"{ports}; controllers {ctrls}")
@@ -410,7 +451,7 @@ def build(loop: HapticLoop | TeleoperationLoop,
     R = termination_rows(st, lay.force, Ac, Cf, off_p)
     pos, vel, E = _selectors(st, lay, R)
     ratios = channel_ratios(st) or (1.0,) * len(st.channels)
-    Fu0, Fu1, A0 = _controllers(st, parts, lay, E, P, ratios)
+    Fu0, Fu1, A0, krows = _controllers(st, parts, lay, E, P, ratios)
     n, p = lay.n_plant, len(st.ports)
     A0[:, :n, :n] = Ad
     A0[:, :n, :] -= Bd @ Fu0
@@ -421,7 +462,7 @@ def build(loop: HapticLoop | TeleoperationLoop,
     held_states(A0, B_ext, B1, Fu0, lay.force, R)
     # C1 rows: the K-part of each port's force; same for every period
     k = _stiffness(st, _KPart(A0, Fu0, Fu1, Fu1.copy(), np.zeros(P), True, ""), Bd, lay, gam_of,
-                   E)
+                   krows)
     _check_finite(st, T, [k.A0, k.C1, k.Fu0, B_ext, B1])
     held = [np.array([d.get(j, -1) for j in range(p)]) if d else None
             for d in (lay.force.u_old, lay.force.f_old)]

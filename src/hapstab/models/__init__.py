@@ -1,7 +1,14 @@
 """What a user describes: devices, impedances, controllers and loops. Frozen,
 validated when built, SI units."""
 
-from hapstab.models.controllers import Controller, DiscreteController, SpringDamper
+from hapstab.models.controllers import (
+    AffineController,
+    Controller,
+    DiscreteController,
+    FilteredSpringDamper,
+    SpringDamper,
+    VelocityFilter,
+)
 from hapstab.models.fourchannel import FourChannelLoop
 from hapstab.models.loops import (
                                   HapticLoop,
@@ -20,5 +27,7 @@ from hapstab.models.parts import (
 )
 
 __all__ = ["Device", "Impedance", "NO_IMPEDANCE", "spring", "mass_spring_damper",
-           "parse_impedance", "SpringDamper", "DiscreteController", "Controller", "HapticLoop",
+           "parse_impedance", "SpringDamper", "FilteredSpringDamper", "VelocityFilter",
+           "AffineController",
+    "DiscreteController", "Controller", "HapticLoop",
            "TeleoperationLoop", "FourChannelLoop", "Loop", "delay_from_seconds", "whole_delay"]

@@ -11,15 +11,18 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Sequence
-from dataclasses import dataclass
-from typing import Any
+from dataclasses import dataclass, field
+from typing import Any, TypeGuard
 
 import numpy as np
 
 from hapstab.errors import ModelError, check_real
 from hapstab.models.parts import _poly
 
-__all__ = ['SpringDamper', 'DiscreteController', 'Controller', 'spring_damper', 'stiffness_ratios']
+__all__ = ['SpringDamper', 'VelocityFilter', 'FilteredSpringDamper', 'AffineController',
+           'DiscreteController',
+           'Controller', 'spring_damper', 'stiffness_controller', 'has_stiffness',
+           'stiffness_ratios']
 
 
 # ----------------------------------------------------------------------- controllers
@@ -67,6 +70,242 @@ class SpringDamper:
 
 
 @dataclass(frozen=True)
+class VelocityFilter:
+    """The velocity estimate a virtual damper acts on: the backward difference
+    ``(x[k] - x[k-1]) / T`` passed through F(z).
+
+    * ``"lowpass"``: a first-order low-pass with cutoff f_c, its pole placed by the
+      exponential map, ``F(z) = (1 - a) / (1 - a z^-1)``, ``a = exp(-2 pi f_c T)``:
+      ``v[k] = a v[k-1] + (1 - a) (x[k] - x[k-1]) / T``, unit gain at DC; as
+      f_c -> infinity, a -> 0 and F -> 1 (the plain backward difference of eq. 23).
+    * ``"average"``: the mean of the last N backward differences,
+      ``v[k] = (x[k] - x[k-N]) / (N T)``, ``F(z) = (1 - z^-N) / (N (1 - z^-1))``;
+      N = 1 is the plain backward difference.
+
+    Parameters
+    ----------
+    kind : str
+        ``"lowpass"`` or ``"average"``.
+    cutoff_hz : float
+        f_c in Hz, > 0 (``"lowpass"`` only; ``inf`` is the plain difference).
+    samples : int
+        N >= 1 (``"average"`` only).
+
+    Raises
+    ------
+    ModelError
+        An unknown kind, f_c <= 0 or not a number, N < 1 or not whole.
+
+    References
+    ----------
+    F. Janabi-Sharifi, V. Hayward and C.-S. J. Chen, "Discrete-time adaptive
+    windowing for velocity estimation", IEEE Trans. Control Systems Technology
+    8(6), 2000 (backward differences, their averages and low-pass filters as the
+    velocity estimators of haptic devices); J. E. Colgate and J. M. Brown, "Factors
+    affecting the Z-width of a haptic display", IEEE ICRA 1994 (the filtered
+    velocity limits the damping a wall can display).
+    """
+
+    kind: str = "lowpass"
+    cutoff_hz: float = float("inf")
+    samples: int = 1
+
+    def __post_init__(self) -> None:
+        if self.kind not in ("lowpass", "average"):
+            raise ModelError(f"velocity filter kind = {self.kind!r}: must be 'lowpass' or 'average'")
+        if self.kind == "lowpass":
+            c = self.cutoff_hz
+            if not isinstance(c, (int, float)) or isinstance(c, bool) or not c > 0:
+                raise ModelError(f"velocity filter cutoff = {c!r} Hz: must be a number > 0 "
+                                 "(inf: no filter)")
+            object.__setattr__(self, "cutoff_hz", float(c))
+        n = self.samples
+        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1 or n > 100000:
+            raise ModelError(f"velocity filter samples = {n!r}: must be a whole number from 1 "
+                             "to 100000")
+        object.__setattr__(self, "samples", int(n))
+
+    @classmethod
+    def parse(cls, spec: str) -> VelocityFilter:
+        """``"lowpass:F"`` (f_c in Hz) or ``"average:N"`` (N samples).
+
+        Raises
+        ------
+        ModelError
+            Anything else, naming the spec and what is allowed.
+        """
+        kind, _, val = str(spec).partition(":")
+        try:
+            if kind == "lowpass":
+                return cls("lowpass", cutoff_hz=float(val))
+            if kind == "average" and val.strip().isdigit():
+                return cls("average", samples=int(val))
+        except ValueError:
+            pass
+        raise ModelError(f"velocity filter = {spec!r}: must be lowpass:F (cutoff F Hz > 0) or "
+                         "average:N (N >= 1 samples)")
+
+    def pole(self, period: np.ndarray | float) -> np.ndarray:
+        """The low-pass pole a = exp(-2 pi f_c T) per period (0 for ``"average"``)."""
+        T = np.asarray(period, float)
+        if self.kind != "lowpass":
+            return np.zeros(T.shape)
+        return np.exp(-2.0 * np.pi * self.cutoff_hz * T)
+
+    def transfer(self, period: float) -> tuple[np.ndarray, np.ndarray]:
+        """(num, den) of F(z) in z, highest power first."""
+        if self.kind == "average":
+            N = self.samples
+            return np.ones(N) / N, np.concatenate([[1.0], np.zeros(N - 1)])
+        a = float(self.pole(period))
+        return np.array([1.0 - a, 0.0]), np.array([1.0, -a])
+
+    def to_dict(self) -> dict[str, Any]:
+        """The filter as JSON-ready values, units in the keys."""
+        if self.kind == "average":
+            return {"kind": "average", "samples": self.samples}
+        return {"kind": "lowpass", "cutoff_Hz": self.cutoff_hz}
+
+    def __str__(self) -> str:
+        return f"average:{self.samples}" if self.kind == "average" else f"lowpass:{self.cutoff_hz:g}"
+
+
+@dataclass(frozen=True)
+class FilteredSpringDamper:
+    """A virtual spring-damper whose damper acts on a filtered velocity estimate:
+    H(z) = K + (B / T)(1 - z^-1) F(z), F the :class:`VelocityFilter`.
+
+    It is affine in the stiffness, H = K P + Q with P = 1, so the exact analyses
+    (K_max, stable intervals, regions) and the simulation take it like eq. (23)'s
+    :class:`SpringDamper`; the analyses derived for eq. (23) itself (the paper's
+    closed forms, passivity, the circle criterion, two-port tests) refuse it.
+
+    Parameters
+    ----------
+    stiffness : float
+        K in N/m, >= 0.
+    damping : float
+        Virtual damping B in N*s/m: any finite real.
+    velocity_filter : VelocityFilter or str
+        The velocity estimate (``"lowpass:200"``, ``"average:4"``).
+
+    Raises
+    ------
+    ModelError
+        If K is negative or not finite, B is not finite, or the filter is invalid.
+
+    References
+    ----------
+    The paper, eq. (23) (the unfiltered H(z)); :class:`VelocityFilter`.
+    """
+
+    stiffness: float = 0.0
+    damping: float = 0.0
+    velocity_filter: Any = field(default_factory=VelocityFilter)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "stiffness", check_real("stiffness", self.stiffness, nonnegative=True))
+        object.__setattr__(self, "damping", check_real("virtual damping", self.damping))
+        f = self.velocity_filter
+        if isinstance(f, str):
+            f = VelocityFilter.parse(f)
+        if not isinstance(f, VelocityFilter):
+            raise ModelError(f"velocity_filter = {f!r}: must be a VelocityFilter or a string "
+                             "lowpass:F / average:N")
+        object.__setattr__(self, "velocity_filter", f)
+
+    def transfer(self, period: float) -> tuple[np.ndarray, np.ndarray]:
+        """(num, den) of H(z) in z, highest power first."""
+        fn, fd = self.velocity_filter.transfer(period)
+        diff = np.convolve(fn, [1.0, -1.0]) * (self.damping / period)   # (z - 1) Fnum / T
+        den = np.concatenate([fd, [0.0]])                                # z Fden
+        num = np.polyadd(self.stiffness * den, diff)
+        return num, den
+
+    def with_stiffness(self, K: float) -> FilteredSpringDamper:
+        return dataclasses.replace(self, stiffness=K)
+
+    def to_dict(self) -> dict[str, Any]:
+        """The controller as JSON-ready values, units in the keys."""
+        return {"type": "filtered-spring-damper", "stiffness_N_per_m": self.stiffness,
+                "virtual_damping_N_s_per_m": self.damping,
+                "velocity_filter": self.velocity_filter.to_dict()}
+
+
+@dataclass(frozen=True)
+class AffineController:
+    """Any discrete controller affine in the stiffness: H(z) = K P(z) + Q(z).
+
+    P and Q are proper transfer functions in z (highest power first) whose
+    coefficients belong to the loop's own sampling period (analyses over other periods
+    refuse it). K is what the exact analyses vary, as for :class:`SpringDamper` (which
+    is P = 1, Q = (B/T)(1 - z^-1)).
+
+    Parameters
+    ----------
+    stiffness : float
+        K >= 0 (N/m when P is dimensionless).
+    p_num, p_den : sequence of float
+        P(z), not identically zero.
+    q_num, q_den : sequence of float
+        Q(z) (default 0).
+
+    Raises
+    ------
+    ModelError
+        A coefficient not finite, a zero denominator, an improper P or Q, P = 0.
+
+    References
+    ----------
+    The paper, eq. (23) (the spring-damper this generalises).
+    """
+
+    stiffness: float = 0.0
+    p_num: tuple[float, ...] = (1.0,)
+    p_den: tuple[float, ...] = (1.0,)
+    q_num: tuple[float, ...] = (0.0,)
+    q_den: tuple[float, ...] = (1.0,)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "stiffness", check_real("stiffness", self.stiffness, nonnegative=True))
+        for name in ("p", "q"):
+            num = _poly(f"controller {name.upper()} numerator", getattr(self, f"{name}_num"))
+            den = _poly(f"controller {name.upper()} denominator", getattr(self, f"{name}_den"))
+            if not np.any(den) or num.size > np.trim_zeros(den, "f").size:
+                raise ModelError(f"controller {name.upper()} = ({list(num)})/({list(den)}): must "
+                                 "have a nonzero denominator and be proper")
+            if name == "p" and not np.any(num):
+                raise ModelError("controller P = 0: K would do nothing; P must not be zero")
+            object.__setattr__(self, f"{name}_num", tuple(map(float, num)))
+            object.__setattr__(self, f"{name}_den", tuple(map(float, den)))
+
+    def parts(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(P_num, P_den, Q_num, Q_den) in z^-1, ascending, each pair padded to the
+        degree of its denominator (z^-deg times the z-polynomials)."""
+        out = []
+        for num, den in ((self.p_num, self.p_den), (self.q_num, self.q_den)):
+            d = np.trim_zeros(np.array(den), "f")
+            n = np.array(num)[-d.size:] if len(num) > d.size else np.array(num)
+            out += [np.concatenate([np.zeros(d.size - n.size), n]), d]
+        return out[0], out[1], out[2], out[3]
+
+    def transfer(self, period: float) -> tuple[np.ndarray, np.ndarray]:
+        """(num, den) of H(z) = K P + Q in z, highest power first."""
+        pn, pd, qn, qd = self.parts()
+        num = np.polyadd(self.stiffness * np.convolve(pn, qd), np.convolve(qn, pd))
+        return num, np.convolve(pd, qd)
+
+    def with_stiffness(self, K: float) -> AffineController:
+        return dataclasses.replace(self, stiffness=K)
+
+    def to_dict(self) -> dict[str, Any]:
+        """The controller as JSON-ready values: H = K P + Q, highest power first."""
+        return {"type": "affine", "stiffness": self.stiffness,
+                "P": {"num": list(self.p_num), "den": list(self.p_den)},
+                "Q": {"num": list(self.q_num), "den": list(self.q_den)}}
+
+
+@dataclass(frozen=True)
 class DiscreteController:
     """Any proper discrete transfer function H(z) = num(z)/den(z) (highest power first).
     It has no stiffness parameter, so :func:`critical_stiffness` does not apply.
@@ -107,7 +346,51 @@ class DiscreteController:
         return np.array(self.num), np.array(self.den)
 
 
-Controller = SpringDamper | DiscreteController
+Controller = SpringDamper | FilteredSpringDamper | AffineController | DiscreteController
+
+#: The controllers with a stiffness K to vary (affine in K: H = K + Q(z)).
+StiffnessController = SpringDamper | FilteredSpringDamper | AffineController
+
+
+def has_stiffness(controller: Any) -> TypeGuard[StiffnessController]:
+    """Whether ``controller`` has a stiffness K that the exact analyses can vary
+    (a :class:`SpringDamper`, :class:`FilteredSpringDamper` or :class:`AffineController`).
+
+    Parameters
+    ----------
+    controller : Any
+        A controller.
+
+    Returns
+    -------
+    bool
+    """
+    return isinstance(controller, (SpringDamper, FilteredSpringDamper, AffineController))
+
+
+def stiffness_controller(controller: Controller, name: str = "controller") -> StiffnessController:
+    """``controller`` itself if it has a stiffness K to vary (:func:`has_stiffness`).
+
+    Parameters
+    ----------
+    controller : Controller
+        The controller to vary K of.
+    name : str
+        Its name in the error message.
+
+    Returns
+    -------
+    SpringDamper or FilteredSpringDamper
+
+    Raises
+    ------
+    ModelError
+        If it is a general :class:`DiscreteController`.
+    """
+    if not has_stiffness(controller):
+        raise ModelError(f"{name}: a SpringDamper or FilteredSpringDamper is needed to vary "
+                         "the stiffness")
+    return controller
 
 
 def spring_damper(controller: Controller, name: str = "controller") -> SpringDamper:

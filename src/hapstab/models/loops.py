@@ -22,10 +22,13 @@ from hapstab.errors import (
     check_real,
 )
 from hapstab.models.controllers import (
+    AffineController,
     Controller,
     DiscreteController,
+    FilteredSpringDamper,
     SpringDamper,
-    spring_damper,
+    has_stiffness,
+    stiffness_controller,
     stiffness_ratios,
 )
 from hapstab.models.delays import DELAY_SNAP, check_fraction, delay_from_seconds, split_delay
@@ -36,8 +39,10 @@ __all__ = ["split_delay", "DELAY_SNAP", "HapticLoop", "TeleoperationLoop", "dela
 
 
 def _check_controller(name: str, c: Any) -> Controller:
-    if not isinstance(c, (SpringDamper, DiscreteController)):
-        raise ModelError(f"{name} = {c!r}: must be a SpringDamper or a DiscreteController")
+    if not isinstance(c, (SpringDamper, FilteredSpringDamper, AffineController,
+                          DiscreteController)):
+        raise ModelError(f"{name} = {c!r}: must be a SpringDamper, FilteredSpringDamper, "
+                         "AffineController or DiscreteController")
     return c
 
 
@@ -103,7 +108,7 @@ class HapticLoop:
         return dataclasses.replace(self, delay_samples=n, fractional_delay=f)
 
     def with_stiffness(self, K: float) -> HapticLoop:
-        return dataclasses.replace(self, controller=spring_damper(self.controller).with_stiffness(K))
+        return dataclasses.replace(self, controller=stiffness_controller(self.controller).with_stiffness(K))
 
     def replace(self, **changes: Any) -> HapticLoop:
         return dataclasses.replace(self, **changes)
@@ -275,8 +280,8 @@ class TeleoperationLoop:
     def with_stiffness(self, K: float) -> TeleoperationLoop:
         """Master stiffness K; the slave's scales with it, keeping K_s/K_m (equal
         stiffnesses, the paper's C_m = C_s case, stay equal)."""
-        cm = spring_damper(self.master_controller, "master_controller")
-        cs = spring_damper(self.slave_controller, "slave_controller")
+        cm = stiffness_controller(self.master_controller, "master_controller")
+        cs = stiffness_controller(self.slave_controller, "slave_controller")
         ratios = stiffness_ratios((cm.stiffness, cs.stiffness))
         if ratios is None:
             raise AnalysisError("master_controller: stiffness 0 with a slave stiffness > 0 leaves "
@@ -415,6 +420,10 @@ def headline(loop: HapticLoop | TeleoperationLoop) -> str:
     else:
         parts = [dev("device", loop.device), term("operator", loop.operator)]
         delay = f"t_d = {loop.delay_s * 1e3:.4g} ms"
+    filters = {str(c.velocity_filter) for c in loop.controllers[:2]
+               if isinstance(c, FilteredSpringDamper)}
+    if filters:
+        parts.append("damper on " + " / ".join(sorted(filters)) + " velocity")
     n = loop.delay_in_samples
     return "; ".join([*parts, f"T = {loop.period * 1e3:.4g} ms, {delay} ({n:.4g} samples)"])
 
@@ -426,7 +435,10 @@ FORCE_NAMES = {"force_to_master": "C_2", "force_to_slave": "C_3", "slave_force_f
 
 def _gain(c: Controller) -> str:
     """A position controller in a headline: ``K 10, B 0.5`` or ``H(z)``."""
-    return f"K {c.stiffness:g}, B {c.damping:g}" if isinstance(c, SpringDamper) else "H(z)"
+    if not isinstance(c, (SpringDamper, FilteredSpringDamper)):
+        return f"K {c.stiffness:g} P(z) + Q(z)" if has_stiffness(c) else "H(z)"
+    vf = getattr(c, "velocity_filter", None)
+    return f"K {c.stiffness:g}, B {c.damping:g}" + (f" on {vf}" if vf else "")
 
 
 def require_loop(loop: Any, name: str = "loop") -> None:
