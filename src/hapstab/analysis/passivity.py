@@ -41,7 +41,7 @@ import numpy as np
 from hapstab.analysis.sweeps import min_eig, psd_limit, refine_minimum, theta_grid
 from hapstab.engine.device_side import DeviceSide, device_side
 from hapstab.errors import AnalysisError
-from hapstab.models.controllers import SpringDamper
+from hapstab.models.controllers import SpringDamper, has_stiffness
 from hapstab.models.loops import HapticLoop, TeleoperationLoop, require_loop, whole_delay
 from hapstab.results import CriticalStiffnessResult, Result, jsonable
 from hapstab.tolerances import DIVISOR_FLOOR, PSD_SLACK, ROOT_ON_CIRCLE
@@ -178,7 +178,9 @@ def critical_stiffness_passivity(loop: HapticLoop | TeleoperationLoop,
     Parameters
     ----------
     loop : HapticLoop or TeleoperationLoop
-        SpringDamper controller(s); for PEB, K is the master's, K_s/K_m kept.
+        Controllers with a stiffness (SpringDamper, FilteredSpringDamper,
+        AffineController: the passivity matrix is affine in K for each); for PEB, K
+        is the master's, K_s/K_m kept.
     approximation : None
         Not applicable (passivity is exact); given only to reject it clearly.
     scaling : {"auto", None}
@@ -199,8 +201,9 @@ def critical_stiffness_passivity(loop: HapticLoop | TeleoperationLoop,
         raise AnalysisError(f"approximation = {approximation!r}: applies to method 'circle' only; "
                             "'passivity' is exact")
     side = _side(loop)
-    if not all(isinstance(ch.controller, SpringDamper) for ch in side.channels):
-        raise AnalysisError("critical stiffness: needs SpringDamper controller(s)")
+    if not all(has_stiffness(ch.controller) for ch in side.channels):
+        raise AnalysisError("critical stiffness: needs SpringDamper controller(s) (or "
+                            "FilteredSpringDamper / AffineController: a stiffness to vary)")
     if side.ratios is None:
         raise AnalysisError("controllers: the master's stiffness is 0 and the slave's is not, so "
                             "K_s/K_m is undefined; give the master a stiffness > 0 to vary K")

@@ -32,7 +32,7 @@ import numpy as np
 
 from hapstab.engine.structure import Channel, channel_ratios, structure_of
 from hapstab.errors import AnalysisError
-from hapstab.models.controllers import SpringDamper
+from hapstab.models.controllers import AffineController, FilteredSpringDamper, SpringDamper
 from hapstab.models.loops import HapticLoop, TeleoperationLoop, split_delay
 
 __all__ = ["DeviceSide", "device_side", "PARTS"]
@@ -242,13 +242,21 @@ def _response(c: object, theta: np.ndarray, T: float, part: str | None, ratio: f
     """H(e^{j theta}) of one controller, or its K-part (times ``ratio``) or B-part.
     A spring-damper's ``1 - e^{-j theta}`` is ``2j sin(theta/2) e^{-j theta/2}``:
     no cancellation as theta -> 0."""
-    if isinstance(c, SpringDamper):
+    z = np.exp(1j * theta)
+    if isinstance(c, (SpringDamper, FilteredSpringDamper)):
         one_minus = 2j * np.sin(theta / 2) * np.exp(-0.5j * theta)
         k = ratio if part == "K" else (0.0 if part == "B" else c.stiffness)
         B = 0.0 if part == "K" else c.damping
+        if isinstance(c, FilteredSpringDamper) and B:
+            fn, fd = c.velocity_filter.transfer(T)
+            one_minus = one_minus * np.polyval(fn, z) / np.polyval(fd, z)
         return k + B * one_minus / T
+    if isinstance(c, AffineController) and part is not None:   # K P(z) + Q(z)
+        pn, pd, qn, qd = c.parts()
+        if part == "K":
+            return ratio * np.polyval(pn, z) / np.polyval(pd, z)
+        return np.polyval(qn, z) / np.polyval(qd, z)
     num, den = c.transfer(T)  # type: ignore[attr-defined]
-    z = np.exp(1j * theta)
     return np.polyval(num, z) / np.polyval(den, z)
 
 
