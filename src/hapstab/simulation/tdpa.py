@@ -179,6 +179,9 @@ class TdpaRecord:
     lags : tuple of int
         Per port, the samples after which the other port's input energy arrives (the
         channel's delay, rounded up, at least 1); empty for a one-port (HVE).
+    commanded : (M+1, p) array, N
+        The force the controller commanded (after a wall and a saturation), before the
+        PC; the force applied is ``SimulationResult.controller_force``.
     energy_in, energy_out : (M+1, p) arrays, J
         Input and output energy of each port as its observer counts it, after the
         sample's PC (``"held"``: the samples completed by t_k).
@@ -193,6 +196,7 @@ class TdpaRecord:
 
     options: TDPA
     lags: tuple[int, ...]
+    commanded: np.ndarray
     energy_in: np.ndarray
     energy_out: np.ndarray
     observed: np.ndarray
@@ -269,8 +273,8 @@ class PassivityController:
         p = self.pos.size
         self.lags = tuple(int(n) for n in lags) if p > 1 else ()
         shape = (n_samples + 1, p)
-        self.e_in, self.e_out, self.W, self.alpha, self.diss = (np.full(shape, np.nan)
-                                                                  for _ in range(5))
+        self.f1, self.e_in, self.e_out, self.W, self.alpha, self.diss = (
+            np.full(shape, np.nan) for _ in range(6))
         self._in, self._out, self._d = [0.0] * p, [0.0] * p, [0.0] * p
         self._net = [0.0] * p                  # one port: its PO, one running sum
         self._x_prev: np.ndarray | None = None
@@ -310,18 +314,21 @@ class PassivityController:
     def _port(self, k: int, j: int, f: float, v: float, held: bool) -> float:
         """One port's PO and PC at sample k; returns the force to apply."""
         T = self.T
+        self.f1[k, j] = f
         q = f * v * T
         base = self._available(k, j)
         W = base + (q if not self.lags else min(q, 0.0))
-        a = 0.0
-        if W < 0 and f * v < 0:
-            # cut the port's output, never reverse the force: alpha <= -f / v
-            a = min(-W / (T * v * v), -f / v)
-            if self.o.max_damping is not None:
-                a = min(a, self.o.max_damping)
-            f += a * v
+        a = cut = 0.0
+        if W < 0 and f * v < 0 and T * abs(v) > 0:     # (T |v| can underflow to 0)
+            # |alpha v| = -W / (T |v|), the force taken off; never more than |f|
+            cut = min(-W / (T * abs(v)), abs(f))
+            a = cut / abs(v)
+            if self.o.max_damping is not None and a > self.o.max_damping:
+                a = self.o.max_damping
+                cut = a * abs(v)
+            f -= math.copysign(cut, f)               # alpha v has the sign of v, not f's
             q = f * v * T
-        self._d[j] += a * v * v * T
+        self._d[j] += cut * abs(v) * T
         if held:
             self._f_prev[j] = f
         else:
@@ -338,7 +345,7 @@ class PassivityController:
         -------
         TdpaRecord
         """
-        arrays = (self.e_in, self.e_out, self.W, self.alpha, self.diss)
+        arrays = (self.f1, self.e_in, self.e_out, self.W, self.alpha, self.diss)
         for a in arrays:
             a.setflags(write=False)
         return TdpaRecord(self.o, self.lags, *arrays)
