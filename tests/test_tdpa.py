@@ -70,7 +70,7 @@ def test_acceptance_delayed_paper_hve_above_kmax_is_bounded_with_tdpa(factor):
     rec = res.tdpa
     assert _bounded(res)
     sw = _stretches(res.position)
-    assert sw[-1] < sw[0] / 3             # it dies out (x0.07 at 2x, x0.23 at 5x, over 35 s)
+    assert sw[-1] < sw[0] / 3             # it dies out (x0.09 at 2x, x0.23 at 5x, over 35 s)
     assert res.verdict.verdict != "unbounded"
     assert np.all(rec.observed >= -_eps(res))      # the acceptance: never below -eps
     assert rec.dissipated[-1, 0] > 0 and np.all(np.diff(rec.dissipated[:, 0]) >= 0)
@@ -305,8 +305,8 @@ def test_the_held_observer_is_exact_for_the_hold_plus_one_predicted_sample():
 
 
 def test_the_held_observer_bounds_very_stiff_walls_until_the_prediction_fails():
-    """200 * 2b/T: bounded (its W dips below 0 by the prediction's error); 1000 * 2b/T:
-    K T^2 / m = 1.3, the one-sample prediction is wrong and the run grows."""
+    """2e4 N/m = 100 * 2b/T: bounded (its W dips below 0 by the prediction's error);
+    2e5 N/m: K T^2 / m = 1.3, the one-sample prediction is wrong and the run diverges."""
     ok = h.simulate(HVE10.with_stiffness(2e4), 10.0, force="step:1", tdpa={"observer": "held"})
     assert _bounded(ok) and ok.tdpa.observed.min() < 0
     bad = h.simulate(HVE10.with_stiffness(2e5), 10.0, force="step:1", tdpa={"observer": "held"})

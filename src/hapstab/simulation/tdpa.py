@@ -55,15 +55,15 @@ Observers
   over the sample *after* it: it does not see the energy a zero-order hold leaks
   (for a spring, ``K/2 sum (x[k+1] - x[k])^2``); against the hold's energy it counts
   about ``K T`` of damping too much, so the device's own damping must cover it: TDPA
-  with this PO bounds a loop only up to about ``K = b / T``. Above that the
+  with this PO bounds a loop only below about ``K = b / T``. Above that the
   simulation shows the run growing while ``W`` stays >= 0.
 * ``"held"`` (hapstab's variant, not the papers'): the energy each held force
   actually delivered, ``f2[k-1] (x[k] - x[k-1])``, known at sample k (the same sum as
   :class:`SimulationResult.port_energy`, exact with an exact encoder), plus the
   coming sample predicted as ``f2[k] v[k] T``. It sees the hold's leak; the
   prediction's error is only corrected at the port's next output, so its ``W`` can
-  dip below 0 by that error (reported). Very stiff walls (``K T^2 / m`` near 0.1)
-  defeat the prediction.
+  dip below 0 by that error (reported). Very stiff walls (``K T^2 / m`` of 0.4 and
+  more) defeat the prediction.
 
 References
 ----------
