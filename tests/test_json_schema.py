@@ -39,6 +39,7 @@ RUNS = [
     ("best-damping", ["best-damping", "hve"]),
     ("simulate", ["simulate", "hve", "-K", "5", "--duration", "0.5"]),
     ("simulate", ["simulate", "hve", "-K", "1e6", "--duration", "1"]),            # overflows
+    ("simulate", ["simulate", "peb", "-K", "8", "-n", "4", "--duration", "1", "--tdpa"]),
     ("reproduce", ["reproduce", "fig5", "--periods", "0.003"]),
     ("demo", ["demo"]),
     ("run", ["run", "study.toml"]),

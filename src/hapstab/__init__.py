@@ -44,7 +44,7 @@ from hapstab.models.parts import (
 from hapstab.outputs import OutputError
 from hapstab.paper.loops import paper_hve, paper_peb
 from hapstab.results import BoundaryResult, CriticalStiffnessResult, StabilityResult
-from hapstab.simulation import SimulationResult, critical_stiffness_simulation, simulate
+from hapstab.simulation import TDPA, SimulationResult, critical_stiffness_simulation, simulate
 
 __version__ = "0.1.0"
 
@@ -61,4 +61,5 @@ __all__ = [
     "stability_region", "RegionResult", "best_damping", "BestDampingResult", "simulate",
     "SimulationResult", "critical_stiffness_simulation", "ArgumentTypeError", "BudgetError",
     "OutputError", "transparency", "TransparencyResult", "llewellyn_test", "TwoPortResult",
+    "TDPA",
 ]

@@ -127,21 +127,24 @@ def _panels(ax: Any, n: int, figsize: tuple[float, float]) -> np.ndarray:
 
 
 def plot_simulation(res: Any, ax: Any = None) -> Any:
-    """Position, controller force and port energy (passivity observer) against time.
+    """Position, controller force and port energy (passivity observer) against time;
+    with TDPA a fourth panel: each port's observed energy and the energy its passivity
+    controller dissipated, and the controller's damping on a second axis.
 
     Parameters
     ----------
     res : SimulationResult
         The run.
-    ax : sequence of 3 matplotlib Axes, optional
-        Where to draw the three panels; a new figure when omitted.
+    ax : sequence of 3 (with TDPA 4) matplotlib Axes, optional
+        Where to draw the panels; a new figure when omitted.
 
     Returns
     -------
-    array of 3 matplotlib Axes
+    array of 3 (with TDPA 4) matplotlib Axes
     """
-    axs = _panels(ax, 3, (7, 7))
-    ax1, ax2, ax3 = axs
+    rec = getattr(res, "tdpa", None)
+    axs = _panels(ax, 3 if rec is None else 4, (7, 7) if rec is None else (7, 9))
+    ax1, ax2, ax3 = axs[:3]
     # an overflowed run: its values past 1e100 are left out (a gap); matplotlib cannot
     # place ticks on an axis that spans ~1e300
     fin = lambda a: np.where(np.abs(a) < 1e100, a, np.nan)  # noqa: E731
@@ -160,7 +163,9 @@ def plot_simulation(res: Any, ax: Any = None) -> Any:
     ax1.set_ylabel("position (m)")
     ax2.set_ylabel("force (N)")
     ax3.set_ylabel("port energy (J)")
-    ax3.set_xlabel("time (s)")
+    axs[-1].set_xlabel("time (s)")
+    if rec is not None:
+        _tdpa_panel(res, rec, axs[3], fin)
     v = res.verdict
     nl = res.nonlinear or {}
     if nl.get("wall") is not None:
@@ -183,6 +188,21 @@ def plot_simulation(res: Any, ax: Any = None) -> Any:
     if ax is None:
         ax1.figure.tight_layout()
     return axs
+
+
+def _tdpa_panel(res: Any, rec: Any, ax: Any, fin: Any) -> None:
+    """The TDPA panel: observed energy and dissipated energy per port (J), the PC's
+    damping (N*s/m) on a second axis."""
+    twin = ax.twinx()
+    for j, lab in enumerate(res.labels):
+        ax.plot(res.time, fin(rec.observed[:, j]), "-", lw=0.8, label=f"observed energy, {lab}")
+        ax.plot(res.time, fin(rec.dissipated[:, j]), "--", lw=0.8,
+                label=f"dissipated by the PC, {lab}")
+        twin.plot(res.time, fin(rec.damping[:, j]), ":", lw=0.6, color="0.4",
+                  label=f"PC damping, {lab}")
+    ax.set_ylabel("TDPA energy (J)")
+    twin.set_ylabel("PC damping (N s/m)", fontsize=8)
+    twin.legend(fontsize=7, loc="lower right")
 
 
 def plot_reproduction(res: Any, ax: Any = None) -> Any:

@@ -29,7 +29,8 @@ from hapstab.results import dumps
 # ------------------------------------------------------------------ simulate
 #: What ``stability`` describes beside a run: the loop itself, or its linearisation.
 LINEAR_LOOP = {False: "this loop",
-               True: "linearised loop (wall always in contact, no saturation or quantisation)"}
+               True: "linearised loop (wall always in contact, no saturation, quantisation or "
+                     "TDPA)"}
 
 @click.group("simulate")
 def simulate_cmd() -> None:
@@ -67,16 +68,30 @@ def _simulate_command(kind: str) -> None:
                   help="Write the sampled time series as CSV.")
     @click.option("--plot", "plot_path", type=click.Path(dir_okay=False), default=None,
                   help="Write a plot of position, force and port energy (PNG, SVG, PDF).")
+    @click.option("--tdpa", is_flag=True,
+                  help="Time-domain passivity observer and controller at every device port "
+                       "(Hannaford & Ryu 2002; PEB: Ryu, Artigas & Preusche 2010).")
+    @click.option("--tdpa-observer", type=click.Choice(["paper", "held"]), default=None,
+                  help="TDPA observer: paper (f[k] v[k] T, default) or held (the energy each "
+                       "held force delivered, plus the coming sample). Implies --tdpa.")
+    @click.option("--tdpa-velocity", type=click.Choice(["backward", "sensor"]), default=None,
+                  help="TDPA velocity: backward difference of the encoder (default) or a "
+                       "velocity sensor. Implies --tdpa.")
+    @click.option("--tdpa-max-damping", type=POS, default=None,
+                  help="Cap on the TDPA controller's damping in N*s/m (default none). "
+                       "Implies --tdpa.")
     def _cmd(stiffness: float, duration: float, force: str, x0: float, saturation: float | None,
              resolution: float | None, quantizer: str, rest: float | None, dense: int,
-             csv_path: str | None, plot_path: str | None, as_json: bool,
-             environment_force: str | None = None, wall: float | None = None,
-             wall_pulls: bool = False, **kw: Any) -> None:
+             csv_path: str | None, plot_path: str | None, as_json: bool, tdpa: bool,
+             tdpa_observer: str | None, tdpa_velocity: str | None,
+             tdpa_max_damping: float | None, environment_force: str | None = None,
+             wall: float | None = None, wall_pulls: bool = False, **kw: Any) -> None:
         check_files(csv_path, plot_path, as_json)
         loop = make(kw, stiffness)
+        pc = _tdpa(tdpa, tdpa_observer, tdpa_velocity, tdpa_max_damping)
         res = _run(kind, loop, duration, force, x0, rest, environment_force, wall, wall_pulls,
                    saturation=saturation, resolution=resolution, quantizer=quantizer,
-                   dense=dense)
+                   dense=dense, tdpa=pc)
         files = write_files(res, csv_path, plot_path)
         d = _summary(res, loop, files)
         emit(d, as_json, lambda: _table(kind, stiffness, loop, res, d, files), loop)
@@ -85,6 +100,14 @@ def _simulate_command(kind: str) -> None:
         _cmd = deco(_cmd)
     _cmd.__doc__ = (f"Simulate the {kind.upper()} loop at stiffness K: verdict, growth rate, "
                     "CSV and plot of position, force and port energy.")
+
+
+def _tdpa(on: bool, observer: str | None, velocity: str | None,
+          max_damping: float | None) -> dict[str, Any] | None:
+    """The TDPA options of the command line (any --tdpa-* option turns it on)."""
+    given = {k: v for k, v in (("observer", observer), ("velocity", velocity),
+                               ("max_damping", max_damping)) if v is not None}
+    return given if on or given else None
 
 
 def _run(kind: str, loop: Any, duration: float, force: str, x0: float, rest: float | None,
@@ -149,8 +172,19 @@ def _table(kind: str, stiffness: float, loop: Any, res: Any, d: dict[str, Any],
         rows.append((f"max |x| {lab}", f"{_g(d[f'max_abs_position_{lab}'])} m"))
         rows.append((f"max |u| {lab}", f"{_g(d[f'max_abs_force_{lab}'])} N"))
         rows.append((f"energy into controller from {lab}", f"{_g(d[f'final_port_energy_{lab}'])} J"))
+        if res.tdpa is not None:
+            rows.append((f"TDPA at {lab}", _tdpa_row(d, lab)))
     rows.extend([("why", v.reason)] + [("wrote", f) for f in files])
     rich_table(f"simulation, {kind}, K = {stiffness:g} N/m", rows, loop)
+
+
+def _tdpa_row(d: dict[str, Any], lab: str) -> str:
+    """One port's TDPA in a line: lowest observed energy, dissipated energy, peak damping
+    and how often the controller acted."""
+    return (f"observed energy >= {_g(d[f'tdpa_min_observed_energy_J_{lab}'], '.3g')} J, "
+            f"dissipated {_g(d[f'tdpa_dissipated_J_{lab}'], '.4g')} J, peak damping "
+            f"{_g(d[f'tdpa_peak_damping_N_s_per_m_{lab}'], '.4g')} N s/m, active in "
+            f"{_g(100 * d[f'tdpa_active_fraction_{lab}'], '.3g')} % of samples")
 
 
 def _doubling(rate: float) -> str:

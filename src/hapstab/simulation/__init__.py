@@ -6,6 +6,7 @@ from hapstab.simulation.propagate import propagate_linear
 from hapstab.simulation.result import SimulationResult
 from hapstab.simulation.run import quantize, simulate
 from hapstab.simulation.search import critical_stiffness_simulation
+from hapstab.simulation.tdpa import TDPA
 
 __all__ = ["simulate", "SimulationResult", "BoundednessVerdict", "force_samples",
-           "critical_stiffness_simulation", "propagate_linear", "quantize"]
+           "critical_stiffness_simulation", "propagate_linear", "quantize", "TDPA"]

@@ -17,6 +17,7 @@ import numpy as np
 from hapstab.errors import AnalysisError
 from hapstab.results import Result, jsonable
 from hapstab.simulation.growth import BoundednessVerdict
+from hapstab.simulation.tdpa import TdpaRecord
 
 __all__ = ["SimulationResult"]
 
@@ -62,6 +63,10 @@ class SimulationResult(Result):
         Rest position of each port's operator / environment spring (m).
     model : str
         The loop in one line (devices, terminations, T, delay), for titles.
+    tdpa : TdpaRecord or None
+        With ``simulate(..., tdpa=...)``: each port's observed energy, the passivity
+        controller's damping and the energy it dissipated, sample by sample
+        (:mod:`hapstab.simulation.tdpa`).
     """
 
     time: np.ndarray
@@ -84,6 +89,7 @@ class SimulationResult(Result):
     dense_velocity: np.ndarray | None = field(default=None, repr=False)
     rest: tuple[float, ...] = ()
     model: str = ""
+    tdpa: TdpaRecord | None = field(default=None, repr=False)
 
     @property
     def bounded(self) -> bool:
@@ -106,6 +112,8 @@ class SimulationResult(Result):
             out[f"max_abs_position_{lab}"] = float(np.abs(self.position[:, j]).max())
             out[f"max_abs_force_{lab}"] = float(np.abs(self.controller_force[:, j]).max())
             out[f"final_port_energy_{lab}"] = float(self.port_energy[-1, j])
+        if self.tdpa is not None:
+            out.update(self.tdpa.summary(self.labels))
         return jsonable(out)
 
     def to_dict(self, series: bool = False) -> dict[str, Any]:
@@ -133,6 +141,8 @@ class SimulationResult(Result):
             cols[f"port_energy_{lab}_J"] = self.port_energy[:, j]
         if self.contact is not None:
             cols["contact"] = self.contact.astype(int)
+        if self.tdpa is not None:
+            cols.update(self.tdpa.columns(self.labels))
         return cols
 
     def to_csv(self, path: Any, dense: bool = False) -> None:
@@ -164,16 +174,17 @@ class SimulationResult(Result):
             np.savetxt(fh, data, delimiter=",", header=",".join(cols), comments="", fmt="%.17g")
 
     def plot(self, ax: Any = None) -> Any:
-        """Position, controller force and port energy against time.
+        """Position, controller force and port energy against time (and, with TDPA, the
+        observed energy, the PC's dissipation and its damping).
 
         Parameters
         ----------
-        ax : sequence of 3 matplotlib Axes, optional
-            Where to draw the three panels; a new figure when omitted.
+        ax : sequence of 3 (with TDPA 4) matplotlib Axes, optional
+            Where to draw the panels; a new figure when omitted.
 
         Returns
         -------
-        array of 3 matplotlib Axes
+        array of 3 (with TDPA 4) matplotlib Axes
             (:func:`hapstab.plotting.save_plot` writes the figure to a file.)
         """
         from hapstab.plotting import plot_simulation

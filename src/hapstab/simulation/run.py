@@ -58,6 +58,7 @@ from hapstab.simulation.propagate import propagate_linear
 from hapstab.simulation.result import SimulationResult
 from hapstab.simulation.stepper import dense_output, roles_of, step_nonlinear
 from hapstab.simulation.stepper import initial_state as make_initial_state
+from hapstab.simulation.tdpa import passivity_controller
 
 __all__ = ["simulate", "quantize", "QUANTIZERS"]
 
@@ -79,7 +80,7 @@ def simulate(loop: HapticLoop | TeleoperationLoop, duration: float, *,
              saturation: float | None = None,
              resolution: float | None = None, quantizer: str = "floor",
              dense: int = 0, max_memory: float | None = None,
-             max_seconds: float | None = None) -> SimulationResult:
+             max_seconds: float | None = None, tdpa: Any = None) -> SimulationResult:
     """Simulate the sampled-data loop for ``duration`` seconds.
 
     Parameters
@@ -120,6 +121,11 @@ def simulate(loop: HapticLoop | TeleoperationLoop, duration: float, *,
     max_memory, max_seconds : float, optional
         Budget for this run in bytes and seconds (default :mod:`hapstab.budget`'s):
         the run's cost is estimated first and a run above it is refused.
+    tdpa : bool, TDPA or dict, optional
+        The time-domain passivity approach at every device port
+        (:mod:`hapstab.simulation.tdpa`): True for the papers' observer and controller,
+        or a :class:`~hapstab.simulation.tdpa.TDPA` (``observer``, ``velocity``,
+        ``max_damping``). It makes the run nonlinear; ``result.tdpa`` records it.
 
     Returns
     -------
@@ -155,11 +161,10 @@ def simulate(loop: HapticLoop | TeleoperationLoop, duration: float, *,
     budget.check(budget.simulation_cost(M, sysm.order, p, dense), max_memory, max_seconds)
     roles = roles_of(loop, sysm)
     t = np.arange(M + 1) * T
-    F = np.zeros((M, p))
-    F[:, 0] = force_samples(force, t[:-1], "force")
-    if p > 1:
-        F[:, 1] = force_samples(environment_force, t[:-1], "environment_force")
+    F = _forces(force, environment_force, t, p)
     pos_idx = np.argmax(sysm.pos, axis=1)
+    if (pc := passivity_controller(tdpa, loop, M, pos_idx)) is not None:
+        nl["tdpa"] = pc.o.to_dict()
     measure = _measurement(roles, p, nl)
     s0 = make_initial_state(sysm, roles, initial_position, initial_velocity, initial_state, measure)
     springs = np.array([pt.termination.stiffness for pt in structure_of(loop).ports])
@@ -176,7 +181,7 @@ def simulate(loop: HapticLoop | TeleoperationLoop, duration: float, *,
             U = S @ roles.Fu.T
     else:
         S, U, contact = step_nonlinear(roles, s0, Fd, M, measure, wall is not None,
-                                       nl.get("saturation"), wall_pulls)
+                                       nl.get("saturation"), wall_pulls, pc)
     X, V = S[:, pos_idx], S[:, pos_idx + 1]
     with np.errstate(over="ignore", invalid="ignore"):
         dX = np.diff(X, axis=0)
@@ -199,7 +204,17 @@ def simulate(loop: HapticLoop | TeleoperationLoop, duration: float, *,
     K = float(sysm.stiffness[0])
     return SimulationResult(t, X, V, U, Fx, pe, ee, S, verdict, tuple(sysm.labels), T,
                             loop.delay_in_samples, K, nl, contact, dt, dx, dv,
-                            rest=tuple(float(r) for r in rest), model=headline(loop))
+                            rest=tuple(float(r) for r in rest), model=headline(loop),
+                            tdpa=None if pc is None else pc.record())
+
+
+def _forces(force: ForceSpec, environment_force: ForceSpec, t: np.ndarray, p: int) -> np.ndarray:
+    """The exogenous forces held over each sample, (M, p): operator, environment."""
+    F = np.zeros((t.size - 1, p))
+    F[:, 0] = force_samples(force, t[:-1], "force")
+    if p > 1:
+        F[:, 1] = force_samples(environment_force, t[:-1], "environment_force")
+    return F
 
 
 def _samples(duration: float, T: float, dense: Any) -> int:

@@ -145,12 +145,15 @@ def initial_state(sysm: SampledSystem, roles: Roles, x0: Any, v0: Any, full: Any
 
 def step_nonlinear(roles: Roles, s0: np.ndarray, F: np.ndarray, M: int,
                    measure: Callable[[np.ndarray], np.ndarray], has_wall: bool,
-                   sat: float | None, wall_pulls: bool = False
-                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+                   sat: float | None, wall_pulls: bool = False,
+                   adjust: Callable[[int, np.ndarray, np.ndarray, np.ndarray], np.ndarray]
+                   | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
     """Step M samples with the nonlinear elements at the sampling instants.
 
     The wall (port 0) acts only on a penetration it sees, and then only pushes
-    (``u >= 0``) unless ``wall_pulls``; saturation clips each port's force.
+    (``u >= 0``) unless ``wall_pulls``; saturation clips each port's force; then
+    ``adjust(k, u, s, measured s)``, if given, returns the force to apply (the
+    passivity controller of :mod:`hapstab.simulation.tdpa`).
 
     Returns
     -------
@@ -177,6 +180,8 @@ def step_nonlinear(roles: Roles, s0: np.ndarray, F: np.ndarray, M: int,
                 u[0] = 0.0               # a wall pushes out; its damper must not pull in
         if sat is not None:
             u = np.clip(u, -sat, sat)
+        if adjust is not None:
+            u = adjust(k, u, s, sm)
         U[k] = u
         if k == M:
             break
