@@ -180,6 +180,11 @@ def _timing_options(kind: str, ranges: bool) -> list[Callable]:
     return timing
 
 
+#: What a device's --friction does (its help).
+FRICTION_HELP = ("simulate models it exactly (stick-slip between samples); the linear analyses "
+                 "analyse the friction-free loop and say so.")
+
+
 def loop_options(kind: str, ranges: bool = False) -> Callable:
     """Options of one loop kind (defaults: the paper's simulation study). With
     ``ranges``, --period and --delay take a range / list (for ``boundary``)."""
@@ -190,6 +195,8 @@ def loop_options(kind: str, ranges: bool = False) -> Callable:
                          help="Device mass m in kg."),
             click.option("--damping", "-b", type=NONNEG, default=0.1, show_default=True,
                          help="Device damping b in N*s/m."),
+            click.option("--friction", type=NONNEG, default=0.0, show_default=True,
+                         help=f"Device Coulomb friction f_c in N. {FRICTION_HELP}"),
         ]
     else:
         devices = _teleoperator_options(kind)
@@ -230,6 +237,10 @@ def _teleoperator_options(kind: str) -> list[Callable]:
         click.option("--master-damping", type=NONNEG, default=0.02, show_default=True, help="N*s/m"),
         click.option("--slave-mass", type=POS, default=0.015, show_default=True, help="kg"),
         click.option("--slave-damping", type=NONNEG, default=0.02, show_default=True, help="N*s/m"),
+        click.option("--master-friction", type=NONNEG, default=0.0, show_default=True,
+                     help=f"Master's Coulomb friction f_c in N. {FRICTION_HELP}"),
+        click.option("--slave-friction", type=NONNEG, default=0.0, show_default=True,
+                     help=f"Slave's Coulomb friction f_c in N. {FRICTION_HELP}"),
         click.option("--environment", default="spring:1", show_default=True,
                      help="Environment impedance: none | spring:k | msd:m,b,k."),
         ratio,
@@ -305,7 +316,7 @@ def _period(kw: dict[str, Any]) -> float:
 
 def hve_loop(kw: dict[str, Any], stiffness: float = 0.0) -> HapticLoop:
     """Build the HVE from parsed options."""
-    loop = HapticLoop(Device(kw["mass"], kw["damping"]),
+    loop = HapticLoop(Device(kw["mass"], kw["damping"], kw.get("friction", 0.0)),
                       SpringDamper(stiffness, kw["virtual_damping"]),
                       parse_impedance(kw["operator"], "--operator"), _period(kw), kw["delay"])
     if kw.get("delay_s") is not None:
@@ -323,14 +334,19 @@ def peb_loop(kw: dict[str, Any], stiffness: float = 0.0) -> TeleoperationLoop:
     B_s = kw.get("slave_virtual_damping")
     cm = SpringDamper(stiffness, kw["virtual_damping"])
     cs = SpringDamper(ratio * stiffness, kw["virtual_damping"] if B_s is None else B_s)
-    loop = TeleoperationLoop(Device(kw["master_mass"], kw["master_damping"]),
-                             Device(kw["slave_mass"], kw["slave_damping"]), cm, cs,
+    loop = TeleoperationLoop(*teleoperator_devices(kw), cm, cs,
                              parse_impedance(kw["operator"], "--operator"),
                              parse_impedance(kw["environment"], "--environment"),
                              _period(kw), kw["delay"],
                              position_scale=kw.get("position_scale", 1.0),
                              force_scale=kw.get("force_scale", 1.0))
     return with_delays(loop, kw)
+
+
+def teleoperator_devices(kw: dict[str, Any]) -> tuple[Device, Device]:
+    """The master and the slave from parsed options (mass, damping, Coulomb friction)."""
+    return (Device(kw["master_mass"], kw["master_damping"], kw.get("master_friction", 0.0)),
+            Device(kw["slave_mass"], kw["slave_damping"], kw.get("slave_friction", 0.0)))
 
 
 def with_delays(loop: TeleoperationLoop, kw: dict[str, Any]) -> TeleoperationLoop:
@@ -405,11 +421,21 @@ def provenance(loop: Any = None) -> dict[str, Any]:
 
 
 def emit(data: dict[str, Any], as_json: bool, table: Callable[[], None], loop: Any = None) -> None:
-    """One JSON object on stdout (the result, then its provenance), or a readable table."""
+    """One JSON object on stdout (the result, then its provenance), or a readable table.
+    A linear analysis of a loop with Coulomb friction says that it analysed the
+    friction-free loop (``friction_note``, unless its reason says so already)."""
+    from hapstab.models.parts import friction_note
+
+    note = friction_note(loop) if loop is not None and "nonlinear" not in data else ""
+    if note and note in str(data.get("reason", "")):
+        note = ""
     if as_json:
-        click.echo(dumps({**data, **provenance(loop)}))
+        click.echo(dumps({**data, **({"friction_note": note} if note else {}),
+                          **provenance(loop)}))
     else:
         table()
+        if note:
+            click.echo(note)
 
 
 def console() -> Any:

@@ -122,6 +122,9 @@ class SampledSystem:
     held_u, held_f : (p,) int arrays or None
         The state holding each port's controller / exogenous force of the previous
         sample (-1: none); only ports whose force a channel measures have them.
+    fractional : tuple of (int, float, int)
+        ``(port j, fraction f, state)`` of each fractional-delay state
+        ``x_j(kT - fT)`` (its registers follow it).
     fixed_reason : str
         Why K cannot be varied (empty when it can).
     rigid_modes : int
@@ -151,6 +154,7 @@ class SampledSystem:
     E_channels: np.ndarray | None = None
     held_u: np.ndarray | None = None
     held_f: np.ndarray | None = None
+    fractional: tuple[tuple[int, float, int], ...] = ()
 
     @property
     def order(self) -> int:
@@ -430,4 +434,5 @@ def build(loop: HapticLoop | TeleoperationLoop,
                          n_plant=n, labels=[pt.name for pt in st.ports], varies_with_K=k.varies,
                          E=E if st.simple else None, fixed_reason=k.fixed_reason,
                          rigid_modes=rigid_modes(st, float(T.max())), E_channels=E,
-                         held_u=held[0], held_f=held[1])
+                         held_u=held[0], held_f=held[1],
+                         fractional=tuple((j, f, r0) for (j, f), r0 in lay.off_f.items()))

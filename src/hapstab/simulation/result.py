@@ -62,6 +62,9 @@ class SimulationResult(Result):
         Rest position of each port's operator / environment spring (m).
     model : str
         The loop in one line (devices, terminations, T, delay), for titles.
+    friction_energy : (M+1, p) J or None
+        Energy each device's Coulomb friction has dissipated since t = 0 (exact: f_c
+        times the distance slid); None when no device has friction.
     """
 
     time: np.ndarray
@@ -84,6 +87,7 @@ class SimulationResult(Result):
     dense_velocity: np.ndarray | None = field(default=None, repr=False)
     rest: tuple[float, ...] = ()
     model: str = ""
+    friction_energy: np.ndarray | None = field(default=None, repr=False)
 
     @property
     def bounded(self) -> bool:
@@ -106,6 +110,8 @@ class SimulationResult(Result):
             out[f"max_abs_position_{lab}"] = float(np.abs(self.position[:, j]).max())
             out[f"max_abs_force_{lab}"] = float(np.abs(self.controller_force[:, j]).max())
             out[f"final_port_energy_{lab}"] = float(self.port_energy[-1, j])
+            if self.friction_energy is not None:
+                out[f"friction_dissipated_J_{lab}"] = float(self.friction_energy[-1, j])
         return jsonable(out)
 
     def to_dict(self, series: bool = False) -> dict[str, Any]:
@@ -131,6 +137,8 @@ class SimulationResult(Result):
             cols[f"u_{lab}_N"] = self.controller_force[:, j]
             cols[f"f_ext_{lab}_N"] = self.exogenous_force[:, j]
             cols[f"port_energy_{lab}_J"] = self.port_energy[:, j]
+            if self.friction_energy is not None:
+                cols[f"friction_energy_{lab}_J"] = self.friction_energy[:, j]
         if self.contact is not None:
             cols["contact"] = self.contact.astype(int)
         return cols
