@@ -29,7 +29,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.integrate import solve_ivp
 
-__all__ = ["Body", "Track", "advance", "hve_run", "peb_run"]
+__all__ = ["Body", "Track", "acceleration", "advance", "hve_run", "peb_run"]
 
 #: solve_ivp's relative tolerance (the brief's); the absolute one is this times the
 #: state's scale (1e-12 of a mm, a mm/s, a mN: far below every compared difference)
@@ -113,8 +113,9 @@ def _mode(body: Body, y: np.ndarray, g: float) -> int:
 
 
 def advance(body: Body, y: np.ndarray, g: float, t0: float, T: float, track: Track | None
-            ) -> np.ndarray:
-    """The state ``[x, v, F_m, E_friction, E_viscous]`` T seconds after t0, g held."""
+            ) -> tuple[np.ndarray, int]:
+    """The state ``[x, v, F_m, E_friction, E_viscous]`` T seconds after t0, g held, and
+    the mode (+-1 sliding, 0 stuck) just before then."""
     t, y = t0, np.array(y, float)
     sigma = _mode(body, y, g)
     scale = np.maximum(np.abs(y), 1e-3)                  # (m, m/s, N, J, J) scales
@@ -141,7 +142,14 @@ def advance(body: Body, y: np.ndarray, g: float, t0: float, T: float, track: Tra
             sigma = 0 if abs(N) <= body.fc else (1 if N > 0 else -1)
         else:
             sigma = 1 if i == 0 else -1
-    return y
+    return y, sigma
+
+
+def acceleration(body: Body, y: np.ndarray, g: float, sigma: int) -> float:
+    """The body's acceleration in mode sigma (0 while stuck)."""
+    if sigma == 0:
+        return 0.0
+    return (g - body.b * y[1] - body.k * (y[0] - body.rest) - y[2] - sigma * body.fc) / body.M
 
 
 def _q(x: float, res: float | None, how: str) -> float:
@@ -155,14 +163,19 @@ def _q(x: float, res: float | None, how: str) -> float:
 def hve_run(body: Body, *, K: float, B: float, T: float, delay: float, x0: float, v0: float,
             force, n: int, wall: float | None = None, wall_pulls: bool = False,
             resolution: float | None = None, quantizer: str = "floor",
-            saturation: float | None = None, track: bool = False):
+            saturation: float | None = None, track: bool = False,
+            force_feedback: tuple[float, float, float] | None = None):
     """The HVE of Fig. 2a with friction. ``delay`` in samples (may be fractional: the
-    controller reads q(x(kT - delay T)), x0 before t = 0). Returns positions,
-    velocities (n + 1,), forces u (n,), friction and viscous energies (n + 1,) and the
-    track."""
+    controller reads q(x(kT - delay T)), x0 before t = 0). ``force_feedback = (c, m_z,
+    b_z)`` subtracts ``c F_h`` from u: F_h the force the operator (mass m_z, damper b_z
+    and the body's spring) applies to the device just before the sample, ``F_h = f_old -
+    m_z a - b_z v - k (x - rest)`` (a the acceleration just before, f_old the force held
+    over the last sample; at rest before t = 0). Returns positions, velocities (n + 1,),
+    forces u (n,), friction and viscous energies (n + 1,) and the track."""
     tr = Track()
     y = np.array([x0, v0, 0.0, 0.0, 0.0])
     X, V, U, EF, EV = [x0], [v0], [], [0.0], [0.0]
+    f_old, accel = 0.0, 0.0
     off = 0.0 if wall is None else wall
     e_prev = _q(x0, resolution, quantizer) - off
     for k in range(n):
@@ -172,11 +185,16 @@ def hve_run(body: Body, *, K: float, B: float, T: float, delay: float, x0: float
         e = _q(xd, resolution, quantizer) - off
         u = K * e + B * (e - e_prev) / T
         e_prev = e
+        if force_feedback is not None:
+            c, mz, bz = force_feedback
+            Fh = f_old - mz * accel - bz * y[1] - body.k * (y[0] - body.rest)
+            u -= c * Fh
         if wall is not None and (e <= 0 or (not wall_pulls and u < 0)):
             u = 0.0
         if saturation is not None:
             u = min(max(u, -saturation), saturation)
-        y = advance(body, y, float(force[k]) - u, t, T, tr)
+        y, sigma = advance(body, y, float(force[k]) - u, t, T, tr)
+        f_old, accel = float(force[k]), acceleration(body, y, float(force[k]) - u, sigma)
         X.append(y[0]), V.append(y[1]), U.append(u), EF.append(y[3]), EV.append(y[4])
     out = [np.array(a) for a in (X, V, U, EF, EV)]
     return (*out, tr) if track else tuple(out)
@@ -205,8 +223,8 @@ def peb_run(master: Body, slave: Body, *, K: float, B: float, T: float, delay: i
         if saturation is not None:
             um = min(max(um, -saturation), saturation)
             us = min(max(us, -saturation), saturation)
-        ym = advance(master, ym, float(force_m[k]) - um, k * T, T, None)
-        ys = advance(slave, ys, float(force_s[k]) - us, k * T, T, None)
+        ym = advance(master, ym, float(force_m[k]) - um, k * T, T, None)[0]
+        ys = advance(slave, ys, float(force_s[k]) - us, k * T, T, None)[0]
         XM.append(ym[0]), XS.append(ys[0]), UM.append(um), US.append(us)
         FM.append(ym[3]), FS.append(ys[3])
     return tuple(np.array(a) for a in (XM, XS, UM, US, FM, FS))
