@@ -50,7 +50,7 @@ from scipy.linalg import matrix_balance
 from scipy.optimize import brentq
 
 from hapstab.engine.structure import Port
-from hapstab.engine.zoh import discretize, port_matrices
+from hapstab.engine.zoh import expm_batched, port_matrices
 from hapstab.errors import ModelError
 
 __all__ = ["FrictionPort", "LoopFriction", "Segment", "first_zero", "MAX_EVENTS"]
@@ -90,8 +90,15 @@ class Segment:
 
 
 class _Flow:
-    """``z' = A z + b g`` for a constant g: exact propagation (the engine's ZOH
-    discretisation) and the data of the derivative bounds (module docstring)."""
+    """``z' = A z + b g`` for a constant g: exact propagation and the data of the
+    derivative bounds (module docstring).
+
+    The matrix exponential is taken of the diagonally scaled state (the scaling of the
+    bounds, e.g. ``[x, v / w]`` for a spring-mass block), whose norm is near the motion's
+    own rate: scaling and squaring on the unscaled ``[[0, 1], [-w^2, 0]] t`` loses about
+    ``eps ||A t||`` (1e-9 relative for 1e6 N/m on 20 g at T = 1 ms, measured against
+    the closed form), the scaled one stays at rounding.
+    """
 
     def __init__(self, A: np.ndarray, b: np.ndarray, active: np.ndarray) -> None:
         self.A, self.b, self.active = A, b, active
@@ -105,18 +112,31 @@ class _Flow:
                 best = (mu, sc, At)
         assert best is not None
         self.mu, self.scale, self.At = best
+        q = A.shape[0]
+        full = np.full(q, float(best[1][0]) if best[1].size else 1.0)
+        full[active] = best[1]
+        self._aug = np.zeros((q + 1, q + 1))      # the scaled [[A, b], [0, 0]]
+        self._aug[:q, :q] = A * full[None, :] / full[:, None]
+        self._aug[:q, q] = b / full
+        self._full = full
 
     def maps(self, t: float, cache: bool = True) -> tuple[np.ndarray, np.ndarray]:
         """``(e^{At}, int_0^t e^{As} ds b)``."""
         hit = self._cache.get(t) if cache else None
         if hit is None:
-            Ad, Bd = discretize(self.A, self.b[:, None], np.array([t]))
-            hit = (Ad[0], Bd[0, :, 0])
+            Ad, Bd = self.maps_many(np.array([t]))
+            hit = (Ad[0], Bd[0])
             if cache:
                 if len(self._cache) > 64:
                     self._cache.clear()
                 self._cache[t] = hit
         return hit
+
+    def maps_many(self, ts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The maps of :meth:`maps` for each time of ``ts``: (P, q, q) and (P, q)."""
+        E = expm_batched(self._aug[None] * np.asarray(ts, float)[:, None, None])
+        q, sc = self.A.shape[0], self._full
+        return E[:, :q, :q] * sc[None, :, None] / sc[None, None, :], E[:, :q, q] * sc[None]
 
     def prop(self, z: np.ndarray, g: float, t: float, cache: bool = True) -> np.ndarray:
         """The state t seconds after z."""
@@ -419,14 +439,14 @@ class LoopFriction:
         M = S.shape[0] - 1
         for j, fp, sl in self.ports:
             Z, sig = S[:-1, sl], self.modes[:M, j].astype(float)
-            Ad, Bd = discretize(fp.slide.A, fp.slide.b[:, None], taus)
+            Ad, Bd = fp.slide.maps_many(taus)
             inner = np.einsum("inj,kj->kin", Ad, Z) \
-                + Bd[None, :, :, 0] * (G[:, j] - sig * fp.fc)[:, None, None]
+                + Bd[None, :, :] * (G[:, j] - sig * fp.fc)[:, None, None]
             stuck = sig == 0
             if fp.stick is None:
                 inner[stuck] = Z[stuck][:, None, :]
             else:
-                As = discretize(fp.stick.A, np.zeros((fp.q, 1)), taus)[0]
+                As = fp.stick.maps_many(taus)[0]
                 inner[stuck] = np.einsum("inj,kj->kin", As, Z[stuck])
             for (k, jj), segs in self.events.items():
                 if jj == j:
