@@ -397,3 +397,12 @@ def test_cli_linear_commands_note_friction(tmp_path):
     assert s["nonlinear"]["coulomb_friction_N"] == [0.05]
     k = _json(["kmax", "--study", str(study)])
     assert "friction-free loop" in k["reason"]
+
+
+def test_a_run_that_overflows_says_so():
+    # far beyond K_max the motion grows until double precision runs out: overflowed, not
+    # (as an uncertified event search on inf would make it) a body that stuck
+    loop = h.HapticLoop(h.Device(0.15, 0.1, 0.05), h.SpringDamper(1e6, 0.0), "spring:1", T, 0)
+    res = simulate(loop, 1.0, force="step:1")
+    assert not np.all(np.isfinite(res.position)) and res.verdict.verdict == "unbounded"
+    assert "overflowed" in res.verdict.reason

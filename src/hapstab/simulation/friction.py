@@ -53,7 +53,7 @@ from hapstab.engine.structure import Port
 from hapstab.engine.zoh import expm_batched, port_matrices
 from hapstab.errors import ModelError
 
-__all__ = ["FrictionPort", "LoopFriction", "Segment", "first_zero", "MAX_EVENTS"]
+__all__ = ["FrictionPort", "LoopFriction", "Segment", "Overflow", "first_zero", "MAX_EVENTS"]
 
 #: Brent's method's relative tolerance in time: its smallest allowed value (4 eps),
 #: so an event is located to machine precision.
@@ -166,12 +166,25 @@ def _scalings(A: np.ndarray) -> list[np.ndarray]:
     return [s for s in out if np.all(np.isfinite(s)) and np.all(s > 0)]
 
 
+class Overflow(ArithmeticError):
+    """The port's state left double precision (a growing run): the run has overflowed."""
+
+
 def _derivs(flow: _Flow, z: np.ndarray, g: float, c: np.ndarray, d: float
             ) -> tuple[float, float, float, float]:
-    """y, y', y'' at z and the scaled norm of w = z'."""
+    """y, y', y'' at z and the scaled norm of w = z'.
+
+    Raises
+    ------
+    Overflow
+        One of them is not finite.
+    """
     w = flow.A @ z + flow.b * g
-    return (float(c @ z) + d, float(c @ w), float(c @ (flow.A @ w)),
-            float(np.linalg.norm(w[flow.active] / flow.scale)))
+    out = (float(c @ z) + d, float(c @ w), float(c @ (flow.A @ w)),
+           float(np.linalg.norm(w[flow.active] / flow.scale)))
+    if not all(map(math.isfinite, out)):
+        raise Overflow
+    return out
 
 
 def first_zero(flow: _Flow, z0: np.ndarray, g: float, c: np.ndarray, d: float, tau: float,
@@ -215,6 +228,8 @@ def first_zero(flow: _Flow, z0: np.ndarray, g: float, c: np.ndarray, d: float, t
         h = min(h, tau - a)
         grow = math.exp(min(flow.mu * h, 700.0)) * nw
         c2, c3 = n1 * grow, n2 * grow      # |y''|, |y'''| on [a, a + h]
+        if not math.isfinite(c2 + c3):
+            raise Overflow
         if ya > 0:                         # y >= ya + y1 s - c2 s^2 / 2, concave in s
             clear = ya + y1 * h - 0.5 * c2 * h * h > 0
         else:                              # y / s >= y1 + y2 s / 2 - c3 s^2 / 6
@@ -417,9 +432,14 @@ class LoopFriction:
         self.dissipated[k + 1] = self.dissipated[k]
         for j, fp, sl in self.ports:
             gj = float(g[j])
-            if not (np.all(np.isfinite(s[sl])) and math.isfinite(gj)):
-                continue                     # overflowed: the stepper stops the run
-            z, diss, segs, phi = fp.advance(s[sl], gj)
+            try:
+                if not (np.all(np.isfinite(s[sl])) and math.isfinite(gj)):
+                    raise Overflow
+                with np.errstate(over="ignore", invalid="ignore"):
+                    z, diss, segs, phi = fp.advance(s[sl], gj)
+            except Overflow:                 # the stepper ends the run as overflowed
+                nxt[sl] = np.inf
+                continue
             nxt[sl] = z
             for tau, row in self.frac[j]:
                 nxt[row] = fp.state_at(segs, gj, tau)[0]
