@@ -91,6 +91,8 @@ def simulate(loop: HapticLoop | TeleoperationLoop, duration: float, *,
     Parameters
     ----------
     loop : HapticLoop or TeleoperationLoop
+        The loop; a device's ``coulomb_friction`` is simulated exactly (stick-slip between
+        the samples, :mod:`hapstab.simulation.friction`) and makes the run nonlinear.
     duration : float
         Seconds; ``round(duration / T)`` samples are taken.
     force : force spec, optional
