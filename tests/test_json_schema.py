@@ -40,6 +40,10 @@ RUNS = [
     ("simulate", ["simulate", "hve", "-K", "5", "--duration", "0.5"]),
     ("simulate", ["simulate", "hve", "-K", "1e6", "--duration", "1"]),            # overflows
     ("simulate", ["simulate", "peb", "-K", "8", "-n", "4", "--duration", "1", "--tdpa"]),
+    ("simulate", ["simulate", "peb", "-K", "5", "--duration", "0.5", "--master-friction", "0.01",
+                  "--slave-friction", "0.02"]),                                 # stick-slip
+    ("kmax", ["kmax", "hve", "--friction", "0.1"]),             # the friction-free loop, noted
+    ("boundary", ["boundary", "hve", "--period", "0.001", "--friction", "0.1"]),
     ("reproduce", ["reproduce", "fig5", "--periods", "0.003"]),
     ("demo", ["demo"]),
     ("run", ["run", "study.toml"]),

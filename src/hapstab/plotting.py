@@ -160,6 +160,9 @@ def plot_simulation(res: Any, ax: Any = None) -> Any:
                      label=f"applied force on {lab}")
         ax3.plot(res.time, fin(res.port_energy[:, j]), "-", lw=0.8,
                  label=f"into controller from {lab}")
+        fe = getattr(res, "friction_energy", None)     # the device's Coulomb friction
+        if fe is not None and np.any(fe[:, j]):
+            ax3.plot(res.time, fin(fe[:, j]), ":", lw=0.8, label=f"dissipated by friction, {lab}")
     ax1.set_ylabel("position (m)")
     ax2.set_ylabel("force (N)")
     ax3.set_ylabel("port energy (J)")

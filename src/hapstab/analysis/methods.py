@@ -6,6 +6,7 @@ same models; :data:`METHODS` is the one table of them.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable, Sequence
 from typing import Any
@@ -28,6 +29,7 @@ from hapstab.errors import (
     check_reals,
 )
 from hapstab.models.loops import HapticLoop, TeleoperationLoop, require_loop
+from hapstab.models.parts import friction_note
 from hapstab.results import BoundaryResult, CriticalStiffnessResult
 from hapstab.simulation.search import critical_stiffness_simulation
 
@@ -108,6 +110,8 @@ def critical_stiffness(loop: HapticLoop | TeleoperationLoop, method: str = "exac
     Returns
     -------
     CriticalStiffnessResult
+        Of the friction-free loop: with a device's Coulomb friction the reason says
+        so (:func:`~hapstab.models.parts.friction_note`).
 
     Raises
     ------
@@ -116,7 +120,9 @@ def critical_stiffness(loop: HapticLoop | TeleoperationLoop, method: str = "exac
     """
     f = _resolve(method)
     _check_options(method, f, options)
-    return f(loop, **options)
+    res = f(loop, **options)
+    note = friction_note(loop)      # a linear method: the friction-free loop
+    return dataclasses.replace(res, reason=f"{res.reason}; {note}") if note else res
 
 
 def _check_options(method: str, f: Callable[..., Any], options: dict[str, Any]) -> None:

@@ -15,11 +15,11 @@ from typing import Any
 
 import click
 
-from hapstab.cli.options import RATIO, REAL, Number, _period, with_delays
+from hapstab.cli.options import RATIO, REAL, Number, _period, teleoperator_devices, with_delays
 from hapstab.errors import HapstabError, ModelError
 from hapstab.models.controllers import SpringDamper
 from hapstab.models.fourchannel import FourChannelLoop
-from hapstab.models.parts import Device, parse_impedance
+from hapstab.models.parts import parse_impedance
 
 __all__ = ["four_channel_options", "four_channel_loop"]
 
@@ -122,8 +122,7 @@ def four_channel_loop(kw: dict[str, Any], stiffness: float = 0.0) -> FourChannel
     r1, B1 = _or(kw.get("c1_stiffness_ratio"), rs), _or(kw.get("c1_virtual_damping"), Bs)
     r4, B4 = _or(kw.get("c4_stiffness_ratio"), rm), _or(kw.get("c4_virtual_damping"), B)
     gains = {name: kw.get(name, 0.0) for _, name, _ in FORCE_OPTIONS}
-    loop = FourChannelLoop(Device(kw["master_mass"], kw["master_damping"]),
-                           Device(kw["slave_mass"], kw["slave_damping"]),
+    loop = FourChannelLoop(*teleoperator_devices(kw),
                            SpringDamper(rm * stiffness, B), SpringDamper(rs * stiffness, Bs),
                            parse_impedance(kw["operator"], "--operator"),
                            parse_impedance(kw["environment"], "--environment"),

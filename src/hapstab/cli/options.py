@@ -6,14 +6,13 @@ from __future__ import annotations
 
 import math
 import re
-import sys
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from collections.abc import Callable
 from contextvars import ContextVar
 from typing import Any
 
 import click
 
+from hapstab.cli import output
 from hapstab.errors import PERIOD_RANGE, HapstabError
 from hapstab.models.controllers import (
     Controller,
@@ -24,6 +23,9 @@ from hapstab.models.controllers import (
 from hapstab.models.loops import HapticLoop, TeleoperationLoop
 from hapstab.models.parts import Device, parse_impedance
 from hapstab.results import dumps
+
+#: The human output, re-exported: the commands import it from here.
+console, fmt, progress, rich_table = output.console, output.fmt, output.progress, output.rich_table
 
 
 class Number(click.ParamType):
@@ -185,6 +187,11 @@ def _timing_options(kind: str, ranges: bool) -> list[Callable]:
     return timing
 
 
+#: What a device's --friction does (its help).
+FRICTION_HELP = ("simulate models it exactly (stick-slip between samples); the linear analyses "
+                 "analyse the friction-free loop and say so.")
+
+
 def loop_options(kind: str, ranges: bool = False) -> Callable:
     """Options of one loop kind (defaults: the paper's simulation study). With
     ``ranges``, --period and --delay take a range / list (for ``boundary``)."""
@@ -195,6 +202,8 @@ def loop_options(kind: str, ranges: bool = False) -> Callable:
                          help="Device mass m in kg."),
             click.option("--damping", "-b", type=NONNEG, default=0.1, show_default=True,
                          help="Device damping b in N*s/m."),
+            click.option("--friction", type=NONNEG, default=0.0, show_default=True,
+                         help=f"Device Coulomb friction f_c in N. {FRICTION_HELP}"),
         ]
     else:
         devices = _teleoperator_options(kind)
@@ -239,6 +248,10 @@ def _teleoperator_options(kind: str) -> list[Callable]:
         click.option("--master-damping", type=NONNEG, default=0.02, show_default=True, help="N*s/m"),
         click.option("--slave-mass", type=POS, default=0.015, show_default=True, help="kg"),
         click.option("--slave-damping", type=NONNEG, default=0.02, show_default=True, help="N*s/m"),
+        click.option("--master-friction", type=NONNEG, default=0.0, show_default=True,
+                     help=f"Master's Coulomb friction f_c in N. {FRICTION_HELP}"),
+        click.option("--slave-friction", type=NONNEG, default=0.0, show_default=True,
+                     help=f"Slave's Coulomb friction f_c in N. {FRICTION_HELP}"),
         click.option("--environment", default="spring:1", show_default=True,
                      help="Environment impedance: none | spring:k | msd:m,b,k."),
         ratio,
@@ -322,7 +335,7 @@ def _spring_damper(K: float, B: float, kw: dict[str, Any]) -> Controller:
 
 def hve_loop(kw: dict[str, Any], stiffness: float = 0.0) -> HapticLoop:
     """Build the HVE from parsed options."""
-    loop = HapticLoop(Device(kw["mass"], kw["damping"]),
+    loop = HapticLoop(Device(kw["mass"], kw["damping"], kw.get("friction", 0.0)),
                       _spring_damper(stiffness, kw["virtual_damping"], kw),
                       parse_impedance(kw["operator"], "--operator"), _period(kw), kw["delay"])
     if kw.get("delay_s") is not None:
@@ -340,14 +353,19 @@ def peb_loop(kw: dict[str, Any], stiffness: float = 0.0) -> TeleoperationLoop:
     B_s = kw.get("slave_virtual_damping")
     cm = _spring_damper(stiffness, kw["virtual_damping"], kw)
     cs = _spring_damper(ratio * stiffness, kw["virtual_damping"] if B_s is None else B_s, kw)
-    loop = TeleoperationLoop(Device(kw["master_mass"], kw["master_damping"]),
-                             Device(kw["slave_mass"], kw["slave_damping"]), cm, cs,
+    loop = TeleoperationLoop(*teleoperator_devices(kw), cm, cs,
                              parse_impedance(kw["operator"], "--operator"),
                              parse_impedance(kw["environment"], "--environment"),
                              _period(kw), kw["delay"],
                              position_scale=kw.get("position_scale", 1.0),
                              force_scale=kw.get("force_scale", 1.0))
     return with_delays(loop, kw)
+
+
+def teleoperator_devices(kw: dict[str, Any]) -> tuple[Device, Device]:
+    """The master and the slave from parsed options (mass, damping, Coulomb friction)."""
+    return (Device(kw["master_mass"], kw["master_damping"], kw.get("master_friction", 0.0)),
+            Device(kw["slave_mass"], kw["slave_damping"], kw.get("slave_friction", 0.0)))
 
 
 def with_delays(loop: TeleoperationLoop, kw: dict[str, Any]) -> TeleoperationLoop:
@@ -422,73 +440,18 @@ def provenance(loop: Any = None) -> dict[str, Any]:
 
 
 def emit(data: dict[str, Any], as_json: bool, table: Callable[[], None], loop: Any = None) -> None:
-    """One JSON object on stdout (the result, then its provenance), or a readable table."""
+    """One JSON object on stdout (the result, then its provenance), or a readable table.
+    A linear analysis of a loop with Coulomb friction says that it analysed the
+    friction-free loop (``friction_note``, unless its reason says so already)."""
+    from hapstab.models.parts import friction_note
+
+    note = friction_note(loop) if loop is not None and "nonlinear" not in data else ""
+    if note and note in str(data.get("reason", "")):
+        note = ""
     if as_json:
-        click.echo(dumps({**data, **provenance(loop)}))
+        click.echo(dumps({**data, **({"friction_note": note} if note else {}),
+                          **provenance(loop)}))
     else:
         table()
-
-
-def console() -> Any:
-    """A rich console as wide as the terminal, and 160 columns when piped or redirected
-    (rich's 80 would cut numbers in tables); on standard error when standard output
-    carries a file (``--csv -``)."""
-    import shutil
-
-    from rich.console import Console
-
-    from hapstab.cli.files import STDOUT_TAKEN
-
-    class _Console(Console):
-        def on_broken_pipe(self) -> None:   # rich exits 1 silently; hapstab says so (exit 2)
-            self.quiet = True
-            raise BrokenPipeError(32, "Broken pipe")
-
-    return _Console(width=max(shutil.get_terminal_size((160, 24)).columns, 100),
-                    stderr=STDOUT_TAKEN.get())
-
-
-def rich_table(title: str, rows: list[tuple[str, str]], loop: Any = None) -> None:
-    """Two columns, no header; with ``loop``, a last row saying which loop it is for."""
-    from rich.markup import escape
-    from rich.table import Table
-
-    from hapstab.models.loops import headline
-
-    t = Table(title=escape(title), show_header=False)
-    t.add_column(style="bold")
-    t.add_column()
-    for k, v in [*rows, *([("loop", headline(loop))] if loop is not None else [])]:
-        t.add_row(escape(k), escape(v))
-    console().print(t)
-
-
-def fmt(x: float) -> str:
-    return "inf" if math.isinf(x) else f"{x:.10g}"
-
-
-@contextmanager
-def progress(total: int, description: str, quiet: bool = False
-             ) -> Iterator[Callable[[int], None] | None]:
-    """A progress bar on stderr when it is a terminal (nothing with --json, when piped,
-    or when ``quiet``); yields ``advance(k)`` or None.
-
-    Parameters
-    ----------
-    total : int
-        Steps in all.
-    description : str
-        What is being done.
-    quiet : bool
-        No bar (e.g. ``--json``).
-    """
-    if quiet or not sys.stderr.isatty():
-        yield None
-        return
-    from rich.console import Console
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn
-
-    with Progress("[progress.description]{task.description}", BarColumn(), MofNCompleteColumn(),
-                  TimeElapsedColumn(), transient=True, console=Console(stderr=True)) as prog:
-        task = prog.add_task(description, total=total)
-        yield lambda k: prog.advance(task, k)
+        if note:
+            click.echo(note)

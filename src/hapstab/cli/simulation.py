@@ -29,8 +29,8 @@ from hapstab.results import dumps
 # ------------------------------------------------------------------ simulate
 #: What ``stability`` describes beside a run: the loop itself, or its linearisation.
 LINEAR_LOOP = {False: "this loop",
-               True: "linearised loop (wall always in contact, no saturation, quantisation or "
-                     "TDPA)"}
+               True: "linearised loop (wall always in contact, no saturation, quantisation, "
+                     "friction or TDPA)"}
 
 @click.group("simulate")
 def simulate_cmd() -> None:
@@ -132,7 +132,7 @@ def _run(kind: str, loop: Any, duration: float, force: str, x0: float, rest: flo
 def _summary(res: Any, loop: Any, files: list[str]) -> dict[str, Any]:
     """The run's summary beside the exact verdict of the linear loop: this one, or
     with nonlinear elements the linearised one (wall always in contact, no
-    saturation or quantisation)."""
+    saturation, quantisation or friction)."""
     from hapstab.analysis.exact.core import stability
 
     ex = stability(loop)

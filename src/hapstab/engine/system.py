@@ -36,6 +36,7 @@ from hapstab.engine.forces import (
     termination_rows,
 )
 from hapstab.engine.structure import (
+    Channel,
     LoopStructure,
     channel_ratios,
     periods_of,
@@ -158,6 +159,9 @@ class SampledSystem:
     held_u, held_f : (p,) int arrays or None
         The state holding each port's controller / exogenous force of the previous
         sample (-1: none); only ports whose force a channel measures have them.
+    fractional : tuple of (int, float, int)
+        ``(port j, fraction f, state)`` of each fractional-delay state
+        ``x_j(kT - fT)`` (its registers follow it).
     fixed_reason : str
         Why K cannot be varied (empty when it can).
     rigid_modes : int
@@ -187,6 +191,7 @@ class SampledSystem:
     E_channels: np.ndarray | None = None
     held_u: np.ndarray | None = None
     held_f: np.ndarray | None = None
+    fractional: tuple[tuple[int, float, int], ...] = ()
 
     @property
     def order(self) -> int:
@@ -404,6 +409,15 @@ def _stiffness(st: LoopStructure, k: _KPart, Bd: np.ndarray, lay: _Layout,
     return k
 
 
+def _name(st: LoopStructure, ch: Channel) -> str:
+    """A channel in a message: its port's name, or Lawrence's C4 / C1 for a position
+    controller that reads only the other port (the 4-channel loop's transmitted ones)."""
+    if len(st.ports) == 2 and ch.measures == "position" and all(j != ch.port for j, _, _ in
+                                                                ch.terms):
+        return "C4" if ch.port == 0 else "C1"
+    return st.ports[ch.port].name
+
+
 def _check_finite(st: LoopStructure, T: np.ndarray, arrays: list[np.ndarray]) -> None:
     """Refuse a model that overflowed double precision, naming its parameters."""
     with np.errstate(all="ignore"):
@@ -411,8 +425,8 @@ def _check_finite(st: LoopStructure, T: np.ndarray, arrays: list[np.ndarray]) ->
             return
     ports = "; ".join(f"{pt.name} mass {pt.device.mass:g} kg, damping {pt.device.damping:g} N*s/m"
                       for pt in st.ports)
-    ctrls = "; ".join(f"{st.ports[ch.port].name} stiffness K = {ch.controller.stiffness:g} N/m, "
-                      f"{st.ports[ch.port].name} virtual damping B = "
+    ctrls = "; ".join(f"{_name(st, ch)} stiffness K = {ch.controller.stiffness:g} N/m, "
+                      f"{_name(st, ch)} virtual damping B = "
                       f"{getattr(ch.controller, 'damping', 0.0):g} N*s/m"
                       if has_stiffness(ch.controller) else "H(z)"
                       for ch in st.channels)
@@ -471,4 +485,5 @@ def build(loop: HapticLoop | TeleoperationLoop,
                          n_plant=n, labels=[pt.name for pt in st.ports], varies_with_K=k.varies,
                          E=E if st.simple else None, fixed_reason=k.fixed_reason,
                          rigid_modes=rigid_modes(st, float(T.max())), E_channels=E,
-                         held_u=held[0], held_f=held[1])
+                         held_u=held[0], held_f=held[1],
+                         fractional=tuple((j, f, r0) for (j, f), r0 in lay.off_f.items()))

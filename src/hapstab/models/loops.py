@@ -349,7 +349,8 @@ def parameters(loop: HapticLoop | TeleoperationLoop) -> list[tuple[str, str]]:
     -------
     list of (str, str)
     """
-    units = {"kg": "kg", "N_s_per_m": "N*s/m", "N_per_m": "N/m", "s": "s", "samples": "samples"}
+    units = {"kg": "kg", "N_s_per_m": "N*s/m", "N_per_m": "N/m", "s": "s", "samples": "samples",
+             "N": "N"}
 
     def flat(d: dict[str, Any], prefix: str) -> list[tuple[str, str]]:
         out: list[tuple[str, str]] = []
@@ -399,7 +400,8 @@ def headline(loop: HapticLoop | TeleoperationLoop) -> str:
     str
     """
     def dev(name: str, d: Device) -> str:
-        return f"{name} {d.mass:g} kg, {d.damping:g} N*s/m"
+        fc = f", f_c {d.coulomb_friction:g} N" if d.coulomb_friction else ""
+        return f"{name} {d.mass:g} kg, {d.damping:g} N*s/m{fc}"
 
     def term(name: str, z: Any) -> str:
         return f"{name} {getattr(z, 'label', 'none') if z is not None else 'none'}"

@@ -17,13 +17,15 @@ import numpy as np
 from hapstab.errors import ModelError, check_poly, check_real
 from hapstab.tolerances import COEFF_ZERO
 
-__all__ = ['Device', 'Impedance', 'NO_IMPEDANCE', 'spring', 'mass_spring_damper', 'parse_impedance']
+__all__ = ['friction_note', 'Device', 'Impedance', 'NO_IMPEDANCE', 'spring', 'mass_spring_damper',
+           'parse_impedance']
 
 
 # --------------------------------------------------------------------------- devices
 @dataclass(frozen=True)
 class Device:
-    """A 1-DOF haptic interface or robot: ``mass * a + damping * v = force``.
+    """A 1-DOF haptic interface or robot:
+    ``mass * a + damping * v + friction = force``.
 
     Parameters
     ----------
@@ -31,19 +33,35 @@ class Device:
         m in kg, > 0.
     damping : float
         Physical viscous damping b in N*s/m, >= 0.
+    coulomb_friction : float
+        Coulomb (dry) friction level f_c in N, >= 0 (default 0: none). It acts on the
+        velocity of the port's one rigid body (the device with the operator /
+        environment rigidly attached to it): ``-f_c sign(v)`` while it slides, and
+        while it sticks (v = 0) whatever force up to f_c keeps it there. Only
+        :func:`hapstab.simulate` models it (exactly, stick-slip with events located
+        between samples); the linear analyses analyse the friction-free loop and say
+        so in their results.
     """
 
     mass: float
     damping: float = 0.0
+    coulomb_friction: float = 0.0
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "mass", check_real("mass", self.mass, positive=True))
         object.__setattr__(self, "damping",
                            check_real("damping", self.damping, nonnegative=True))
+        object.__setattr__(self, "coulomb_friction",
+                           check_real("coulomb_friction", self.coulomb_friction,
+                                      nonnegative=True))
 
     def to_dict(self) -> dict[str, Any]:
-        """The device as JSON-ready values, units in the keys."""
-        return {"mass_kg": self.mass, "damping_N_s_per_m": self.damping}
+        """The device as JSON-ready values, units in the keys (``coulomb_friction_N``
+        only when the device has friction)."""
+        d: dict[str, Any] = {"mass_kg": self.mass, "damping_N_s_per_m": self.damping}
+        if self.coulomb_friction > 0:
+            d["coulomb_friction_N"] = self.coulomb_friction
+        return d
 
 
 # ------------------------------------------------------------------------ impedances
@@ -258,3 +276,39 @@ def parse_impedance(spec: str, name: str = "--operator") -> Impedance:
     except ModelError as e:
         raise ModelError(f"{name} = {spec!r}: {e}; {allowed}") from None
     raise ModelError(f"{name} = {spec!r}: not understood; {allowed}")
+
+
+def friction_note(loop: Any) -> str:
+    """What a linear analysis says of a loop whose devices have Coulomb friction: that it
+    analysed the friction-free loop, and what that means with friction.
+
+    Parameters
+    ----------
+    loop : HapticLoop or TeleoperationLoop
+        The loop.
+
+    Returns
+    -------
+    str
+        Empty when no device has friction.
+
+    References
+    ----------
+    J. E. Colgate and G. G. Schenkel, "Passivity of a class of sampled-data systems:
+    application to haptic interfaces", J. Robotic Systems 14(1), 1997 (a device's
+    dissipation buys passivity); J. J. Abbott and A. M. Okamura, "Effects of position
+    quantization and sampling rate on virtual-wall passivity", IEEE Trans. Robotics
+    21(5), 2005 (Coulomb friction enlarges the passive region).
+    """
+    devs = [(n, getattr(loop, n)) for n in ("device", "master", "slave") if hasattr(loop, n)]
+    fc = [f"{n} {d.coulomb_friction:g} N" for n, d in devs if d.coulomb_friction > 0]
+    if not fc:
+        return ""
+    return ("NOTE: this linear analysis is of the friction-free loop; the Coulomb friction "
+            f"({', '.join(fc)}) is not in it. Friction is a force of at most f_c that only "
+            "dissipates energy: where the linear loop is stable every run stays bounded (a "
+            "bounded force on an exponentially stable loop), and a loop passive without "
+            "friction stays passive with it, so its limits are conservative (Abbott & Okamura "
+            "2005 show friction enlarges the passive region); where it is unstable, large "
+            "motions still grow, but friction may hold a small one at rest or in a limit cycle: "
+            "simulate to see")

@@ -67,6 +67,9 @@ class SimulationResult(Result):
         With ``simulate(..., tdpa=...)``: each port's observed energy, the passivity
         controller's damping and the energy it dissipated, sample by sample
         (:mod:`hapstab.simulation.tdpa`).
+    friction_energy : (M+1, p) J or None
+        Energy each device's Coulomb friction has dissipated since t = 0 (exact: f_c
+        times the distance slid); None when no device has friction.
     """
 
     time: np.ndarray
@@ -90,6 +93,7 @@ class SimulationResult(Result):
     rest: tuple[float, ...] = ()
     model: str = ""
     tdpa: TdpaRecord | None = field(default=None, repr=False)
+    friction_energy: np.ndarray | None = field(default=None, repr=False)
 
     @property
     def bounded(self) -> bool:
@@ -112,6 +116,8 @@ class SimulationResult(Result):
             out[f"max_abs_position_{lab}"] = float(np.abs(self.position[:, j]).max())
             out[f"max_abs_force_{lab}"] = float(np.abs(self.controller_force[:, j]).max())
             out[f"final_port_energy_{lab}"] = float(self.port_energy[-1, j])
+            if self.friction_energy is not None:
+                out[f"friction_dissipated_J_{lab}"] = float(self.friction_energy[-1, j])
         if self.tdpa is not None:
             out.update(self.tdpa.summary(self.labels))
         return jsonable(out)
@@ -139,6 +145,8 @@ class SimulationResult(Result):
             cols[f"u_{lab}_N"] = self.controller_force[:, j]
             cols[f"f_ext_{lab}_N"] = self.exogenous_force[:, j]
             cols[f"port_energy_{lab}_J"] = self.port_energy[:, j]
+            if self.friction_energy is not None:
+                cols[f"friction_energy_{lab}_J"] = self.friction_energy[:, j]
         if self.contact is not None:
             cols["contact"] = self.contact.astype(int)
         if self.tdpa is not None:

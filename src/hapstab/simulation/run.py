@@ -20,6 +20,11 @@ controller sees and commands them:
   device leaves it fast) gives no force, unless ``wall_pulls=True``;
 * ``saturation``: each actuator force is clipped to +-saturation.
 
+A device's Coulomb friction (``Device(..., coulomb_friction=f_c)``) acts between the
+samples: each port's stick-slip motion under the held force is integrated exactly, its
+events (the velocity reaching 0, the net force leaving the stick band) located to
+machine precision (:mod:`hapstab.simulation.friction`). It makes the run nonlinear.
+
 The operator's (and the environment's) spring is relaxed at the port's initial
 position, where a hand holding the device at rest puts it; ``rest_position``
 moves it.
@@ -52,6 +57,7 @@ from hapstab.engine.zoh import port_matrices
 from hapstab.errors import ModelError, check_real, check_reals
 from hapstab.models.loops import HapticLoop, TeleoperationLoop, headline, require_loop
 from hapstab.simulation.behaviour import assess_nonlinear
+from hapstab.simulation.friction import LoopFriction
 from hapstab.simulation.growth import BoundednessVerdict, assess, combine
 from hapstab.simulation.inputs import ForceSpec, force_grows, force_samples
 from hapstab.simulation.propagate import propagate_linear
@@ -86,6 +92,8 @@ def simulate(loop: HapticLoop | TeleoperationLoop, duration: float, *,
     Parameters
     ----------
     loop : HapticLoop or TeleoperationLoop
+        The loop; a device's ``coulomb_friction`` is simulated exactly (stick-slip between
+        the samples, :mod:`hapstab.simulation.friction`) and makes the run nonlinear.
     duration : float
         Seconds; ``round(duration / T)`` samples are taken.
     force : force spec, optional
@@ -154,11 +162,8 @@ def simulate(loop: HapticLoop | TeleoperationLoop, duration: float, *,
                             quantizer)
     sysm = build(loop)
     p = sysm.n_ports
-    if sysm.held_f is not None and "resolution" in nl:
-        raise ModelError(f"resolution = {resolution}: encoder quantisation with a measured force "
-                         "(a FourChannelLoop's force channel) is not simulated yet; allowed: "
-                         "None, or force gains of 0")
-    budget.check(budget.simulation_cost(M, sysm.order, p, dense), max_memory, max_seconds)
+    ports = structure_of(loop).ports
+    _admit(sysm, ports, nl, M, dense, max_memory, max_seconds)
     roles = roles_of(loop, sysm)
     t = np.arange(M + 1) * T
     F = _forces(force, environment_force, t, p)
@@ -167,21 +172,22 @@ def simulate(loop: HapticLoop | TeleoperationLoop, duration: float, *,
         nl["tdpa"] = pc.o.to_dict()
     measure = _measurement(roles, p, nl)
     s0 = make_initial_state(sysm, roles, initial_position, initial_velocity, initial_state, measure)
-    springs = np.array([pt.termination.stiffness for pt in structure_of(loop).ports])
+    springs = np.array([pt.termination.stiffness for pt in ports])
     rest = _rest(rest_position, s0[pos_idx], p)
     if roles.held_f.size and initial_state is None:
         # a force measured at the first sample sees the hand at rest: the spring's offset
         s0 = make_initial_state(sysm, roles, initial_position, initial_velocity, None, measure,
                                 held_force=springs * rest)
     Fd = F + springs * rest              # a spring relaxed at r: -k (x - r) = -k x + k r
-    contact = None
+    contact, fr = None, None
     if not nl:
         S = propagate_linear(roles.A, roles.G, s0, Fd, M)
         with np.errstate(over="ignore", invalid="ignore"):
             U = S @ roles.Fu.T
     else:
+        fr = LoopFriction(ports, sysm, M) if "coulomb_friction_N" in nl else None
         S, U, contact = step_nonlinear(roles, s0, Fd, M, measure, wall is not None,
-                                       nl.get("saturation"), wall_pulls, pc)
+                                       nl.get("saturation"), wall_pulls, pc, between=fr)
     X, V = S[:, pos_idx], S[:, pos_idx + 1]
     with np.errstate(over="ignore", invalid="ignore"):
         dX = np.diff(X, axis=0)
@@ -198,14 +204,17 @@ def simulate(loop: HapticLoop | TeleoperationLoop, duration: float, *,
     dt = dx = dv = None
     if dense >= 2 and np.all(np.isfinite(S)):
         dt, dx, dv = dense_output(sysm, S, Fd - U[:-1], T, dense)
-    arrays = [t, X, V, U, Fx, pe, ee, S]
+        if fr is not None:               # the friction ports' stick-slip, exact
+            fr.dense(dx, dv, S, Fd - U[:-1], dense)
+    fe = None if fr is None else fr.dissipated
+    arrays = [t, X, V, U, Fx, pe, ee, S] + ([] if fe is None else [fe])
     for a in arrays:
         a.setflags(write=False)
     K = float(sysm.stiffness[0])
     return SimulationResult(t, X, V, U, Fx, pe, ee, S, verdict, tuple(sysm.labels), T,
                             loop.delay_in_samples, K, nl, contact, dt, dx, dv,
                             rest=tuple(float(r) for r in rest), model=headline(loop),
-                            tdpa=None if pc is None else pc.record())
+                            tdpa=None if pc is None else pc.record(), friction_energy=fe)
 
 
 def _forces(force: ForceSpec, environment_force: ForceSpec, t: np.ndarray, p: int) -> np.ndarray:
@@ -215,6 +224,23 @@ def _forces(force: ForceSpec, environment_force: ForceSpec, t: np.ndarray, p: in
     if p > 1:
         F[:, 1] = force_samples(environment_force, t[:-1], "environment_force")
     return F
+
+
+def _admit(sysm: Any, ports: Sequence[Any], nl: dict[str, Any], M: int, dense: int,
+           max_memory: float | None, max_seconds: float | None) -> None:
+    """Add the devices' Coulomb friction to ``nl``, refuse what is not simulated yet and
+    check the run's cost against the budget."""
+    if any(pt.device.coulomb_friction > 0 for pt in ports):
+        nl["coulomb_friction_N"] = [pt.device.coulomb_friction for pt in ports]
+    if sysm.held_f is not None and "resolution" in nl:
+        raise ModelError(f"resolution = {nl['resolution']}: encoder quantisation with a measured "
+                         "force (a FourChannelLoop's force channel) is not simulated yet; "
+                         "allowed: None, or force gains of 0")
+    cost = budget.simulation_cost(M, sysm.order, sysm.n_ports, dense)
+    if "coulomb_friction_N" in nl:       # the ports' stick-slip is stepped in Python
+        extra = 3e-5 * M * sysm.n_ports  # ~30 us per port and sample (measured, 1 core)
+        cost = dataclasses.replace(cost, seconds=cost.seconds + extra)
+    budget.check(cost, max_memory, max_seconds)
 
 
 def _samples(duration: float, T: float, dense: Any) -> int:
@@ -364,10 +390,16 @@ def _bound(ports: Sequence[Any], nl: dict[str, Any], lin: BoundednessVerdict) ->
             np.linalg.eigvals(port_matrices(pt)[0]).real.max() < 0 for pt in ports):
         return (f"the actuator force is limited to +-{nl['saturation']:g} N and every device "
                 "with its operator / environment is stable on its own")
-    if set(nl) <= {"resolution", "quantizer"} and lin.bounded and lin.confidence == "high":
-        return ("quantisation changes what the controller reads by less than one encoder step, "
-                "a bounded disturbance of the linear loop, which is asymptotically stable (its "
-                f"free response decays at {lin.growth_rate:.3g} 1/s)")
+    if set(nl) <= {"resolution", "quantizer", "coulomb_friction_N"} and lin.bounded \
+            and lin.confidence == "high":
+        what = []
+        if "resolution" in nl:
+            what.append("quantisation changes what the controller reads by less than one "
+                        "encoder step")
+        if "coulomb_friction_N" in nl:
+            what.append("Coulomb friction is a force of at most f_c on each device")
+        return (f"{' and '.join(what)}: a bounded disturbance of the linear loop, which is "
+                f"asymptotically stable (its free response decays at {lin.growth_rate:.3g} 1/s)")
     return None
 
 

@@ -147,13 +147,18 @@ def step_nonlinear(roles: Roles, s0: np.ndarray, F: np.ndarray, M: int,
                    measure: Callable[[np.ndarray], np.ndarray], has_wall: bool,
                    sat: float | None, wall_pulls: bool = False,
                    adjust: Callable[[int, np.ndarray, np.ndarray, np.ndarray], np.ndarray]
-                   | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+                   | None = None,
+                   between: Callable[[int, np.ndarray, np.ndarray, np.ndarray], None] | None
+                   = None) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
     """Step M samples with the nonlinear elements at the sampling instants.
 
     The wall (port 0) acts only on a penetration it sees, and then only pushes
     (``u >= 0``) unless ``wall_pulls``; saturation clips each port's force; then
     ``adjust(k, u, s, measured s)``, if given, returns the force to apply (the
     passivity controller of :mod:`hapstab.simulation.tdpa`).
+    ``between(k, s, g, nxt)``, if given, replaces what the linear step put in ``nxt``
+    for the motion between samples k and k+1 under the held net force ``g = F[k] - u``
+    (Coulomb friction, :class:`~hapstab.simulation.friction.LoopFriction`).
 
     Returns
     -------
@@ -190,6 +195,8 @@ def step_nonlinear(roles: Roles, s0: np.ndarray, F: np.ndarray, M: int,
         nxt[ct] = Ac @ sm
         nxt[roles.held_u[:, 1]] = u[roles.held_u[:, 0]]     # the force actually applied
         nxt[roles.held_f[:, 1]] = F[k][roles.held_f[:, 0]]
+        if between is not None:
+            between(k, s, F[k] - u, nxt)
         s = nxt
         if not np.all(np.isfinite(s)):
             S[k + 1:] = np.inf

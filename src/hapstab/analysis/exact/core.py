@@ -25,6 +25,7 @@ from hapstab.engine.structure import channel_ratios, structure_of
 from hapstab.engine.system import build
 from hapstab.errors import AnalysisError
 from hapstab.models.loops import HapticLoop, TeleoperationLoop, describe
+from hapstab.models.parts import friction_note
 from hapstab.results import CriticalStiffnessResult, StabilityResult
 from hapstab.tolerances import NEWTON_ANGLE_STEP, POLE_ON_CIRCLE
 
@@ -113,7 +114,9 @@ def stability(loop: HapticLoop | TeleoperationLoop, *, max_memory: float | None 
         |z| > 1 (the count of poles outside comes from the argument principle,
         certified), ``marginal`` if a pole is on the circle to the model's accuracy
         (the count cannot be certified, or the dominant pole is within 1e-12 of the
-        circle) or a rigid-body mode sits at z = 1.
+        circle) or a rigid-body mode sits at z = 1. Of the friction-free loop: with a
+        device's Coulomb friction the reason says so
+        (:func:`~hapstab.models.parts.friction_note`).
 
     References
     ----------
@@ -149,6 +152,9 @@ def stability(loop: HapticLoop | TeleoperationLoop, *, max_memory: float | None 
     if (verdict == "unstable" and count > 0 and rho <= 1) or (verdict == "stable" and rho >= 1):
         reason += (f" (the eigenvalue solver puts the largest pole at |z| = {rho:.12g}; with "
                    "poles crowding z = 1 it is less accurate than the certified count)")
+    note = friction_note(loop)          # the linear loop: friction-free
+    if note:
+        reason += f"; {note}"
     return StabilityResult(verdict, rho, dom, freq, reason, T, tuple(complex(e) for e in eigs), m)
 
 
