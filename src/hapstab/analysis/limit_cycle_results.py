@@ -195,8 +195,9 @@ class LimitCycleResult(Result):
         return jsonable({"verdict": self.verdict, "stiffness": self.stiffness,
                          "period_s": self.period_s, "delay_samples": float(self.delay_samples),
                          "virtual_damping": self.virtual_damping,
-                         "resolution_m": self.resolution_m, "quantizer": self.quantizer,
-                         "coulomb_friction_N": self.coulomb_friction_N,
+                         "nonlinear": {"resolution_m": self.resolution_m,
+                                       "quantizer": self.quantizer,
+                                       "coulomb_friction_N": self.coulomb_friction_N},
                          "harmonics": self.harmonics,
                          "cycles": [c.to_dict() for c in self.cycles],
                          "linear_verdict": self.linear_verdict,
@@ -214,7 +215,7 @@ class LimitCycleResult(Result):
             Where to write (a path is written atomically, see :mod:`hapstab.outputs`).
         """
         write_csv(path, list(_COLUMNS),
-                  ([repr(v) if isinstance(v, float) else v for v in
+                  ([repr(float(v)) if isinstance(v, (float, np.floating)) else v for v in
                     (getattr(c, k) for k in _COLUMNS)] for c in self.cycles))
 
     def plot(self, ax: Any = None) -> Any:

@@ -94,6 +94,8 @@ MISSES = 4
 #: are within this fraction of the root's (harmonics moved them by at most 16 % in the
 #: cases tried; an unstable root's balance that runs off lands on a neighbour 40 % away).
 NEAR = 0.25
+#: The phase crossovers reported: those with the least gain margins.
+CROSSOVERS = 6
 #: Two cycles within this fraction in amplitude and frequency are one.
 SAME = 0.01
 
@@ -367,8 +369,9 @@ def _cycle(bal: Balance, loop: HapticLoop, mass: float, A: float, theta: float,
             notes.append(f"the device would stick at a reversal (it needs |m a| = {least:.3g} N "
                          f"there, friction holds up to {bal.friction_N:g} N): stick-slip, which "
                          "the describing function (pure sliding) does not describe")
-    return PredictedCycle(float(np.ptp(wave) / 2), th / (2 * math.pi * T), float(m), bool(stable),
-                          float(abs(X[0])), A, theta / (2 * math.pi * T), spp, ok,
+    return PredictedCycle(float(np.ptp(wave) / 2), float(th / (2 * math.pi * T)), float(m),
+                          bool(stable), float(abs(X[0])), float(A),
+                          float(theta / (2 * math.pi * T)), float(spp), bool(ok),
                           not notes, "; ".join(notes if root else [notes_df, *notes]))
 
 
@@ -450,7 +453,8 @@ def limit_cycles(loop: HapticLoop, *, resolution_m: float | None = None,
 
 
 def _crossovers(C: Any, theta: np.ndarray, T: float) -> tuple[tuple[float, float], ...]:
-    """The phase crossovers of C (real and negative): (frequency in Hz, gain margin 1/|C|)."""
+    """The phase crossovers of C (real and negative): (frequency in Hz, gain margin 1/|C|),
+    the :data:`CROSSOVERS` with the least margins, by frequency."""
     from scipy.optimize import brentq
 
     c = C(theta)
@@ -463,7 +467,7 @@ def _crossovers(C: Any, theta: np.ndarray, T: float) -> tuple[tuple[float, float
     cp = C(np.array([math.pi]))[0]
     if cp.real < 0:
         out.append((1 / (2 * T), float(1 / abs(cp.real))))
-    return tuple(out)
+    return tuple(sorted(sorted(out, key=lambda c: c[1])[:CROSSOVERS]))
 
 
 def _curves(bal: Balance, amps: np.ndarray, theta: np.ndarray) -> dict[str, np.ndarray]:
