@@ -218,8 +218,7 @@ class Balance:
         ``P(theta)``: the port's continuous position response to a force at w = theta/T
         (how friction, a continuous force, moves it; aliases neglected).
     spring_N_per_m : float
-        The port's spring to ground k (the operator's); with K the DC balance is
-        ``k x0 + K q0 + f0 = 0``.
+        The port's spring to ground k (the operator's).
     stiffness_N_per_m : float
         K.
     resolution_m : float
@@ -228,6 +227,9 @@ class Balance:
         ``"floor"`` or ``"nearest"``.
     friction_N : float
         f_c (0: none).
+    rest_m : float
+        Where the spring to ground is relaxed (m): the DC balance is
+        ``k (x0 - rest) + K q0 + f0 = 0``.
     """
 
     controller: Callable[[np.ndarray], np.ndarray]
@@ -237,6 +239,7 @@ class Balance:
     resolution_m: float
     quantizer: str
     friction_N: float
+    rest_m: float = 0.0
 
     def read(self, x0: float, X: np.ndarray) -> tuple[float, np.ndarray]:
         """Mean and harmonics of what the controller reads (quantised or not)."""
@@ -264,7 +267,7 @@ class Balance:
         th = theta * np.arange(1, len(X) + 1)
         k, K = self.spring_N_per_m, self.stiffness_N_per_m
         r = np.asarray(X) + self.controller(th) * Q + self.plant(th) * F
-        return np.concatenate([[(k * x0 + K * q0 + f0) / (k + K)], r])
+        return np.concatenate([[(k * (x0 - self.rest_m) + K * q0 + f0) / (k + K)], r])
 
 
 def solve_balance(bal: Balance, theta: float, x0: float, X: np.ndarray, scale: float

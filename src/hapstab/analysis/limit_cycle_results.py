@@ -14,7 +14,7 @@ from hapstab.results import Result, jsonable, write_csv
 __all__ = ["PredictedCycle", "LimitCycleResult", "VERDICTS"]
 
 #: What a prediction can say.
-VERDICTS = ("limit cycle", "threshold", "undecided", "no limit cycle predicted")
+VERDICTS = ("limit cycle", "chatter", "threshold", "undecided", "no limit cycle predicted")
 
 _COLUMNS = ("amplitude_m", "frequency_hz", "period_s", "offset_m", "stable", "first_harmonic_m",
             "describing_function_amplitude_m", "describing_function_frequency_hz",
@@ -104,6 +104,11 @@ class LimitCycleResult(Result):
         (4/pi for a centred one; 1 without quantiser).
     searched_m : (float, float)
         The amplitudes searched, m.
+    can_rest : bool
+        Whether the device can rest strictly inside an encoder step (spring, controller
+        and friction in balance there); without it, it chatters across a line.
+    rest_position_m : float
+        Where the operator's spring is relaxed, m.
     curves : dict
         The describing-function plot's data (not in :meth:`to_dict`).
     """
@@ -121,6 +126,8 @@ class LimitCycleResult(Result):
     crossovers: tuple[tuple[float, float], ...]
     max_gain: float
     searched_m: tuple[float, float]
+    can_rest: bool
+    rest_position_m: float
     curves: dict[str, np.ndarray] = field(default_factory=dict, compare=False, repr=False)
 
     @classmethod
@@ -133,7 +140,8 @@ class LimitCycleResult(Result):
             The loop analysed.
         *args
             resolution_m, quantizer, coulomb_friction_N, harmonics, cycles,
-            linear_verdict, crossovers, max_gain, searched_m, curves.
+            linear_verdict, crossovers, max_gain, searched_m, can_rest, rest_position_m,
+            curves.
 
         Returns
         -------
@@ -145,12 +153,15 @@ class LimitCycleResult(Result):
 
     @property
     def verdict(self) -> str:
-        """``limit cycle`` (a trusted stable one), ``threshold`` (only unstable ones),
-        ``undecided`` (only cycles outside the method's range) or ``no limit cycle
-        predicted``."""
+        """``limit cycle`` (a trusted stable one), ``chatter`` (no rest inside an encoder
+        step: the device chatters across a line, which the describing function does not
+        describe), ``threshold`` (only unstable ones), ``undecided`` (only cycles outside
+        the method's range) or ``no limit cycle predicted``."""
         trusted = [c for c in self.cycles if c.trusted]
         if any(c.stable for c in trusted):
             return "limit cycle"
+        if not self.can_rest:
+            return "chatter"
         if trusted:
             return "threshold"
         return "undecided" if self.cycles else "no limit cycle predicted"
@@ -167,6 +178,10 @@ class LimitCycleResult(Result):
                        f"1.273 for a centred quantiser), so the gain margin must be below that: "
                        + (f"here {gm:.4g} at {f:.4g} Hz" if math.isfinite(gm) else
                           "this loop has no phase crossover"))
+        if self.resolution_m and not self.can_rest:
+            out.append(f"no rest: with the operator's spring relaxed at {self.rest_position_m:g} m "
+                       "no position strictly inside an encoder step balances the spring and the "
+                       "controller (within friction): the device chatters across a line")
         if self.coulomb_friction_N:
             out.append(f"Coulomb friction only dissipates: with a stable linear loop it adds no "
                        f"cycle; with an unstable one its cycle is unstable (Loeb), a threshold: "
@@ -181,6 +196,7 @@ class LimitCycleResult(Result):
         head = {"limit cycle": "limit cycle predicted", "threshold": "no stable limit cycle; "
                 "a threshold (unstable cycle) between decay and growth",
                 "undecided": "only cycles outside the describing function's range",
+                "chatter": "no rest inside an encoder step: the device chatters across a line",
                 "no limit cycle predicted": "no limit cycle predicted"}[v]
         parts = [f"{'stable' if c.stable else 'unstable'} cycle of amplitude {c.amplitude_m:.4g} "
                  f"m at {c.frequency_hz:.5g} Hz" + ("" if c.trusted else f" (untrusted: {c.notes})")
@@ -204,6 +220,7 @@ class LimitCycleResult(Result):
                          "crossovers": [{"frequency_hz": f, "gain_margin": g}
                                         for f, g in self.crossovers],
                          "max_gain": self.max_gain, "searched_m": list(self.searched_m),
+                         "can_rest": self.can_rest, "rest_position_m": self.rest_position_m,
                          "conditions": self.conditions, "reason": self.reason})
 
     def to_csv(self, path: Any) -> None:

@@ -94,6 +94,9 @@ MISSES = 4
 #: are within this fraction of the root's (harmonics moved them by at most 16 % in the
 #: cases tried; an unstable root's balance that runs off lands on a neighbour 40 % away).
 NEAR = 0.25
+#: A rest position within this many steps of an encoder line does not count (it is the
+#: line, to rounding).
+EDGE = 1e-9
 #: The phase crossovers reported: those with the least gain margins.
 CROSSOVERS = 6
 #: Two cycles within this fraction in amplitude and frequency are one.
@@ -162,20 +165,44 @@ def _check(loop: Any, delta: float, fc: float, quantizer: str, harmonics: Any) -
 
 
 def _mean(bal: Balance, A: float) -> float:
-    """The cycle's mean x0 from the first-harmonic DC balance ``k x0 + K q0(x0, A) = 0``
-    (increasing in x0: one root; 0 by symmetry without quantiser or with a nearest one)."""
+    """The cycle's mean x0 from the first-harmonic DC balance
+    ``k (x0 - rest) + K q0(x0, A) = 0`` (increasing in x0: one root; 0 by symmetry with a
+    nearest quantiser and the rest at 0)."""
     from scipy.optimize import brentq
 
-    d = bal.resolution_m
-    if d == 0 or bal.quantizer == "nearest":
+    d, k, K, r = bal.resolution_m, bal.spring_N_per_m, bal.stiffness_N_per_m, bal.rest_m
+    if d == 0:
+        return k * r / (k + K)
+    if bal.quantizer == "nearest" and r == 0:
         return 0.0
-    k, K = bal.spring_N_per_m, bal.stiffness_N_per_m
 
     def dc(x0: float) -> float:
-        return k * x0 + K * quantizer_describing_function(A, x0, d, bal.quantizer)[1]
+        return k * (x0 - r) + K * quantizer_describing_function(A, x0, d, bal.quantizer)[1]
 
-    lo, hi = -A - 2 * d, A + 2 * d
+    lo, hi = -A - 2 * d - abs(r), A + 2 * d + abs(r)
     return float(brentq(dc, lo, hi, xtol=1e-12 * d)) if dc(lo) < 0 < dc(hi) else 0.0  # Δ-relative
+
+
+def _rests(bal: Balance) -> bool:
+    """Whether the quantised loop can rest: a position where the spring's pull and the
+    controller's force on the reading balance (within friction's f_c) strictly inside an
+    encoder step. Without one (the spring relaxed just below a line of a floor encoder,
+    or on it) the device chatters across that line: a cycle of the order of the delay's
+    reach that the describing function does not describe."""
+    d, k, K, r, fc = (bal.resolution_m, bal.spring_N_per_m, bal.stiffness_N_per_m, bal.rest_m,
+                      bal.friction_N)
+    if d == 0 or k == 0:
+        return True                        # no quantiser, or a whole step of rest positions
+    sig = QUANTIZER_OFFSET[bal.quantizer]
+    j0 = round(k * r / ((k + K) * d))
+    for j in range(j0 - 3, j0 + 4):        # the reading j*d of a resting device, near r
+        a, b = (j - 1 + sig) * d, (j + sig) * d     # its step (for floor: [j d, (j+1) d))
+        a, b = (a, b) if sig else (j * d, (j + 1) * d)
+        # |k (x - r) + K j d| <= f_c somewhere strictly inside (a, b)
+        lo, hi = r - (K * j * d + fc) / k, r - (K * j * d - fc) / k
+        if max(lo, a + EDGE * d) <= min(hi, b - EDGE * d):
+            return True
+    return False
 
 
 def _gains(bal: Balance, A: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -389,7 +416,8 @@ def _distinct(cycles: list[PredictedCycle | None]) -> tuple[PredictedCycle, ...]
 
 def limit_cycles(loop: HapticLoop, *, resolution_m: float | None = None,
                  quantizer: str = "floor", coulomb_friction_N: float | None = None,
-                 harmonics: int = 15, max_amplitude_m: float | None = None) -> LimitCycleResult:
+                 rest_position_m: float = 0.0, harmonics: int = 15,
+                 max_amplitude_m: float | None = None) -> LimitCycleResult:
     """Limit cycles of the haptic loop from quantisation and Coulomb friction (see the module).
 
     Parameters
@@ -403,6 +431,9 @@ def limit_cycles(loop: HapticLoop, *, resolution_m: float | None = None,
         The encoder's reading, as :func:`hapstab.simulate`'s.
     coulomb_friction_N : float, optional
         f_c in N; default the device's ``coulomb_friction`` (0 if it has none).
+    rest_position_m : float
+        Where the operator's spring is relaxed (m), as :func:`hapstab.simulate`'s
+        ``rest_position``; the virtual spring pulls to 0.
     harmonics : int
         Harmonics of the refining harmonic balance (1: the describing function alone).
     max_amplitude_m : float, optional
@@ -432,10 +463,13 @@ def limit_cycles(loop: HapticLoop, *, resolution_m: float | None = None,
     if max_amplitude_m is not None:
         from hapstab.errors import check_real
 
-        check_real("max_amplitude_m", max_amplitude_m, positive=True)
+        max_amplitude_m = check_real("max_amplitude_m", max_amplitude_m, positive=True)
     C, P, mass, k = _parts(loop)
     K = loop.controller.stiffness                       # type: ignore[union-attr]
-    bal = Balance(C, P, k, K, delta, quantizer, fc)
+    from hapstab.errors import check_real
+
+    bal = Balance(C, P, k, K, delta, quantizer, fc,
+                  check_real("rest_position_m", rest_position_m))
     amps, theta = _grids(bal, loop.delay_samples, max_amplitude_m)
     roots, near = _scan(bal, amps, theta)
     H = int(harmonics)
@@ -449,7 +483,7 @@ def limit_cycles(loop: HapticLoop, *, resolution_m: float | None = None,
     N = _gains(bal, amps)[0] if delta else np.ones(1)
     return LimitCycleResult.build(loop, delta, quantizer, fc, int(harmonics), cycles, linear,
                                   crossings, float(N.max()), (float(amps[0]), float(amps[-1])),
-                                  _curves(bal, amps, theta))
+                                  bool(_rests(bal)), float(bal.rest_m), _curves(bal, amps, theta))
 
 
 def _crossovers(C: Any, theta: np.ndarray, T: float) -> tuple[tuple[float, float], ...]:

@@ -26,6 +26,8 @@ def limit_cycle_cmd() -> None:
 @click.option("--quantizer", type=click.Choice(["floor", "nearest"]), default="floor",
               show_default=True, help="The encoder's reading: Delta floor(x/Delta), or the "
                                       "nearest multiple (as simulate's).")
+@click.option("--rest", type=float, default=0.0, show_default=True,
+              help="Where the operator's spring is relaxed, m (as simulate's --rest).")
 @click.option("--harmonics", type=click.IntRange(1, 63), default=15, show_default=True,
               help="Harmonics of the refining harmonic balance (1: the describing function alone).")
 @click.option("--max-amplitude", type=POS, default=None,
@@ -35,7 +37,8 @@ def limit_cycle_cmd() -> None:
               help="Write the describing-function plot (the loop against -1/N).")
 @click.option("--csv", "csv_path", type=click.Path(dir_okay=False), default=None,
               help="Write one row per predicted cycle.")
-def limit_cycle_hve(stiffness: float, resolution: float | None, quantizer: str, harmonics: int,
+def limit_cycle_hve(stiffness: float, resolution: float | None, quantizer: str, rest: float,
+                    harmonics: int,
                     max_amplitude: float | None, plot_path: str | None, csv_path: str | None,
                     as_json: bool, **kw: Any) -> None:
     """Limit cycles of the HVE at stiffness K from quantisation and Coulomb friction."""
@@ -45,7 +48,7 @@ def limit_cycle_hve(stiffness: float, resolution: float | None, quantizer: str, 
     check_files(csv_path, plot_path, as_json)
     loop = LOOP_KINDS["hve"](kw, stiffness)
     res = limit_cycles(loop, resolution_m=resolution, quantizer=quantizer,  # type: ignore[arg-type]
-                       harmonics=harmonics, max_amplitude_m=max_amplitude)
+                       rest_position_m=rest, harmonics=harmonics, max_amplitude_m=max_amplitude)
     files = write_files(res, csv_path, plot_path)
     d = {**res.to_dict(), "files": files}
     rows = [("verdict", res.verdict), ("linear loop", res.linear_verdict)]
