@@ -104,9 +104,10 @@ class LimitCycleResult(Result):
         (4/pi for a centred one; 1 without quantiser).
     searched_m : (float, float)
         The amplitudes searched, m.
-    can_rest : bool
-        Whether the device can rest strictly inside an encoder step (spring, controller
-        and friction in balance there); without it, it chatters across a line.
+    rests : str
+        Where the device can rest (spring, controller and friction in balance):
+        ``"inside a step"``, only ``"on a line"`` (then only if it arrives there without
+        overshooting) or ``"nowhere"`` (it chatters across a line).
     rest_position_m : float
         Where the operator's spring is relaxed, m.
     curves : dict
@@ -126,7 +127,7 @@ class LimitCycleResult(Result):
     crossovers: tuple[tuple[float, float], ...]
     max_gain: float
     searched_m: tuple[float, float]
-    can_rest: bool
+    rests: str
     rest_position_m: float
     curves: dict[str, np.ndarray] = field(default_factory=dict, compare=False, repr=False)
 
@@ -140,7 +141,7 @@ class LimitCycleResult(Result):
             The loop analysed.
         *args
             resolution_m, quantizer, coulomb_friction_N, harmonics, cycles,
-            linear_verdict, crossovers, max_gain, searched_m, can_rest, rest_position_m,
+            linear_verdict, crossovers, max_gain, searched_m, rests, rest_position_m,
             curves.
 
         Returns
@@ -153,15 +154,17 @@ class LimitCycleResult(Result):
 
     @property
     def verdict(self) -> str:
-        """``limit cycle`` (a trusted stable one), ``chatter`` (no rest inside an encoder
-        step: the device chatters across a line, which the describing function does not
+        """``limit cycle`` (a trusted stable one), ``chatter`` (the device can rest nowhere:
+        it chatters across an encoder line, which the describing function does not
         describe), ``threshold`` (only unstable ones), ``undecided`` (only cycles outside
-        the method's range) or ``no limit cycle predicted``."""
+        the method's range, or a rest only on a line) or ``no limit cycle predicted``."""
         trusted = [c for c in self.cycles if c.trusted]
         if any(c.stable for c in trusted):
             return "limit cycle"
-        if not self.can_rest:
+        if self.rests == "nowhere":
             return "chatter"
+        if self.rests == "on a line":
+            return "undecided"
         if trusted:
             return "threshold"
         return "undecided" if self.cycles else "no limit cycle predicted"
@@ -178,10 +181,13 @@ class LimitCycleResult(Result):
                        f"1.273 for a centred quantiser), so the gain margin must be below that: "
                        + (f"here {gm:.4g} at {f:.4g} Hz" if math.isfinite(gm) else
                           "this loop has no phase crossover"))
-        if self.resolution_m and not self.can_rest:
-            out.append(f"no rest: with the operator's spring relaxed at {self.rest_position_m:g} m "
+        if self.resolution_m and self.rests != "inside a step":
+            out.append(f"rest: with the operator's spring relaxed at {self.rest_position_m:g} m "
                        "no position strictly inside an encoder step balances the spring and the "
-                       "controller (within friction): the device chatters across a line")
+                       "controller (within friction): "
+                       + ("the device chatters across a line" if self.rests == "nowhere" else
+                          "it rests only on a line, if it arrives there without overshooting; "
+                          "otherwise it chatters across it (not predicted)"))
         if self.coulomb_friction_N:
             out.append(f"Coulomb friction only dissipates: with a stable linear loop it adds no "
                        f"cycle; with an unstable one its cycle is unstable (Loeb), a threshold: "
@@ -220,7 +226,7 @@ class LimitCycleResult(Result):
                          "crossovers": [{"frequency_hz": f, "gain_margin": g}
                                         for f, g in self.crossovers],
                          "max_gain": self.max_gain, "searched_m": list(self.searched_m),
-                         "can_rest": self.can_rest, "rest_position_m": self.rest_position_m,
+                         "rests": self.rests, "rest_position_m": self.rest_position_m,
                          "conditions": self.conditions, "reason": self.reason})
 
     def to_csv(self, path: Any) -> None:

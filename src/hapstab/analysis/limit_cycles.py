@@ -183,26 +183,29 @@ def _mean(bal: Balance, A: float) -> float:
     return float(brentq(dc, lo, hi, xtol=1e-12 * d)) if dc(lo) < 0 < dc(hi) else 0.0  # Δ-relative
 
 
-def _rests(bal: Balance) -> bool:
-    """Whether the quantised loop can rest: a position where the spring's pull and the
-    controller's force on the reading balance (within friction's f_c) strictly inside an
-    encoder step. Without one (the spring relaxed just below a line of a floor encoder,
-    or on it) the device chatters across that line: a cycle of the order of the delay's
-    reach that the describing function does not describe."""
+def _rests(bal: Balance) -> str:
+    """Where the quantised loop can rest: a position where the spring's pull and the
+    controller's force on the reading balance (within friction's f_c) ``"inside a step"``,
+    only ``"on a line"`` (a step's edge: the device rests there only if it arrives without
+    overshooting it) or ``"nowhere"`` (the spring relaxed just below a floor encoder's line:
+    the device must chatter across it, a motion the describing function does not
+    describe)."""
     d, k, K, r, fc = (bal.resolution_m, bal.spring_N_per_m, bal.stiffness_N_per_m, bal.rest_m,
                       bal.friction_N)
     if d == 0 or k == 0:
-        return True                        # no quantiser, or a whole step of rest positions
+        return "inside a step"             # no quantiser, or a whole step of rest positions
     sig = QUANTIZER_OFFSET[bal.quantizer]
     j0 = round(k * r / ((k + K) * d))
+    found = "nowhere"
     for j in range(j0 - 3, j0 + 4):        # the reading j*d of a resting device, near r
-        a, b = (j - 1 + sig) * d, (j + sig) * d     # its step (for floor: [j d, (j+1) d))
-        a, b = (a, b) if sig else (j * d, (j + 1) * d)
-        # |k (x - r) + K j d| <= f_c somewhere strictly inside (a, b)
+        a, b = ((j - 0.5) * d, (j + 0.5) * d) if sig else (j * d, (j + 1) * d)   # its step
+        # |k (x - r) + K j d| <= f_c somewhere in the step: strictly inside, or on its edge
         lo, hi = r - (K * j * d + fc) / k, r - (K * j * d - fc) / k
         if max(lo, a + EDGE * d) <= min(hi, b - EDGE * d):
-            return True
-    return False
+            return "inside a step"
+        if max(lo, a - EDGE * d) <= min(hi, b + EDGE * d):
+            found = "on a line"
+    return found
 
 
 def _gains(bal: Balance, A: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -483,7 +486,7 @@ def limit_cycles(loop: HapticLoop, *, resolution_m: float | None = None,
     N = _gains(bal, amps)[0] if delta else np.ones(1)
     return LimitCycleResult.build(loop, delta, quantizer, fc, int(harmonics), cycles, linear,
                                   crossings, float(N.max()), (float(amps[0]), float(amps[-1])),
-                                  bool(_rests(bal)), float(bal.rest_m), _curves(bal, amps, theta))
+                                  _rests(bal), float(bal.rest_m), _curves(bal, amps, theta))
 
 
 def _crossovers(C: Any, theta: np.ndarray, T: float) -> tuple[tuple[float, float], ...]:

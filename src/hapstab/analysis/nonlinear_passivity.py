@@ -84,7 +84,7 @@ def coulomb_friction_of(loop: Any, coulomb_friction_N: Any = None) -> float:
         A negative, non-finite or non-numeric value.
     """
     if coulomb_friction_N is None:
-        return float(getattr(loop.device, "coulomb_friction", 0.0))
+        return float(getattr(getattr(loop, "device", None), "coulomb_friction", 0.0))
     return check_real("coulomb_friction_N", coulomb_friction_N, nonnegative=True)
 
 
