@@ -94,6 +94,11 @@ MISSES = 4
 #: are within this fraction of the root's (harmonics moved them by at most 16 % in the
 #: cases tried; an unstable root's balance that runs off lands on a neighbour 40 % away).
 NEAR = 0.25
+#: Lengths (m) an encoder step, or friction's reach f_c/K, may have: a femtometre to a
+#: kilometre (outside, the amplitude scan leaves double precision's comfortable range).
+LENGTHS = (1e-15, 1e3)
+#: The largest amplitude searched with a quantiser, in steps.
+STEPS_MAX = 1e4
 #: A rest position within this many steps of an encoder line does not count (it is the
 #: line, to rounding).
 EDGE = 1e-9
@@ -161,6 +166,13 @@ def _check(loop: Any, delta: float, fc: float, quantizer: str, harmonics: Any) -
     if isinstance(harmonics, bool) or not isinstance(harmonics, (int, np.integer)) \
             or not 1 <= harmonics <= 63:
         raise ModelError(f"harmonics = {harmonics!r}: must be a whole number from 1 to 63")
+    lo, hi = LENGTHS
+    if delta and not lo <= delta <= hi:
+        raise ModelError(f"resolution_m = {delta:g}: must be between {lo:g} m and {hi:g} m")
+    scale = fc / loop.controller.stiffness               # where friction matches the spring
+    if fc and not lo <= scale <= hi:
+        raise ModelError(f"coulomb_friction_N = {fc:g}: f_c/K = {scale:g} m, the length friction "
+                         f"holds against the spring, must be between {lo:g} m and {hi:g} m")
     return loop
 
 
@@ -467,6 +479,10 @@ def limit_cycles(loop: HapticLoop, *, resolution_m: float | None = None,
         from hapstab.errors import check_real
 
         max_amplitude_m = check_real("max_amplitude_m", max_amplitude_m, positive=True)
+        if delta and max_amplitude_m > STEPS_MAX * delta:
+            raise ModelError(f"max_amplitude_m = {max_amplitude_m:g}: at most {STEPS_MAX:g} "
+                             f"encoder steps ({STEPS_MAX * delta:g} m): the quantiser's every "
+                             "line is a term of the balance")
     C, P, mass, k = _parts(loop)
     K = loop.controller.stiffness                       # type: ignore[union-attr]
     from hapstab.errors import check_real
