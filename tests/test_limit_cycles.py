@@ -159,19 +159,30 @@ FAST_NONE = [2, 5]
 SLOW_NONE = list(range(200, 230))
 
 
+def no_cycle(res):
+    """The run shows no limit cycle: it settles, has stopped, or its envelope still falls
+    over its last eighths (a slow decay the verdict will not yet call settled)."""
+    if res.verdict.behaviour == "settles":
+        return True
+    x = res.position[:, 0]
+    e = [np.ptp(p) for p in np.array_split(x, 8)]
+    return e[-1] <= 1e-9 * max(e) or (e[-1] < 0.95 * e[-2] < 0.95 ** 2 * e[-3])
+
+
 @pytest.mark.parametrize("seed", FAST_NONE + [pytest.param(s, marks=pytest.mark.slow)
                                               for s in SLOW_NONE])
 def test_no_cycle_predicted_means_none_simulated(seed):
     loop, f_x, q, rng = _quantised_case(seed, (0.3, 0.75))
     rest = D * (round(rng.uniform(-3, 3)) + rng.uniform(0.2, 0.8))    # inside a step
     pred = limit_cycles(loop, resolution_m=D, quantizer=q, rest_position_m=rest)
-    if pred.verdict != "no limit cycle predicted":
+    if pred.verdict == "limit cycle":
         _check_cycles(loop, pred, f_x, q, rest)
+    if pred.verdict != "no limit cycle predicted":
         return
     for x0 in (rest + 3 * D, rest + 0.6 * D):
         res = h.simulate(loop, max(60.0, 100 / f_x), initial_position=x0, rest_position=rest,
                          resolution=D, quantizer=q)
-        assert res.verdict.behaviour == "settles", (loop, q, rest, x0, res.verdict.reason)
+        assert no_cycle(res), (loop, q, rest, x0, res.verdict.reason)
 
 
 def test_the_paper_loop_documented_cases():
@@ -198,7 +209,7 @@ def test_the_paper_loop_documented_cases():
 
 def test_chatter_where_the_device_cannot_rest():
     # a floor encoder, the operator's spring relaxed just below a line: no rest anywhere
-    loop, f_x, q, _ = _quantised_case(2, (0.3, 0.78))      # msd operator, K = 0.39 K_max
+    loop = _quantised_case(2, (0.3, 0.78))[0]      # msd operator, K = 0.39 K_max
     for rest in (-0.2 * D, -0.05 * D):
         pred = limit_cycles(loop, resolution_m=D, quantizer="floor", rest_position_m=rest)
         assert pred.verdict == "chatter" and pred.rests == "nowhere"

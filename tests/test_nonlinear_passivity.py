@@ -98,7 +98,7 @@ def test_energy_is_extracted_just_above_the_limit_and_never_below(seed):
     for scale in 10.0 ** np.arange(-3, 4):
         for _ in range(20):
             p = rng.uniform(-1, 1, int(rng.integers(2, 30))) * scale * delta
-            paths.append(list(p) + [p[0]])
+            paths.append([*p, p[0]])
     for p in paths:
         E = energy_in(p, Kl, b, fc, T, delta, quantizer)
         diss = energy_in(p, 0.0, b, fc, T, delta, quantizer)
@@ -152,7 +152,7 @@ def test_audit_row_only_when_asked():
     assert "abbott-okamura" not in [r.key for r in plain.rows]
     a = h.audit(h.paper_hve(), coulomb_friction_N=0.005, resolution_m=1e-4)
     keys = [r.key for r in a.rows]
-    assert keys[:-1] == [r.key for r in plain.rows][:-1] + ["abbott-okamura"]
+    assert keys[:-1] == [*[r.key for r in plain.rows][:-1], "abbott-okamura"]
     row = a.rows[keys.index("abbott-okamura")]
     assert row.critical_stiffness == 100.0 and row.claims == "passivity" and row.flag is None
     assert [r.critical_stiffness for r in a.rows if r.key != "abbott-okamura"] == \

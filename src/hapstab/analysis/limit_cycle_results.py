@@ -107,7 +107,8 @@ class LimitCycleResult(Result):
     rests : str
         Where the device can rest (spring, controller and friction in balance):
         ``"inside a step"``, only ``"on a line"`` (then only if it arrives there without
-        overshooting) or ``"nowhere"`` (it chatters across a line).
+        overshooting), ``"nowhere"`` (it chatters across a line) or ``"free in a step"``
+        (no spring, friction below K Δ/2: it may bounce across a step's lines).
     rest_position_m : float
         Where the operator's spring is relaxed, m.
     curves : dict
@@ -163,7 +164,7 @@ class LimitCycleResult(Result):
             return "limit cycle"
         if self.rests == "nowhere":
             return "chatter"
-        if self.rests == "on a line":
+        if self.rests in ("on a line", "free in a step"):
             return "undecided"
         if trusted:
             return "threshold"
@@ -181,7 +182,12 @@ class LimitCycleResult(Result):
                        f"1.273 for a centred quantiser), so the gain margin must be below that: "
                        + (f"here {gm:.4g} at {f:.4g} Hz" if math.isfinite(gm) else
                           "this loop has no phase crossover"))
-        if self.resolution_m and self.rests != "inside a step":
+        if self.rests == "free in a step":
+            out.append("rest: no operator's spring and friction below K Delta/2 (Abbott-Okamura's "
+                       "quantisation condition): the device coasts within an encoder step and may "
+                       "bounce across its lines, a motion the describing function does not "
+                       "describe (not predicted)")
+        elif self.resolution_m and self.rests != "inside a step":
             out.append(f"rest: with the operator's spring relaxed at {self.rest_position_m:g} m "
                        "no position strictly inside an encoder step balances the spring and the "
                        "controller (within friction): "
@@ -201,7 +207,8 @@ class LimitCycleResult(Result):
         v = self.verdict
         head = {"limit cycle": "limit cycle predicted", "threshold": "no stable limit cycle; "
                 "a threshold (unstable cycle) between decay and growth",
-                "undecided": "only cycles outside the describing function's range",
+                "undecided": "undecided: what the describing function cannot tell (see the "
+                             "conditions and the cycles' notes)",
                 "chatter": "no rest inside an encoder step: the device chatters across a line",
                 "no limit cycle predicted": "no limit cycle predicted"}[v]
         parts = [f"{'stable' if c.stable else 'unstable'} cycle of amplitude {c.amplitude_m:.4g} "
