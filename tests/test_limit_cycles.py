@@ -223,19 +223,27 @@ def test_chatter_where_the_device_cannot_rest():
 
 
 def _stops(res, A):
-    """Settled, or its last tenth within a third of the threshold and shrinking (a run that
-    starts near an unstable cycle leaves it slowly)."""
+    """Settled, or its last tenth below 0.7 of the threshold (started at 0.9) and still
+    shrinking (a run that starts near an unstable cycle leaves it slowly)."""
     x = res.position[:, 0]
     tail, before = x[-x.size // 10:], x[-x.size // 5:-x.size // 10]
     return res.verdict.behaviour == "settles" or (
-        np.ptp(tail) / 2 < A / 3 and np.ptp(tail) < np.ptp(before))
+        np.ptp(tail) / 2 < 0.7 * A and np.ptp(tail) < np.ptp(before))
 
 
 def _grows(res, A):
-    """Overflowed, grows, or well past the threshold at the end."""
+    """Overflowed, grows, or past 1.4 times the threshold (started at 1.1) at the end."""
     x = res.position[:, 0]
     return res.verdict.behaviour == "grows" or not np.all(np.isfinite(x)) or \
-        np.abs(x[-x.size // 10:]).max() > 1.5 * A
+        np.abs(x[-x.size // 10:]).max() > 1.4 * A
+
+
+def _leaving_time(loop):
+    """A run long enough to leave the threshold's neighbourhood: 8 e-foldings of the linear
+    loop's growth (the motion 10 % off the threshold leaves it at about that rate), 30 s
+    at least, 400 s at most."""
+    rate = math.log(h.stability(loop).spectral_radius) / loop.period
+    return float(np.clip(8 / rate, 30.0, 400.0))
 
 
 def test_friction_threshold_separates_stopping_from_growing():
@@ -267,7 +275,7 @@ def test_friction_thresholds_seeded(seed):
     thr = [c for c in pred.cycles if c.trusted and not c.stable]
     assert pred.linear_verdict == "unstable" and thr, pred.reason
     c = thr[0]
-    dur = max(30.0, 40 / c.frequency_hz)
+    dur = max(_leaving_time(loop), 40 / c.frequency_hz)
     below = h.simulate(loop, dur, initial_position=0.9 * c.amplitude_m, rest_position=0.0)
     above = h.simulate(loop, dur, initial_position=1.1 * c.amplitude_m, rest_position=0.0)
     assert _stops(below, c.amplitude_m), below.verdict.reason

@@ -28,7 +28,16 @@ of what the encoder reads and of the friction force, k the operator's spring.
    third harmonic of 20 %), which shift its switching instants and so the fundamental.
    On the paper's delayed HVE (n = 10) at 0.8 K_max the describing function gives
    0.786 Δ at 1.3315 Hz, harmonic balance 0.912 Δ at 1.2876 Hz, the simulator 0.925 Δ
-   at 1.2837 Hz.
+   at 1.2837 Hz. The describing function's near misses (|F| < :data:`NEAR_MISS`) are
+   tried too: harmonics can close them (a cycle the first harmonic alone misses). A
+   refined root keeps its describing function's Loeb verdict; a closed near miss gets
+   Loeb's criterion on the balance itself (:func:`~hapstab.analysis.harmonic.loeb_stable`).
+3. **Rest** (:func:`~hapstab.analysis.limit_cycle_loop.rests`): with an encoder the device
+   may have no rest strictly inside a step (the operator's spring relaxed just below a
+   floor encoder's line: it chatters across it), rest only on a line, or, free of any
+   spring and with f_c < K Δ/2, coast within a step and bounce across its lines. These
+   motions are not harmonic-balance cycles; the verdict says ``chatter`` or
+   ``undecided`` rather than promising none.
 
 What it neglects, and when to trust it (each cycle says so, ``trusted`` and ``notes``):
 

@@ -8,7 +8,7 @@ from typing import Any
 
 import click
 
-from hapstab.cli.options import LOOP_KINDS, POS, emit, loop_options, rich_table
+from hapstab.cli.options import LOOP_KINDS, POS, REAL, emit, loop_options, rich_table
 
 
 @click.group("limit-cycle",
@@ -26,8 +26,9 @@ def limit_cycle_cmd() -> None:
 @click.option("--quantizer", type=click.Choice(["floor", "nearest"]), default="floor",
               show_default=True, help="The encoder's reading: Delta floor(x/Delta), or the "
                                       "nearest multiple (as simulate's).")
-@click.option("--rest", type=float, default=0.0, show_default=True,
-              help="Where the operator's spring is relaxed, m (as simulate's --rest).")
+@click.option("--rest", type=REAL, default=0.0, show_default=True,
+              help="Where the operator's spring is relaxed, m (simulate's --rest; here 0 by "
+                   "default, where the virtual spring pulls).")
 @click.option("--harmonics", type=click.IntRange(1, 63), default=15, show_default=True,
               help="Harmonics of the refining harmonic balance (1: the describing function alone).")
 @click.option("--max-amplitude", type=POS, default=None,
