@@ -47,11 +47,15 @@ def _commands():
     return out
 
 
-COMMANDS = _commands()
+#: (limit-cycle's invocations are drawn in a block of their own, after the others, so that
+#: the draw of every other command stays the one it was before the command existed)
+COMMANDS = [c for c in _commands() if c[0][0] != "limit-cycle"]
+LIMIT_CYCLE = [c for c in _commands() if c[0][0] == "limit-cycle"]
 #: (every loop kind of a command, hve, peb and 4ch, needs the same)
 NEEDS = {"region": ["--K", "0:100", "--B", "0:1", "--resolution", "12"], "reproduce": ["fig5"],
          "check": ["-K", "5"], "passivity": ["-K", "5"], "simulate": ["-K", "5"],
-         "run": ["study.toml"], "twoport": ["-K", "5"], "transparency": ["-K", "5"]}
+         "run": ["study.toml"], "twoport": ["-K", "5"], "transparency": ["-K", "5"],
+         "limit-cycle": ["-K", "5", "--resolution", "1e-4"]}
 #: 4ch loops each command takes, one option of them then hostile: force reflection (C_m
 #: a damper, C_4 = 0, C_2 = 1) for the exact K_max, a force gain for the best damping,
 #: equal position controllers for the region, unequal ones for the position-only tests.
@@ -93,6 +97,12 @@ def _invocations(n, seed):
         o = rng.choice(opts)
         calls.append(([*path, *NEEDS.get(path[0], []), *FOURCH.get(path[0], POSITION_ONLY), o,
                        rng.choice(HOSTILE)], [o]))
+    # limit-cycle hve, one or two hostile options
+    for _ in range(30):
+        path, opts = rng.choice(LIMIT_CYCLE)
+        chosen = rng.sample(opts, rng.choice([1, 2]))
+        calls.append(([*path, *NEEDS[path[0]], *[v for o in chosen for v in (o, rng.choice(HOSTILE))]],
+                      chosen))
     # study files: the group-level --study / --variant, hostile values
     for _ in range(20):
         calls.append((["kmax", "hve", "--study", rng.choice(HOSTILE)], ["--study"]))
@@ -167,6 +177,9 @@ TAKES_A_LOOP = {
     "positive_real": lambda G: h.positive_real(G, 1e-3),
     "circle_criterion": lambda G: h.circle_criterion(G, 1.0, 1e-3),
     "transparency": lambda L: h.transparency(L),
+    "abbott_okamura": lambda L: h.abbott_okamura(L, resolution_m=1e-4),
+    "nonlinear_passivity": lambda L: h.nonlinear_passivity(L, coulomb_friction_N=0.01),
+    "limit_cycles": lambda L: h.limit_cycles(L, resolution_m=1e-4),
 }
 
 BAD_VALUES = {

@@ -35,6 +35,12 @@ RUNS = [
     ("kmax", ["kmax", "peb", "--method", "llewellyn", "-n", "2"]),
     ("passivity", ["passivity", "peb", "-K", "5", "--method", "passivity"]),
     ("audit", ["audit", "hve", "--delay", "2"]),
+    ("audit", ["audit", "hve", "--friction", "0.005", "--resolution", "1e-4"]),   # + a row
+    ("passivity", ["passivity", "hve", "-K", "150", "--friction", "0.005", "--resolution",
+                   "1e-4"]),                                 # Abbott-Okamura beside it
+    ("limit-cycle", ["limit-cycle", "hve", "-K", "8", "-n", "10", "--resolution", "1e-4",
+                     "--quantizer", "nearest"]),
+    ("limit-cycle", ["limit-cycle", "hve", "-K", "11.44", "-n", "10", "--friction", "0.01"]),
     ("region", ["region", "hve", "--K", "0:100", "--B", "0:1", "--resolution", "8"]),
     ("best-damping", ["best-damping", "hve"]),
     ("simulate", ["simulate", "hve", "-K", "5", "--duration", "0.5"]),

@@ -30,6 +30,10 @@ def _results():
         h.simulate(loop.with_stiffness(50.0), 0.2),
         h.simulate(loop.with_stiffness(50.0), 0.2).verdict,
         h.transparency(peb.with_stiffness(3.0)),
+        h.nonlinear_passivity(loop.replace(delay_samples=0).with_stiffness(150.0),
+                              coulomb_friction_N=0.005, resolution_m=1e-4),
+        h.limit_cycles(h.paper_hve(1e-3, 10).with_stiffness(8.0), resolution_m=1e-4,
+                       quantizer="nearest"),
     ]
 
 

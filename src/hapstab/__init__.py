@@ -10,7 +10,14 @@ from hapstab.analysis.circle import circle_test, loop_inverse
 from hapstab.analysis.closed_forms import colgate, eq18, eq29, eq34, gil, gil2004
 from hapstab.analysis.damping import BestDampingResult, best_damping
 from hapstab.analysis.exact.core import stability
+from hapstab.analysis.limit_cycle_results import LimitCycleResult, PredictedCycle
+from hapstab.analysis.limit_cycles import limit_cycles
 from hapstab.analysis.methods import boundary, critical_stiffness, methods_for
+from hapstab.analysis.nonlinear_passivity import (
+    NonlinearPassivityResult,
+    abbott_okamura,
+    nonlinear_passivity,
+)
 from hapstab.analysis.passivity import PassivityResult, sampled_passivity
 from hapstab.analysis.positive_real import (
     PositiveRealResult,
@@ -61,5 +68,6 @@ __all__ = [
     "stability_region", "RegionResult", "best_damping", "BestDampingResult", "simulate",
     "SimulationResult", "critical_stiffness_simulation", "ArgumentTypeError", "BudgetError",
     "OutputError", "transparency", "TransparencyResult", "llewellyn_test", "TwoPortResult",
-    "TDPA",
+    "TDPA", "abbott_okamura", "nonlinear_passivity", "NonlinearPassivityResult", "limit_cycles",
+    "LimitCycleResult", "PredictedCycle",
 ]

@@ -19,6 +19,7 @@ from hapstab import budget
 from hapstab.analysis.circle import critical_stiffness_circle
 from hapstab.analysis.closed_forms import closed_forms_for
 from hapstab.analysis.exact.core import exact_critical_stiffness
+from hapstab.analysis.nonlinear_passivity import abbott_okamura
 from hapstab.analysis.passivity import critical_stiffness_passivity
 from hapstab.engine.system import build
 from hapstab.errors import AnalysisError
@@ -160,7 +161,8 @@ def _verdict(intervals: Any, K: float) -> str:
     return "unstable"
 
 
-def audit(loop: HapticLoop | TeleoperationLoop, *, max_memory: float | None = None,
+def audit(loop: HapticLoop | TeleoperationLoop, *, coulomb_friction_N: float | None = None,
+          resolution_m: float | None = None, max_memory: float | None = None,
           max_seconds: float | None = None) -> AuditResult:
     """Closed forms vs circle / passivity vs exact, for the loop's parameters.
 
@@ -171,6 +173,12 @@ def audit(loop: HapticLoop | TeleoperationLoop, *, max_memory: float | None = No
         K_max). PEB closed forms are listed only for C_m = C_s (as derived);
         (1)/(13) and (29) only for n = 0, Gil et al. 2004 only without operator,
         delay and B.
+    coulomb_friction_N : float, optional
+        f_c in N (default: the device's ``coulomb_friction``). With friction or
+        ``resolution_m`` given (HVE only), a row ``abbott-okamura`` is added: the passivity
+        limit with friction and quantisation (:func:`~hapstab.analysis.nonlinear_passivity.abbott_okamura`).
+    resolution_m : float, optional
+        Encoder resolution Δ in m, for that row.
     max_memory, max_seconds : float, optional
         Budget in bytes and seconds (default :mod:`hapstab.budget`'s), estimated first.
 
@@ -181,11 +189,13 @@ def audit(loop: HapticLoop | TeleoperationLoop, *, max_memory: float | None = No
     Raises
     ------
     AnalysisError
-        If the loop has no stiffness to vary.
+        If the loop has no stiffness to vary; friction or quantisation for a teleoperator,
+        or quantisation where Abbott and Okamura's condition does not apply (B != 0, delay).
 
     References
     ----------
-    The paper, eq. (1), (2), (13), (18), (29), (34); Colgate and Schenkel 1997.
+    The paper, eq. (1), (2), (13), (18), (29), (34); Colgate and Schenkel 1997; Abbott and
+    Okamura 2005.
     """
     require_loop(loop)
     kind = loop.kind
@@ -222,9 +232,26 @@ def audit(loop: HapticLoop | TeleoperationLoop, *, max_memory: float | None = No
     add("passivity", "sampled-data passivity (Colgate-Schenkel)", passive, "passivity",
         "exact passivity of device + sampled controller; sufficient for stability with "
         "passive terminations")
+    nonlinear = _abbott_okamura(loop, coulomb_friction_N, resolution_m)
+    if nonlinear is not None:
+        add("abbott-okamura", "Abbott-Okamura (friction, quantisation)",
+            nonlinear.critical_stiffness, "passivity", nonlinear.reason)
     rows.append(AuditRow("exact", "exact sampled-data stability", float(exact), "exact",
                          _verdict(exact_res.stable_intervals, exact), None, exact_res.reason))
     name = "controller" if loop.kind == "hve" else "master_controller"
     B = spring_damper(loop.controllers[0], name).damping
     return AuditResult(kind, loop.period, loop.delay_samples, B, tuple(rows), float(exact),
                        float(passive))
+
+
+def _abbott_okamura(loop: Any, coulomb_friction_N: float | None,
+                    resolution_m: float | None) -> Any:
+    """The Abbott-Okamura limit when friction or quantisation is asked for (or the device
+    has friction); None otherwise, so a friction-free, quantisation-free audit is today's."""
+    fc = getattr(getattr(loop, "device", None), "coulomb_friction", 0.0)
+    if coulomb_friction_N is None and resolution_m is None and not fc:
+        return None
+    if loop.kind != "hve":
+        raise AnalysisError(f"coulomb_friction_N / resolution_m: the Abbott-Okamura condition is "
+                            f"derived for the haptic loop (hve), not a {loop.kind} loop")
+    return abbott_okamura(loop, coulomb_friction_N=coulomb_friction_N, resolution_m=resolution_m)

@@ -69,12 +69,17 @@ def _passivity_command(kind: str) -> None:
     @click.option("--sector", type=POS, default=None,
                   help="For --method circle: finite sector bound k of the termination(s) "
                        "(Theorem 2.1); default: passive limit.")
+    @_resolution_option(kind, "passivity")
     def _cmd(stiffness: float, method: str, approximation: str | None, sector: float | None,
              as_json: bool, **kw: Any) -> None:
         refuse_force_gains(kw, "the circle criterion" if method == "circle"
                            else "sampled-data passivity")
+        resolution = kw.pop("resolution", None)
         loop = make(kw, stiffness)
         res: Any
+        if method == "passivity" and (resolution is not None or kw.get("friction")):
+            _nonlinear_passivity(loop, stiffness, resolution, approximation, sector, as_json, kind)
+            return
         if method == "circle":
             from hapstab.analysis.circle import circle_test
 
@@ -106,16 +111,53 @@ def _passivity_command(kind: str) -> None:
                     "N*s/m, worst frequency.")
 
 
+def _resolution_option(kind: str, command: str) -> Any:
+    """``--resolution`` (the encoder's step, m) for the HVE's passivity and audit: the
+    Abbott-Okamura condition with the device's ``--friction``; no option for the others."""
+    if kind != "hve":
+        return lambda f: f
+    return click.option("--resolution", type=POS, default=None,
+                        help="Encoder resolution Delta in m: adds the Abbott-Okamura condition "
+                             "(b >= KT/2 and f_c >= K Delta/2, with --friction f_c; B = 0 and no "
+                             "delay)" + (" as a row." if command == "audit" else "."))
+
+
+def _nonlinear_passivity(loop: Any, stiffness: float, resolution: float | None,
+                         approximation: str | None, sector: float | None, as_json: bool,
+                         kind: str) -> None:
+    """``passivity hve`` with friction and / or quantisation: both conditions."""
+    from hapstab.analysis.nonlinear_passivity import nonlinear_passivity
+
+    if approximation is not None or sector is not None:
+        raise HapstabError("--approximation/--sector: apply to --method circle only; "
+                           "'passivity' is exact")
+    res = nonlinear_passivity(loop, resolution_m=resolution)
+    d = res.to_dict()
+    d.update(stiffness=stiffness, method="passivity", approximation=None, sector=None)
+    nl = d["nonlinear"]
+    rows = [("verdict", res.verdict), ("margin", _margin_words(res.margin, None)),
+            ("quantisation margin", f"{res.quantization_margin_N:.6g} N (f_c - K Delta/2)"
+             if res.resolution_m else "no quantisation"),
+            ("K_max with friction and quantisation", f"{fmt(nl['critical_stiffness'])} N/m"
+             if nl["critical_stiffness"] is not None else "inf"),
+            ("failing condition", res.failed_condition or "none"), ("why", res.reason)]
+    title = f"passivity, {kind}, K = {stiffness:g} N/m, f_c = {res.coulomb_friction_N:g} N, " \
+            f"Delta = {res.resolution_m:g} m"
+    emit(d, as_json, lambda: rich_table(title, rows, loop), loop)
+
+
 def _audit_command(kind: str) -> None:
     make = LOOP_KINDS[kind]
 
     @audit_cmd.command(kind)
     @loop_options(kind)
+    @_resolution_option(kind, "audit")
     def _cmd(as_json: bool, **kw: Any) -> None:
         from hapstab.analysis.audit import audit
 
+        resolution = kw.pop("resolution", None)
         loop = make(kw, 1.0)
-        res = audit(loop)
+        res = audit(loop, resolution_m=resolution)
         emit(res.to_dict(), as_json, lambda: _audit_table(res), loop)
 
     _cmd.__doc__ = (f"Closed-form K_max conditions for the {kind.upper()} loop beside the circle, "
