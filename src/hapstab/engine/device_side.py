@@ -313,8 +313,10 @@ def device_side(loop: HapticLoop | TeleoperationLoop, what: str,
         for j, s, d in ch.terms:
             n, f = split_delay(d)
             if f:
+                name = ("" if len(st.ports) == 1 or j == ch.port else
+                        "delay forward = " if ch.port == 1 else "delay backward = ")
                 raise AnalysisError(f"{what}: derived for a whole number of samples of delay "
-                                    f"(t_d = nT); this loop has t_d = {d:g} T")
+                                    f"(t_d = nT); this loop has {name}t_d = {d:g} T")
             terms.append((j, s, float(n)))
         ch_whole = Channel(ch.port, ch.controller, tuple(terms), ch.measures)
         (channels if ch.measures == "position" else force_channels).append(ch_whole)

@@ -338,3 +338,24 @@ def _four_channel(loop: FourChannelLoop) -> LoopStructure:
     return LoopStructure(
         (Port(loop.master, loop.operator, "master"), Port(loop.slave, loop.environment, "slave")),
         tuple(chans), reference=2 * loop.stiffness_reference)
+
+
+def channel_name(structure: LoopStructure, channel: Channel) -> str:
+    """A channel in a message: its port's name, or Lawrence's C4 / C1 for a position
+    controller that reads only the other port (the 4-channel loop's transmitted ones).
+
+    Parameters
+    ----------
+    structure : LoopStructure
+        The loop.
+    channel : Channel
+        One of its channels.
+
+    Returns
+    -------
+    str
+    """
+    if len(structure.ports) == 2 and channel.measures == "position" and \
+            all(j != channel.port for j, _, _ in channel.terms):
+        return "C4" if channel.port == 0 else "C1"
+    return structure.ports[channel.port].name

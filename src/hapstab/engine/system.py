@@ -36,8 +36,8 @@ from hapstab.engine.forces import (
     termination_rows,
 )
 from hapstab.engine.structure import (
-    Channel,
     LoopStructure,
+    channel_name,
     channel_ratios,
     periods_of,
     rigid_modes,
@@ -409,15 +409,6 @@ def _stiffness(st: LoopStructure, k: _KPart, Bd: np.ndarray, lay: _Layout,
     return k
 
 
-def _name(st: LoopStructure, ch: Channel) -> str:
-    """A channel in a message: its port's name, or Lawrence's C4 / C1 for a position
-    controller that reads only the other port (the 4-channel loop's transmitted ones)."""
-    if len(st.ports) == 2 and ch.measures == "position" and all(j != ch.port for j, _, _ in
-                                                                ch.terms):
-        return "C4" if ch.port == 0 else "C1"
-    return st.ports[ch.port].name
-
-
 def _check_finite(st: LoopStructure, T: np.ndarray, arrays: list[np.ndarray]) -> None:
     """Refuse a model that overflowed double precision, naming its parameters."""
     with np.errstate(all="ignore"):
@@ -425,8 +416,8 @@ def _check_finite(st: LoopStructure, T: np.ndarray, arrays: list[np.ndarray]) ->
             return
     ports = "; ".join(f"{pt.name} mass {pt.device.mass:g} kg, damping {pt.device.damping:g} N*s/m"
                       for pt in st.ports)
-    ctrls = "; ".join(f"{_name(st, ch)} stiffness K = {ch.controller.stiffness:g} N/m, "
-                      f"{_name(st, ch)} virtual damping B = "
+    ctrls = "; ".join(f"{channel_name(st, ch)} stiffness K = {ch.controller.stiffness:g} N/m, "
+                      f"{channel_name(st, ch)} virtual damping B = "
                       f"{getattr(ch.controller, 'damping', 0.0):g} N*s/m"
                       if has_stiffness(ch.controller) else "H(z)"
                       for ch in st.channels)
