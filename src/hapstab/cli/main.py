@@ -248,12 +248,13 @@ def cli() -> None:
 
 def _register() -> None:
     """Add every command to :data:`cli` (one place, in the order of ``--help``)."""
-    from hapstab.cli import analysis, paper, regions, run, simulation
+    from hapstab.cli import analysis, paper, regions, robust, run, simulation
 
     for cmd in (analysis.kmax, analysis.check, analysis.boundary_cmd, analysis.demo,
                 paper.passivity_cmd, paper.twoport_cmd, paper.transparency_cmd,
                 paper.audit_cmd, regions.region,
-                regions.best, simulation.simulate_cmd, simulation.reproduce_cmd, run.run_cmd):
+                regions.best, robust.robust, simulation.simulate_cmd, simulation.reproduce_cmd,
+                run.run_cmd):
         cli.add_command(cmd)
         _describe(cmd)
 
