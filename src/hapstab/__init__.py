@@ -19,6 +19,8 @@ from hapstab.analysis.positive_real import (
     positive_real,
 )
 from hapstab.analysis.regions import RegionResult, stability_region
+from hapstab.analysis.robust import RobustStiffnessResult, robust_critical_stiffness
+from hapstab.analysis.robust_damping import RobustDampingResult, robust_best_damping
 from hapstab.analysis.transparency import TransparencyResult, transparency
 from hapstab.analysis.twoport import TwoPortResult, llewellyn_test
 from hapstab.budget import BudgetError
@@ -27,6 +29,7 @@ from hapstab.errors import AnalysisError, ArgumentTypeError, HapstabError, Model
 from hapstab.models.controllers import DiscreteController, SpringDamper
 from hapstab.models.fourchannel import FourChannelLoop
 from hapstab.models.loops import HapticLoop, TeleoperationLoop
+from hapstab.models.operators import OperatorBox, operator_box
 from hapstab.models.parts import (
     NO_IMPEDANCE,
     Device,
@@ -54,4 +57,6 @@ __all__ = [
     "stability_region", "RegionResult", "best_damping", "BestDampingResult", "simulate",
     "SimulationResult", "critical_stiffness_simulation", "ArgumentTypeError", "BudgetError",
     "OutputError", "transparency", "TransparencyResult", "llewellyn_test", "TwoPortResult",
+    "OperatorBox", "operator_box", "robust_critical_stiffness", "RobustStiffnessResult",
+    "robust_best_damping", "RobustDampingResult",
 ]

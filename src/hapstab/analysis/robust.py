@@ -44,8 +44,8 @@ import numpy as np
 from hapstab import budget
 from hapstab.analysis.exact.boxes import U_HI, U_LO
 from hapstab.analysis.exact.core import exact_critical_stiffness
-from hapstab.analysis.exact.crossings import winding
 from hapstab.analysis.exact.families import crossing_gradient, first_events
+from hapstab.analysis.exact.parametric import isolate
 from hapstab.analysis.exact.zonotope import family_floor
 from hapstab.analysis.robust_result import RobustStiffnessResult
 from hapstab.engine.frequency import LoopResponse, PortPoly
@@ -74,6 +74,9 @@ class _Leaf:
     hi: np.ndarray
     lb: float = 0.0
     score: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    #: the face that holds the box's minimum (K_max proved monotone in some
+    #: directions): the box is replaced by it rather than split
+    face: tuple[np.ndarray, np.ndarray] | None = None
 
 
 @dataclass
@@ -88,12 +91,14 @@ class _State:
     pruned: float = math.inf
 
 
-def _points(loop: HapticLoop | TeleoperationLoop, P: np.ndarray
-            ) -> tuple[np.ndarray, np.ndarray, list]:
-    """Enclosures [K_lo, K_hi] (N/m) of the exact K_max of the operators P (n, 3) and
-    the boxes isolating their crossings (None where there is none); K_hi is nan where
-    the search could not isolate the crossing (no upper bound)."""
-    resp, _ = family_response(loop, P, P)
+def _points(loop: HapticLoop | TeleoperationLoop, P: np.ndarray, resp: LoopResponse | None = None
+            ) -> tuple[np.ndarray, np.ndarray, list, np.ndarray]:
+    """Enclosures [K_lo, K_hi] (N/m) of the exact K_max of the operators P (n, 3), the
+    boxes isolating their crossings (None where there is none) and their counts of
+    poles outside as K -> 0+ (-1: not certified); K_hi is nan where the search could
+    not isolate the crossing (no upper bound)."""
+    if resp is None:
+        resp, _ = family_response(loop, P, P)
     ev, _ = first_events(resp)
     lo, hi = np.zeros(len(ev)), np.full(len(ev), np.nan)
     for i, e in enumerate(ev):
@@ -106,70 +111,113 @@ def _points(loop: HapticLoop | TeleoperationLoop, P: np.ndarray
             lo[i] = e.u_lo * s
             if e.box is not None:
                 hi[i] = e.box[1] * s
-    return lo, hi, [e.box for e in ev]
+    return lo, hi, [e.box for e in ev], np.array([e.anchor for e in ev])
 
 
 def _evaluate(st: _State, leaves: list[_Leaf]) -> None:
-    """Lower bounds of the sub-boxes (the zonotope floor, the disc search, and the
-    mean-value form from each one's point a) and the upper bound from the points a."""
+    """Lower bounds of the sub-boxes and the upper bound from the operators tried.
+
+    Per sub-box: the centre operator's crossing (enclosed); the parametric Krawczyk
+    box X around it that holds one crossing of every operator (when proved), whose
+    branch u_X(p) is smooth on the box: its gradient is enclosed over X and the box,
+    and the mean-value form from the operator a (a corner in each direction where
+    the gradient has one sign) bounds it below; the zonotope floor bounds every
+    other crossing below. The sub-box's bound is the smaller of the two."""
     LO = np.array([lf.lo for lf in leaves])
     HI = np.array([lf.hi for lf in leaves])
-    C = 0.5 * (LO + HI)
+    C, half = 0.5 * (LO + HI), 0.5 * (HI - LO)
     n = len(leaves)
+    st.evaluated += n
     resp, poly = family_response(st.loop, LO, HI)
     cen, _ = family_response(st.loop, C, C)
-    ev, _ = first_events(resp)
-    st.evaluated += n
     vary = list(poly.varying)
-    half = 0.5 * (HI - LO)
     dres = [derivative_response(resp, poly, j) for j in range(len(vary))]
-    lb = np.array([0.0 if e.anchor != 0 else e.u_lo * resp.scale[i] for i, e in enumerate(ev)])
+    c_lo, c_hi, c_box, count = _points(st.loop, C, cen)
+    _update_upper(st, C, c_hi)
+    hv = half[:, vary]
+    iso = np.array([i for i in range(n) if c_box[i] is not None and count[i] == 0], int)
+    X: list = [None] * n            # the contracted boxes
+    X0: list = [None] * n           # the boxes proved to hold one crossing each
+    if iso.size and vary:
+        for i, x in zip(iso, isolate(resp, cen, dres, iso, hv[iso], [c_box[i] for i in iso]),
+                        strict=True):
+            if x is not None:
+                X0[i], X[i] = x
+    other, clear = _lower(st, cen, dres, hv, np.max(half / np.maximum(np.abs(C), 1e-300),
+                                                     axis=1), count, X0)
+    branch = np.array([np.inf if x is None else x[0] * cen.scale[i] for i, x in enumerate(X)])
     glo, ghi = np.full((n, 3), -np.inf), np.full((n, 3), np.inf)
     glo[:, [j for j in range(3) if j not in vary]] = 0.0
     ghi[:, [j for j in range(3) if j not in vary]] = 0.0
-    _, c_hi, c_box = _points(st.loop, C)
-    _update_upper(st, C, c_hi)
-    iso = np.array([i for i, e in enumerate(ev) if e.box is not None and c_box[i] is not None], int)
-    rest = np.setdiff1d(np.arange(n), iso)     # the zonotope floor where nothing is isolated
-    if rest.size:
-        rel = np.max(half / np.maximum(np.abs(C), 1e-300), axis=1)    # relative size
-        lb[rest] = np.maximum(lb[rest], _zonotope_bound(st, _items(cen, rest),
-                                                        [_items(d, rest) for d in dres],
-                                                        half[np.ix_(rest, vary)], rel[rest]))
-    if iso.size and vary:
-        a, b, X = crossing_gradient(resp, dres, iso, [ev[i].box for i in iso],
-                                    [c_box[i] for i in iso], half[np.ix_(iso, vary)])
-        glo[np.ix_(iso, vary)] = a * resp.scale[iso, None]
-        ghi[np.ix_(iso, vary)] = b * resp.scale[iso, None]
-        lb[iso] = np.maximum(lb[iso], [x[0] * resp.scale[i] for x, i in zip(X, iso, strict=True)])
-    known = np.all(np.isfinite(glo) & np.isfinite(ghi), axis=1)
-    anchor = np.where(glo >= 0, LO, np.where(ghi <= 0, HI, C))
-    k_lo, k_hi, _ = _points(st.loop, anchor)
-    _update_upper(st, anchor, k_hi)
-    steep = np.where((glo >= 0) | (ghi <= 0), 0.0, np.maximum(np.abs(glo), np.abs(ghi)))
+    top = np.flatnonzero(np.isfinite(branch))
+    if top.size:
+        a, b, Xn = crossing_gradient(resp, dres, top, [X[i] for i in top],
+                                     [c_box[i] for i in top], hv[top])
+        glo[np.ix_(top, vary)] = a * resp.scale[top, None]
+        ghi[np.ix_(top, vary)] = b * resp.scale[top, None]
+        branch[top] = [x[0] * resp.scale[i] for x, i in zip(Xn, top, strict=True)]
+    known = np.isfinite(branch) & np.all(np.isfinite(glo) & np.isfinite(ghi), axis=1)
+    branch = np.maximum(branch, _mean_value(st, LO, HI, glo, ghi, known, c_lo, c_hi))
     for i, lf in enumerate(leaves):
-        lf.lb = float(lb[i])
-        if known[i] and np.isfinite(k_lo[i]) and not np.isnan(k_hi[i]):
-            drop = float(np.sum(steep[i] * half[i])) * (1 + 1e-12)   # rounding of the sum
-            lf.lb = max(lf.lb, float(np.nextafter(k_lo[i] - drop, -np.inf)))
+        lf.lb = float(min(other[i], branch[i])) if vary else \
+            (float(c_lo[i]) if count[i] == 0 else 0.0)   # a single operator: its enclosure
         lf.score = (np.maximum(np.abs(glo[i]), np.abs(ghi[i])) * 2 * half[i] if known[i]
                     else _spread(poly, i, half[i], vary))
+        mono = known[i] & clear[i] & (HI[i] > LO[i]) & ((glo[i] >= 0) | (ghi[i] <= 0))
+        if mono.any() and not np.all(mono | (HI[i] == LO[i])):
+            # below the best upper bound, K_max is u_X, monotone along these directions
+            # on the whole box: the box's minimum there is on this face
+            face = np.where(glo[i] >= 0, LO[i], HI[i])
+            lf.face = (np.where(mono, face, LO[i]), np.where(mono, face, HI[i]))
 
 
-def _zonotope_bound(st: _State, cen: LoopResponse, dres: list[LoopResponse],
-                    half: np.ndarray, rel: np.ndarray) -> np.ndarray:
-    """The zonotope floor of each family in N/m (0 where the count of poles outside
-    at K -> 0+ is not zero), searched only below the best upper bound so far."""
+def _mean_value(st: _State, LO: np.ndarray, HI: np.ndarray, glo: np.ndarray, ghi: np.ndarray,
+                known: np.ndarray, c_lo: np.ndarray, c_hi: np.ndarray) -> np.ndarray:
+    """The mean-value bound of each isolated branch (N/m; -inf where none): from the
+    operator a at the corner along each direction where the gradient has one sign
+    (the centre along the others), u_X(p) >= u_X(a) - sum_i max|du/dp_i| |p_i - a_i|
+    over the directions of unknown sign; u_X(a) is enclosed by a search of its own."""
+    n = LO.shape[0]
+    C, half = 0.5 * (LO + HI), 0.5 * (HI - LO)
+    anchor = np.where(glo >= 0, LO, np.where(ghi <= 0, HI, C))
+    k_lo, k_hi = c_lo.copy(), c_hi.copy()
+    moved = np.flatnonzero(known & np.any(anchor != C, axis=1))     # the centre is done
+    if moved.size:
+        k_lo[moved], k_hi[moved], _, _ = _points(st.loop, anchor[moved])
+        _update_upper(st, anchor[moved], k_hi[moved])
+    steep = np.where((glo >= 0) | (ghi <= 0) | (half == 0), 0.0,
+                     np.maximum(np.abs(glo), np.abs(ghi)))
+    drop = np.sum(steep * half, axis=1) * (1 + 1e-12)   # (1e-12: the rounding of the sum)
+    ok = known & np.isfinite(k_lo) & ~np.isnan(k_hi)
+    return np.where(ok, np.nextafter(k_lo - drop, -np.inf), -np.inf) if n else np.zeros(0)
+
+
+def _lower(st: _State, cen: LoopResponse, dres: list[LoopResponse], half: np.ndarray,
+           rel: np.ndarray, count: np.ndarray, X: list) -> tuple[np.ndarray, np.ndarray]:
+    """A lower bound (N/m) of every crossing of each family outside its box X (all of
+    them where there is no X; X is the box proved to hold one crossing of each loop),
+    by the zonotope floor searched below the best upper bound so far; and whether
+    nothing outside X was found below that (then, below it, each loop's K_max is its
+    crossing in X).
+
+    No loop of a family has a crossing in [U_LO, floor) outside X, and X lies above
+    its own lower end: by continuity each loop has the centre's count of poles
+    outside there, so the bound is 0 unless that count is 0 (and when it is
+    positive every loop has K_max = 0)."""
     n = cen.size
     cap = np.full(n, U_HI) if math.isinf(st.upper) else \
         np.minimum(U_HI, st.upper * (1 + 1e-9) / cen.scale)      # just above the best
+    skip = np.full((n, 4), np.nan)
+    for i, x in enumerate(X):
+        if x is not None:
+            skip[i] = (x[2] - x[3], x[2] + x[3], x[0], x[1])
     # resolve u to a quarter of the gap asked for, or to the zonotope's own error
     # (second order in the box's relative size w: about w^2; 0.1 w^2 to be safe)
-    floor = family_floor(cen, dres, half, cap, np.maximum(st.rtol / 4, 0.1 * rel ** 2))
-    count = winding(cen, np.arange(n), np.full(n, U_LO))
-    # no loop of a family has a crossing in [U_LO, floor): each has the centre's count
-    lb = np.where((floor > U_LO) & (count == 0), floor * cen.scale, 0.0)
-    return np.where((floor >= U_HI) & (count == 0), np.inf, lb)
+    floor = family_floor(cen, dres, half, cap, np.maximum(st.rtol / 4, 0.1 * rel ** 2), skip)
+    below = np.where(np.isnan(skip[:, 2]), floor, np.minimum(floor, skip[:, 2]))
+    ok = (below > U_LO) & (count == 0)
+    lb = np.where(ok, floor * cen.scale, 0.0)
+    return np.where(ok & (floor >= U_HI), np.inf, lb), ok & (floor >= cap)
 
 
 def _items(resp: LoopResponse, idx: np.ndarray) -> LoopResponse:
@@ -204,10 +252,13 @@ def _update_upper(st: _State, P: np.ndarray, k_hi: np.ndarray) -> None:
             st.upper, st.best = float(k_hi[i]), P[i].copy()
 
 
-def _split(lf: _Leaf) -> tuple[_Leaf, _Leaf]:
-    """Halve a sub-box along the direction with the largest score (its contribution
-    to the mean-value gap), else its widest relative side (geometric midpoint for a
+def _split(lf: _Leaf) -> tuple[_Leaf, ...]:
+    """The face that holds a sub-box's minimum, where one is known; else its two
+    halves along the direction with the largest score (its contribution to the
+    mean-value gap), else along its widest relative side (geometric midpoint for a
     range over a factor of 4 above 0)."""
+    if lf.face is not None:
+        return (_Leaf(lf.face[0].copy(), lf.face[1].copy(), lf.lb),)
     w = lf.hi - lf.lo
     if np.any(lf.score > 0):
         j = int(np.argmax(lf.score))
@@ -220,6 +271,14 @@ def _split(lf: _Leaf) -> tuple[_Leaf, _Leaf]:
     left_hi, right_lo = lf.hi.copy(), lf.lo.copy()
     left_hi[j], right_lo[j] = mid, mid
     return _Leaf(lf.lo.copy(), left_hi), _Leaf(right_lo, lf.hi.copy())
+
+
+def _unique(leaves: list[_Leaf]) -> list[_Leaf]:
+    """The sub-boxes without repeats (two boxes may reduce to the same face)."""
+    seen: dict[tuple, _Leaf] = {}
+    for lf in leaves:
+        seen.setdefault((*lf.lo.tolist(), *lf.hi.tolist()), lf)
+    return list(seen.values())
 
 
 def _vertices(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
@@ -272,13 +331,17 @@ def robust_critical_stiffness(loop: HapticLoop | TeleoperationLoop, box: Operato
     rtol, max_boxes = _check(loop, box, rtol, max_boxes)
     from hapstab.analysis.methods import order_estimate
     delays = [getattr(loop, "delay_in_samples", 0.0)]
-    budget.check(budget.exact_points_cost(f"robust K_max: up to {max_boxes} operator sub-boxes",
-                                          2 * max_boxes, order_estimate(loop, max(delays))),
+    # sub-boxes go in batches of 2 BATCH, each a few certified searches (a K_max's cost,
+    # budget.exact_points_cost, times 3: the box, its centre and its point a); the
+    # memory is that of one batch, whatever the budget of sub-boxes
+    per = budget.exact_points_cost("", 3, order_estimate(loop, max(delays)))
+    budget.check(budget.Cost(f"robust K_max: up to {max_boxes} operator sub-boxes",
+                             2 * BATCH * per.memory_bytes, max_boxes * per.seconds),
                  max_memory, max_seconds)
     t0 = time.perf_counter()
     st = _State(loop, rtol)
     verts = _vertices(box.lo, box.hi)
-    _, v_hi, _ = _points(loop, verts)
+    _, v_hi, _, _ = _points(loop, verts)
     _update_upper(st, verts, v_hi)
     leaves = [_Leaf(box.lo.astype(float), box.hi.astype(float))]
     _evaluate(st, leaves)
@@ -292,7 +355,7 @@ def robust_critical_stiffness(loop: HapticLoop | TeleoperationLoop, box: Operato
                                        if not ok])
         keep.sort(key=lambda lf: lf.lb)
         todo, rest = keep[:BATCH], keep[BATCH:]
-        kids = [k for lf in todo for k in _split(lf)]
+        kids = _unique([k for lf in todo for k in _split(lf)])
         _evaluate(st, kids)
         leaves = rest + kids
     return _result(st, box, lower, rtol, verts, v_hi, time.perf_counter() - t0)

@@ -108,7 +108,11 @@ def _split(cs, resps, cell, ua, ub, w_th, w_u) -> tuple:
     can_t = c.rho[cell] > THETA_FLOOR * (1 + c.th[cell])
     t = (w_th >= 0.25 * w_u) & can_t
     need_u = (w_u >= 0.25 * w_th) | ~can_t
-    kids = _split_cells(cs, resps, cell[t]) if t.any() else cell[:0]
+    kids = cell[:0]
+    if t.any():                       # each parent cell once, however many boxes share it
+        parents, inv = np.unique(cell[t], return_inverse=True)
+        both = _split_cells(cs, resps, parents)
+        kids = np.concatenate([both[:parents.size][inv], both[parents.size:][inv]])
     cell = np.concatenate([cell[~t], kids])
     ua, ub, need_u = (np.concatenate([a[~t], a[t], a[t]]) for a in (ua, ub, need_u))
     m = need_u
@@ -117,8 +121,21 @@ def _split(cs, resps, cell, ua, ub, w_th, w_u) -> tuple:
             np.concatenate([ub[~m], mid, ub[m]]))
 
 
+def _inside(c: Cells, cell: np.ndarray, ua: np.ndarray, ub: np.ndarray,
+            skip: np.ndarray) -> np.ndarray:
+    """Boxes inside their item's excluded box ``skip`` (n_items, 4: theta_lo,
+    theta_hi, u_lo, u_hi; nan: none)."""
+    it = c.item[cell]
+    th, rho, kind = c.th[cell], c.rho[cell], c.kind[cell]
+    t_lo = np.where(kind == 1, -rho, th - rho)          # an end cell is symmetric
+    t_hi = np.where(kind == 1, rho, th + rho)
+    s = skip[it]
+    return (t_lo >= s[:, 0]) & (t_hi <= s[:, 1]) & (ua >= s[:, 2]) & (ub <= s[:, 3])
+
+
 def family_floor(centre: LoopResponse, derivs: list[LoopResponse], half: np.ndarray,
-                 cap: np.ndarray, utol: np.ndarray | float = 0.0) -> np.ndarray:
+                 cap: np.ndarray, utol: np.ndarray | float = 0.0,
+                 skip: np.ndarray | None = None) -> np.ndarray:
     """Per family, a u below which no loop of it has a pole on the unit circle
     (between U_LO and it).
 
@@ -136,6 +153,9 @@ def family_floor(centre: LoopResponse, derivs: list[LoopResponse], half: np.ndar
     utol : float or (L,) array
         A box narrower than this (relative, in u) is recorded as it is rather than
         split: the bound is then at most that much below the sharpest one.
+    skip : (L, 4) array, optional
+        Per family, a box (theta_lo, theta_hi, u_lo, u_hi) left out of the search
+        (nan: none): one whose crossings are accounted for otherwise (isolated).
 
     Returns
     -------
@@ -161,6 +181,8 @@ def family_floor(centre: LoopResponse, derivs: list[LoopResponse], half: np.ndar
         it = cs[0].item[cell]
         ub = np.minimum(ub, floor[it])
         keep = ua < ub
+        if skip is not None:
+            keep &= ~_inside(cs[0], cell, ua, ub, skip)
         cell, ua, ub, it = cell[keep], ua[keep], ub[keep], it[keep]
         if not cell.size:
             break
