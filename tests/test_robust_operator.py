@@ -17,7 +17,6 @@ import os
 import mpmath
 import numpy as np
 import pytest
-from references import brute
 
 import hapstab as h
 from hapstab.analysis.exact.core import exact_critical_stiffness
@@ -25,6 +24,7 @@ from hapstab.engine.balls import Ball, ball_expm
 from hapstab.engine.frequency import _port_poly
 from hapstab.engine.operator_family import box_port_polynomials
 from hapstab.errors import AnalysisError, ModelError
+from references import brute
 
 DPS = 50
 
@@ -349,3 +349,59 @@ def _check_campaign(n, seed):
             named = _exact(loop, r.operator)
             assert r.critical_stiffness <= named <= r.upper_bound * (1 + 1e-12)
             assert named - r.critical_stiffness <= 1e-4 * named
+
+
+# ------------------------------------------------------------------ command line
+def _run(*args):
+    from click.testing import CliRunner
+
+    from hapstab.cli.main import cli
+
+    return CliRunner().invoke(cli, list(args))
+
+
+def test_cli_robust_json_plot_and_csv(tmp_path):
+    import json
+
+    png, csv_path = tmp_path / "box.png", tmp_path / "box.csv"
+    r = _run("robust", "hve", "-n", "2", "--operator-mass", "0.5", "--operator-damping", "4.5:5",
+             "--operator-stiffness", "490:510", "--json", "--plot", str(png), "--csv",
+             str(csv_path))
+    assert r.exit_code == 0, r.stderr
+    d = json.loads(r.stdout)
+    loop = h.HapticLoop(h.Device(0.15, 0.1), h.SpringDamper(0.0, 0.0), period=1e-3,
+                        delay_samples=2)
+    exact = _exact(loop, (d["operator"]["mass_kg"], d["operator"]["damping_N_s_per_m"],
+                          d["operator"]["stiffness_N_per_m"]))
+    assert d["converged"] and d["critical_stiffness"] <= exact
+    assert exact - d["critical_stiffness"] <= 1e-6 * exact
+    assert d["inputs"]["loop"]["operator"]["mass_kg"] == 0.5      # the worst operator shown
+    assert png.stat().st_size > 0 and csv_path.read_text().count("\n") == 3
+    table = _run("robust", "hve", "-n", "2", "--operator-box", "arm-grasp", "--operator-mass",
+                 "0.5", "--operator-damping", "6", "--operator-stiffness", "100:110")
+    assert table.exit_code == 0 and "robust K_max (certified)" in table.stdout
+
+
+@pytest.mark.parametrize("args, words", [
+    (["robust", "hve"], "operator box: not given"),
+    (["robust", "hve", "--operator", "spring:5", "--operator-box", "arm-grasp"],
+     "--operator = 'spring:5': the operator is varied over the box"),
+    (["robust", "hve", "--operator-mass", "2:1", "--operator-damping", "1",
+      "--operator-stiffness", "1"], "--operator-mass = '2:1': the lower end must not exceed"),
+    (["robust", "hve", "--operator-box", "hand"], "unknown preset; allowed: arm-grasp"),
+    (["robust", "hve", "--operator-mass", "x", "--operator-damping", "1",
+      "--operator-stiffness", "1"], "--operator-mass = 'x'"),
+    (["robust", "peb", "--operator-box", "arm-grasp", "--rtol", "0"], "--rtol"),
+])
+def test_cli_robust_refusals_are_one_line(args, words):
+    r = _run(*args)
+    assert r.exit_code == 2 and words in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1
+
+
+def test_cli_best_damping_with_an_operator_box():
+    r = _run("best-damping", "hve", "-n", "2", "--operator", "msd:0.5,5,500", "--min-damping",
+             "0", "--operator-mass", "0.5", "--operator-damping", "4.5:5", "--operator-stiffness",
+             "500")
+    assert r.exit_code == 0, r.stderr
+    assert "robust K_max at B*" in r.stdout and "Over the operator box" in r.stdout

@@ -153,8 +153,9 @@ def _evaluate(st: _State, leaves: list[_Leaf]) -> None:
     if top.size:
         a, b, Xn = crossing_gradient(resp, dres, top, [X[i] for i in top],
                                      [c_box[i] for i in top], hv[top])
-        glo[np.ix_(top, vary)] = a * resp.scale[top, None]
-        ghi[np.ix_(top, vary)] = b * resp.scale[top, None]
+        cols = np.array(vary, int)
+        glo[np.ix_(top, cols)] = a * resp.scale[top, None]
+        ghi[np.ix_(top, cols)] = b * resp.scale[top, None]
         branch[top] = [x[0] * resp.scale[i] for x, i in zip(Xn, top, strict=True)]
     known = np.isfinite(branch) & np.all(np.isfinite(glo) & np.isfinite(ghi), axis=1)
     branch = np.maximum(branch, _mean_value(st, LO, HI, glo, ghi, known, c_lo, c_hi))
@@ -394,6 +395,6 @@ def _result(st: _State, box: OperatorBox, lower: float, rtol: float, verts: np.n
     vmin = float(np.nanmin(v_hi)) if np.any(~np.isnan(v_hi)) else math.nan
     vert = verts[int(np.nanargmin(v_hi))] if np.any(~np.isnan(v_hi)) else named
     converged = _done(st.upper, lower, rtol)
-    return RobustStiffnessResult(lower, tuple(float(x) for x in named), float(exact),
-                                 st.upper, converged, st.evaluated, rtol, vmin,
-                                 tuple(float(x) for x in vert), box, seconds, st.loop)
+    three = lambda p: (float(p[0]), float(p[1]), float(p[2]))  # noqa: E731
+    return RobustStiffnessResult(lower, three(named), float(exact), st.upper, converged,
+                                 st.evaluated, rtol, vmin, three(vert), box, seconds, st.loop)

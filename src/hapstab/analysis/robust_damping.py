@@ -14,7 +14,6 @@ limit of the device side, whatever the operator).
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -49,29 +48,34 @@ class RobustDampingResult(Result):
         return self.robust.critical_stiffness >= self.nominal.critical_stiffness
 
     @property
+    def fails_for_some(self) -> bool:
+        """Whether some operator of the box is unstable at K* (the named one is)."""
+        return self.robust.upper_bound < self.nominal.critical_stiffness
+
+    @property
     def reason(self) -> str:
         """B* and K*, and whether they hold for every operator of the box, in words."""
         n, r = self.nominal, self.robust
         op = ", ".join(f"{v:.6g} {u}" for v, u in zip(r.operator, ("kg", "N*s/m", "N/m"),
                                                         strict=True))
         words = (f"{n.reason}. Over the operator box ({r.box.describe()}) at B* = "
-                 f"{n.damping:.6g} N*s/m: every operator is stable up to K = "
+                 f"{n.damping:.6g} N*s/m every operator is stable up to K = "
                  f"{r.critical_stiffness:.8g} N/m (certified)")
-        if not self.stable_for_all:
-            words += (f"; B* loses stability for other operators: with the operator ({op}) "
-                      f"K_max = {r.operator_critical_stiffness:.8g} N/m < K* = "
-                      f"{n.critical_stiffness:.8g} N/m")
-        else:
-            words += f", so K* = {n.critical_stiffness:.8g} N/m holds for all of them"
-        if math.isfinite(n.passive_up_to) and n.passive_up_to < n.critical_stiffness:
-            words += (f"; the device side at B* is passive only up to K = {n.passive_up_to:.6g} "
-                      "N/m whatever the operator: above it stability rests on the operator")
-        return words
+        if self.stable_for_all:
+            return words + f", so K* = {n.critical_stiffness:.8g} N/m holds for all of them"
+        if self.fails_for_some:
+            return words + (f"; B* loses stability for other operators: with the operator "
+                            f"({op}) K_max = {r.operator_critical_stiffness:.8g} N/m < K* = "
+                            f"{n.critical_stiffness:.8g} N/m")
+        return words + (f"; whether K* = {n.critical_stiffness:.8g} N/m holds for every operator "
+                        f"is not decided within the budget (the smallest K_max lies in "
+                        f"[{r.critical_stiffness:.8g}, {r.upper_bound:.8g}] N/m)")
 
     def to_dict(self) -> dict[str, Any]:
         d = self.nominal.to_dict()
         rob = self.robust.to_dict()
         d.update({"reason": self.reason, "stable_for_every_operator": self.stable_for_all,
+                  "unstable_for_some_operator": self.fails_for_some,
                   "robust_critical_stiffness": rob["critical_stiffness"],
                   "worst_operator": rob["operator"],
                   "worst_operator_critical_stiffness": rob["operator_critical_stiffness"],
@@ -133,8 +137,8 @@ def robust_best_damping(loop: Any, box: OperatorBox, B_max: float | None = None,
     -------
     RobustDampingResult
         The reason says when B* leaves some operator of the box unstable at K*
-        (naming the worst one and its K_max) and when K* is above the device
-        side's passivity limit at B*.
+        (naming the worst one and its K_max); the nominal part says when K* is
+        above the device side's passivity limit at B* (whatever the operator).
 
     Raises
     ------

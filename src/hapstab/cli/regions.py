@@ -139,7 +139,7 @@ def _best_command(kind: str) -> None:
         if B_min is not None and B_min > 0:
             raise HapstabError(f"--min-damping = {B_min:g}: must be <= 0 (the search always "
                                "includes B = 0)")
-        box = box_from(kw)
+        box = box_from(kw, nominal=True)
         loop = make(kw, 1.0)
         res: Any = (best_damping(loop, B_max=B_max, B_min=B_min) if box is None else
                     robust_best_damping(loop, box, B_max=B_max, B_min=B_min))

@@ -29,31 +29,39 @@ def operator_box_options(f: Any) -> Any:
 
 
 def _side(spec: str | None, name: str) -> tuple[float, float] | None:
+    """``lo:hi`` or one value (lo = hi), each >= 0 in the parameter's unit."""
     if spec is None:
         return None
-    if ":" in spec:
-        lo, hi = parse_range(spec, f"--operator-{name}", _UNITS[name], count=False,
-                             values=">= 0")
-        if hi < lo:
-            raise HapstabError(f"--operator-{name} = {spec!r}: the lower end must not exceed "
-                               "the upper end")
-        return (lo, hi)
-    v = parse_range(spec, f"--operator-{name}", _UNITS[name], values=">= 0")
-    if len(v) != 1:
-        raise HapstabError(f"--operator-{name} = {spec!r}: expected lo:hi or one value")
-    return (v[0], v[0])
+    opt, unit = f"--operator-{name}", _UNITS[name]
+    parts = spec.split(":")
+    if len(parts) > 2 or not all(p.strip() for p in parts):
+        raise HapstabError(f"{opt} = {spec!r}: expected lo:hi or one value in {unit}, "
+                           "e.g. 0.1:2")
+    vals = []
+    for p in parts:
+        try:
+            v = parse_range(p, opt, unit, values=">= 0")
+        except HapstabError:
+            raise HapstabError(f"{opt} = {spec!r}: expected lo:hi or one value, each a number "
+                               f">= 0 in {unit}, e.g. 0.1:2") from None
+        vals.append(v[0])
+    lo, hi = vals[0], vals[-1]
+    if hi < lo:
+        raise HapstabError(f"{opt} = {spec!r}: the lower end must not exceed the upper end")
+    return (lo, hi)
 
 
-def box_from(kw: dict[str, Any]) -> Any:
+def box_from(kw: dict[str, Any], nominal: bool = False) -> Any:
     """The operator box the options describe (None when none is given); removes them
-    from ``kw``."""
+    from ``kw``. ``nominal``: --operator is the nominal operator (best-damping), not
+    refused."""
     from hapstab.models.operators import operator_box
 
     preset = kw.pop("operator_box", None)
     sides = {n: _side(kw.pop(f"operator_{n}", None), n) for n in _UNITS}
     if preset is None and all(v is None for v in sides.values()):
         return None
-    if given("operator"):
+    if given("operator") and not nominal:
         raise HapstabError(f"--operator = {kw.get('operator')!r}: the operator is varied over "
                            "the box (--operator-box, --operator-mass, -damping, -stiffness); "
                            "allowed here: not given")

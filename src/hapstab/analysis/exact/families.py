@@ -101,14 +101,14 @@ def first_events(resp: LoopResponse) -> tuple[list[FirstEvent], Cells]:
             out.append(FirstEvent(int(anchor[i]), 0.0, None))
             continue
         unsure = [a for a, _ in found.unsure[i]]
-        boxes = [b for (j, _), b in zip(todo, tight, strict=True) if j == i]
-        lows = unsure + [b[0] for b in boxes]
+        mine = [b for (j, _), b in zip(todo, tight, strict=True) if j == i]
+        lows = unsure + [b[0] for b in mine]
         if not lows:
             out.append(FirstEvent(0, np.inf, None))
             continue
         u_lo = min(lows)
-        first = [b for b in boxes if b[0] == u_lo]
-        box = first[0] if len(first) == 1 and sum(x < first[0][1] for x in lows) == 1 else None
+        low = [b for b in mine if b[0] == u_lo]
+        box = low[0] if len(low) == 1 and sum(x < low[0][1] for x in lows) == 1 else None
         out.append(FirstEvent(0, u_lo, box))
     return out, c
 
