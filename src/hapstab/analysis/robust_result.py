@@ -142,7 +142,8 @@ class RobustStiffnessResult(Result):
         K : (len(y), len(x)) array
             Exact K_max (N/m).
         """
-        from hapstab.analysis.exact.core import exact_critical_stiffness
+        from hapstab.analysis.exact.crossings import analyse
+        from hapstab.engine.frequency import loop_response, stack_responses
 
         lo, hi = self.box.lo, self.box.hi
         rel = np.where(hi > lo, (hi - lo) / np.maximum(hi, 1e-300), -1.0)
@@ -150,14 +151,13 @@ class RobustStiffnessResult(Result):
         i, j = int(order[0]), int(order[1])
         x = np.linspace(lo[i], hi[i], resolution)
         y = np.linspace(lo[j], hi[j], resolution if hi[j] > lo[j] else 1)
-        K = np.zeros((y.size, x.size))
-        p = np.array(self.operator, float)
-        for a, yy in enumerate(y):
-            for b, xx in enumerate(x):
-                q = p.copy()
-                q[i], q[j] = xx, yy
-                K[a, b] = exact_critical_stiffness(self.loop.replace(
-                    operator=self.box.operator(*q))).critical_stiffness
+        P = np.repeat(np.array(self.operator, float)[None], x.size * y.size, axis=0)
+        P[:, i] = np.tile(x, y.size)
+        P[:, j] = np.repeat(y, x.size)
+        # the exact core's K_max of every grid operator, in one batch
+        resp = stack_responses([loop_response(self.loop.replace(operator=self.box.operator(*q)))
+                                for q in P])
+        K = np.array([r.kmax for r in analyse(resp, full=False)]).reshape(y.size, x.size)
         return i, j, x, y, K
 
     def plot(self, ax: Any = None, resolution: int = 24) -> Any:
