@@ -19,7 +19,7 @@ from typing import Any
 
 from hapstab.analysis.damping import BestDampingResult, best_damping
 from hapstab.analysis.kb_plane import with_gains
-from hapstab.analysis.robust import DEFAULT_RTOL, robust_critical_stiffness
+from hapstab.analysis.robust import DEFAULT_RTOL, MAX_BOXES, robust_critical_stiffness
 from hapstab.analysis.robust_result import RobustStiffnessResult
 from hapstab.models.operators import OperatorBox
 from hapstab.results import Result, jsonable
@@ -114,7 +114,7 @@ class RobustDampingResult(Result):
 
 def robust_best_damping(loop: Any, box: OperatorBox, B_max: float | None = None,
                         resolution: int = 64, B_min: float | None = None, *,
-                        rtol: float = DEFAULT_RTOL, max_boxes: int = 2000,
+                        rtol: float = DEFAULT_RTOL, max_boxes: int = MAX_BOXES,
                         max_memory: float | None = None,
                         max_seconds: float | None = None) -> RobustDampingResult:
     """The nominal best damping B* (for the loop's own operator) and the robust K_max

@@ -91,6 +91,7 @@ class RobustStiffnessResult(Result):
         else:
             words += (f"; the budget of {self.boxes} sub-boxes is spent: the smallest K_max "
                       f"lies in [{self.critical_stiffness:.8g}, {self.upper_bound:.8g}] N/m")
+        # above the gap asked for (and the enclosures' 1e-9): the vertices miss the minimum
         if self.vertex_minimum > self.upper_bound * (1 + max(self.rtol, 1e-9)):
             words += (f"; the box's vertices alone give {self.vertex_minimum:.8g} N/m: the "
                       "smallest K_max is not at a vertex")
@@ -146,7 +147,7 @@ class RobustStiffnessResult(Result):
         from hapstab.engine.frequency import loop_response, stack_responses
 
         lo, hi = self.box.lo, self.box.hi
-        rel = np.where(hi > lo, (hi - lo) / np.maximum(hi, 1e-300), -1.0)
+        rel = np.where(hi > lo, (hi - lo) / np.maximum(hi, 1e-300), -1.0)   # 0 / 0 guarded
         order = np.argsort(-rel)
         i, j = int(order[0]), int(order[1])
         x = np.linspace(lo[i], hi[i], resolution)

@@ -74,9 +74,10 @@ def _robust_command(kind: str) -> None:
     @robust.command(kind)
     @loop_options(kind)
     @operator_box_options
+    # rtol from 1e-12 (the exact core's accuracy) to 0.5; 1e-6 as the library's default
     @click.option("--rtol", type=click.FloatRange(1e-12, 0.5), default=1e-6, show_default=True,
                   help="Stop when upper - lower <= rtol * upper.")
-    @click.option("--max-boxes", type=click.IntRange(1, 100000), default=2000,
+    @click.option("--max-boxes", type=click.IntRange(1, 100000), default=6000,
                   show_default=True, help="Budget of operator sub-boxes.")
     @click.option("--plot", "plot_path", type=click.Path(dir_okay=False), default=None,
                   help="Write a heat map of K_max over the box (PNG or SVG by extension).")

@@ -265,8 +265,9 @@ def crossing_gradient(resp: LoopResponse, dresps: list[LoopResponse], items: np.
     kind = X[4].astype(int)
     for _ in range(4):
         t_lo, t_hi, u_lo, u_hi = _derivatives(resp, dresps, items, (*X[:4], kind))
+        # (1 + 1e-12): the rounding of the sums, far above their few unit round-offs
         st = np.sum(np.maximum(np.abs(t_lo), np.abs(t_hi)) * half, axis=1) * (1 + 1e-12)
-        su = np.sum(np.maximum(np.abs(u_lo), np.abs(u_hi)) * half, axis=1) * (1 + 1e-12)
+        su = np.sum(np.maximum(np.abs(u_lo), np.abs(u_hi)) * half, axis=1) * (1 + 1e-12)  # as st
         ok = np.isfinite(st + su)
         na = np.where(ok, np.maximum(X[0], np.nextafter(C[0] - su, -np.inf)), X[0])
         nb = np.where(ok, np.minimum(X[1], np.nextafter(C[1] + su, np.inf)), X[1])
@@ -275,7 +276,7 @@ def crossing_gradient(resp: LoopResponse, dresps: list[LoopResponse], items: np.
         nr = np.where(ok & (kind == 0), 0.5 * (t1 - t0) * (1 + 4 * EPS_OP), X[3])
         if not np.all((nb >= na) & (nr >= 0)):
             break
-        shrink = np.max((nb - na) / np.maximum(X[1] - X[0], 1e-300))
+        shrink = np.max((nb - na) / np.maximum(X[1] - X[0], 1e-300))   # (a zero width guarded)
         X[0], X[1], X[2], X[3] = na, nb, nt, nr
         if shrink > 0.9:
             break

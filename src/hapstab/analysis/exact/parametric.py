@@ -139,8 +139,9 @@ def isolate(fam: LoopResponse, cen: LoopResponse, dres: list[LoopResponse], item
         s_u += half[:, p] * np.abs(Y[1, 0] * gc.real + Y[1, 1] * gc.imag)
     out: list = [None] * items.size
     x0 = np.array([th0, u0])
+    # X also holds the centre's own enclosure, and 1e-13 (the exact core's accuracy) more
     floor_u = np.array([0.5 * (b[1] - b[0]) for b in cbox]) + 1e-13 * u0
-    floor_t = np.array([b[3] for b in cbox]) + 1e-13 * (1 + th0)
+    floor_t = np.array([b[3] for b in cbox]) + 1e-13 * (1 + th0)   # the same, in theta
     todo = np.isfinite(det) & (det != 0)
     for f, r in SIZES:
         k = np.flatnonzero(todo)
