@@ -58,9 +58,15 @@ def box_from(kw: dict[str, Any], nominal: bool = False) -> Any:
     from hapstab.models.operators import operator_box
 
     preset = kw.pop("operator_box", None)
-    sides = {n: _side(kw.pop(f"operator_{n}", None), n) for n in _UNITS}
+    specs = {n: kw.pop(f"operator_{n}", None) for n in _UNITS}
+    sides = {n: _side(specs[n], n) for n in _UNITS}
     if preset is None and all(v is None for v in sides.values()):
         return None
+    missing = [f"--operator-{n}" for n, v in sides.items() if v is None]
+    if preset is None and missing:
+        have = ", ".join(f"--operator-{n} = {specs[n]!r}" for n in _UNITS if specs[n] is not None)
+        raise HapstabError(f"{have}: {' and '.join(missing)} not given; give all three ranges "
+                           "(or --operator-box PRESET, which they then override)")
     if given("operator") and not nominal:
         raise HapstabError(f"--operator = {kw.get('operator')!r}: the operator is varied over "
                            "the box (--operator-box, --operator-mass, -damping, -stiffness); "
