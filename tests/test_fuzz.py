@@ -56,7 +56,9 @@ NEEDS = {"region": ["--K", "0:100", "--B", "0:1", "--resolution", "12"], "reprod
          "check": ["-K", "5"], "passivity": ["-K", "5"], "simulate": ["-K", "5"],
          "run": ["study.toml"], "twoport": ["-K", "5"], "transparency": ["-K", "5"],
          "limit-cycle": ["-K", "5", "--resolution", "1e-4"],
-         "zwidth": ["--K", "0:100", "--B", "0:1", "--rows", "4"]}
+         "zwidth": ["--K", "0:100", "--B", "0:1", "--rows", "4"],
+         "robust": ["--operator-mass", "0.5", "--operator-damping", "5", "--operator-stiffness",
+                    "500"]}
 #: 4ch loops each command takes, one option of them then hostile: force reflection (C_m
 #: a damper, C_4 = 0, C_2 = 1) for the exact K_max, a force gain for the best damping,
 #: equal position controllers for the region, unequal ones for the position-only tests.

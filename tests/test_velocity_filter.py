@@ -377,3 +377,12 @@ def test_affine_controller_refuses_other_periods_and_zero_p():
         h.AffineController(1.0, (0.0,), (1.0,))
     with pytest.raises(ModelError, match="proper"):
         h.AffineController(1.0, (1.0, 0.0, 0.0), (1.0, 0.5))
+
+
+def test_robust_analysis_refuses_a_filtered_damper():
+    # its ball-arithmetic family carries no filter yet: one line, not a wrong bound
+    loop = h.HapticLoop(h.Device(0.15, 0.1), FilteredSpringDamper(0, 0.5, "lowpass:100"),
+                        "msd:0.5,5,500", period=1e-3, delay_samples=2)
+    box = h.operator_box(mass=(0.3, 0.6), damping=(2, 8), stiffness=(100, 800))
+    with pytest.raises(AnalysisError, match="filtered velocity"):
+        h.robust_critical_stiffness(loop, box)

@@ -26,6 +26,8 @@ from hapstab.analysis.positive_real import (
     positive_real,
 )
 from hapstab.analysis.regions import RegionResult, stability_region
+from hapstab.analysis.robust import RobustStiffnessResult, robust_critical_stiffness
+from hapstab.analysis.robust_damping import RobustDampingResult, robust_best_damping
 from hapstab.analysis.transparency import TransparencyResult, transparency
 from hapstab.analysis.twoport import TwoPortResult, llewellyn_test
 from hapstab.budget import BudgetError
@@ -40,6 +42,7 @@ from hapstab.models.controllers import (
 )
 from hapstab.models.fourchannel import FourChannelLoop
 from hapstab.models.loops import HapticLoop, TeleoperationLoop
+from hapstab.models.operators import OperatorBox, operator_box
 from hapstab.models.parts import (
     NO_IMPEDANCE,
     Device,
@@ -70,4 +73,6 @@ __all__ = [
     "OutputError", "transparency", "TransparencyResult", "llewellyn_test", "TwoPortResult",
     "TDPA", "abbott_okamura", "nonlinear_passivity", "NonlinearPassivityResult", "limit_cycles",
     "LimitCycleResult", "PredictedCycle",
+    "OperatorBox", "operator_box", "robust_critical_stiffness", "RobustStiffnessResult",
+    "robust_best_damping", "RobustDampingResult",
 ]

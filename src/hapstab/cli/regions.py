@@ -18,6 +18,7 @@ from hapstab.cli.options import (
     rich_table,
 )
 from hapstab.cli.ranges import parse_range
+from hapstab.cli.robust import box_from, operator_box_options
 from hapstab.errors import HapstabError
 
 
@@ -129,19 +130,27 @@ def _best_command(kind: str) -> None:
     @click.option("--min-damping", "B_min", type=REAL, default=None,
                   help="Smallest B to search, <= 0 (default: where K_max falls to 0 going "
                        "down; 0 searches B >= 0 only).")
+    @operator_box_options
     def _cmd(B_max: float | None, B_min: float | None, as_json: bool, **kw: Any) -> None:
         from hapstab.analysis.damping import best_damping
+        from hapstab.analysis.robust_damping import robust_best_damping
 
         _equal_controllers(kw)
         if B_min is not None and B_min > 0:
             raise HapstabError(f"--min-damping = {B_min:g}: must be <= 0 (the search always "
                                "includes B = 0)")
+        box = box_from(kw, nominal=True)
         loop = make(kw, 1.0)
-        res = best_damping(loop, B_max=B_max, B_min=B_min)
-        rows = [("best virtual damping B*", f"{res.damping:.10g} N*s/m"),
-                ("critical stiffness K*", f"{fmt(res.critical_stiffness)} N/m"),
-                ("K_max at B = 0", f"{fmt(res.critical_stiffness_at_zero_damping)} N/m"),
-                ("design answer", res.reason)]
+        res: Any = (best_damping(loop, B_max=B_max, B_min=B_min) if box is None else
+                    robust_best_damping(loop, box, B_max=B_max, B_min=B_min))
+        nom = res if box is None else res.nominal
+        rows = [("best virtual damping B*", f"{nom.damping:.10g} N*s/m"),
+                ("critical stiffness K*", f"{fmt(nom.critical_stiffness)} N/m"),
+                ("K_max at B = 0", f"{fmt(nom.critical_stiffness_at_zero_damping)} N/m")]
+        if box is not None:
+            rows.append(("robust K_max at B*", f"{fmt(res.robust.critical_stiffness)} N/m for "
+                                               f"every operator of {box.describe()}"))
+        rows.append(("design answer", res.reason))
         emit(res.to_dict(), as_json, lambda: rich_table(f"best virtual damping, {kind}", rows, loop),
              loop)
 

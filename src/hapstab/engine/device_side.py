@@ -125,10 +125,14 @@ class DeviceSide:
         # (a few digits short of double precision for these low-degree polynomials)
         if (len(roots) == 0 and poly[0] == 0) or np.any(np.abs(roots) <= 1.0 + 1e-9):
             bad = max((1.0 / abs(r) for r in roots if r != 0), default=math.inf)
-            raise AnalysisError(f"{what}: the force feedback alone is unstable (det(I - z^-1 "
-                                f"G_f(z)) has a zero at |z| = {bad:.6g} >= 1: |C_5|, |C_6| must "
-                                "be below 1 and C_2 C_3 small enough); the test needs a stable "
-                                "two-port")
+            names = {(0, 0): "C6", (0, 1): "C2", (1, 0): "C3", (1, 1): "C5"}
+            gains = ", ".join(f"{names.get((ch.port, j), 'gain')} = "
+                              f"{-float(ch.controller.num[0]) * s:g}"  # type: ignore[union-attr]
+                              for ch in self.forces for j, s, _ in ch.terms)
+            raise AnalysisError(f"{what}: the force feedback alone is unstable with {gains} "
+                                f"(det(I - z^-1 G_f(z)) has a zero at |z| = {bad:.6g} >= 1: "
+                                "|C5|, |C6| must be below 1 and C2 C3 small enough); the test "
+                                "needs a stable two-port")
 
     @property
     def ports(self) -> int:

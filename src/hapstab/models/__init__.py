@@ -17,6 +17,7 @@ from hapstab.models.loops import (
                                   delay_from_seconds,
                                   whole_delay,
 )
+from hapstab.models.operators import OperatorBox, operator_box
 from hapstab.models.parts import (
                                   NO_IMPEDANCE,
                                   Device,
@@ -28,6 +29,6 @@ from hapstab.models.parts import (
 
 __all__ = ["Device", "Impedance", "NO_IMPEDANCE", "spring", "mass_spring_damper",
            "parse_impedance", "SpringDamper", "FilteredSpringDamper", "VelocityFilter",
-           "AffineController",
-    "DiscreteController", "Controller", "HapticLoop",
-           "TeleoperationLoop", "FourChannelLoop", "Loop", "delay_from_seconds", "whole_delay"]
+           "AffineController", "DiscreteController", "Controller", "HapticLoop",
+           "TeleoperationLoop", "FourChannelLoop", "Loop", "delay_from_seconds", "whole_delay",
+           "OperatorBox", "operator_box"]

@@ -14,6 +14,7 @@ M. J. Cloud, *Introduction to Interval Analysis*, SIAM 2009, ch. 8.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -177,10 +178,13 @@ def _dpoly(c: np.ndarray, r: np.ndarray, uc: np.ndarray, ur: np.ndarray):
 # -------------------------------------------------------------------- the boxes
 @dataclass
 class Found:
-    """Crossings (u, theta, direction, multiplicity) and unresolved u-intervals per item."""
+    """Crossings (u, theta, direction, multiplicity) and unresolved u-intervals per item;
+    for a search over a family of loops (``robust``) also the boxes that isolate each
+    crossing: (u_lo, u_hi, cell, u, theta), u and theta polished inside the box."""
 
     cross: list[list[tuple[float, float, int, int]]]
     unsure: list[list[tuple[float, float]]]
+    boxes: list[list[tuple[float, float, int, float, float]]] | None = None
 
 
 def _quad_roots(a0: np.ndarray, a1: np.ndarray, a2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -293,9 +297,11 @@ def _box_test(c: Cells, cell: np.ndarray, ua: np.ndarray, ub: np.ndarray):
     return status, w_theta, w_u, np.abs(fc), noise
 
 
-def _krawczyk(c: Cells, cell, uc, ur, rho, tc, tr, kc, kr) -> np.ndarray:
+def _krawczyk(c: Cells, cell, uc, ur, rho, tc, tr, kc, kr, image: bool = False) -> Any:
     """1 where the Krawczyk operator maps the box into its interior (exactly one
-    zero), 0 where it misses the box (no zero), else 2."""
+    zero), 0 where it misses the box (no zero), else 2. With ``image``, also the
+    image's shift and half-width per coordinate (theta, u): every zero in the box
+    lies in ``centre - shift +- half``."""
     z = np.zeros(uc.shape)
     pc, pr, pd = c.pc[:, cell], c.pr[:, cell], c.pd[:, cell]
     f, frad = _dpoly(pc, pr, uc, z)                              # F at the centre
@@ -326,6 +332,8 @@ def _krawczyk(c: Cells, cell, uc, ur, rho, tc, tr, kc, kr) -> np.ndarray:
         outside = np.any(np.abs(shift) - half > rad, axis=0)
     out[ok & inside] = 1
     out[ok & outside & ~inside] = 0
+    if image:
+        return out, np.where(ok, shift, 0.0), np.where(ok, half, np.inf)
     return out
 
 

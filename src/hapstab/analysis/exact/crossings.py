@@ -94,15 +94,21 @@ class _Search:
     guess: np.ndarray           # (L,) the cap is a guess that may have to be raised
     deferred: list[tuple[np.ndarray, np.ndarray, np.ndarray]]
     rounds: int = 0
+    #: a family of loops (coefficient enclosures over a box of parameters): a crossing
+    #: is recorded at its box's lower end and keeps the boxes below its upper end
+    robust: bool = False
 
 
 def _boxes(resp: LoopResponse, items: np.ndarray, u_cap: np.ndarray, polish: bool = True,
-           estimate: bool = True, start: tuple[Cells, np.ndarray] | None = None) -> Found:
+           estimate: bool = True, start: tuple[Cells, np.ndarray] | None = None,
+           robust: bool = False) -> Found:
     """Branch and prune over (theta, u) for the given items (see module doc).
 
     ``u_cap[item]`` bounds the u of interest (inf: all); it is lowered to each
     crossing found when only the lowest crossing is wanted (finite caps).
     ``start``: cells already built (and the indices of a partition of [0, pi] per item).
+    ``robust``: each item is a family of loops (see :class:`_Search`); the boxes that
+    isolate crossings are returned too (``Found.boxes``).
     """
     L = resp.size
     if start is None:
@@ -113,7 +119,10 @@ def _boxes(resp: LoopResponse, items: np.ndarray, u_cap: np.ndarray, polish: boo
         cells = cells[np.isin(c.item[cells], items)]
     lowest_only = np.isfinite(u_cap)
     srch = _Search(resp, c, Found([[] for _ in range(L)], [[] for _ in range(L)]), lowest_only,
-                   np.where(lowest_only, u_cap, np.inf).astype(float), np.zeros(L, bool), [])
+                   np.where(lowest_only, u_cap, np.inf).astype(float), np.zeros(L, bool), [],
+                   robust=robust)
+    if robust:
+        srch.found.boxes = [[] for _ in range(L)]
     if estimate and lowest_only.any():
         # a first cap from the near-real roots u at the cells' centres: with it the
         # high-u boxes are never refined. A cap below the true lowest crossing finds
@@ -173,7 +182,9 @@ def _round(srch: _Search, cell: np.ndarray, ua: np.ndarray, ub: np.ndarray,
         T = ", ".join(f"{t:g}" for t in np.unique(srch.resp.periods[srch.c.item[cell]]))
         raise AnalysisError(f"period = {T} s: the crossing analysis needs more than {MAX_BOXES} "
                             "boxes for this loop at this sampling period; it is beyond what it "
-                            "can certify (a shorter period or delay may be)")
+                            "can certify (a shorter period or delay may be; so may a mass, "
+                            "damping or stiffness nearer a device's usual range, when the "
+                            "loop's poles crowd z = 1 to within rounding)")
     status, w_th, w_u, f_abs, noise = _box_test(srch.c, cell, ua, ub)
     one = np.flatnonzero(status == 1)
     if one.size:
@@ -190,13 +201,18 @@ def _record(srch: _Search, cell: np.ndarray, ua: np.ndarray, ub: np.ndarray,
             polish: bool) -> None:
     """Boxes proved to hold one crossing each: polish it, record it, lower the cap."""
     c = srch.c
-    res = _polish(srch.resp, c, cell, ua, ub) if polish else None
+    res = _polish(srch.resp, c, cell, ua, ub) if polish or srch.robust else None
     for k in range(cell.size):
         i = int(c.item[cell[k]])
         u, t, dirn = res[k] if res is not None else (0.5 * (ua[k] + ub[k]), c.th[cell[k]], 0)
-        srch.found.cross[i].append((u, t, dirn, 1 if c.kind[cell[k]] else 2))
+        u_rec = u_cap = u
+        if srch.robust:       # every loop of the family has its crossing in [ua, ub]
+            assert srch.found.boxes is not None
+            srch.found.boxes[i].append((float(ua[k]), float(ub[k]), int(cell[k]), u, t))
+            u_rec, u_cap = float(ua[k]), float(ub[k])
+        srch.found.cross[i].append((u_rec, t, dirn, 1 if c.kind[cell[k]] else 2))
         if srch.lowest_only[i]:
-            srch.cap[i] = min(srch.cap[i], u)
+            srch.cap[i] = min(srch.cap[i], u_cap)
 
 
 def _give_up(srch: _Search, cell: np.ndarray, ua: np.ndarray, ub: np.ndarray,
@@ -244,13 +260,15 @@ def _split(srch: _Search, cell: np.ndarray, ua: np.ndarray, ub: np.ndarray,
 
 
 # ------------------------------------------------------------------ the winding
-def _winding_cells(resp: LoopResponse, c: Cells, leaves: np.ndarray, u: np.ndarray
-                   ) -> np.ndarray:
+def _winding_cells(resp: LoopResponse, c: Cells, leaves: np.ndarray, u: np.ndarray,
+                   robust: bool = False) -> np.ndarray:
     """:func:`winding` at u[item] on cells already built (a partition of [0, pi] per
     item, centred cells, the ends centred on 0 and pi): cells whose disc holds 0 at u
     are split. Between the centres of neighbouring cells the argument changes by
     Arg(w / F_i) + Arg(F_(i+1) / w) for any w in both discs (each disc excludes 0 and
-    holds the value at the shared edge), so no further evaluation is needed."""
+    holds the value at the shared edge), so no further evaluation is needed. ``robust``
+    (a family of loops): a cell whose centre's own enclosure holds 0 is not split (no
+    split can exclude 0 there), and its item's count is not certified."""
     L = resp.size
     bad_item = np.zeros(L, bool)
     for _ in range(200):
@@ -260,6 +278,9 @@ def _winding_cells(resp: LoopResponse, c: Cells, leaves: np.ndarray, u: np.ndarr
         if not holds0.any():
             break
         floor = holds0 & _theta_floor(c, leaves)
+        if robust:
+            pc, pr = _dpoly(c.pc[:, leaves], c.pr[:, leaves], u[it], np.zeros(leaves.size))
+            floor |= holds0 & ~(np.abs(pc) > pr)
         bad_item[it[floor]] = True
         split = leaves[holds0 & ~floor]
         keep = leaves[~holds0 | floor]
