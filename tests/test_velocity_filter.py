@@ -386,3 +386,17 @@ def test_robust_analysis_refuses_a_filtered_damper():
     box = h.operator_box(mass=(0.3, 0.6), damping=(2, 8), stiffness=(100, 800))
     with pytest.raises(AnalysisError, match="filtered velocity"):
         h.robust_critical_stiffness(loop, box)
+
+
+def test_affine_controller_refuses_a_shared_unstable_root():
+    # P and Q with the same integrator: (1 - z^-1)^2 divides every row, det M vanishes at
+    # z = 1 for every K and the count is undefined (an independent review hung the core
+    # on it); K on an integrated position alone, P = z / (z - 1), is accepted and answers
+    # (a pure integral wall on this device is stable only below ~7e-4 N/m)
+    with pytest.raises(ModelError, match="share the denominator root"):
+        h.AffineController(0.0, p_num=(1, 0), p_den=(1, -1), q_num=(0.1, 0), q_den=(1, -1))
+    with pytest.raises(ModelError, match="numerator and denominator root"):
+        h.AffineController(0.0, q_num=(1.0, -1.0), q_den=(1.0, -1.0))
+    c = h.AffineController(0.0, p_num=(1, 0), p_den=(1, -1))
+    loop = h.HapticLoop(h.Device(0.15, 0.1), c, h.spring(1.0), period=1e-3, delay_samples=2)
+    assert 0 < h.critical_stiffness(loop).critical_stiffness < 1e-3

@@ -278,6 +278,15 @@ class AffineController:
                 raise ModelError("controller P = 0: K would do nothing; P must not be zero")
             object.__setattr__(self, f"{name}_num", tuple(map(float, num)))
             object.__setattr__(self, f"{name}_den", tuple(map(float, den)))
+        pairs = ((self.p_den, self.q_den, "P and Q share the denominator"),
+                 (self.p_num, self.p_den, "P has a numerator and denominator"),
+                 (self.q_num, self.q_den, "Q has a numerator and denominator"))
+        for x, y, what in pairs:
+            r = _common_root(x, y)
+            if r is not None:
+                raise ModelError(f"controller: {what} root z = {r:.6g} on or outside the unit "
+                                 "circle; cancel it (one filter, in lowest terms): the exact "
+                                 "analysis cannot count a pole that every K leaves there")
 
     def parts(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(P_num, P_den, Q_num, Q_den) in z^-1, ascending, each pair padded to the
@@ -347,6 +356,21 @@ class DiscreteController:
 
 
 Controller = SpringDamper | FilteredSpringDamper | AffineController | DiscreteController
+
+
+def _common_root(x: Any, y: Any) -> complex | None:
+    """A root that polynomials ``x`` and ``y`` (z, highest power first) share on or
+    outside the unit circle, or None. Roots agree to 1e-9 relative (np.roots resolves
+    the simple roots of these low-degree polynomials to ~1e-12), and 1 - 1e-9 counts
+    as on the circle."""
+    rx = np.roots(np.asarray(x, float)) if len(x) > 1 else np.zeros(0)
+    ry = np.roots(np.asarray(y, float)) if len(y) > 1 else np.zeros(0)
+    for a in rx:
+        for b in ry:
+            on_or_out = abs(a) >= 1 - 1e-9      # np.roots' accuracy: ~1e-12 for simple roots
+            if on_or_out and abs(a - b) <= 1e-9 * max(1.0, abs(a)):   # the same root, to it
+                return complex(a)
+    return None
 
 #: The controllers with a stiffness K to vary (affine in K: H = K + Q(z)).
 StiffnessController = SpringDamper | FilteredSpringDamper | AffineController
