@@ -91,7 +91,9 @@ class _Search:
     cap: np.ndarray             # (L,) the u above which nothing is of interest (yet)
     guess: np.ndarray           # (L,) the cap is a guess that may have to be raised
     deferred: list[tuple[np.ndarray, np.ndarray, np.ndarray]]
-    rounds: int = 0
+    #: (L,) rounds in which each item still had boxes to split (counted per item, so a
+    #: batch of loops gives each the limit it has alone)
+    rounds: np.ndarray | None = None
     #: a family of loops (coefficient enclosures over a box of parameters): a crossing
     #: is recorded at its box's lower end and keeps the boxes below its upper end
     robust: bool = False
@@ -226,9 +228,11 @@ def _give_up(srch: _Search, cell: np.ndarray, ua: np.ndarray, ub: np.ndarray,
     th_done = th_small | (w_th <= noise)          # theta splits cannot help any more
     stuck = (th_done & (u_small | (w_u <= noise)) | th_small & (w_th >= f_abs)
              | ~np.isfinite(f_abs + w_th + w_u))
-    srch.rounds += 1
-    if srch.rounds > MAX_ROUNDS:
-        stuck[:] = True
+    items = srch.c.item[cell]
+    if srch.rounds is None:
+        srch.rounds = np.zeros(srch.cap.size, int)
+    srch.rounds[np.unique(items)] += 1
+    stuck |= srch.rounds[items] > MAX_ROUNDS
     for k in np.flatnonzero(stuck):
         i = int(srch.c.item[cell[k]])
         srch.found.unsure[i].append((float(ua[k]), float(ub[k])))
@@ -269,6 +273,7 @@ def _winding_cells(resp: LoopResponse, c: Cells, leaves: np.ndarray, u: np.ndarr
     split can exclude 0 there), and its item's count is not certified."""
     L = resp.size
     bad_item = np.zeros(L, bool)
+    kids = leaves[:0]
     for _ in range(200):
         it = c.item[leaves]
         fc, fr = _dpoly(c.vc[:, leaves], c.vr[:, leaves], u[it], np.zeros(leaves.size))
@@ -286,8 +291,8 @@ def _winding_cells(resp: LoopResponse, c: Cells, leaves: np.ndarray, u: np.ndarr
             break
         kids = c.add(resp, *_split_cells(c, split))
         leaves = np.concatenate([keep, kids])
-    else:
-        bad_item[c.item[leaves]] = True
+    else:       # the items still splitting (not every item of a batch)
+        bad_item[c.item[kids]] = True
     it = c.item[leaves]
     order = np.lexsort((c.th[leaves], it))
     leaves, it = leaves[order], it[order]

@@ -1,0 +1,182 @@
+"""The exact critical stiffness of many loops at once: ``critical_stiffness_many``.
+
+Loops that share a *structure* (loop kind, ports and the order of their
+terminations, which port each channel measures with which sign and whole and
+fractional delay, velocity filters, free ports and rigid-body modes) have
+characteristic functions ``det M = F0 + u F1 + u^2 F2`` of the same form, differing
+only in numbers (masses, dampings, terminations, period, virtual damping B, K
+ratios, filter poles): :mod:`hapstab.engine.frequency` evaluates them as one batch
+(one row per loop), and the certified crossing search of
+:mod:`~hapstab.analysis.exact.crossings` runs over every loop of the batch in the
+same vectorised rounds. The answer for each loop is the one the single-loop core
+gives (:func:`~hapstab.analysis.methods.critical_stiffness`); what is shared is
+only the Python overhead, which dominates at ~0.1-1 ms per loop.
+
+A batch holds at most :data:`BATCH` loops, so a chunk of any size is analysed in
+bounded memory; a loop the core refuses (its parameters, or a search beyond the
+core's limits) is isolated by splitting its batch until it is alone, and then gets
+exactly the error the single-loop call raises.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Sequence
+from typing import Any, Literal, overload
+
+import numpy as np
+
+from hapstab.analysis.exact.core import _to_result
+from hapstab.analysis.exact.crossings import analyse
+from hapstab.engine.frequency import LoopResponse, loop_response, stack_responses
+from hapstab.errors import AnalysisError, ArgumentTypeError, HapstabError
+from hapstab.models.loops import HapticLoop, TeleoperationLoop, describe, require_loop
+from hapstab.models.parts import friction_note
+from hapstab.results import CriticalStiffnessResult
+
+__all__ = ["critical_stiffness_many", "structure_key", "BATCH"]
+
+#: Most loops analysed in one batch. The crossing search keeps every theta-cell of
+#: every loop of its batch (about 200 bytes a cell, a few hundred to a few thousand
+#: cells a loop at delays up to 30 samples) and evaluates each round's boxes at once:
+#: measured peak below 250 MB for 256 loops with delays up to 30 samples
+#: (benchmarks/bench_many.py); larger batches gain nothing in speed.
+BATCH = 256
+
+Outcome = CriticalStiffnessResult | HapstabError
+
+
+@overload
+def critical_stiffness_many(loops: Sequence[HapticLoop | TeleoperationLoop], *,
+                            errors: Literal["raise"] = ...
+                            ) -> list[CriticalStiffnessResult]: ...
+
+
+@overload
+def critical_stiffness_many(loops: Sequence[HapticLoop | TeleoperationLoop], *,
+                            errors: Literal["return"]
+                            ) -> list[Outcome]: ...
+
+
+def critical_stiffness_many(loops: Sequence[HapticLoop | TeleoperationLoop], *,
+                            errors: str = "raise") -> list[Any]:
+    """Exact K_max of every loop: ``[critical_stiffness(loop) for loop in loops]``,
+    batched over loops of one structure.
+
+    Parameters
+    ----------
+    loops : sequence of HapticLoop, TeleoperationLoop or FourChannelLoop
+        Any mix of kinds, structures and parameters; duplicates are analysed again.
+    errors : {"raise", "return"}
+        What a loop the exact core refuses gives: ``"raise"`` raises the error of the
+        first such loop in input order (after every loop is analysed: the error the
+        list comprehension would raise); ``"return"`` puts the
+        :class:`~hapstab.errors.HapstabError` instance in that loop's slot and goes on.
+
+    Returns
+    -------
+    list of CriticalStiffnessResult (or HapstabError with ``errors="return"``)
+        In the order of ``loops``; each equal to ``critical_stiffness(loop)``: the
+        same K_max (to the last bits: see the notes), stable intervals, reason,
+        crossing frequency, uncertain intervals and rigid-body modes.
+
+    Raises
+    ------
+    HapstabError
+        With ``errors="raise"``: the first refused loop's error (e.g. an
+        :class:`~hapstab.errors.AnalysisError` for a controller that is not a
+        spring-damper, or port masses more than 1e12 apart).
+    ArgumentTypeError
+        ``errors`` is not "raise" or "return", or ``loops`` is not a sequence.
+
+    Notes
+    -----
+    The results are bitwise those of the single-loop call, not merely close: every
+    operation of the search on one loop's rows is elementwise (the characteristic
+    function, the boxes' tests and splits, the windings, summed in the same order);
+    the three places where the rows of a batch met are per loop now: the Newton
+    polishing of a round's crossings stops for each loop when its own boxes have
+    converged (it ran until all had, so a loop could take one step more in a batch
+    and move K_max by an ulp), the search's safety valve on rounds counts each
+    loop's own rounds, and a winding that runs out of splits marks only the loops
+    still splitting. Checked bitwise on seeded mixed campaigns (tests/test_exact_many.py).
+
+    References
+    ----------
+    R. Krawczyk, "Newton-Algorithmen zur Bestimmung von Nullstellen mit
+    Fehlerschranken", Computing 4 (1969) 187-201; R. E. Moore, R. B. Kearfott and
+    M. J. Cloud, *Introduction to Interval Analysis*, SIAM 2009, ch. 8 (the certified
+    search, batched here); N. Miandashti and M. Tavakoli, "Stability of Sampled-Data,
+    Delayed Haptic Interaction and Teleoperation", IEEE Haptics Symposium 2014,
+    eq. (20) and (23) (the loops).
+    """
+    if not isinstance(errors, str) or errors not in ("raise", "return"):
+        raise ArgumentTypeError(f"errors = {errors!r:.40}: allowed: 'raise', 'return'")
+    if isinstance(loops, (str, bytes)) or not isinstance(loops, Sequence):
+        raise ArgumentTypeError(f"loops = {loops!r:.60}: must be a sequence (list or tuple) "
+                                "of loops")
+    out: list[Any] = [None] * len(loops)
+    groups: dict[Any, list[tuple[int, LoopResponse]]] = {}
+    for i, loop in enumerate(loops):
+        try:
+            require_loop(loop)
+            resp = loop_response(loop)
+        except HapstabError as e:
+            out[i] = e
+            continue
+        groups.setdefault(structure_key(resp), []).append((i, resp))
+    for members in groups.values():
+        for k in range(0, len(members), BATCH):
+            _analyse_batch(loops, members[k:k + BATCH], out)
+    if errors == "raise":
+        for o in out:
+            if isinstance(o, HapstabError):
+                raise o
+    return out
+
+
+def structure_key(resp: LoopResponse) -> tuple:
+    """What responses must share to be analysed as one batch: everything but the
+    numbers of the rows (see the module docstring).
+
+    Parameters
+    ----------
+    resp : LoopResponse
+        One loop's characteristic function.
+
+    Returns
+    -------
+    tuple
+        Hashable; equal for responses :func:`~hapstab.engine.frequency.stack_responses`
+        can stack and whose analysis has the same cells and rounds.
+    """
+    ports = tuple((pp.d.shape[1], pp.dhat.shape[1], tuple(sorted(pp.Nt)), pp.R is None)
+                  for pp in resp.ports)
+    filters = tuple(None if f is None else (f[0],) if f[0] == "lowpass" else
+                    (f[0], f[1]) if f[0] == "average" else
+                    (f[0], tuple(tuple(np.asarray(x).tolist()) for x in f[1]))
+                    for f in resp.filters)
+    return (resp.terms, resp.q, resp.rigid, resp.free, resp.channel_ports, resp.kinds,
+            ports, filters)
+
+
+def _analyse_batch(loops: Sequence[Any], members: list[tuple[int, LoopResponse]],
+                   out: list[Any]) -> None:
+    """Analyse one batch into ``out``; a refusal splits it until the refused loop is
+    alone, which then gets the single-loop core's error."""
+    try:
+        sets = analyse(stack_responses([r for _, r in members]), full=True)
+    except AnalysisError as e:
+        if len(members) > 1:
+            half = len(members) // 2
+            _analyse_batch(loops, members[:half], out)
+            _analyse_batch(loops, members[half:], out)
+            return
+        i = members[0][0]       # as exact_kmax_batch words it
+        out[i] = AnalysisError(f"{e}; the loop: {describe(loops[i])}")
+        return
+    for (i, _), res in zip(members, sets, strict=True):
+        loop = loops[i]
+        r = _to_result(res, loop.period, loop.delay_in_samples)
+        note = friction_note(loop)          # as critical_stiffness words it
+        out[i] = dataclasses.replace(r, reason=f"{r.reason}; {note}") if note else r
