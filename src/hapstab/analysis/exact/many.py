@@ -21,27 +21,38 @@ exactly the error the single-loop call raises.
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Sequence
 from typing import Any, Literal, overload
 
-import numpy as np
-
 from hapstab.analysis.exact.core import _to_result
 from hapstab.analysis.exact.crossings import analyse
-from hapstab.engine.frequency import LoopResponse, loop_response, stack_responses
+from hapstab.engine.frequency import (
+    ResponsePlan,
+    build_responses,
+    check_plan,
+    loop_response,
+    plan_response,
+)
 from hapstab.errors import AnalysisError, ArgumentTypeError, HapstabError
 from hapstab.models.loops import HapticLoop, TeleoperationLoop, describe, require_loop
 from hapstab.models.parts import friction_note
 from hapstab.results import CriticalStiffnessResult
 
-__all__ = ["critical_stiffness_many", "structure_key", "BATCH"]
+__all__ = ["critical_stiffness_many", "batch_size", "BATCH", "BATCH_BYTES"]
 
-#: Most loops analysed in one batch. The crossing search keeps every theta-cell of
-#: every loop of its batch (about 200 bytes a cell, a few hundred to a few thousand
-#: cells a loop at delays up to 30 samples) and evaluates each round's boxes at once:
-#: measured peak below 250 MB for 256 loops with delays up to 30 samples
-#: (benchmarks/bench_many.py); larger batches gain nothing in speed.
+#: Most loops analysed in one batch (more gains nothing in speed).
 BATCH = 256
+#: Memory one batch's search may take (bytes); its size is chosen by it. The search
+#: keeps every theta-cell of every loop of its batch (~300 bytes a cell) and
+#: evaluates each round's boxes at once; measured peak (tracemalloc) per loop and unit
+#: of the phase rate (delays in samples, both ways, plus the plant order) per port:
+#: 23-61 KB (HVE 10 samples 34 KB, PEB 15 and 30 samples each way 61 and 48 KB),
+#: taken as :data:`PER_RATE` = 70 KB. A chunk of any size then peaks near this
+#: budget (batches run one after another): PEB with 30 samples each way goes 32
+#: loops a batch, the paper's HVE with 10 samples 256.
+BATCH_BYTES = 300e6
+PER_RATE = 70e3
 
 Outcome = CriticalStiffnessResult | HapstabError
 
@@ -116,18 +127,20 @@ def critical_stiffness_many(loops: Sequence[HapticLoop | TeleoperationLoop], *,
         raise ArgumentTypeError(f"loops = {loops!r:.60}: must be a sequence (list or tuple) "
                                 "of loops")
     out: list[Any] = [None] * len(loops)
-    groups: dict[Any, list[tuple[int, LoopResponse]]] = {}
+    groups: dict[tuple, list[tuple[int, ResponsePlan]]] = {}
     for i, loop in enumerate(loops):
         try:
             require_loop(loop)
-            resp = loop_response(loop)
+            plan = plan_response(loop)
+            check_plan(plan)
         except HapstabError as e:
-            out[i] = e
+            out[i] = _refusal(loop, e)
             continue
-        groups.setdefault(structure_key(resp), []).append((i, resp))
+        groups.setdefault(plan.key(), []).append((i, plan))
     for members in groups.values():
-        for k in range(0, len(members), BATCH):
-            _analyse_batch(loops, members[k:k + BATCH], out)
+        size = batch_size(members[0][1])
+        for k in range(0, len(members), size):
+            _analyse_batch(loops, members[k:k + size], out)
     if errors == "raise":
         for o in out:
             if isinstance(o, HapstabError):
@@ -135,48 +148,66 @@ def critical_stiffness_many(loops: Sequence[HapticLoop | TeleoperationLoop], *,
     return out
 
 
-def structure_key(resp: LoopResponse) -> tuple:
-    """What responses must share to be analysed as one batch: everything but the
-    numbers of the rows (see the module docstring).
+def batch_size(plan: ResponsePlan) -> int:
+    """How many loops of ``plan``'s structure one batch takes: :data:`BATCH` at most,
+    fewer when its phase rate (the delays) would take the search beyond
+    :data:`BATCH_BYTES`; at least 8.
 
     Parameters
     ----------
-    resp : LoopResponse
-        One loop's characteristic function.
+    plan : ResponsePlan
+        Any loop of the structure.
 
     Returns
     -------
-    tuple
-        Hashable; equal for responses :func:`~hapstab.engine.frequency.stack_responses`
-        can stack and whose analysis has the same cells and rounds.
+    int
     """
-    ports = tuple((pp.d.shape[1], pp.dhat.shape[1], tuple(sorted(pp.Nt)), pp.R is None)
-                  for pp in resp.ports)
-    filters = tuple(None if f is None else (f[0],) if f[0] == "lowpass" else
-                    (f[0], f[1]) if f[0] == "average" else
-                    (f[0], tuple(tuple(np.asarray(x).tolist()) for x in f[1]))
-                    for f in resp.filters)
-    return (resp.terms, resp.q, resp.rigid, resp.free, resp.channel_ports, resp.kinds,
-            ports, filters)
+    ports = len(plan.matrices)
+    most = [0] * ports
+    for ch, terms in zip(plan.st.channels, plan.terms, strict=True):
+        most[ch.port] = max(most[ch.port], *(n + math.ceil(f) for _, _, n, f in terms))
+    rate = sum(most) + sum(m[0].shape[0] for m in plan.matrices) + 2
+    return int(max(8, min(BATCH, BATCH_BYTES // (PER_RATE * rate * ports))))
 
 
-def _analyse_batch(loops: Sequence[Any], members: list[tuple[int, LoopResponse]],
+def _refusal(loop: Any, e: HapstabError) -> HapstabError:
+    """The error the single-loop core gives a loop refused before its polynomials are
+    built: when it fails a check made after them, it may fail one made before too."""
+    try:
+        loop_response(loop)
+    except HapstabError as first:
+        return first
+    return e
+
+
+def _analyse_batch(loops: Sequence[Any], members: list[tuple[int, ResponsePlan]],
                    out: list[Any]) -> None:
     """Analyse one batch into ``out``; a refusal splits it until the refused loop is
     alone, which then gets the single-loop core's error."""
+    def split() -> None:
+        half = len(members) // 2
+        _analyse_batch(loops, members[:half], out)
+        _analyse_batch(loops, members[half:], out)
+
     try:
-        sets = analyse(stack_responses([r for _, r in members]), full=True)
-    except AnalysisError as e:
+        resp = build_responses([pl for _, pl in members])
+    except HapstabError as e:
         if len(members) > 1:
-            half = len(members) // 2
-            _analyse_batch(loops, members[:half], out)
-            _analyse_batch(loops, members[half:], out)
-            return
+            return split()
+        out[members[0][0]] = e
+        return None
+    try:
+        sets = analyse(resp, full=True)
+    except HapstabError as e:
+        if len(members) > 1:
+            return split()
         i = members[0][0]       # as exact_kmax_batch words it
-        out[i] = AnalysisError(f"{e}; the loop: {describe(loops[i])}")
-        return
+        out[i] = AnalysisError(f"{e}; the loop: {describe(loops[i])}") \
+            if isinstance(e, AnalysisError) else e
+        return None
     for (i, _), res in zip(members, sets, strict=True):
         loop = loops[i]
         r = _to_result(res, loop.period, loop.delay_in_samples)
         note = friction_note(loop)          # as critical_stiffness words it
         out[i] = dataclasses.replace(r, reason=f"{r.reason}; {note}") if note else r
+    return None
