@@ -84,6 +84,24 @@ def test_one_structure_many_numbers_equals_the_single_core():
     _check_equal(loops)
 
 
+def test_four_channel_loops_with_and_without_dampers_in_one_call():
+    # the expansion of several channels per port leaves out a channel's damper term
+    # when its B is 0: such loops are another batch (found by the 1200-loop campaign,
+    # loop 1023: K_max off by 3.6e-15 when batched with a damped neighbour)
+    from hapstab.models.fourchannel import FourChannelLoop
+    loops = []
+    for Bm in (0.0, -0.0005, 0.002):
+        for Bs in (0.0, 0.01):
+            for ks in (1.0, 2.1756832107189386):
+                loops.append(FourChannelLoop(
+                    h.Device(0.02054054767534916, 0.0011796640345971587),
+                    h.Device(0.9706340919098657, 0.0008390868924263191),
+                    campaign.spring_damper(1.0, Bm), campaign.spring_damper(ks, Bs),
+                    "msd:0.0119528,0.0058174,2.25824", "msd:0.0110647,5.49729,3.40079",
+                    0.0020064030208822685, 4, 4))
+    _check_equal(loops)
+
+
 # ------------------------------------------------------- order, duplicates, empty
 def test_order_is_kept_and_duplicates_are_fine():
     loops = mixed_loops(12, seed=1602, most_delay=8)

@@ -250,10 +250,15 @@ class ResponsePlan:
     def key(self) -> tuple:
         """What loops must share to be one batch (see :func:`build_responses`)."""
         nums = self.numbers if self.numbers is not None else _numbers(self)
+        # the expansion of several channels per port leaves out the terms of a channel
+        # with no stiffness or no damping (engine.expansion): part of the structure there
+        zeros = () if self.st.simple else (
+            tuple(r != 0 for r in self.ratios),
+            tuple(bool(np.any(nums[1][:, c])) for c in range(nums[1].shape[1])))
         return (self.terms, tuple((A.shape[0], fr, tuple(fs), force is None)
                                   for A, _b, force, _m, fr, fs in self.matrices),
                 nums[4], tuple(ch.port for ch in self.st.channels),
-                tuple(ch.measures for ch in self.st.channels), _filter_key(nums[5]))
+                tuple(ch.measures for ch in self.st.channels), _filter_key(nums[5]), zeros)
 
 
 def _filter_key(filters: tuple) -> tuple:
