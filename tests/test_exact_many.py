@@ -24,7 +24,7 @@ from hapstab.analysis.exact import many
 from hapstab.analysis.exact.many import BATCH, critical_stiffness_many
 from hapstab.errors import AnalysisError, ArgumentTypeError, HapstabError
 from references import campaign
-from references.mixed import mixed_loops
+from references.mixed import mixed_loops, undamped_loops
 
 
 def _single(loop):
@@ -81,6 +81,17 @@ def test_one_structure_many_numbers_equals_the_single_core():
                           campaign.spring_damper(0.0, float(rng.uniform(-0.001, 0.5))),
                           h.spring(float(10 ** rng.uniform(-1, 3))),
                           float(1 / 10 ** rng.uniform(2, 4)), 6) for _ in range(40)]
+    _check_equal(loops)
+
+
+def test_marginal_and_uncertain_verdicts_equal_the_single_core():
+    # (nearly) undamped loops: "marginal for K -> 0+" and K-intervals the numerics
+    # cannot decide, batched with loops of the same structure that are decided
+    loops = undamped_loops(60, seed=1)
+    got = critical_stiffness_many(loops, errors="return")
+    marginal = [r for r in got if r.reason.startswith("marginal for K -> 0+")]
+    uncertain = [r for r in got if r.details["uncertain_intervals"] and r not in marginal]
+    assert len(marginal) >= 3 and len(uncertain) >= 1      # the draw covers both verdicts
     _check_equal(loops)
 
 
@@ -247,7 +258,7 @@ def test_batched_answers_pass_the_brute_force_campaign(monkeypatch):
 # --------------------------------------------------------------------------- slow
 @pytest.mark.slow
 def test_slow_campaign_1200_mixed_loops_equal_the_single_core():
-    _check_equal(mixed_loops(1200, seed=1603, most_delay=30))
+    _check_equal(mixed_loops(1200, seed=1603, most_delay=30) + undamped_loops(300, seed=1605))
 
 
 @pytest.mark.slow
