@@ -52,6 +52,8 @@ RUNS = [
                 "--operator-mass", "0.5", "--operator-damping", "5", "--operator-stiffness",
                 "500"]),
     ("simulate", ["simulate", "hve", "-K", "5", "--duration", "0.5"]),
+    ("simulate", ["simulate", "hve", "-K", "5", "--duration", "0.5", "--series", "100",
+                  "--wall", "0"]),
     ("simulate", ["simulate", "hve", "-K", "1e6", "--duration", "1"]),            # overflows
     ("simulate", ["simulate", "peb", "-K", "8", "-n", "4", "--duration", "1", "--tdpa"]),
     ("simulate", ["simulate", "peb", "-K", "5", "--duration", "0.5", "--master-friction", "0.01",
