@@ -174,3 +174,27 @@ def test_another_host_warns(monkeypatch):
     assert r.exit_code == 0, r.output
     assert r.stderr.startswith("hapstab: warning: --host = 0.0.0.0") and r.stderr.count("\n") == 1
     assert seen == {"host": "0.0.0.0", "port": 0, "open": True}
+
+
+@pytest.mark.parametrize("args,named", [
+    (["--port", "-1"], "--port"), (["--port", "65536"], "--port"), (["--port", "abc"], "--port"),
+    (["--port", "1e3"], "--port"), (["--host", "1_000"], "--host"),
+    (["--host", "no.such.host.invalid"], "--host"), (["--host", "\udcff"], "--host"),
+    (["--host", ""], "--host"), (["--host", "256.1.1.1"], "--host"),
+    (["--study", "/nonexistent.toml"], "--study"), (["--study", ""], "--study"),
+])
+def test_hostile_options_are_one_line(args, named):
+    r = CliRunner().invoke(cli, ["explore", *args])
+    assert r.exit_code == 2, (args, r.output)
+    lines = [ln for ln in r.stderr.splitlines() if not ln.startswith("hapstab: warning: ")]
+    assert len(lines) == 1 and lines[0].startswith("hapstab: error: ") and named in lines[0]
+    assert "Traceback" not in r.stderr
+
+
+def test_a_port_in_use_is_one_line():
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        s.listen(1)
+        port = s.getsockname()[1]
+        r = CliRunner().invoke(cli, ["explore", "--port", str(port)])
+    assert r.exit_code == 2 and r.stderr.count("\n") == 1 and "cannot listen" in r.stderr

@@ -33,6 +33,7 @@ def explore_cmd(port: int, host: str, study_path: str | None, open_browser: bool
     except ImportError as e:
         raise HapstabError(f"hapstab explore needs starlette and uvicorn ({e.name} is "
                            "missing): pip install 'hapstab[explore]'") from None
+    _check_listen(host, port)
     app = create_app(study_path)
     if host != LOCAL:
         click.echo(f"hapstab: warning: --host = {host}: the explorer is reachable from other "
@@ -40,6 +41,26 @@ def explore_cmd(port: int, host: str, study_path: str | None, open_browser: bool
     server = uvicorn.Server(uvicorn.Config(app, host=host, port=port, log_level="warning",
                                            access_log=False, lifespan="off"))
     _serve(server, host, open_browser)
+
+
+def _check_listen(host: str, port: int) -> None:
+    """Refuse, in one line, a host this machine cannot listen on or a port in use (before
+    uvicorn tries and logs it)."""
+    import socket
+
+    try:
+        infos = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM, flags=socket.AI_PASSIVE)
+    except (OSError, UnicodeError, ValueError) as e:
+        raise HapstabError(f"--host = {host!r:.80}: not a name or address of an interface "
+                           f"({getattr(e, 'strerror', None) or e})") from None
+    family, kind, proto, _, address = infos[0]
+    with socket.socket(family, kind, proto) as s:
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            s.bind(address)
+        except OSError as e:
+            raise HapstabError(f"--host/--port = {host}:{port}: cannot listen there "
+                               f"({e.strerror or e})") from None
 
 
 def _serve(server: Any, host: str, open_browser: bool) -> None:
@@ -72,7 +93,10 @@ def _serve(server: Any, host: str, open_browser: bool) -> None:
         for sig in (signal.SIGINT, signal.SIGTERM):
             signal.signal(sig, lambda signum, frame: None)
     threading.Thread(target=announce, daemon=True).start()
-    with contextlib.suppress(KeyboardInterrupt):    # (uvicorn handles SIGINT itself)
-        asyncio.run(server.serve())
+    try:
+        with contextlib.suppress(KeyboardInterrupt):    # (uvicorn handles SIGINT itself)
+            asyncio.run(server.serve())
+    except SystemExit:          # uvicorn could not start (it said why on stderr)
+        server.started = False
     if not server.started:
         raise HapstabError(f"--host/--port: could not listen on {host} (see the message above)")
