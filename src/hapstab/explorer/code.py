@@ -7,7 +7,7 @@ with the public models (:class:`hapstab.Device`, :class:`hapstab.SpringDamper` /
 :class:`hapstab.TeleoperationLoop`), with every value as the command's own types read it
 (``"1kHz"`` is ``period=1 / 1000.0``, ``"20ms"`` is ``0.02``), calls the analysis and
 prints its headline: kmax, check, passivity, simulate and audit; for the other commands
-it builds the loop and says to use the command line.
+the script runs the command itself in Python (``hapstab.cli.main.main([...])``).
 """
 
 from __future__ import annotations
@@ -17,9 +17,14 @@ from typing import Any
 
 import click
 
-from hapstab.explorer.api import ApiError, check_request, loop_command, option_names
+from hapstab.cli.main import one_line
+from hapstab.explorer.api import ApiError, check_request, long_name, loop_command, option_names
 
-__all__ = ["code_for", "cli_line", "python_script"]
+__all__ = ["code_for", "cli_line", "python_script", "MAPPED"]
+
+#: Commands whose script builds the loop with the public models and calls the library;
+#: the others' script runs the command itself (``hapstab.cli.main.main``).
+MAPPED = ("kmax", "check", "passivity", "simulate", "audit")
 
 
 def cli_line(argv: list[str]) -> str:
@@ -80,10 +85,11 @@ def _values(command: str, kind: str, options: dict[str, Any]) -> dict[str, Any]:
             raise ApiError(422, f"Missing option {flags}.", p.opts[0].lstrip("-"))
     for key, value in options.items():
         p = names[key.replace("-", "_")]
+        text = repr(value) if isinstance(value, float) else str(value)   # as on the line
         try:
-            out[str(p.name)] = value if p.is_flag else p.type.convert(value, p, None)
+            out[str(p.name)] = value if p.is_flag else p.type.convert(text, p, None)
         except click.BadParameter as e:
-            raise ApiError(422, f"--{key} = {value!r:.60}: {e.message}", key) from None
+            raise ApiError(422, one_line(e.format_message()), long_name(p)) from None
     return out
 
 
@@ -153,8 +159,7 @@ def _analysis_lines(command: str, kind: str, v: dict[str, Any]) -> list[str]:
     if command == "audit":
         return [f"res = h.audit(loop, resolution_m={v.get('resolution')!r})",
                 "for row in res.rows:", "    print(row.label, row.critical_stiffness)"]
-    return [f"# hapstab {command}: run the command line above (its options are not mapped "
-            "to Python here)", "print(loop)"]
+    raise AssertionError(command)          # (python_script maps only MAPPED)
 
 
 def _simulate_lines(kind: str, v: dict[str, Any]) -> list[str]:
@@ -193,6 +198,12 @@ def python_script(command: str, kind: str, options: dict[str, Any]) -> str:
     -------
     str
     """
+    if command not in MAPPED:
+        argv = check_request(command, {"kind": kind, "options": options})
+        return ("# hapstab " + command + ": not mapped to the library's calls here; this runs\n"
+                "# the command itself in Python (the same JSON as the command line)\n"
+                "from hapstab.cli.main import main\n\n"
+                f"main({argv!r})\n")
     v = _values(command, kind, options)
     K = "1.0" if command == "kmax" else repr(v.get("stiffness") or 0.0)
     lines = ["import hapstab as h", "", f"K = {K}   # N/m", *_loop_lines(kind, v, "K"),
