@@ -36,6 +36,8 @@
                   wall: "m", saturation: "N", resolution: "m", operator: "Z", environment: "Z" };
   const PAGE_DEFAULTS = { hve: { stiffness: "50" }, peb: { stiffness: "5" } };
   const CLOSED = ["colgate", "gil", "eq18", "gil2004", "eq29", "eq34"];
+  // options a command varies itself (the CLI refuses a given value: cli/study.py VARIED)
+  const VARIED = { region: ["virtual-damping"], "best-damping": ["virtual-damping"] };
   const NOT_SENT = new Set(["json", "csv", "plot", "study", "variant", "dense", "series", "curve"]);
 
   let schema = null;
@@ -59,7 +61,7 @@
   function simOptions(kind) {
     const loop = new Set(loopOptions(kind).map((o) => o.name));
     return (schema.kinds[kind].commands.simulate || [])
-      .filter((o) => !loop.has(o.name) && !NOT_SENT.has(o.name));
+      .filter((o) => !loop.has(o.name) && !NOT_SENT.has(o.name) && o.name !== "stiffness");
   }
   function indexOptions(kind) {
     const m = {};
@@ -95,7 +97,8 @@
     const names = new Set(Object.keys(state.values));
     if (allowed.has("stiffness")) names.add("stiffness");
     for (const name of names) {
-      if (!allowed.has(name) || NOT_SENT.has(name) || (sim.has(name) && command !== "simulate")) continue;
+      if (!allowed.has(name) || NOT_SENT.has(name) || (sim.has(name) && command !== "simulate") ||
+          (VARIED[command] || []).includes(name)) continue;
       const o = optByName[state.kind][name];
       const text = value(name);
       if (text === "" && o.type !== "flag") continue;
@@ -239,6 +242,7 @@
   // ------------------------------------------------------------------ requests
   function schedule() {
     clearTimeout(timer);
+    document.body.dataset.pending = "1";     // a test waits for this to go
     timer = setTimeout(update, DEBOUNCE_MS);
   }
 
@@ -358,6 +362,7 @@
     else if (!inflight) { s.className = "idle"; s.textContent = "up to date"; }
     document.body.dataset.seq = String(seq);
     document.body.dataset.settled = errors.length ? "error" : "ok";
+    delete document.body.dataset.pending;
   }
 
   function current() {
@@ -369,7 +374,7 @@
   function simExtra() {
     const o = optsOf("simulate").find((x) => x.name === "series");
     if (!o) return {};
-    return { series: o.type === "flag" ? true : 2000 };
+    return { series: o.type === "flag" ? true : 1000 };
   }
 
   // periods (or rates) T/4 ... 4T around the current one, log-spaced, the current one included
@@ -412,9 +417,10 @@
   }
   function drawCheck(a) {
     const v = $("#verdict");
-    v.textContent = a.verdict + (a.stiffness != null ? ` at K = ${fmt(a.stiffness)} N/m` : "");
+    v.textContent = a.verdict;
     v.dataset.value = a.verdict; v.className = "big " + a.verdict;
-    $("#verdict-detail").textContent = `spectral radius ${fmt(a.spectral_radius, 8)}` +
+    $("#verdict-detail").textContent = (a.stiffness != null ? `at K = ${fmt(a.stiffness)} N/m · ` : "") +
+      `spectral radius ${fmt(a.spectral_radius, 8)}` +
       (a.frequency_hz != null ? ` · ${fmt(a.frequency_hz, 4)} Hz` : "") + " · " + a.reason;
     $("#verdict-detail").title = a.reason;
   }

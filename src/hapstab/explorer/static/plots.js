@@ -12,7 +12,7 @@ const HapstabPlots = (() => {
   const plots = {};   // key -> {u, table, markers}
 
   function fmt(v) {
-    if (v == null || !isFinite(v)) return "–";
+    if (v == null || !isFinite(v)) return "";
     const a = Math.abs(v);
     if (a !== 0 && (a >= 1e5 || a < 1e-3)) return v.toExponential(2);
     return +v.toPrecision(4) + "";
@@ -145,8 +145,9 @@ const HapstabPlots = (() => {
 
   // position (mm) and the controller's force (N) of each device against time
   function simulate(ans) {
-    const s = ans.series || {};
-    const t = s.time_s || [];
+    const s = ans.series;
+    if (!s || !s.time_s) { note("simulate", "this server's simulate gives no time series (--series)"); return; }
+    const t = s.time_s;
     const xk = Object.keys(s).filter((k) => /^x_.*_m$/.test(k));
     const uk = Object.keys(s).filter((k) => /^u_.*_N$/.test(k));
     const series = [{ label: "t (s)" }], data = [t];
