@@ -13,7 +13,7 @@
   const DEBOUNCE_MS = 30;
   const PAGE = Math.random().toString(36).slice(2, 10);   // this tab's channels
   const CURVE_POINTS = 400;      // the passivity margin curve
-  const REGION_RESOLUTION = 120; // K-B grid (rows of B, exact intervals in K)
+  const REGION_RESOLUTION = 48;  // K-B rows of B (each row's K intervals are exact)
   const SWEEP = 25;              // periods of the K_max-against-T plot, T/4 ... 4T
   const PAGE_FIELDS = ["_kwin", "_bwin"];
   const MAIN = {
@@ -285,7 +285,14 @@
   }
 
   const num = (t) => { const x = Number(String(t).trim()); return isFinite(x) && String(t).trim() !== "" ? x : null; };
-  function fieldFor(param) {
+  // the model's own names in a library message that gave no option ("delay_samples = ...")
+  const MODEL_NAMES = { delay_samples: "delay", period_s: "period", delay_s: "delay-s",
+                        delay_forward_samples: "delay-forward", delay_backward_samples: "delay-backward" };
+  function fieldFor(param, message) {
+    if (!param && message) {
+      const m = /^([a-z_]+) = /.exec(message);
+      param = m && MODEL_NAMES[m[1]];
+    }
     if (!param) return null;
     let n = String(param).replace(/_/g, "-");
     if (n === "K") n = "_kwin"; else if (n === "B") n = "_bwin";
@@ -298,7 +305,7 @@
     $("#form-error").textContent = "";
   }
   function showError(res, where) {
-    const f = fieldFor(res.parameter);
+    const f = fieldFor(res.parameter, res.error);
     if (f) {
       if (!f.classList.contains("invalid")) { f.classList.add("invalid"); $(".msg", f).textContent = res.error; }
       if (f.closest("details")) f.closest("details").open = true;
@@ -320,7 +327,7 @@
       if (res.error) {
         errors.push(res);
         stale(channel, true);
-        if (plot && !fieldFor(res.parameter) && !errors.some((e) => e !== res && fieldFor(e.parameter)))
+        if (plot && !fieldFor(res.parameter, res.error) && !errors.some((e) => e !== res && fieldFor(e.parameter, e.error)))
           HapstabPlots.note(plot, res.error);
         return null;
       }
@@ -347,7 +354,7 @@
       const rP = run("region", "region", regionExtra(km, cur), (a) => HapstabPlots.region(a, cur), "region");
       const b = await bP;
       if (b && b.ok) { shown.boundary = b.ok; stale("boundary", false); HapstabPlots.boundary(b.ok, cur); }
-      else if (b && b.error) { stale("boundary", true); if (!fieldFor(b.parameter)) HapstabPlots.note("boundary", b.error); }
+      else if (b && b.error) { stale("boundary", true); if (!fieldFor(b.parameter, b.error)) HapstabPlots.note("boundary", b.error); }
       await rP;
     } else {
       const b = await bP; stale("boundary", true); stale("region", true);
@@ -401,8 +408,10 @@
     const bHi = Math.max(2 * Math.abs(B), 1, (num(value("damping")) || num(value("master-damping")) || 0.1) * 10);
     const bLo = Math.min(-0.1 * bHi, 2 * B);
     const kHi = Math.max(2.5 * kmax, 1.5 * K, 1);
-    return { K: kw || `0:${+kHi.toPrecision(4)}`, B: bw || `${+bLo.toPrecision(4)}:${+bHi.toPrecision(4)}`,
-             resolution: REGION_RESOLUTION };
+    const out = { K: kw || `0:${+kHi.toPrecision(4)}`, B: bw || `${+bLo.toPrecision(4)}:${+bHi.toPrecision(4)}`,
+                  resolution: REGION_RESOLUTION };
+    if (has("region", "overlay")) out.overlay = "none";     // drawn by the CLI's --plot only
+    return out;
   }
 
   // ------------------------------------------------------------------ the cards
@@ -436,7 +445,7 @@
       k.textContent = r.critical_stiffness == null ? "∞" : fmt(r.critical_stiffness) + " N/m";
       const l = document.createElement("span"); l.className = "l"; l.textContent = r.label; l.title = r.note;
       d.append(k, l); box.appendChild(d);
-      if (r.flag) { const fl = document.createElement("div"); fl.className = "flag"; fl.textContent = "⚠ " + r.flag; box.appendChild(fl); }
+      if (r.flag) { const fl = document.createElement("div"); fl.className = "flag"; fl.textContent = "⚠ " + r.flag; fl.title = r.flag; box.appendChild(fl); }
     }
     const others = (a.flagged || []).filter((k) => !CLOSED.includes(k));
     if (others.length) { const d = document.createElement("div"); d.className = "flag"; d.textContent = "also flagged: " + others.join(", "); box.appendChild(d); }

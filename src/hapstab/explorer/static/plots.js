@@ -31,6 +31,7 @@ const HapstabPlots = (() => {
     if (!p || !p.markers) return;
     const ctx = u.ctx, dpr = devicePixelRatio || 1;
     ctx.save();
+    ctx.beginPath(); ctx.rect(u.bbox.left, u.bbox.top, u.bbox.width, u.bbox.height); ctx.clip();
     for (const m of p.markers) {
       if (m.x == null || !isFinite(m.x)) continue;
       const X = u.valToPos(m.x, "x", true);
@@ -178,7 +179,8 @@ const HapstabPlots = (() => {
     const f = c.frequency_hz, m = c.margin;
     const ok = ans.passive;
     render("passivity", {
-      scales: { x: { time: false } },
+      scales: { x: { time: false },
+                y: { range: (u, lo, hi) => { const a = Math.min(0, lo), b = Math.max(0, hi), p = 0.06 * (b - a || 1); return [a - (a < 0 ? p : 0), b + p]; } } },
       axes: [axis("frequency (Hz)"), axis("margin (N·s/m)")],
       series: [{ label: "f (Hz)" }, { label: "passivity margin", stroke: COLORS.line, width: 2,
                                       fill: ok ? "rgba(25,121,74,.08)" : "rgba(179,38,30,.08)" }],
