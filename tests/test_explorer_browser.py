@@ -226,23 +226,30 @@ def test_copy_as_cli_reproduces_kmax(page):
 
 
 def test_four_plots_drawn_with_the_region_marker(page):
-    open_page(page, "?delay=10&stiffness=8&virtual-damping=0.05")
+    # the paper's HVE with n = 10 at K = 8 N/m (README's docs/explorer.png is this view)
+    open_page(page, "?delay=10&stiffness=8")
     for key in ("boundary", "region", "simulate", "passivity"):
         fig = f"#plot-{key}"
         assert page.locator(f"{fig} canvas").count() == 1, key
         assert int(page.get_attribute(fig, "data-points")) > 10, key
         assert "stale" not in page.get_attribute(fig, "class")
-    assert float(page.get_attribute("#plot-region", "data-marker-x")) == 0.05
-    assert float(page.get_attribute("#plot-region", "data-marker-y")) == 8.0
     # the K_max-against-T plot marks the current T with the page's own K_max
     assert float(page.get_attribute("#plot-boundary", "data-current-x")) == 1.0     # ms
     assert float(page.get_attribute("#plot-boundary", "data-current-y")) == kmax_shown(page)
+    # the margin plot marks the minimum passivity reports
+    ref = cli_json("passivity", "hve", "-n", "10", "-K", "8", "--json")
+    assert float(page.get_attribute("#plot-passivity", "data-worst-y")) == ref["margin"]
     # every canvas has something drawn on it (not a blank bitmap)
     inked = page.eval_on_selector_all("#plots canvas", """cs => cs.map(c => {
         const d = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;
         let n = 0; for (let i = 3; i < d.length; i += 4) if (d[i]) n++; return n; })""")
     assert len(inked) == 4 and min(inked) > 1000, inked
     page.screenshot(path=str(artifacts() / "explorer.png"), full_page=True)
+    assert float(page.get_attribute("#plot-region", "data-marker-x")) == 0.0
+    assert float(page.get_attribute("#plot-region", "data-marker-y")) == 8.0
+    set_field(page, "virtual-damping", "0.05")      # the marker follows (K, B)
+    assert float(page.get_attribute("#plot-region", "data-marker-x")) == 0.05
+    assert float(page.get_attribute("#plot-region", "data-marker-y")) == 8.0
 
 
 def test_downloads(page, tmp_path):

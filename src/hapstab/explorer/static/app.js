@@ -405,9 +405,14 @@
   function regionExtra(km, cur) {
     const kw = (state.values._kwin || "").trim(), bw = (state.values._bwin || "").trim();
     const K = cur.stiffness || 0, B = cur.B || 0, kmax = km.critical_stiffness || 0;
-    const bHi = Math.max(2 * Math.abs(B), 1, (num(value("damping")) || num(value("master-damping")) || 0.1) * 10);
-    const bLo = Math.min(-0.1 * bHi, 2 * B);
-    const kHi = Math.max(2.5 * kmax, 1.5 * K, 1);
+    // B up to four times the device's own damping b (PEB: the smaller of the two), or 2|B|;
+    // K up to where the closed forms' K_max (b + B)/(T/2 + t_d) would be at the top B
+    let b = state.kind === "hve" ? num(value("damping"))
+      : Math.min(num(value("master-damping")) ?? Infinity, num(value("slave-damping")) ?? Infinity);
+    if (!(b > 0 && isFinite(b))) b = 0.1;
+    const bHi = Math.max(2 * Math.abs(B), 4 * b);
+    const bLo = Math.min(-0.25 * b, 2 * B);
+    const kHi = Math.max(1.2 * kmax * (b + bHi) / b, 1.5 * K, 1);
     const out = { K: kw || `0:${+kHi.toPrecision(4)}`, B: bw || `${+bLo.toPrecision(4)}:${+bHi.toPrecision(4)}`,
                   resolution: REGION_RESOLUTION };
     if (has("region", "overlay")) out.overlay = "none";     // drawn by the CLI's --plot only

@@ -136,8 +136,8 @@ const HapstabPlots = (() => {
       scales: { x: { time: false }, y: { range: () => ans.K_range } },
       axes: [axis("virtual damping B (N·s/m)"), axis("K (N/m)")],
       series: [{ label: "B" },
-               { label: "stable K from", stroke: COLORS.line, width: 1 },
-               { label: more ? "to (1st interval)" : "stable K to", stroke: COLORS.line, width: 2 }],
+               { label: "lowest stable K", stroke: COLORS.line, width: 1 },
+               { label: more ? "K_max(B), first stable interval" : "K_max(B)", stroke: COLORS.line, width: 2 }],
       bands: [{ series: [2, 1], fill: COLORS.band }],
     }, [B, lo, hi], { headers: ["virtual_damping_N_s_per_m", "stable_intervals_K_N_per_m"], rows },
     [{ name: "marker", x: cur.B, y: cur.stiffness, color: stable ? COLORS.ok : COLORS.bad,
@@ -150,7 +150,8 @@ const HapstabPlots = (() => {
     if (!s || !s.time_s) { note("simulate", "this server's simulate gives no time series (--series)"); return; }
     const t = s.time_s;
     const xk = Object.keys(s).filter((k) => /^x_.*_m$/.test(k));
-    const uk = Object.keys(s).filter((k) => /^u_.*_N$/.test(k));
+    // the controller's force beside one device's position; two devices: positions only
+    const uk = xk.length > 1 ? [] : Object.keys(s).filter((k) => /^u_.*_N$/.test(k));
     const series = [{ label: "t (s)" }], data = [t];
     const pal = [COLORS.line, COLORS.line3, COLORS.line2, "#2a9d8f"];
     xk.forEach((k, i) => {
@@ -159,14 +160,15 @@ const HapstabPlots = (() => {
     });
     uk.forEach((k, i) => {
       series.push({ label: k.slice(2, -2) + " force (N)", stroke: pal[(i + 2) % 4], width: 1,
-                    scale: "N", dash: [4, 3] });
+                    scale: "N" });
       data.push(s[k]);
     });
     const keys = ["time_s", ...xk, ...uk];
+    const axes = [axis("time (s)"), axis("position (mm)", { scale: "mm" })];
+    if (uk.length) axes.push(axis("force (N)", { scale: "N", side: 1, grid: { show: false } }));
     render("simulate", {
       scales: { x: { time: false } },
-      axes: [axis("time (s)"), axis("position (mm)", { scale: "mm" }),
-             axis("force (N)", { scale: "N", side: 1, grid: { show: false } })],
+      axes,
       series,
     }, data, { headers: keys, rows: t.map((_, i) => keys.map((k) => s[k][i])) },
     [{ name: "verdict", x: null, y: null, color: COLORS.ref }]);
