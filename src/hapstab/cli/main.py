@@ -50,7 +50,7 @@ class HapstabGroup(click.Group):
             from hapstab import budget
             from hapstab.cli.study import take_study
 
-            if argv[:1] != ["run"]:                # --study FILE [--variant V], anywhere
+            if argv[:1] not in (["run"], ["explore"]):   # --study FILE [--variant V], anywhere
                 argv, default_map = take_study(argv, self)
             with np.errstate(all="ignore"), warnings.catch_warnings(), _bars(argv), \
                     (budget.unlimited() if yes else contextlib.nullcontext()):

@@ -44,6 +44,10 @@ MAX_BODY_BYTES = 64 * 1024
 #: The explorer's budget (hapstab.budget.limits): memory in bytes and seconds; a request
 #: that would need more is refused before any work (422).
 BUDGET = (512 * 1024 ** 2, 10.0)
+#: The library's names of what an option gives (in its messages) -> the option.
+ALIASES = {"delay_samples": "delay", "coulomb_friction": "friction", "coulomb_friction_N":
+           "friction", "delay_forward_s": "delay_s", "delay_backward_s": "delay_s",
+           "resolution_m": "resolution", "duration_s": "duration"}
 #: Options a request cannot set (where the answer goes is the server's choice).
 OUTPUT_OPTIONS = ("as_json", "csv_path", "plot_path")
 _HIDDEN = ("json", "csv", "plot", "study", "variant", "yes", "debug", "help")
@@ -377,7 +381,8 @@ def _parameter(message: str, cmd: click.Command) -> str | None:
     if not m:
         return None
     word = m.group(1).lstrip("-").split(".")[-1].replace("-", "_")
-    p = option_names(cmd).get(word)
+    names = option_names(cmd)
+    p = names.get(word) or names.get(ALIASES.get(word, ""))
     return long_name(p) if p is not None else None
 
 

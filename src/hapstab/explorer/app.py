@@ -58,8 +58,15 @@ ENDPOINTS = ["GET /", "GET /static/{path}", "GET /api/v1", "GET /api/v1/schema",
 Handler = Callable[[Request], Awaitable[Response]]
 
 
+class _Json(JSONResponse):
+    """JSON in ASCII (a request's lone surrogate, echoed in a message, stays encodable)."""
+
+    def render(self, content: Any) -> bytes:
+        return json.dumps(content, allow_nan=False, separators=(",", ":")).encode("ascii")
+
+
 def _error(e: ApiError, headers: dict[str, str] | None = None) -> JSONResponse:
-    return JSONResponse(e.to_dict(), status_code=e.status, headers=headers)
+    return _Json(e.to_dict(), status_code=e.status, headers=headers)
 
 
 def _guarded(handler: Handler) -> Handler:
@@ -178,11 +185,11 @@ def create_app(study_path: str | None = None) -> Starlette:
         return _static_file(request.path_params["path"])
 
     async def info(request: Request) -> Response:
-        return JSONResponse({"version": __version__, "endpoints": ENDPOINTS,
+        return _Json({"version": __version__, "endpoints": ENDPOINTS,
                              "kinds": list(KINDS), "commands": list(COMMANDS)})
 
     async def get_schema(request: Request) -> Response:
-        return JSONResponse({"kinds": schema(), "study": study})
+        return _Json({"kinds": schema(), "study": study})
 
     async def code(request: Request) -> Response:
         from hapstab.explorer.code import code_for
@@ -192,6 +199,8 @@ def create_app(study_path: str | None = None) -> Starlette:
 
     async def command(request: Request) -> Response:
         name = request.path_params["command"]
+        if name == "schema":
+            raise ApiError(405, "method POST not allowed on /api/v1/schema (GET it)")
         loop_command(name, "hve" if name not in ("twoport", "transparency") else "peb")
         argv = check_request(name, await _read_body(request))
         return await compute(request, lambda: run_command(argv))
@@ -207,9 +216,11 @@ def create_app(study_path: str | None = None) -> Starlette:
 
 def _static_file(path: str) -> Response:
     """A file under :data:`STATIC` (404 for anything outside it or missing)."""
+    if "\0" in path:
+        raise ApiError(404, "not found: a path with a NUL byte")
     root = os.path.realpath(STATIC)
     full = os.path.realpath(os.path.join(root, path))
-    if "\0" in path or os.path.commonpath([root, full]) != root or not os.path.isfile(full):
+    if os.path.commonpath([root, full]) != root or not os.path.isfile(full):
         raise ApiError(404, f"not found: /static/{path[:100]}")
     return FileResponse(full)
 
