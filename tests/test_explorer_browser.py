@@ -152,6 +152,11 @@ def test_delay_moves_kmax_to_the_clis_value(page):
     assert after == cli_json("kmax", "hve", "-n", "10", "--json")["critical_stiffness"]
     assert after < before
     assert "delay=10" in page.url
+    # typed a key at a time: the superseded requests are aborted, the last answer stays
+    page.locator("#f-delay").select_text()
+    page.locator("#f-delay").press_sequentially("25", delay=0)
+    settle(page)
+    assert kmax_shown(page) == cli_json("kmax", "hve", "-n", "25", "--json")["critical_stiffness"]
     # the same delay in seconds, with a unit the CLI parses
     page.select_option("#f-delay-unit", "delay-s")
     set_field(page, "delay", "20ms")
