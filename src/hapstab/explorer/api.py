@@ -45,14 +45,19 @@ MAX_BODY_BYTES = 64 * 1024
 #: that would need more is refused before any work (422).
 BUDGET = (512 * 1024 ** 2, 10.0)
 #: The library's names of what an option gives (in its messages) -> the option.
-ALIASES = {"delay_samples": "delay", "coulomb_friction": "friction", "coulomb_friction_N":
-           "friction", "delay_forward_s": "delay_s", "delay_backward_s": "delay_s",
-           "resolution_m": "resolution", "duration_s": "duration"}
+#: Where several options give it, the first the request gave is the one (else the first).
+ALIASES = {"delay_samples": ("delay",), "coulomb_friction": ("friction",),
+           "coulomb_friction_N": ("friction",), "resolution_m": ("resolution",),
+           "duration_s": ("duration",), "period_s": ("period", "rate"),
+           "period": ("period", "rate"), "delay_forward_s": ("delay_s", "delay_forward"),
+           "delay_backward_s": ("delay_s", "delay_backward"),
+           "delay_forward_samples": ("delay_forward",),
+           "delay_backward_samples": ("delay_backward",), "fractional_delay": ("delay_s",)}
 #: Options a request cannot set (where the answer goes is the server's choice).
 OUTPUT_OPTIONS = ("as_json", "csv_path", "plot_path")
 _HIDDEN = ("json", "csv", "plot", "study", "variant", "yes", "debug", "help")
-_LEADING = re.compile(r"^\s*(?:Invalid value for\s+)?['\"]?(--?[A-Za-z][\w-]*|[A-Za-z_][\w.-]*)"
-                      r"['\"]?\s*(?:=|:|and\b|/)")
+_LEADING = re.compile(r"^\s*(?:Invalid value for\s+)?['\"]?(--?[A-Za-z][\w-]*|"
+                      r"[A-Za-z_][\w.-]*(?: [a-z]+)?)['\"]?\s*(?:=|:|and\b|/)")
 
 
 class ApiError(Exception):
@@ -363,9 +368,9 @@ def run_command(argv: list[str]) -> str:
         p = getattr(e, "param", None)
         msg = one_line(click_message(list(argv), e))
         raise ApiError(422, msg, long_name(p) if isinstance(p, click.Option)
-                       else _parameter(msg, cmd)) from None
+                       else _parameter(msg, cmd, argv)) from None
     except HapstabError as e:
-        raise ApiError(422, one_line(e), _parameter(str(e), cmd)) from None
+        raise ApiError(422, one_line(e), _parameter(str(e), cmd, argv)) from None
     except MemoryError:
         raise ApiError(422, "out of memory: the model is too large for the explorer") from None
     finally:
@@ -374,16 +379,21 @@ def run_command(argv: list[str]) -> str:
     return buf.getvalue().strip()
 
 
-def _parameter(message: str, cmd: click.Command) -> str | None:
+def _parameter(message: str, cmd: click.Command, argv: list[str]) -> str | None:
     """The option a one-line message is about: its leading ``--name`` or ``name = value:``
-    mapped to the option's long name (None when it names no option of ``cmd``)."""
+    mapped to the option's long name (the library's names through :data:`ALIASES`, the
+    one the request ``argv`` gave first); None when it names no option of ``cmd``."""
     m = _LEADING.match(message)
     if not m:
         return None
-    word = m.group(1).lstrip("-").split(".")[-1].replace("-", "_")
+    word = m.group(1).lstrip("-").split(".")[-1].replace("-", "_").replace(" ", "_")
     names = option_names(cmd)
-    p = names.get(word) or names.get(ALIASES.get(word, ""))
-    return long_name(p) if p is not None else None
+    found = [names[w] for w in ALIASES.get(word, (word,)) if w in names]
+    if word in names and names[word] not in found:
+        found.insert(0, names[word])
+    given = [p for p in found if any(a.startswith(f"--{long_name(p)}=") or a == f"--{long_name(p)}"
+                                     for a in argv)]
+    return long_name((given or found)[0]) if found else None
 
 
 # ------------------------------------------------------------------------ schema
