@@ -4,6 +4,7 @@ the CLI's --json, and malformed requests answered with a 4xx JSON error."""
 from __future__ import annotations
 
 import json
+import os
 import warnings
 
 import pytest
@@ -316,3 +317,20 @@ def test_malformed_requests_are_4xx_json(client, method, path, body, ctype, stat
 
 def test_there_are_at_least_fifty_malformed_requests():
     assert len(MALFORMED) >= 50
+
+
+def test_the_page_and_its_files(client):
+    from hapstab.explorer.app import STATIC
+
+    if not os.path.isfile(os.path.join(STATIC, "index.html")):
+        r = client.get("/")
+        assert r.status_code == 404 and r.json()["status"] == 404
+        return
+    r = client.get("/")
+    assert r.status_code == 200 and r.headers["content-type"].startswith("text/html")
+    for name in sorted(os.listdir(STATIC)):
+        if os.path.isfile(os.path.join(STATIC, name)):
+            f = client.get(f"/static/{name}")
+            assert f.status_code == 200
+            with open(os.path.join(STATIC, name), "rb") as fh:
+                assert f.content == fh.read()
