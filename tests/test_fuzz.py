@@ -49,7 +49,9 @@ def _commands():
 
 #: (limit-cycle's invocations are drawn in a block of their own, after the others, so that
 #: the draw of every other command stays the one it was before the command existed)
-COMMANDS = [c for c in _commands() if c[0][0] != "limit-cycle"]
+#: (explore starts a server that runs until stopped: its hostile options are tested in
+#: tests/test_explorer_server.py, which stops what it starts)
+COMMANDS = [c for c in _commands() if c[0][0] not in ("limit-cycle", "explore")]
 LIMIT_CYCLE = [c for c in _commands() if c[0][0] == "limit-cycle"]
 #: (every loop kind of a command, hve, peb and 4ch, needs the same)
 NEEDS = {"region": ["--K", "0:100", "--B", "0:1", "--resolution", "12"], "reproduce": ["fig5"],

@@ -28,6 +28,8 @@ RUNS = [
     ("boundary", ["boundary", "hve", "--period", "0.001,0.002", "-n", "0,2"]),
     ("boundary", ["boundary", "peb", "--rate", "500Hz,1kHz", "--delay-s", "2ms,5ms"]),
     ("passivity", ["passivity", "hve", "-K", "5"]),
+    ("passivity", ["passivity", "peb", "-K", "5", "-n", "3", "--curve", "50"]),
+    ("passivity", ["passivity", "hve", "-K", "150", "--friction", "0.005", "--curve", "9"]),
     ("twoport", ["twoport", "peb", "-K", "5", "-n", "2"]),
     ("transparency", ["transparency", "peb", "-K", "5", "-n", "2", "--frequencies", "1:500:20"]),
     ("transparency", ["transparency", "peb", "-K", "0", "--environment", "none",   # nulls
@@ -52,6 +54,8 @@ RUNS = [
                 "--operator-mass", "0.5", "--operator-damping", "5", "--operator-stiffness",
                 "500"]),
     ("simulate", ["simulate", "hve", "-K", "5", "--duration", "0.5"]),
+    ("simulate", ["simulate", "hve", "-K", "5", "--duration", "0.5", "--series", "100",
+                  "--wall", "0"]),
     ("simulate", ["simulate", "hve", "-K", "1e6", "--duration", "1"]),            # overflows
     ("simulate", ["simulate", "peb", "-K", "8", "-n", "4", "--duration", "1", "--tdpa"]),
     ("simulate", ["simulate", "peb", "-K", "5", "--duration", "0.5", "--master-friction", "0.01",

@@ -67,6 +67,13 @@ class PassivityResult(Result):
         The verdict in words.
     period : float
         Sampling period T in s (converts rad/sample to rad/s).
+    curve_frequency_hz : numpy.ndarray or None
+        With ``curve_points``: frequencies in Hz from (almost) 0 to the Nyquist frequency
+        1/(2T), evenly spaced (the first is the w -> 0 limit, see
+        :func:`hapstab.analysis.sweeps.theta_grid`); None otherwise.
+    curve_margin : numpy.ndarray or None
+        The margin at each of them (the smallest eigenvalue of the passivity matrix,
+        N*s/m): the curve whose minimum over all w is ``margin``; None otherwise.
     """
 
     passive: bool
@@ -76,17 +83,23 @@ class PassivityResult(Result):
     failed_condition: str | None
     reason: str
     period: float
+    curve_frequency_hz: np.ndarray | None = None
+    curve_margin: np.ndarray | None = None
 
     @property
     def verdict(self) -> str:
         return "passive" if self.passive else "not passive"
 
     def to_dict(self) -> dict[str, Any]:
-        return jsonable({"verdict": self.verdict, "passive": self.passive, "margin": self.margin,
-                         "worst_frequency_rad_s": self.worst_frequency_rad_s,
-                         "worst_frequency_hz": self.worst_frequency_hz,
-                         "failed_condition": self.failed_condition, "reason": self.reason,
-                         "period_s": self.period})
+        d = {"verdict": self.verdict, "passive": self.passive, "margin": self.margin,
+             "worst_frequency_rad_s": self.worst_frequency_rad_s,
+             "worst_frequency_hz": self.worst_frequency_hz,
+             "failed_condition": self.failed_condition, "reason": self.reason,
+             "period_s": self.period}
+        if self.curve_frequency_hz is not None and self.curve_margin is not None:
+            d["margin_curve"] = {"frequency_hz": self.curve_frequency_hz,
+                                 "margin": self.curve_margin}
+        return jsonable(d)
 
 
 def _side(loop: Any) -> DeviceSide:
@@ -119,8 +132,8 @@ def _parts(side: DeviceSide, theta: np.ndarray, D: tuple[float, ...], part: str 
     return Db, W
 
 
-def sampled_passivity(loop: HapticLoop | TeleoperationLoop, scaling: str | None = "auto"
-                      ) -> PassivityResult:
+def sampled_passivity(loop: HapticLoop | TeleoperationLoop, scaling: str | None = "auto",
+                      curve_points: int = 0) -> PassivityResult:
     """Exact sampled-data passivity of the device(s) + discrete controller(s).
 
     Parameters
@@ -130,6 +143,11 @@ def sampled_passivity(loop: HapticLoop | TeleoperationLoop, scaling: str | None 
         terminations do not enter: passivity is a property of the device side.
     scaling : {"auto", None}
         PEB port weighting (see :func:`hapstab.circle.port_scaling`).
+    curve_points : int
+        Also return the margin over frequency at this many evenly spaced frequencies from
+        the w -> 0 limit to the Nyquist frequency (0: none; at most
+        :data:`MAX_CURVE_POINTS`). Its minimum is ``margin`` up to the grid's spacing: the
+        reported minimum is refined between grid points.
 
     Returns
     -------
@@ -138,12 +156,14 @@ def sampled_passivity(loop: HapticLoop | TeleoperationLoop, scaling: str | None 
     Raises
     ------
     AnalysisError
-        If H(z) has a pole on or outside the unit circle.
+        If H(z) has a pole on or outside the unit circle, or ``curve_points`` is not a
+        whole number in 0...:data:`MAX_CURVE_POINTS`.
 
     References
     ----------
     Colgate and Schenkel 1997; the paper, eq. (1).
     """
+    points = _curve_points(curve_points)
     side = _side(loop)
     T, D = side.period_s, side.port_weights(scaling)
 
@@ -158,8 +178,28 @@ def sampled_passivity(loop: HapticLoop | TeleoperationLoop, scaling: str | None 
     where = f"w = {t_min / T:.6g} rad/s ({t_min / (2 * math.pi * T):.6g} Hz)"
     reason = (f"passive (Colgate-Schenkel): damping to spare {m:.6g} N*s/m, least at {where}" if ok
               else f"not passive (Colgate-Schenkel): {-m:.6g} N*s/m of damping missing at {where}")
+    curve = None
+    if points:                     # evenly spaced, the first at the w -> 0 limit (theta_grid's)
+        curve = np.linspace(0.0, np.pi, points)
+        curve[0] = theta_grid(side.oscillations)[0]
     return PassivityResult(bool(ok), float(m), t_min / T, t_min / (2 * math.pi * T),
-                           None if ok else "colgate-schenkel", reason, T)
+                           None if ok else "colgate-schenkel", reason, T,
+                           None if curve is None else curve / (2 * math.pi * T),
+                           None if curve is None else margin(curve))
+
+
+#: The most points a margin curve may have (a curve for a page or a plot needs ~1000).
+MAX_CURVE_POINTS = 100_000
+
+
+def _curve_points(points: Any) -> int:
+    """``curve_points`` checked: a whole number in 0...MAX_CURVE_POINTS (1 is refused: a
+    curve needs both ends)."""
+    if isinstance(points, bool) or not isinstance(points, (int, np.integer)) \
+            or not (points == 0 or 2 <= points <= MAX_CURVE_POINTS):
+        raise AnalysisError(f"curve_points = {points!r:.40}: must be 0 (no curve) or a whole "
+                            f"number of points from 2 to {MAX_CURVE_POINTS}")
+    return int(points)
 
 
 def critical_stiffness_passivity(loop: HapticLoop | TeleoperationLoop,

@@ -50,7 +50,7 @@ class HapstabGroup(click.Group):
             from hapstab import budget
             from hapstab.cli.study import take_study
 
-            if argv[:1] != ["run"]:                # --study FILE [--variant V], anywhere
+            if argv[:1] not in (["run"], ["explore"]):   # --study FILE [--variant V], anywhere
                 argv, default_map = take_study(argv, self)
             with np.errstate(all="ignore"), warnings.catch_warnings(), _bars(argv), \
                     (budget.unlimited() if yes else contextlib.nullcontext()):
@@ -60,9 +60,7 @@ class HapstabGroup(click.Group):
                                   default_map=default_map, **extra)
             _flush_stdout(argv)
         except click.exceptions.ClickException as e:
-            msg = e.format_message()
-            hint = _kind_hint(argv, msg)      # (a better hint than click's guess, if any)
-            _fail(argv, (msg.split(" Did you mean")[0].rstrip(".") + hint) if hint else msg)
+            _fail(argv, click_message(argv, e))
         except HapstabError as e:
             _fail(argv, str(e))
         except _BrokenPipe:
@@ -199,12 +197,46 @@ def _flush_stdout(argv: list[str]) -> None:
         _fail(argv, f"cannot write to stdout ({e.strerror or e})")
 
 
+def click_message(argv: list[str], e: click.exceptions.ClickException) -> str:
+    """What the command line says of click's usage error ``e`` on ``argv`` (with a better
+    hint than click's guess where there is one).
+
+    Parameters
+    ----------
+    argv : list of str
+        The command line after ``hapstab``.
+    e : click.ClickException
+
+    Returns
+    -------
+    str
+    """
+    msg = e.format_message()
+    hint = _kind_hint(argv, msg)
+    return (msg.split(" Did you mean")[0].rstrip(".") + hint) if hint else msg
+
+
+def one_line(msg: object) -> str:
+    """An error message as the one line the command line prints (whitespace folded, a
+    value of thousands of digits shortened).
+
+    Parameters
+    ----------
+    msg : object
+        The message.
+
+    Returns
+    -------
+    str
+    """
+    line = " ".join(str(msg).split())
+    return f"{line[:400]} ... {line[-150:]}" if len(line) > 600 else line
+
+
 def _fail(argv: list[str], msg: str) -> None:
     """A user error: one line on stderr, exit code 2; with ``--json`` also a JSON object
     ``{"error": ..., "exit_code": 2}`` on stdout, so that a tool reading it sees why."""
-    line = " ".join(str(msg).split())
-    if len(line) > 600:        # a value of thousands of digits: one readable line still
-        line = f"{line[:400]} ... {line[-150:]}"
+    line = one_line(msg)
     click.echo("hapstab: error: " + line, err=True)
     if "--json" in argv:
         with contextlib.suppress(OSError):
@@ -248,13 +280,23 @@ def cli() -> None:
 
 def _register() -> None:
     """Add every command to :data:`cli` (one place, in the order of ``--help``)."""
-    from hapstab.cli import analysis, devices, nonlinear, paper, regions, robust, run, simulation
+    from hapstab.cli import (
+        analysis,
+        devices,
+        explore,
+        nonlinear,
+        paper,
+        regions,
+        robust,
+        run,
+        simulation,
+    )
 
     for cmd in (analysis.kmax, analysis.check, analysis.boundary_cmd, analysis.demo,
                 paper.passivity_cmd, paper.twoport_cmd, paper.transparency_cmd,
                 paper.audit_cmd, nonlinear.limit_cycle_cmd, regions.region,
                 regions.best, robust.robust, devices.zwidth_cmd, simulation.simulate_cmd,
-                simulation.reproduce_cmd, run.run_cmd):
+                simulation.reproduce_cmd, run.run_cmd, explore.explore_cmd):
         cli.add_command(cmd)
         _describe(cmd)
 

@@ -70,15 +70,20 @@ def _passivity_command(kind: str) -> None:
                   help="For --method circle: finite sector bound k of the termination(s) "
                        "(Theorem 2.1); default: passive limit.")
     @_resolution_option(kind, "passivity")
+    @CURVE
     def _cmd(stiffness: float, method: str, approximation: str | None, sector: float | None,
-             as_json: bool, **kw: Any) -> None:
+             curve_points: int, as_json: bool, **kw: Any) -> None:
         refuse_force_gains(kw, "the circle criterion" if method == "circle"
                            else "sampled-data passivity")
         resolution = kw.pop("resolution", None)
         loop = make(kw, stiffness)
         res: Any
+        if curve_points and method != "passivity":
+            raise HapstabError(f"--curve = {curve_points}: the margin over frequency of "
+                               "--method passivity only")
         if method == "passivity" and (resolution is not None or kw.get("friction")):
-            _nonlinear_passivity(loop, stiffness, resolution, approximation, sector, as_json, kind)
+            _nonlinear_passivity(loop, stiffness, resolution, approximation, sector, as_json, kind,
+                                 curve_points)
             return
         if method == "circle":
             from hapstab.analysis.circle import circle_test
@@ -93,7 +98,7 @@ def _passivity_command(kind: str) -> None:
             if approximation is not None or sector is not None:
                 raise HapstabError("--approximation/--sector: apply to --method circle only; "
                                    "'passivity' is exact")
-            res, approx = sampled_passivity(loop), None
+            res, approx = sampled_passivity(loop, curve_points=curve_points), None
         else:
             raise HapstabError(f"--method = {method!r}: allowed: circle, passivity")
         d = res.to_dict()
@@ -111,6 +116,14 @@ def _passivity_command(kind: str) -> None:
                     "N*s/m, worst frequency.")
 
 
+#: ``passivity --curve POINTS``: the margin over frequency in the JSON.
+CURVE = click.option(
+    "--curve", "curve_points", type=click.IntRange(0, 100_000), default=0, show_default=True,
+    help="With --json: add the passivity margin over frequency at POINTS evenly spaced "
+         "frequencies from 0 to the Nyquist frequency (\"margin_curve\"; its minimum is the "
+         "margin); 0: none.")
+
+
 def _resolution_option(kind: str, command: str) -> Any:
     """``--resolution`` (the encoder's step, m) for the HVE's passivity and audit: the
     Abbott-Okamura condition with the device's ``--friction``; no option for the others."""
@@ -124,9 +137,11 @@ def _resolution_option(kind: str, command: str) -> Any:
 
 def _nonlinear_passivity(loop: Any, stiffness: float, resolution: float | None,
                          approximation: str | None, sector: float | None, as_json: bool,
-                         kind: str) -> None:
-    """``passivity hve`` with friction and / or quantisation: both conditions."""
+                         kind: str, curve_points: int = 0) -> None:
+    """``passivity hve`` with friction and / or quantisation: both conditions (and the
+    friction-free loop's margin over frequency, whose minimum is the margin shown)."""
     from hapstab.analysis.nonlinear_passivity import nonlinear_passivity
+    from hapstab.analysis.passivity import sampled_passivity
 
     if approximation is not None or sector is not None:
         raise HapstabError("--approximation/--sector: apply to --method circle only; "
@@ -134,6 +149,9 @@ def _nonlinear_passivity(loop: Any, stiffness: float, resolution: float | None,
     res = nonlinear_passivity(loop, resolution_m=resolution)
     d = res.to_dict()
     d.update(stiffness=stiffness, method="passivity", approximation=None, sector=None)
+    if curve_points:
+        d["margin_curve"] = sampled_passivity(loop, curve_points=curve_points).to_dict()[
+            "margin_curve"]
     nl = d["nonlinear"]
     rows = [("verdict", res.verdict), ("margin", _margin_words(res.margin, None)),
             ("quantisation margin", f"{res.quantization_margin_N:.6g} N (f_c - K Delta/2)"

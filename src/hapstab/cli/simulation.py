@@ -68,24 +68,14 @@ def _simulate_command(kind: str) -> None:
                   help="Write the sampled time series as CSV.")
     @click.option("--plot", "plot_path", type=click.Path(dir_okay=False), default=None,
                   help="Write a plot of position, force and port energy (PNG, SVG, PDF).")
-    @click.option("--tdpa", is_flag=True,
-                  help="Time-domain passivity observer and controller at every device port "
-                       "(Hannaford & Ryu 2002; PEB: Ryu, Artigas & Preusche 2010).")
-    @click.option("--tdpa-observer", type=click.Choice(["paper", "held"]), default=None,
-                  help="TDPA observer: paper (f[k] v[k] T, default) or held (the energy each "
-                       "held force delivered, plus the coming sample). Implies --tdpa.")
-    @click.option("--tdpa-velocity", type=click.Choice(["backward", "sensor"]), default=None,
-                  help="TDPA velocity: backward difference of the encoder (default) or a "
-                       "velocity sensor. Implies --tdpa.")
-    @click.option("--tdpa-max-damping", type=POS, default=None,
-                  help="Cap on the TDPA controller's damping in N*s/m (default none). "
-                       "Implies --tdpa.")
+    @_tdpa_and_series
     def _cmd(stiffness: float, duration: float, force: str, x0: float, saturation: float | None,
              resolution: float | None, quantizer: str, rest: float | None, dense: int,
              csv_path: str | None, plot_path: str | None, as_json: bool, tdpa: bool,
              tdpa_observer: str | None, tdpa_velocity: str | None,
-             tdpa_max_damping: float | None, environment_force: str | None = None,
-             wall: float | None = None, wall_pulls: bool = False, **kw: Any) -> None:
+             tdpa_max_damping: float | None, series_points: int,
+             environment_force: str | None = None, wall: float | None = None,
+             wall_pulls: bool = False, **kw: Any) -> None:
         check_files(csv_path, plot_path, as_json)
         loop = make(kw, stiffness)
         pc = _tdpa(tdpa, tdpa_observer, tdpa_velocity, tdpa_max_damping)
@@ -93,13 +83,49 @@ def _simulate_command(kind: str) -> None:
                    saturation=saturation, resolution=resolution, quantizer=quantizer,
                    dense=dense, tdpa=pc)
         files = write_files(res, csv_path, plot_path)
-        d = _summary(res, loop, files)
+        d = _summary(res, loop, files, series_points)
         emit(d, as_json, lambda: _table(kind, stiffness, loop, res, d, files), loop)
 
     for deco in reversed(extra):
         _cmd = deco(_cmd)
     _cmd.__doc__ = (f"Simulate the {kind.upper()} loop at stiffness K: verdict, growth rate, "
                     "CSV and plot of position, force and port energy.")
+
+
+def _series(res: Any, points: int) -> dict[str, Any]:
+    """The run's sampled columns (as ``to_dict(series=True)``), every k-th sample with the
+    smallest k that leaves at most ``points`` rows (the first sample always kept)."""
+    full = res.to_dict(series=True)["series"]
+    n = len(full["time_s"])
+    k = max(1, -(-n // points))
+    return {name: column[::k] for name, column in full.items()}
+
+
+_TDPA_AND_SERIES = [
+    click.option("--tdpa", is_flag=True,
+                 help="Time-domain passivity observer and controller at every device port "
+                      "(Hannaford & Ryu 2002; PEB: Ryu, Artigas & Preusche 2010)."),
+    click.option("--tdpa-observer", type=click.Choice(["paper", "held"]), default=None,
+                 help="TDPA observer: paper (f[k] v[k] T, default) or held (the energy each "
+                      "held force delivered, plus the coming sample). Implies --tdpa."),
+    click.option("--tdpa-velocity", type=click.Choice(["backward", "sensor"]), default=None,
+                 help="TDPA velocity: backward difference of the encoder (default) or a "
+                      "velocity sensor. Implies --tdpa."),
+    click.option("--tdpa-max-damping", type=POS, default=None,
+                 help="Cap on the TDPA controller's damping in N*s/m (default none). "
+                      "Implies --tdpa."),
+    click.option("--series", "series_points", type=click.IntRange(0, 1_000_000), default=0,
+                 show_default=True,
+                 help="With --json: add the sampled time series (the --csv columns) as "
+                      "\"series\", every k-th sample so that at most this many rows (0: none)."),
+]
+
+
+def _tdpa_and_series(f: Any) -> Any:
+    """simulate's --tdpa options and --series."""
+    for d in reversed(_TDPA_AND_SERIES):
+        f = d(f)
+    return f
 
 
 def _tdpa(on: bool, observer: str | None, velocity: str | None,
@@ -129,7 +155,7 @@ def _run(kind: str, loop: Any, duration: float, force: str, x0: float, rest: flo
                     initial_position=x_init, rest_position=rest_pos, **opts)
 
 
-def _summary(res: Any, loop: Any, files: list[str]) -> dict[str, Any]:
+def _summary(res: Any, loop: Any, files: list[str], series_points: int = 0) -> dict[str, Any]:
     """The run's summary beside the exact verdict of the linear loop: this one, or
     with nonlinear elements the linearised one (wall always in contact, no
     saturation, quantisation or friction)."""
@@ -142,6 +168,8 @@ def _summary(res: Any, loop: Any, files: list[str]) -> dict[str, Any]:
              linear_loop_growth_rate_per_s=(math.log(ex.spectral_radius) / loop.period
                                             if ex.spectral_radius > 0 else -math.inf),
              files=files)
+    if series_points:
+        d["series"] = _series(res, series_points)
     return d
 
 

@@ -1,0 +1,240 @@
+"""The explorer's Starlette application: the page, its static files and the JSON API.
+
+Routes (see README.md, "Explorer", for the requests and answers)::
+
+    GET  /                    the page (static/index.html)
+    GET  /static/{path}       its files
+    GET  /api/v1              version, endpoints, kinds, commands
+    GET  /api/v1/schema       every command's options, and the --study file's loop
+    POST /api/v1/code         the command line and a Python script for a request
+    POST /api/v1/{command}    the JSON answer of ``hapstab COMMAND KIND ... --json``
+
+Every error is JSON ``{"error", "parameter", "status"}``; an unexpected exception is a
+500 ``internal error (<Type>)`` with its traceback on the server's stderr only.
+Computations run in worker threads, at most :data:`WORKERS` at a time; a request that
+carries ``X-Hapstab-Channel`` / ``X-Hapstab-Seq`` is answered 409 without computing when
+a later one of its channel arrived before its turn came.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+import traceback
+from collections.abc import Awaitable, Callable
+from typing import Any
+
+from starlette.applications import Starlette
+from starlette.exceptions import HTTPException
+from starlette.requests import Request
+from starlette.responses import FileResponse, JSONResponse, Response
+from starlette.routing import Route
+
+from hapstab.explorer.api import (
+    COMMANDS,
+    KINDS,
+    MAX_BODY_BYTES,
+    ApiError,
+    check_request,
+    loop_command,
+    option_args,
+    parse_body,
+    run_command,
+    schema,
+)
+
+__all__ = ["create_app", "STATIC", "WORKERS"]
+
+#: The page's files.
+STATIC = os.path.join(os.path.dirname(os.path.abspath(__file__)), "static")
+#: Computations at once (the machine has 2 cores).
+WORKERS = 2
+#: Channels remembered for superseded requests (the oldest are forgotten beyond).
+MAX_CHANNELS = 1000
+ENDPOINTS = ["GET /", "GET /static/{path}", "GET /api/v1", "GET /api/v1/schema",
+             "POST /api/v1/code", "POST /api/v1/{command}"]
+
+Handler = Callable[[Request], Awaitable[Response]]
+
+
+class _Json(JSONResponse):
+    """JSON in ASCII (a request's lone surrogate, echoed in a message, stays encodable)."""
+
+    def render(self, content: Any) -> bytes:
+        return json.dumps(content, allow_nan=False, separators=(",", ":")).encode("ascii")
+
+
+def _error(e: ApiError, headers: dict[str, str] | None = None) -> JSONResponse:
+    return _Json(e.to_dict(), status_code=e.status, headers=headers)
+
+
+def _guarded(handler: Handler) -> Handler:
+    """Answer an ApiError as its JSON, anything unexpected as a 500 (logged to stderr)."""
+    async def wrapped(request: Request) -> Response:
+        try:
+            return await handler(request)
+        except ApiError as e:
+            return _error(e)
+        except Exception as e:           # a bug of hapstab's: never a traceback to the client
+            print(f"hapstab explorer: internal error on {request.method} {request.url.path}:",
+                  file=sys.stderr)
+            traceback.print_exc(file=sys.stderr)
+            return _error(ApiError(500, f"internal error ({type(e).__name__})"))
+    return wrapped
+
+
+async def _http_error(request: Request, exc: Exception) -> Response:
+    """Starlette's own 404 / 405 as the API's JSON."""
+    assert isinstance(exc, HTTPException)
+    what = {404: f"not found: {request.url.path[:120]}",
+            405: f"method {request.method} not allowed on {request.url.path[:120]}"}
+    return _error(ApiError(exc.status_code, what.get(exc.status_code, str(exc.detail))),
+                  headers=dict(exc.headers or {}))
+
+
+async def _read_body(request: Request) -> dict[str, Any]:
+    """The JSON object of a POST (413 beyond :data:`MAX_BODY_BYTES`, read no further)."""
+    ctype = request.headers.get("content-type", "").split(";")[0].strip().lower()
+    if ctype != "application/json":
+        raise ApiError(415, f"content type {ctype[:60]!r}: send application/json")
+    length = request.headers.get("content-length", "")
+    if length.isdigit() and int(length) > MAX_BODY_BYTES:
+        raise ApiError(413, f"request body of {int(length)} bytes: at most {MAX_BODY_BYTES}")
+    raw = bytearray()
+    async for chunk in request.stream():
+        raw += chunk
+        if len(raw) > MAX_BODY_BYTES:
+            raise ApiError(413, f"request body over {MAX_BODY_BYTES} bytes: at most "
+                                f"{MAX_BODY_BYTES}")
+    return parse_body(bytes(raw))
+
+
+class _Sequencer:
+    """The latest ``X-Hapstab-Seq`` seen on each ``X-Hapstab-Channel``."""
+
+    def __init__(self) -> None:
+        self.latest: dict[str, int] = {}
+
+    def arrive(self, request: Request) -> tuple[str, int] | None:
+        channel = request.headers.get("x-hapstab-channel")
+        seq = request.headers.get("x-hapstab-seq")
+        if channel is None and seq is None:
+            return None
+        if channel is None or seq is None or not seq.strip().lstrip("-").isdigit() \
+                or len(seq) > 18 or len(channel) > 100:
+            raise ApiError(400, "X-Hapstab-Channel and X-Hapstab-Seq: give both, the channel a "
+                                "name (<= 100 characters), the seq an integer", None)
+        n = int(seq)
+        if channel not in self.latest and len(self.latest) >= MAX_CHANNELS:
+            self.latest.pop(next(iter(self.latest)))
+        self.latest[channel] = max(n, self.latest.get(channel, n))
+        return channel, n
+
+    def superseded(self, mark: tuple[str, int] | None) -> bool:
+        return mark is not None and mark[1] < self.latest.get(mark[0], mark[1])
+
+
+def create_app(study_path: str | None = None) -> Starlette:
+    """The explorer's application.
+
+    Parameters
+    ----------
+    study_path : str, optional
+        A study file of kind hve or peb: its [loop] table is the page's initial state
+        (``GET /api/v1/schema``'s ``study``).
+
+    Returns
+    -------
+    starlette.applications.Starlette
+
+    Raises
+    ------
+    hapstab.errors.HapstabError
+        The study cannot be read, or its kind or [loop] table is not the explorer's.
+    """
+    import anyio
+
+    from hapstab import __version__
+
+    study = _study(study_path) if study_path is not None else None
+    seq = _Sequencer()
+    limiter: list[anyio.CapacityLimiter] = []
+
+    async def compute(request: Request, work: Callable[[], str]) -> Response:
+        mark = seq.arrive(request)
+        if not limiter:
+            limiter.append(anyio.CapacityLimiter(WORKERS))
+
+        def job() -> str | None:
+            return None if seq.superseded(mark) else work()
+
+        text = await anyio.to_thread.run_sync(job, limiter=limiter[0])
+        if text is None:
+            raise ApiError(409, "superseded: a later request of this channel arrived first")
+        return Response(text.encode("utf-8", "replace"), media_type="application/json")
+
+    async def index(request: Request) -> Response:
+        page = os.path.join(STATIC, "index.html")
+        if not os.path.isfile(page):
+            raise ApiError(404, "the page is not installed (static/index.html); the API "
+                                "answers under /api/v1")
+        return FileResponse(page, media_type="text/html")
+
+    async def static(request: Request) -> Response:
+        return _static_file(request.path_params["path"])
+
+    async def info(request: Request) -> Response:
+        return _Json({"version": __version__, "endpoints": ENDPOINTS,
+                             "kinds": list(KINDS), "commands": list(COMMANDS)})
+
+    async def get_schema(request: Request) -> Response:
+        return _Json({"kinds": schema(), "study": study})
+
+    async def code(request: Request) -> Response:
+        from hapstab.explorer.code import code_for
+
+        body = await _read_body(request)
+        return await compute(request, lambda: json.dumps(code_for(body)))
+
+    async def command(request: Request) -> Response:
+        name = request.path_params["command"]
+        if name == "schema":
+            raise ApiError(405, "method POST not allowed on /api/v1/schema (GET it)")
+        loop_command(name, "hve" if name not in ("twoport", "transparency") else "peb")
+        argv = check_request(name, await _read_body(request))
+        return await compute(request, lambda: run_command(argv))
+
+    routes = [Route("/", _guarded(index), methods=["GET"]),
+              Route("/static/{path:path}", _guarded(static), methods=["GET"]),
+              Route("/api/v1", _guarded(info), methods=["GET"]),
+              Route("/api/v1/schema", _guarded(get_schema), methods=["GET"]),
+              Route("/api/v1/code", _guarded(code), methods=["POST"]),
+              Route("/api/v1/{command}", _guarded(command), methods=["POST"])]
+    return Starlette(routes=routes, exception_handlers={HTTPException: _http_error})
+
+
+def _static_file(path: str) -> Response:
+    """A file under :data:`STATIC` (404 for anything outside it or missing)."""
+    if "\0" in path:
+        raise ApiError(404, "not found: a path with a NUL byte")
+    root = os.path.realpath(STATIC)
+    full = os.path.realpath(os.path.join(root, path))
+    if os.path.commonpath([root, full]) != root or not os.path.isfile(full):
+        raise ApiError(404, f"not found: /static/{path[:100]}")
+    return FileResponse(full)
+
+
+def _study(path: str) -> dict[str, Any]:
+    """The --study file's kind and [loop] table, checked as kmax's options."""
+    from hapstab.cli.study import StudyError, load_study
+
+    study = load_study(path)
+    if study.kind not in KINDS:
+        raise StudyError(f"--study = {path!r}: its kind is {study.kind!r}; the explorer "
+                         f"builds {' or '.join(KINDS)} loops")
+    try:
+        option_args(loop_command("kmax", study.kind), "kmax", study.kind, study.loop)
+    except ApiError as e:
+        raise StudyError(f"{study.path}: [loop]: {e.error}") from None
+    return {"kind": study.kind, "options": {k.replace("_", "-"): v for k, v in study.loop.items()}}

@@ -1,0 +1,524 @@
+/* hapstab explorer: the form (built from GET /api/v1/schema), the live answers, the URL.
+ *
+ * Every input change (debounced) sends the commands the page shows to POST /api/v1/{command};
+ * a superseded request is aborted (AbortController) and carries X-Hapstab-Channel / -Seq so
+ * that the server can skip it. The page keeps only what the user changed from the CLI's
+ * defaults: that is what the URL, the requests and the copied command carry.
+ */
+"use strict";
+
+(() => {
+  const $ = (s, root = document) => root.querySelector(s);
+  const API = "api/v1/";
+  const DEBOUNCE_MS = 30;
+  const PAGE = Math.random().toString(36).slice(2, 10);   // this tab's channels
+  const CURVE_POINTS = 400;      // the passivity margin curve
+  const REGION_RESOLUTION = 48;  // K-B rows of B (each row's K intervals are exact)
+  const SWEEP = 25;              // periods of the K_max-against-T plot, T/4 ... 4T
+  const PAGE_FIELDS = ["_kwin", "_bwin"];
+  const MAIN = {
+    hve: [["Device", ["mass", "damping"]], ["Operator", ["operator"]],
+          ["Sampling and delay", ["period", "delay"]], ["Controller", ["stiffness", "virtual-damping"]]],
+    peb: [["Master and slave", ["master-mass", "master-damping", "slave-mass", "slave-damping"]],
+          ["Operator and environment", ["operator", "environment"]],
+          ["Sampling and delay", ["period", "delay"]], ["Controller", ["stiffness", "virtual-damping"]]],
+  };
+  // one field, two ways to give it: a unit switch beside the input
+  const ALT = { period: { other: "rate", units: ["T (s)", "rate (Hz)"] },
+                delay: { other: "delay-s", units: ["samples", "seconds"] } };
+  const ALT_OF = { rate: "period", "delay-s": "delay" };
+  const LABELS = { "virtual-damping": "B (virtual damping)", stiffness: "K (stiffness)",
+                   period: "Sampling", delay: "Delay" };
+  const UNITS = { mass: "kg", "master-mass": "kg", "slave-mass": "kg", damping: "N·s/m",
+                  "master-damping": "N·s/m", "slave-damping": "N·s/m", stiffness: "N/m",
+                  "virtual-damping": "N·s/m", "slave-virtual-damping": "N·s/m", friction: "N",
+                  "master-friction": "N", "slave-friction": "N", duration: "s", x0: "m", rest: "m",
+                  wall: "m", saturation: "N", resolution: "m", operator: "Z", environment: "Z" };
+  const PAGE_DEFAULTS = { hve: { stiffness: "50" }, peb: { stiffness: "5" } };
+  const CLOSED = ["colgate", "gil", "eq18", "gil2004", "eq29", "eq34"];
+  // options a command varies itself (the CLI refuses a given value: cli/study.py VARIED)
+  const VARIED = { region: ["virtual-damping"], "best-damping": ["virtual-damping"] };
+  const NOT_SENT = new Set(["json", "csv", "plot", "study", "variant", "dense", "series", "curve"]);
+
+  let schema = null;
+  const state = { kind: "hve", values: {} };   // values: name -> text, only those changed
+  const shown = {};                            // command -> last good answer shown
+  const ctrls = {};
+  let SEQ = 0, timer = null;
+
+  // ------------------------------------------------------------------ schema helpers
+  const cmds = () => schema.kinds[state.kind].commands;
+  const optsOf = (command) => cmds()[command] || [];
+  const has = (command, name) => optsOf(command).some((o) => o.name === name);
+  const optByName = {};   // kind -> name -> opt (loop options and simulate's)
+
+  function loopOptions(kind) {
+    const c = schema.kinds[kind].commands;
+    const names = (k) => new Set((c[k] || []).map((o) => o.name));
+    const sets = ["kmax", "check", "simulate"].filter((k) => c[k]).map(names);
+    return (c.kmax || []).filter((o) => sets.every((s) => s.has(o.name)) && !NOT_SENT.has(o.name));
+  }
+  function simOptions(kind) {
+    const loop = new Set(loopOptions(kind).map((o) => o.name));
+    return (schema.kinds[kind].commands.simulate || [])
+      .filter((o) => !loop.has(o.name) && !NOT_SENT.has(o.name) && o.name !== "stiffness");
+  }
+  function indexOptions(kind) {
+    const m = {};
+    for (const c of Object.values(schema.kinds[kind].commands)) for (const o of c) if (!m[o.name]) m[o.name] = o;
+    for (const o of [...loopOptions(kind), ...simOptions(kind)]) m[o.name] = o;
+    optByName[kind] = m;
+  }
+  const opt = (name) => optByName[state.kind][name];
+  function defaultText(name) {
+    const pd = PAGE_DEFAULTS[state.kind][name];
+    if (pd !== undefined) return pd;
+    const o = opt(name);
+    return !o || o.default == null || o.type === "flag" ? "" : String(o.default);
+  }
+  const value = (name) => (name in state.values ? state.values[name] : defaultText(name));
+  const unitOf = (o) => UNITS[o.name] || o.unit ||
+    ((o.help.match(/\b(?:in|,)\s+(kg|N\*s\/m|N\/m|N|Hz|m)\b/) || [])[1] || "").replace("N*s/m", "N·s/m");
+
+  // the JSON value of a text the user typed: a plain number as a number, anything else as
+  // the text, which the CLI's own type parses ("1kHz", "20ms") or refuses with its message
+  function jsonValue(o, text) {
+    if (o.type === "flag") return text === "true";
+    const t = text.trim();
+    if ((o.type === "float" || o.type === "int") && /^[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$/.test(t)) return Number(t);
+    return t;
+  }
+
+  // the options of one command: the loop's, K where it takes one, simulate's own
+  function optionsFor(command, extra) {
+    const out = {};
+    const allowed = new Set(optsOf(command).map((o) => o.name));
+    const sim = new Set(simOptions(state.kind).map((o) => o.name));
+    const names = new Set(Object.keys(state.values));
+    if (allowed.has("stiffness")) names.add("stiffness");
+    for (const name of names) {
+      if (!allowed.has(name) || NOT_SENT.has(name) || (sim.has(name) && command !== "simulate") ||
+          (VARIED[command] || []).includes(name)) continue;
+      const o = optByName[state.kind][name];
+      const text = value(name);
+      if (text === "" && o.type !== "flag") continue;
+      out[name] = jsonValue(o, text);
+    }
+    return Object.assign(out, extra || {});
+  }
+
+  // ------------------------------------------------------------------ the form
+  function fieldRow(o, name) {
+    const alt = ALT[name];
+    const div = document.createElement("div");
+    div.className = "field"; div.dataset.name = name;
+    const id = "f-" + name;
+    const label = document.createElement("label");
+    label.htmlFor = id; label.textContent = LABELS[name] || o.name.replace(/-/g, " ");
+    label.title = (o.flags || []).join(", ") + (o.help ? " — " + o.help : "");
+    let input;
+    if (o.type === "choice") {
+      input = document.createElement("select");
+      for (const c of o.choices) { const op = document.createElement("option"); op.value = op.textContent = c; input.appendChild(op); }
+      if (o.default == null) { const op = document.createElement("option"); op.value = ""; op.textContent = "–"; input.prepend(op); }
+    } else if (o.type === "flag") {
+      input = document.createElement("input"); input.type = "checkbox";
+    } else {
+      input = document.createElement("input"); input.type = "text"; input.inputMode = "decimal";
+      input.placeholder = o.default == null ? (o.required ? "required" : "–") : String(o.default);
+    }
+    input.id = id; input.name = name; input.title = o.help || "";
+    const unit = document.createElement("span"); unit.className = "unit";
+    if (alt) {
+      const sel = document.createElement("select"); sel.id = id + "-unit"; sel.setAttribute("aria-label", name + " given as");
+      [name, alt.other].forEach((v, i) => { const op = document.createElement("option"); op.value = v; op.textContent = alt.units[i]; sel.appendChild(op); });
+      sel.addEventListener("change", () => switchAlt(name, sel.value));
+      unit.appendChild(sel);
+    } else unit.textContent = unitOf(o);
+    const msg = document.createElement("div"); msg.className = "msg"; msg.setAttribute("role", "alert");
+    div.append(label, input, unit, msg);
+    input.addEventListener(o.type === "choice" || o.type === "flag" ? "change" : "input", () => onInput(input));
+    return div;
+  }
+
+  function buildForm() {
+    const main = $("#main-fields"), more = $("#more-fields");
+    main.replaceChildren(); more.replaceChildren();
+    const used = new Set(["rate", "delay-s"]);
+    for (const [title, names] of MAIN[state.kind]) {
+      const h = document.createElement("div"); h.className = "group-title"; h.textContent = title;
+      main.appendChild(h);
+      for (const name of names) {
+        const o = opt(name);
+        if (!o) continue;
+        main.appendChild(fieldRow(o, name)); used.add(name);
+      }
+    }
+    const groups = [["Loop", loopOptions(state.kind)], ["Simulation", simOptions(state.kind)]];
+    for (const [title, list] of groups) {
+      const h = document.createElement("div"); h.className = "group-title"; h.textContent = title;
+      more.appendChild(h);
+      for (const o of list) if (!used.has(o.name)) { more.appendChild(fieldRow(o, o.name)); used.add(o.name); }
+    }
+    for (const f of PAGE_FIELDS) $("#f-" + f).oninput = (e) => onInput(e.target);
+    fillForm();
+  }
+
+  function fillForm() {
+    for (const div of document.querySelectorAll("#form .field")) {
+      const name = div.dataset.name;
+      const input = $("#f-" + name);
+      if (PAGE_FIELDS.includes(name)) { input.value = state.values[name] || ""; continue; }
+      const alt = ALT[name];
+      const active = alt && alt.other in state.values ? alt.other : name;
+      if (alt) $("#f-" + name + "-unit").value = active;
+      const o = opt(active);
+      if (input.type === "checkbox") input.checked = value(active) === "true";
+      else input.value = active === name || active in state.values ? value(active) : "";
+      input.placeholder = o && o.default != null ? String(o.default) : input.placeholder;
+    }
+  }
+
+  function activeName(input) {
+    const name = input.name, alt = ALT[name];
+    return alt ? $("#f-" + name + "-unit").value : name;
+  }
+
+  function onInput(input) {
+    const name = activeName(input);
+    const text = input.type === "checkbox" ? String(input.checked) : input.value;
+    const dflt = PAGE_FIELDS.includes(name) ? "" : defaultText(name);
+    if (text === dflt || (input.type === "checkbox" && text === "false")) delete state.values[name];
+    else state.values[name] = text;
+    schedule();
+  }
+
+  // period <-> rate, samples <-> seconds: converted with the last answer's loop
+  function switchAlt(name, to) {
+    const other = ALT[name].other, from = to === name ? other : name;
+    const loop = shown.kmax && shown.kmax.inputs && shown.kmax.inputs.loop;
+    delete state.values[from];
+    if (loop) {
+      const conv = { rate: 1 / loop.period_s, period: loop.period_s,
+                     "delay-s": loop.delay_s, delay: loop.delay_samples }[to];
+      if (conv != null && isFinite(conv)) state.values[to] = String(+conv.toPrecision(12));
+    }
+    if (state.values[to] === defaultText(to)) delete state.values[to];
+    fillForm(); schedule();
+  }
+
+  function setKind(kind) {
+    if (kind === state.kind) return;
+    const keep = {};
+    indexOptions(kind);
+    for (const [k, v] of Object.entries(state.values))
+      if (PAGE_FIELDS.includes(k) || ((optByName[kind][k]) && k !== "stiffness")) keep[k] = v;
+    state.kind = kind; state.values = keep;
+    for (const k of Object.keys(shown)) delete shown[k];
+    buildForm(); schedule();
+  }
+
+  // ------------------------------------------------------------------ URL state
+  function writeUrl() {
+    const q = new URLSearchParams();
+    q.set("kind", state.kind);
+    for (const [k, v] of Object.entries(state.values)) q.set(k, v);
+    history.replaceState(null, "", location.pathname + "?" + q.toString());
+  }
+  function readUrl() {
+    const q = new URLSearchParams(location.search);
+    if (![...q.keys()].length && schema.study && schema.kinds[schema.study.kind]) {
+      state.kind = schema.study.kind;
+      indexOptions(state.kind);
+      for (const [k, v] of Object.entries(schema.study.options || {})) state.values[k.replace(/_/g, "-")] = String(v);
+      return;
+    }
+    const kind = q.get("kind");
+    if (kind && schema.kinds[kind]) state.kind = kind;
+    indexOptions(state.kind);
+    for (const [k, v] of q) if (k !== "kind" && (optByName[state.kind][k] || PAGE_FIELDS.includes(k))) state.values[k] = v;
+  }
+
+  // ------------------------------------------------------------------ requests
+  function schedule() {
+    clearTimeout(timer);
+    document.body.dataset.pending = "1";     // a test waits for this to go
+    timer = setTimeout(update, DEBOUNCE_MS);
+  }
+
+  let inflight = 0;
+  function busy(delta) {
+    inflight += delta;
+    const s = $("#status");
+    if (inflight > 0) { s.className = "busy"; s.textContent = "computing…"; }
+    else if (s.className === "busy") { s.className = "idle"; s.textContent = "up to date"; }
+  }
+
+  async function call(channel, command, options, seq) {
+    if (ctrls[channel]) ctrls[channel].abort();
+    const ac = new AbortController();
+    ctrls[channel] = ac;
+    busy(+1);
+    document.querySelectorAll(`[data-channel="${channel}"]`).forEach((e) => e.classList.add("busy"));
+    try {
+      const r = await fetch(API + command, {
+        method: "POST", signal: ac.signal,
+        headers: { "Content-Type": "application/json", "X-Hapstab-Channel": PAGE + ":" + channel,
+                   "X-Hapstab-Seq": String(seq) },
+        body: JSON.stringify({ kind: state.kind, options }),
+      });
+      let body = null;
+      try { body = await r.json(); } catch (e) { body = { error: `HTTP ${r.status}: not JSON` }; }
+      if (seq !== SEQ || r.status === 409) return { superseded: true };
+      if (!r.ok) return { error: body.error || `HTTP ${r.status}`, parameter: body.parameter, status: r.status };
+      return { ok: body };
+    } catch (e) {
+      if (e.name === "AbortError" || seq !== SEQ) return { superseded: true };
+      return { error: `the explorer's server does not answer (${e.message})`, parameter: null };
+    } finally {
+      busy(-1);
+      if (ctrls[channel] === ac) {
+        delete ctrls[channel];
+        document.querySelectorAll(`[data-channel="${channel}"]`).forEach((e) => e.classList.remove("busy"));
+      }
+    }
+  }
+
+  const num = (t) => { const x = Number(String(t).trim()); return isFinite(x) && String(t).trim() !== "" ? x : null; };
+  // the model's own names in a library message that gave no option ("delay_samples = ...")
+  const MODEL_NAMES = { delay_samples: "delay", period_s: "period", delay_s: "delay-s",
+                        delay_forward_samples: "delay-forward", delay_backward_samples: "delay-backward" };
+  function fieldFor(param, message) {
+    if (!param && message) {
+      const m = /^([a-z_]+) = /.exec(message);
+      param = m && MODEL_NAMES[m[1]];
+    }
+    if (!param) return null;
+    let n = String(param).replace(/_/g, "-");
+    if (n === "K") n = "_kwin"; else if (n === "B") n = "_bwin";
+    n = ALT_OF[n] || n;
+    return $(`#form .field[data-name="${n}"]`);
+  }
+
+  function clearErrors() {
+    document.querySelectorAll("#form .field.invalid").forEach((f) => { f.classList.remove("invalid"); $(".msg", f).textContent = ""; });
+    $("#form-error").textContent = "";
+  }
+  function showError(res, where) {
+    const f = fieldFor(res.parameter, res.error);
+    if (f) {
+      if (!f.classList.contains("invalid")) { f.classList.add("invalid"); $(".msg", f).textContent = res.error; }
+      if (f.closest("details")) f.closest("details").open = true;
+      return true;
+    }
+    if (where) where(res.error);
+    else if (!$("#form-error").textContent) $("#form-error").textContent = res.error;
+    return false;
+  }
+  const stale = (channel, on) => document.querySelectorAll(`[data-channel="${channel}"]`).forEach((e) => e.classList.toggle("stale", on));
+
+  async function update() {
+    const seq = ++SEQ;
+    writeUrl();
+    const errors = [];
+    const run = async (channel, command, extra, draw, plot) => {
+      const res = await call(channel, command, optionsFor(command, extra), seq);
+      if (res.superseded) return null;
+      if (res.error) {
+        errors.push(res);
+        stale(channel, true);
+        if (plot && !fieldFor(res.parameter, res.error) && !errors.some((e) => e !== res && fieldFor(e.parameter, e.error)))
+          HapstabPlots.note(plot, res.error);
+        return null;
+      }
+      shown[command] = res.ok;
+      stale(channel, false);
+      try { draw(res.ok); } catch (e) { console.error(e); HapstabPlots.note(plot || "boundary", `cannot draw: ${e.message}`); }
+      return res.ok;
+    };
+    const cur = current();
+    const kmaxP = run("kmax", "kmax", {}, drawKmax);
+    const checkP = run("check", "check", {}, drawCheck);
+    const auditP = run("audit", "audit", {}, drawAudit);
+    const simP = run("simulate", "simulate", simExtra(), (a) => HapstabPlots.simulate(a), "simulate");
+    const pasP = run("passivity", "passivity", has("passivity", "curve") ? { curve: CURVE_POINTS } : {},
+                     (a) => { drawPassivity(a); HapstabPlots.passivity(a); }, "passivity");
+    const sweep = boundaryExtra(cur);
+    const bP = sweep ? call("boundary", "boundary", optionsFor("boundary", sweep), seq) : Promise.resolve(null);
+    const km = await kmaxP;
+    const check = await checkP;
+    cur.kmax = km ? km.critical_stiffness : null;
+    cur.verdict = check ? check.verdict : null;
+    if (km) {
+      cur.period_s = km.period_s;
+      const rP = run("region", "region", regionExtra(km, cur), (a) => HapstabPlots.region(a, cur), "region");
+      const b = await bP;
+      if (b && b.ok) { shown.boundary = b.ok; stale("boundary", false); HapstabPlots.boundary(b.ok, cur); }
+      else if (b && b.error) { stale("boundary", true); if (!fieldFor(b.parameter, b.error)) HapstabPlots.note("boundary", b.error); }
+      await rP;
+    } else {
+      const b = await bP; stale("boundary", true); stale("region", true);
+      if (b && b.error && !errors.length) HapstabPlots.note("boundary", b.error);
+    }
+    await Promise.all([auditP, simP, pasP]);
+    if (seq !== SEQ) return;
+    clearErrors();
+    for (const e of errors) showError(e);
+    const s = $("#status");
+    if (errors.length) { s.className = "error"; s.textContent = "input refused"; }
+    else if (!inflight) { s.className = "idle"; s.textContent = "up to date"; }
+    document.body.dataset.seq = String(seq);
+    document.body.dataset.settled = errors.length ? "error" : "ok";
+    delete document.body.dataset.pending;
+  }
+
+  function current() {
+    const K = num(value("stiffness")), B = num(value("virtual-damping"));
+    const delay = state.values["delay-s"] != null ? value("delay-s") + " s" : `${value("delay") || 0} samples`;
+    return { stiffness: K, B: B == null ? 0 : B, delayLabel: delay, rateMode: "rate" in state.values };
+  }
+
+  function simExtra() {
+    const o = optsOf("simulate").find((x) => x.name === "series");
+    if (!o) return {};
+    return { series: o.type === "flag" ? true : 1000 };
+  }
+
+  // periods (or rates) T/4 ... 4T around the current one, log-spaced, the current one included
+  function boundaryExtra() {
+    const rateMode = "rate" in state.values;
+    const centre = num(value(rateMode ? "rate" : "period"));
+    if (centre == null || centre <= 0) return shown.kmax ? periods(shown.kmax.period_s, false) : null;
+    return periods(centre, rateMode);
+  }
+  function periods(centre, rateMode) {
+    const xs = [];
+    for (let i = 0; i < SWEEP; i++) xs.push(centre * Math.pow(16, i / (SWEEP - 1)) / 4);
+    xs[(SWEEP - 1) / 2] = centre;
+    const list = xs.map((x) => String(+x.toPrecision(10))).join(",");
+    const extra = rateMode ? { rate: list } : { period: list };
+    if ("delay-s" in state.values) extra["delay-s"] = value("delay-s");
+    else extra.delay = value("delay") === "" ? 0 : jsonValue({ type: "float" }, value("delay"));
+    return extra;
+  }
+
+  function regionExtra(km, cur) {
+    const kw = (state.values._kwin || "").trim(), bw = (state.values._bwin || "").trim();
+    const K = cur.stiffness || 0, B = cur.B || 0, kmax = km.critical_stiffness || 0;
+    // B up to four times the device's own damping b (PEB: the smaller of the two), or 2|B|;
+    // K up to where the closed forms' K_max (b + B)/(T/2 + t_d) would be at the top B
+    let b = state.kind === "hve" ? num(value("damping"))
+      : Math.min(num(value("master-damping")) ?? Infinity, num(value("slave-damping")) ?? Infinity);
+    if (!(b > 0 && isFinite(b))) b = 0.1;
+    const bHi = Math.max(2 * Math.abs(B), 4 * b);
+    const bLo = Math.min(-0.25 * b, 2 * B);
+    const kHi = Math.max(1.2 * kmax * (b + bHi) / b, 1.5 * K, 1);
+    const out = { K: kw || `0:${+kHi.toPrecision(4)}`, B: bw || `${+bLo.toPrecision(4)}:${+bHi.toPrecision(4)}`,
+                  resolution: REGION_RESOLUTION };
+    if (has("region", "overlay")) out.overlay = "none";     // drawn by the CLI's --plot only
+    return out;
+  }
+
+  // ------------------------------------------------------------------ the cards
+  const fmt = (v, p = 6) => (v == null ? "–" : Math.abs(v) >= 1e6 || (v !== 0 && Math.abs(v) < 1e-4) ? v.toExponential(p - 1) : String(+v.toPrecision(p)));
+  function setNum(id, v) { const e = $(id); e.dataset.value = v == null ? "" : String(v); e.textContent = fmt(v); }
+
+  function drawKmax(a) {
+    setNum("#kmax", a.critical_stiffness);
+    const f = a.crossing_frequency_hz;
+    $("#kmax-detail").textContent = (f != null ? `crossing at ${fmt(f, 4)} Hz · ` : "") + a.reason;
+    $("#kmax-detail").title = a.reason;
+  }
+  function drawCheck(a) {
+    const v = $("#verdict");
+    v.textContent = a.verdict;
+    v.dataset.value = a.verdict; v.className = "big " + a.verdict;
+    $("#verdict-detail").textContent = (a.stiffness != null ? `at K = ${fmt(a.stiffness)} N/m · ` : "") +
+      `spectral radius ${fmt(a.spectral_radius, 8)}` +
+      (a.frequency_hz != null ? ` · ${fmt(a.frequency_hz, 4)} Hz` : "") + " · " + a.reason;
+    $("#verdict-detail").title = a.reason;
+  }
+  function drawAudit(a) {
+    setNum("#passivity-kmax", a.passivity_kmax);
+    const rows = a.rows.filter((r) => CLOSED.includes(r.key));
+    const box = $("#paper-rows");
+    box.replaceChildren();
+    if (!rows.length) box.textContent = "none of the paper's closed forms applies to this loop";
+    for (const r of rows) {
+      const d = document.createElement("div"); d.className = "row"; d.dataset.key = r.key;
+      const k = document.createElement("span"); k.className = "k"; k.dataset.value = String(r.critical_stiffness);
+      k.textContent = r.critical_stiffness == null ? "∞" : fmt(r.critical_stiffness) + " N/m";
+      const l = document.createElement("span"); l.className = "l"; l.textContent = r.label; l.title = r.note;
+      d.append(k, l); box.appendChild(d);
+      if (r.flag) { const fl = document.createElement("div"); fl.className = "flag"; fl.textContent = "⚠ " + r.flag; fl.title = r.flag; box.appendChild(fl); }
+    }
+    const others = (a.flagged || []).filter((k) => !CLOSED.includes(k));
+    if (others.length) { const d = document.createElement("div"); d.className = "flag"; d.textContent = "also flagged: " + others.join(", "); box.appendChild(d); }
+  }
+  function drawPassivity(a) {
+    const p = $("#passivity-detail");
+    p.textContent = `at K: ${a.verdict}, margin ${fmt(a.margin, 4)} N·s/m at ${fmt(a.worst_frequency_hz, 4)} Hz`;
+    p.title = a.reason;
+  }
+
+  // ------------------------------------------------------------------ downloads, code
+  function download(name, data, type) {
+    const a = document.createElement("a");
+    a.href = data.startsWith("data:") ? data : URL.createObjectURL(new Blob([data], { type }));
+    a.download = name;
+    document.body.appendChild(a); a.click(); a.remove();
+  }
+  async function copyCode(which) {
+    const command = $("#code-command").value;
+    const box = $("#code");
+    try {
+      const r = await fetch(API + "code", { method: "POST", headers: { "Content-Type": "application/json" },
+        body: JSON.stringify({ kind: state.kind, command, options: optionsFor(command, extraFor(command)) }) });
+      const body = await r.json();
+      if (!r.ok) { box.value = "error: " + body.error; return; }
+      box.value = body[which];
+      box.dataset.which = which;
+      try { await navigator.clipboard.writeText(body[which]); $("#status").textContent = "copied"; } catch (e) { /* not allowed here: the box shows it */ }
+    } catch (e) { box.value = "error: " + e.message; }
+  }
+  function extraFor(command) {
+    if (command === "boundary") return boundaryExtra() || {};
+    if (command === "region" && shown.kmax) return regionExtra(shown.kmax, current());
+    if (command === "passivity") return {};
+    return {};
+  }
+
+  function wire() {
+    document.querySelectorAll('#kind input[name="kind"]').forEach((r) => r.addEventListener("change", () => setKind(r.value)));
+    $("#copy-cli").onclick = () => copyCode("cli");
+    $("#copy-python").onclick = () => copyCode("python");
+    $("#copy-link").onclick = async () => { try { await navigator.clipboard.writeText(location.href); $("#status").textContent = "link copied"; } catch (e) { $("#code").value = location.href; } };
+    $("#download-json").onclick = () => download("hapstab-explorer.json",
+      JSON.stringify({ kind: state.kind, options: state.values, url: location.href, answers: shown }, null, 1), "application/json");
+    document.querySelectorAll("[data-csv]").forEach((b) => (b.onclick = () => {
+      const t = HapstabPlots.csv(b.dataset.csv); if (t) download(`hapstab-${b.dataset.csv}.csv`, t, "text/csv"); }));
+    document.querySelectorAll("[data-png]").forEach((b) => (b.onclick = () => {
+      const u = HapstabPlots.png(b.dataset.png); if (u) download(`hapstab-${b.dataset.png}.png`, u); }));
+    let rt = null;
+    window.addEventListener("resize", () => { clearTimeout(rt); rt = setTimeout(HapstabPlots.resize, 100); });
+  }
+
+  async function start() {
+    wire();
+    try {
+      const r = await fetch(API + "schema");
+      if (!r.ok) throw new Error(`HTTP ${r.status}`);
+      schema = await r.json();
+    } catch (e) {
+      const f = $("#fatal"); f.hidden = false;
+      f.textContent = `The explorer's server did not give its schema (${e.message}); start it with: hapstab explore`;
+      return;
+    }
+    readUrl();
+    $(`#kind input[value="${state.kind}"]`).checked = true;
+    buildForm();
+    update();
+  }
+  window.HapstabExplorer = { state, shown, optionsFor };
+  start();
+})();
