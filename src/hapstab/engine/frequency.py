@@ -247,6 +247,12 @@ class ResponsePlan:
     masses: list[float]
     numbers: tuple | None = None
 
+    @property
+    def filter_rate(self) -> int:
+        """Powers of z^-1 the velocity filters add to det M (see LoopResponse.phase_rate)."""
+        nums = self.numbers if self.numbers is not None else _numbers(self)
+        return sum(map(filter_order, nums[5]))
+
     def key(self) -> tuple:
         """What loops must share to be one batch (see :func:`build_responses`)."""
         nums = self.numbers if self.numbers is not None else _numbers(self)

@@ -263,13 +263,28 @@ def _trim(c: Cells, cell: np.ndarray, ua: np.ndarray, ub: np.ndarray
     r, a, b = r[order], a[order], b[order]
     if r.size:   # merge overlapping pieces of one box
         new = np.ones(r.size, bool)
-        new[1:] = (r[1:] != r[:-1]) | (a[1:] > np.maximum.accumulate(b)[:-1])
+        new[1:] = (r[1:] != r[:-1]) | (a[1:] > _running_max(r, b)[:-1])
         grp = np.cumsum(new) - 1
         rr, aa = r[new], a[new]
         bb = np.full(rr.size, -np.inf)
         np.maximum.at(bb, grp, b)
         r, a, b = rr, aa, bb
     return cell[r], a, b
+
+
+def _running_max(r: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The running maximum of ``b`` within each run of equal ``r`` (``r`` sorted): one
+    box's pieces merge only with that box's own (a running maximum over every box let a
+    wide piece of one box, or of another loop in a batch, swallow the gaps of the next)."""
+    start = np.ones(r.size, bool)
+    start[1:] = r[1:] != r[:-1]
+    g = (np.cumsum(start) - 1).astype(np.int64)
+    order = np.argsort(b, kind="stable")
+    rank = np.empty(b.size, np.int64)
+    rank[order] = np.arange(b.size)
+    # groups ascend, so a running maximum of (group, rank) never leaves its group
+    key = np.maximum.accumulate(g * b.size + rank)
+    return b[order[key - g * b.size]]
 
 
 def _box_test(c: Cells, cell: np.ndarray, ua: np.ndarray, ub: np.ndarray):

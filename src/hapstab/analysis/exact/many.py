@@ -167,7 +167,9 @@ def batch_size(plan: ResponsePlan) -> int:
     most = [0] * ports
     for ch, terms in zip(plan.st.channels, plan.terms, strict=True):
         most[ch.port] = max(most[ch.port], *(n + math.ceil(f) for _, _, n, f in terms))
-    rate = sum(most) + sum(m[0].shape[0] for m in plan.matrices) + 2
+    # the velocity filters' orders raise det M's degree (LoopResponse.phase_rate) as delays do
+    rate = sum(most) + sum(m[0].shape[0] for m in plan.matrices) + 2 + \
+        plan.filter_rate
     return int(max(8, min(BATCH, BATCH_BYTES // (PER_RATE * rate * ports))))
 
 
