@@ -248,13 +248,23 @@ def cli() -> None:
 
 def _register() -> None:
     """Add every command to :data:`cli` (one place, in the order of ``--help``)."""
-    from hapstab.cli import analysis, devices, nonlinear, paper, regions, robust, run, simulation
+    from hapstab.cli import (
+        analysis,
+        devices,
+        nonlinear,
+        paper,
+        regions,
+        robust,
+        run,
+        simulation,
+        sweep,
+    )
 
     for cmd in (analysis.kmax, analysis.check, analysis.boundary_cmd, analysis.demo,
                 paper.passivity_cmd, paper.twoport_cmd, paper.transparency_cmd,
                 paper.audit_cmd, nonlinear.limit_cycle_cmd, regions.region,
                 regions.best, robust.robust, devices.zwidth_cmd, simulation.simulate_cmd,
-                simulation.reproduce_cmd, run.run_cmd):
+                simulation.reproduce_cmd, run.run_cmd, sweep.sweep_cmd):
         cli.add_command(cmd)
         _describe(cmd)
 
