@@ -154,6 +154,8 @@ def plan(study: Study, root: click.Group, yes: bool) -> dict[str, Any]:
                              "option (hapstab sweep computes its [sweep] quantities)")
     fixed.update(loop)
     random = table.get("random")
+    if random is not None:
+        _random(study, random)                  # (before the axes, which depend on it)
     axes = _axes(study, table.get("axes"), params, random is not None)
     for a in axes:
         fixed.pop(a.name, None)
@@ -225,11 +227,7 @@ def _settings(study: Study, table: dict[str, Any], random: Any, axes: list[Any])
     out["quantities"] = q
     out["chunk"] = _int(study, table, "chunk", "sweep", 1)
     if random is not None:
-        if "samples" not in random:
-            raise StudyError(f"{study.where('random', 'sweep')}sweep.random.samples: missing; "
-                             "give the number of random points")
-        out["samples"] = _int(study, random, "samples", "sweep.random", 1)
-        out["seed"] = _int(study, random, "seed", "sweep.random", 0) or 0
+        out.update(_random(study, random))
     plot = table.get("plot")
     if plot is not None:
         for k in ("x", "y"):
@@ -254,6 +252,15 @@ def _settings(study: Study, table: dict[str, Any], random: Any, axes: list[Any])
                              else _number(study, bd, key, "sweep.best-damping", None))
     out["damping"] = damping
     return out
+
+
+def _random(study: Study, random: dict[str, Any]) -> dict[str, Any]:
+    """[sweep.random]: samples and seed."""
+    if "samples" not in random:
+        raise StudyError(f"{study.where('random', 'sweep')}sweep.random.samples: missing; "
+                         "give the number of random points")
+    return {"samples": _int(study, random, "samples", "sweep.random", 1),
+            "seed": _int(study, random, "seed", "sweep.random", 0) or 0}
 
 
 def _int(study: Study, table: dict[str, Any], key: str, where: str, low: int) -> int | None:

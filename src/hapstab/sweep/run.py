@@ -34,10 +34,10 @@ __all__ = ["sweep", "MAX_POINTS", "INSTALL", "default_chunk", "POINT_SECONDS"]
 MAX_POINTS = 10 ** 7
 #: What installs the sweep's dependencies.
 INSTALL = "pip install 'hapstab[sweep]'"
-#: Seconds per point of each quantity, for the default chunk size: K_max batched about
-#: 0.2 ms at the project's machine (see benchmarks/bench_sweep.py), the others one call
-#: each (passivity ~2 ms, a verdict ~1 ms, the best damping ~100 K_max).
-POINT_SECONDS = {"kmax": 2e-4, "passivity": 2e-3, "closed-form": 1e-5, "check": 1e-3,
+#: Seconds per point of each quantity, for the default chunk size (about, on the project's
+#: machine; benchmarks/bench_sweep.py measures them): K_max 2-16 ms one by one and less
+#: batched, the passivity limit and a verdict ~4 ms, the best damping ~100 K_max.
+POINT_SECONDS = {"kmax": 2e-3, "passivity": 4e-3, "closed-form": 1e-5, "check": 4e-3,
                  "best-damping": 0.1}
 #: A chunk takes about this long: a Dask task costs ~1 ms, under 1 % of it.
 CHUNK_SECONDS = 2.0
