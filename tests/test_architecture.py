@@ -21,7 +21,10 @@ MAY_IMPORT = {
     "analysis": {"models", "engine"},
     "simulation": {"models", "engine", "analysis"},
     "paper": {"models", "engine", "analysis", "simulation"},
-    "cli": {"models", "engine", "analysis", "simulation", "paper"},
+    # design sweeps: many loops in chunks, on Dask (its loops are built by a function the
+    # caller gives: the CLI's, from a study file's option names)
+    "sweep": {"models", "engine", "analysis", "simulation", "paper"},
+    "cli": {"models", "engine", "analysis", "simulation", "paper", "sweep"},
 }
 #: the exceptions, each with its reason
 EXCEPTIONS = {

@@ -19,7 +19,8 @@ __all__ = ["on_dask", "check_address", "CONNECT_TIMEOUT_S"]
 CONNECT_TIMEOUT_S = 10
 #: Tasks in flight per worker thread.
 IN_FLIGHT = 4
-_ADDRESS = re.compile(r"^(?:(tcp|tls|inproc|ucx|ws|wss)://)?[A-Za-z0-9_.\-\[\]:]+:\d{1,5}$")
+_ADDRESS = re.compile(r"^(?:(?:tcp|tls|ucx|ws|wss)://)?"
+                      r"(?:[A-Za-z0-9](?:[A-Za-z0-9.-]*[A-Za-z0-9])?|\[[0-9A-Fa-f:.]+\]):\d{1,5}$")
 
 
 def check_address(address: Any) -> str:

@@ -14,6 +14,7 @@ import numpy as np
 
 from hapstab.results import Result, jsonable
 from hapstab.sweep.axes import Axis, Points
+from hapstab.sweep.store import read_chunk
 
 __all__ = ["SweepResult", "summarise", "heat_map"]
 
@@ -71,13 +72,11 @@ class SweepResult(Result):
         pyarrow.Table
             Sorted by point id.
         """
-        import pyarrow.parquet as pq
+        import pyarrow as pa
 
         paths = [os.path.join(self.out_dir, "chunks", f"chunk-{int(e['chunk']):06d}.parquet")
                  for e in self.manifest.get("finished", [])]
-        import pyarrow as pa
-
-        return pa.concat_tables([pq.read_table(p, columns=columns) for p in paths])
+        return pa.concat_tables([read_chunk(p, columns) for p in paths])
 
     def plot(self, ax: Any = None) -> Any:
         """K_max over the plot's two axes (the others reduced by the minimum).
@@ -113,10 +112,9 @@ def summarise(paths: list[str], points: Points, quantities: tuple[str, ...],
     dict
         ``points``, ``errors``, per quantity column ``{min, max, where_min, where_max}``,
         ``closed_form`` (over-promises: count, fraction, the worst points),
-        ``verdicts`` (check), and ``heat_map`` (its grid) with ``plot``.
+        ``verdicts_at_K`` (check: each verdict and its number of points), and
+        ``heat_map`` (its grid) with ``plot``.
     """
-    import pyarrow.parquet as pq
-
     stats: dict[str, dict[str, Any]] = {}
     verdicts: dict[str, int] = {}
     over: list[tuple[float, dict[str, Any]]] = []
@@ -124,7 +122,7 @@ def summarise(paths: list[str], points: Points, quantities: tuple[str, ...],
     heat = _Heat(points, plot) if plot else None
     axes = [a.column for a in points.axes]
     for path in paths:
-        t = pq.read_table(path).to_pydict()
+        t = read_chunk(path).to_pydict()
         ids = t["point_id"]
         n += len(ids)
         errors += sum(e is not None for e in t["error"])
@@ -146,7 +144,7 @@ def summarise(paths: list[str], points: Points, quantities: tuple[str, ...],
             heat.add(t)
     out: dict[str, Any] = {"points": n, "errors": errors, "quantities": stats}
     if verdicts:
-        out["verdicts_at_K"] = verdicts
+        out["verdicts_at_K"] = [{"verdict": v, "points": k} for v, k in sorted(verdicts.items())]
     if "closed-form" in quantities:
         count = len(over) if len(over) < WORST else None
         out["closed_form"] = {"compared": compared, "over_promises_listed": len(over[:WORST]),
@@ -160,9 +158,7 @@ def summarise(paths: list[str], points: Points, quantities: tuple[str, ...],
 
 
 def _count_over(paths: list[str]) -> int:
-    import pyarrow.parquet as pq
-
-    return sum(sum(bool(f) for f in pq.read_table(p, columns=["closed_form_over_promises"])
+    return sum(sum(bool(f) for f in read_chunk(p, ["closed_form_over_promises"])
                    .column(0).to_pylist()) for p in paths)
 
 

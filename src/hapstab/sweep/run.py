@@ -60,7 +60,7 @@ def default_chunk(quantities: Sequence[str], points: int) -> int:
     -------
     int
     """
-    per = sum(POINT_SECONDS[q] for q in quantities) or 1e-4
+    per = sum(POINT_SECONDS[q] for q in quantities) or POINT_SECONDS["kmax"]
     size = max(1, int(CHUNK_SECONDS / per))
     return max(size, -(-points // MAX_CHUNKS))
 
@@ -105,7 +105,8 @@ def sweep(build: Callable[[dict[str, Any]], Any], axes: Sequence[Axis] | Mapping
     plot : (str, str), optional
         The heat map's x and y axes (default: the first two axes; none with one axis).
     workers : int, optional
-        Local processes (default: every core); 1: in this process, without Dask.
+        Local processes (default: every core); 1: in this process, without Dask. Not with
+        ``scheduler``.
     scheduler : str, optional
         The address of a Dask scheduler to run on instead (``tcp://host:8786``).
     force : bool
@@ -240,12 +241,14 @@ def _plot(plot: Any, axes: tuple[Axis, ...], qs: tuple[str, ...]) -> tuple[str, 
 
 def _workers(workers: Any, scheduler: Any) -> int:
     if workers is None:
-        return 1 if scheduler is None and (os.cpu_count() or 1) == 1 else (os.cpu_count() or 1)
-    if isinstance(workers, bool) or not isinstance(workers, int) or not 1 <= workers <= 4096:
-        raise SweepError(f"workers = {workers!r}: must be a whole number 1...4096")
-    if scheduler is not None and workers != 1:
-        raise SweepError("workers and scheduler: give one (a scheduler's cluster has its own "
-                         "workers)")
+        return os.cpu_count() or 1
+    most = 4 * (os.cpu_count() or 1)      # (more local processes than that only compete)
+    if isinstance(workers, bool) or not isinstance(workers, int) or not 1 <= workers <= most:
+        raise SweepError(f"--workers = {workers!r}: must be a whole number 1...{most} (4 times "
+                         "this machine's cores; a cluster: --scheduler)")
+    if scheduler is not None:
+        raise SweepError("--workers and --scheduler: give one of them (a scheduler's cluster "
+                         "has its own workers)")
     return workers
 
 

@@ -23,7 +23,7 @@ from typing import Any
 from hapstab.outputs import OutputError, atomic_file
 from hapstab.sweep.axes import SweepError, chunks_of, ids_of
 
-__all__ = ["Store", "MANIFEST", "CHUNKS", "chunk_name", "arrow_schema"]
+__all__ = ["Store", "MANIFEST", "CHUNKS", "chunk_name", "arrow_schema", "read_chunk"]
 
 MANIFEST = "manifest.json"
 CHUNKS = "chunks"
@@ -44,6 +44,26 @@ def chunk_name(index: int) -> str:
     str
     """
     return f"chunk-{index:06d}.parquet"
+
+
+def read_chunk(path: str, columns: list[str] | None = None) -> Any:
+    """A chunk file's rows (opened as a file: a folder named like a URI, ``s3:x``, is
+    still a folder).
+
+    Parameters
+    ----------
+    path : str
+    columns : list of str, optional
+        Only these columns.
+
+    Returns
+    -------
+    pyarrow.Table
+    """
+    import pyarrow.parquet as pq
+
+    with open(path, "rb") as fh:
+        return pq.read_table(fh, columns=columns)
 
 
 def arrow_schema(columns: list[tuple[str, str]]) -> Any:
@@ -167,11 +187,12 @@ class Store:
             if index in self.done or not 0 <= index < self.n_chunks:
                 continue
             try:
-                meta = pq.read_schema(path)
-                rows = pq.read_metadata(path).num_rows
+                with open(path, "rb") as fh:
+                    meta = pq.ParquetFile(fh)
+                    schema, rows = meta.schema_arrow, meta.metadata.num_rows
             except Exception:       # not a Parquet file we wrote: computed again
                 continue
-            if rows == self.rows_of(index) and meta.equals(self.schema):
+            if rows == self.rows_of(index) and schema.equals(self.schema):
                 self.done[index] = {"chunk": index, "rows": rows, "sha256": _sha256(path)}
 
     # ------------------------------------------------------------------ the work
