@@ -10,6 +10,7 @@ from hapstab.analysis.circle import circle_test, loop_inverse
 from hapstab.analysis.closed_forms import colgate, eq18, eq29, eq34, gil, gil2004
 from hapstab.analysis.damping import BestDampingResult, best_damping
 from hapstab.analysis.exact.core import stability
+from hapstab.analysis.exact.many import critical_stiffness_many
 from hapstab.analysis.limit_cycle_results import LimitCycleResult, PredictedCycle
 from hapstab.analysis.limit_cycles import limit_cycles
 from hapstab.analysis.methods import boundary, critical_stiffness, methods_for
@@ -76,4 +77,5 @@ __all__ = [
     "LimitCycleResult", "PredictedCycle",
     "OperatorBox", "operator_box", "robust_critical_stiffness", "RobustStiffnessResult",
     "robust_best_damping", "RobustDampingResult", "sweep", "SweepResult",
+    "critical_stiffness_many",
 ]

@@ -51,6 +51,7 @@ from hapstab.engine.discs import (
     zero,
 )
 from hapstab.engine.expansion import generic_coefficients
+from hapstab.engine.port_poly import COEF_REL, PortPoly, _port_poly
 from hapstab.engine.structure import (
     channel_name,
     channel_ratios,
@@ -61,36 +62,18 @@ from hapstab.engine.structure import (
 )
 from hapstab.engine.two_port import two_port
 from hapstab.engine.velocity import damper_jets, filter_order, filters_of, stack_filters
-from hapstab.engine.zoh import _THETA13, expm_batched, port_matrices
+from hapstab.engine.zoh import port_matrices
 from hapstab.errors import AnalysisError
 from hapstab.models.controllers import has_stiffness
 from hapstab.models.loops import HapticLoop, TeleoperationLoop, split_delay
-from hapstab.tolerances import DIVISOR_FLOOR
 
-__all__ = ["LoopResponse", "loop_response", "stack_responses"]
+__all__ = ["LoopResponse", "loop_response", "stack_responses", "ResponsePlan", "plan_response",
+           "build_responses", "check_plan", "PortPoly", "COEF_REL", "_port_poly"]
 
 #: Largest ratio of port masses analysed: beyond ~1e12 the certified search's boxes
 #: multiply (measured: 1e15 kg against 15 g took 0.35 GB, 1e20 kg 4.6 GB, 1e30 kg ran
 #: out of memory), while no real teleoperator comes near it (grams to tonnes: 1e6).
 MASS_RATIO = 1e12
-
-#: Relative error assumed for the discretised coefficients (matrix exponential and
-#: Leverrier recursion on matrices of order <= 8: a few tens of unit round-offs).
-COEF_REL = 64 * np.finfo(float).eps
-
-
-@dataclass
-class PortPoly:
-    """Polynomials in y = z - 1 (ascending) of one port, one row per item."""
-
-    d: np.ndarray          # (L, q+1)  det(yI - (Phi - I))
-    dhat: np.ndarray       # (L, q)    d / y (free ports only, else empty)
-    N: np.ndarray          # (L, q)    C adj(yI - E) Gamma
-    Nt: dict[float, np.ndarray]   # fraction f -> (L, q+1): z^-1 Nt / d is the f-delayed measurement
-    D: dict[float, np.ndarray]    # fraction f -> (L, q): (Nt - (1 + y) N) / y
-    err: dict[str, np.ndarray]    # coefficient error bounds, same shapes
-    R: np.ndarray | None = None   # (L, q) c adj(yI - E) Gamma: the termination's force
-    mz_M: np.ndarray | None = None   # (L,) termination mass / port mass
 
 
 @dataclass
@@ -226,110 +209,57 @@ def _times(a: Jet, e: Jet | None) -> Jet:
 
 
 # ---------------------------------------------------------------------- building
-def _zoh(A: np.ndarray, T: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(Phi, S) with Phi = e^{AT}, S = int_0^T e^{As} ds, batched over T."""
-    n = A.shape[0]
-    M = np.zeros((2 * n, 2 * n))
-    M[:n, :n], M[:n, n:] = A, np.eye(n)
-    E = expm_batched(T[:, None, None] * M[None])
-    return E[:, :n, :n], E[:, :n, n:]
+@dataclass
+class ResponsePlan:
+    """One loop's share of a :class:`LoopResponse` before its port polynomials: what
+    :func:`build_responses` needs, with the checks that need no polynomials done.
+
+    Parameters
+    ----------
+    loop : HapticLoop or TeleoperationLoop
+        The loop.
+    st : LoopStructure
+        Its ports and channels.
+    T : (L,) array
+        The periods (s).
+    terms : tuple
+        Per channel, the measured ports (j, sign, whole delay, fraction).
+    ratios : tuple of float
+        Each channel's stiffness per unit K.
+    pos, ctrls : list
+        The position channels and their controllers.
+    matrices : list of tuple
+        Per port: (A, B, force row or None, m_z / M, free, fractions).
+    masses : list of float
+        Each port's total mass (kg).
+    """
+
+    loop: Any
+    st: Any
+    T: np.ndarray
+    terms: tuple
+    ratios: tuple[float, ...]
+    pos: list
+    ctrls: list
+    matrices: list[tuple]
+    masses: list[float]
+
+    def key(self) -> tuple:
+        """What loops must share to be one batch (see :func:`build_responses`)."""
+        return (self.terms, tuple((A.shape[0], fr, tuple(fs), force is None)
+                                  for A, _b, force, _m, fr, fs in self.matrices),
+                rigid_modes(self.st, float(self.T.max())),
+                tuple(ch.port for ch in self.st.channels),
+                tuple(ch.measures for ch in self.st.channels),
+                _filter_key(filters_of([ch.controller for ch in self.st.channels], self.T)))
 
 
-def _leverrier(E: np.ndarray, G: np.ndarray, d_desc: np.ndarray, kappa: np.ndarray,
-               T: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Leverrier on vectors: adj(yI - E) Gamma = sum_k y^(q-1-k) v_k; returns V (L, q, q),
-    row k = v_k, and magnitudes that bound its error.
-
-    E and Gamma come from the matrix exponential, accurate normwise rather than per entry
-    (a stiff port's position entries carry the rounding of its larger velocity terms),
-    here in the state's natural units, positions and T times velocities (w = [1, T, ...]),
-    times ``kappa`` = 1 + the number of squarings (each squaring rounds again); each step
-    then adds |E| |v| + |d_k| |Gamma|. Measured against 60 digits this holds up to walls
-    whose resonance is below about a third of the sampling rate; at 1e6 N/m with T = 0.5
-    to 2 ms it is still up to 40 times short (a bound normwise across units holds there,
-    but made the exact core run out of memory on extreme loops)."""
-    q = E.shape[1]
-    w = np.ones((T.size, q))
-    w[:, 1:] = T[:, None]
-    Es = np.abs(E) * w[:, :, None] / w[:, None, :]            # diag(w) |E| diag(1/w)
-    Gs = np.abs(G) * w
-    e_norm, g_norm = kappa * Es.max(axis=(1, 2)), kappa * Gs.max(axis=1)
-    g_mag = Gs + g_norm[:, None]
-    v, mag = G.copy(), g_mag
-    vs, mags = [v], [mag]
-    for k in range(1, q):
-        v = np.einsum("lij,lj->li", E, v) + d_desc[:, k:k + 1] * G
-        mag = (np.einsum("lij,lj->li", Es, mag) + e_norm[:, None] * mag.sum(axis=1, keepdims=True)
-               + np.abs(d_desc[:, k:k + 1]) * g_mag)
-        vs.append(v)
-        mags.append(mag)
-    return np.stack(vs, axis=1), np.stack(mags, axis=1) / w[:, None, :]
-
-
-def _port_poly(A: np.ndarray, Bv: np.ndarray, free: bool, T: np.ndarray,
-               fractions: Sequence[float], force: tuple[np.ndarray, np.ndarray] | None = None,
-               mz_M: float = 0.0) -> PortPoly:
-    """Polynomials of one port (state [x, v, rest...], position = state 0); with
-    ``force`` = (c, |c|-bound), the row of the termination's force
-    (``Ft = -c s + (m_z/M) u_old``) and the magnitudes it was summed from, also the
-    numerator of its force at kT^-."""
-    L, q = T.size, A.shape[0]
-    _Phi, S = _zoh(A, T)
-    E = A[None] @ S                                  # Phi - I, accurate for small T
-    G = S @ Bv[None]                                 # (L, q, 1)
-    # d(y) = prod (y - expm1(lambda T)): a free port's lambda = 0 is structural
-    lam = np.linalg.eigvals(A[1:, 1:]) if free else np.linalg.eigvals(A)
-    delta = np.expm1(T[:, None] * lam[None, :])
-    if free:
-        delta = np.concatenate([np.zeros((L, 1)), delta], axis=1)
-    d_desc = np.ones((L, 1), complex)
-    for i in range(q):
-        d_desc = np.concatenate([d_desc, np.zeros((L, 1))], axis=1)
-        d_desc[:, 1:] -= delta[:, i:i + 1] * d_desc[:, :-1]
-    d_desc = d_desc.real
-    if free:
-        d_desc[:, -1] = 0.0                           # exactly: a root at y = 0
-    # one rounding per squaring of the scaling-and-squaring exponential (its count as
-    # engine.zoh.expm_batched takes it; the augmented matrix's norm is at least A T's)
-    norm = np.maximum(T * np.abs(A).sum(axis=0).max(), DIVISOR_FLOOR)   # (log2 of 0 guarded)
-    squarings = np.maximum(0.0, np.ceil(np.log2(norm / _THETA13)))
-    V, Vmag = _leverrier(E, G[:, :, 0], d_desc, 1.0 + squarings, T)
-    N = V[:, ::-1, 0]                                 # ascending: coefficient of y^(q-1-k)
-    d = d_desc[:, ::-1].copy()
-    # magnitudes that rounding acts on: coefficients of prod (y + |delta_i|)
-    mag = np.ones((L, 1))
-    for i in range(q):
-        mag = np.concatenate([mag, np.zeros((L, 1))], axis=1)
-        mag[:, 1:] += np.abs(delta[:, i:i + 1]) * mag[:, :-1]
-    scale_d = mag[:, ::-1]
-    err = {"d": COEF_REL * scale_d, "N": COEF_REL * (np.abs(N) + Vmag[:, ::-1, 0])}
-    dhat = d[:, 1:] if free else np.zeros((L, 0))
-    err["dhat"] = err["d"][:, 1:] if free else np.zeros((L, 0))
-    Nt, D = {}, {}
-    for f in fractions:
-        Phf, Sf = _zoh(A, (1.0 - f) * T)
-        Gf = (Sf @ Bv[None])[:, 0, 0]                 # C Gamma_{1-f}
-        c_phi = Phf[:, 0, :]                          # C Phi_{1-f}
-        part = np.einsum("li,lki->lk", c_phi, V)[:, ::-1]        # ascending, degree q-1
-        nt = Gf[:, None] * d
-        nt[:, :q] += part
-        Nt[f] = nt
-        onepy_N = np.zeros((L, q + 1))
-        onepy_N[:, :q] += N
-        onepy_N[:, 1:] += N
-        diff = nt - onepy_N
-        D[f] = diff[:, 1:]                            # the constant term is 0 exactly
-        err[f"Nt{f}"] = COEF_REL * (np.abs(nt) + np.abs(Gf)[:, None] * scale_d
-                                    + np.pad(np.abs(part), ((0, 0), (0, 1))))
-        err[f"D{f}"] = (err[f"Nt{f}"] + COEF_REL * np.abs(onepy_N))[:, 1:]
-    R = None
-    if force is not None:
-        c, c_mag = force
-        R = np.einsum("lki,i->lk", V, c)[:, ::-1]              # ascending, degree q-1
-        if free:
-            R[:, 0] = 0.0          # exactly: c[0] = 0 and adj(-E) Gamma is along e_0
-        err["R"] = COEF_REL * (np.abs(R) + np.einsum("lki,i->lk", Vmag, c_mag)[:, ::-1])
-    return PortPoly(d, dhat, N, Nt, D, err, R, np.full(L, mz_M) if force is not None else None)
+def _filter_key(filters: tuple) -> tuple:
+    """The velocity filters' kinds (a low-pass's pole is a number of the row)."""
+    return tuple(None if f is None else ("lowpass",) if f[0] == "lowpass" else
+                 ("average", f[1]) if f[0] == "average" else
+                 ("affine", tuple(tuple(np.asarray(x).tolist()) for x in f[1]))
+                 for f in filters)
 
 
 def loop_response(loop: HapticLoop | TeleoperationLoop,
@@ -342,6 +272,13 @@ def loop_response(loop: HapticLoop | TeleoperationLoop,
         If a controller is not a :class:`~hapstab.models.SpringDamper` (no K to
         vary), or the master's stiffness is 0 while the slave's is not.
     """
+    return build_responses([plan_response(loop, periods)])
+
+
+def plan_response(loop: HapticLoop | TeleoperationLoop,
+                  periods: Sequence[float] | np.ndarray | None = None) -> ResponsePlan:
+    """The first half of :func:`loop_response`: the loop's structure, terms and port
+    matrices, and the checks of its controllers (the errors it raises come first)."""
     st = structure_of(loop)
     T = periods_of(loop, periods)
     pos = [ch for ch in st.channels if ch.measures == "position"]
@@ -361,10 +298,73 @@ def loop_response(loop: HapticLoop | TeleoperationLoop,
                             f"undefined; give the {ref} a stiffness > 0 to vary K")
     terms = tuple(tuple((j, float(s), *split_delay(d)) for j, s, d in ch.terms)
                   for ch in st.channels)
-    ports, masses = _ports(st, T, terms)
-    p = len(ports)
+    matrices, masses = _port_matrices(st, T, terms)
+    return ResponsePlan(loop, st, T, terms, ratios, pos, ctrls, matrices, masses)
+
+
+def build_responses(plans: Sequence[ResponsePlan]) -> LoopResponse:
+    """The characteristic function of every plan's loop at each of its periods, one
+    batch: the port polynomials of all items at once (plans of one :meth:`~ResponsePlan.key`).
+
+    Parameters
+    ----------
+    plans : sequence of ResponsePlan
+        From :func:`plan_response`, all with the same key.
+
+    Returns
+    -------
+    LoopResponse
+        The items of the plans in order (each plan's periods).
+
+    Raises
+    ------
+    AnalysisError
+        A loop outside the exact analysis's range (the first one's, in the order
+        :func:`loop_response` checks them).
+    """
+    T = np.concatenate([pl.T for pl in plans])
+    ports = _ports(plans, T)
+    parts = [_numbers(pl) for pl in plans]
+    pl0 = plans[0]
+    st, p = pl0.st, len(ports)
+    filters = stack_filters([pt[5] for pt in parts]) if parts[0][5] else parts[0][5]
+    resp = LoopResponse(pl0.terms, ports, np.concatenate([pt[0] for pt in parts]),
+                        np.concatenate([pt[1] for pt in parts]),
+                        np.concatenate([pt[2] for pt in parts]), parts[0][3], parts[0][4], T,
+                        tuple(ch.port for ch in st.channels),
+                        tuple(ch.measures for ch in st.channels),
+                        np.concatenate([pt[6] for pt in parts]), parts[0][7], filters)
+    if p != len(st.ports) or (p > 2 and not resp.simple):
+        raise AnalysisError("loop: the exact analysis takes one or two ports")
+    _check_finite(resp, [c for pl in plans for c in pl.ctrls])
+    return resp
+
+
+def check_plan(plan: ResponsePlan) -> None:
+    """The checks :func:`build_responses` makes of a plan after its polynomials, alone.
+
+    Parameters
+    ----------
+    plan : ResponsePlan
+        From :func:`plan_response`.
+
+    Raises
+    ------
+    AnalysisError
+        The loop is outside the exact analysis's range (mass ratio above 1e12, |B| T / m
+        above 1e8, ...); a loop that passes may still be refused by
+        :func:`build_responses` (its discretised plant or characteristic function
+        overflows).
+    """
+    _numbers(plan)
+
+
+def _numbers(pl: ResponsePlan) -> tuple:
+    """A plan's rows (k, beta, scale), q, rigid, filters, gain and free ports, after
+    the checks :func:`loop_response` makes once the polynomials exist."""
+    st, T, masses = pl.st, pl.T, pl.masses
     rigid = rigid_modes(st, float(T.max()))
-    q = sum(pp.d.shape[1] - 1 for pp in ports) - rigid
+    q = sum(A.shape[0] for A, *_ in pl.matrices) - rigid
     scale = 2.0 ** np.round(np.log2(min(masses) / T ** 2))
     if max(masses) > MASS_RATIO * min(masses):
         names = ", ".join(f"{pt.name} mass = {m:g} kg" for pt, m in zip(st.ports, masses, strict=True))
@@ -373,7 +373,7 @@ def loop_response(loop: HapticLoop | TeleoperationLoop,
                             "one's by more than its certified enclosures resolve)")
     beta = np.array([[getattr(c, "damping", 0.0) if ch.measures == "position" else 0.0
                       for ch, c in ((ch, ch.controller) for ch in st.channels)]]) / T[:, None]
-    gain = np.array([[ch.controller.num[0] if ch.measures == "force" else 0.0  # type: ignore[union-attr]
+    gain = np.array([[ch.controller.num[0] if ch.measures == "force" else 0.0
                       for ch in st.channels]]) * np.ones((T.size, 1))
     # |B| T / m beyond 1e8: the damper's pole pair is beyond double precision's reach
     ratio_B = np.abs(beta).max(axis=1) * T ** 2 / min(masses) if beta.size else np.zeros(T.size)
@@ -384,38 +384,33 @@ def loop_response(loop: HapticLoop | TeleoperationLoop,
     if not np.all(ratio_B <= 1e8):
         names = ", ".join(f"{channel_name(st, ch)} virtual damping = "
                           f"{getattr(c, 'damping', 0.0):g} N*s/m"
-                          for ch, c in zip(pos, ctrls, strict=True))
+                          for ch, c in zip(pl.pos, pl.ctrls, strict=True))
         raise AnalysisError(f"{names}: cannot analyse |B| T / m = {ratio_B.max():.3g} (at most "
                             "1e8; the loop's poles then lie beyond double precision)")
     free = tuple(port_is_free(pt, float(T.max())) for pt in st.ports)
     filters = filters_of([ch.controller for ch in st.channels], T)
     if any(f is not None and f[0] == "affine" for f in filters) and \
-            not np.all(T == loop.period):
+            not np.all(T == pl.loop.period):
         raise AnalysisError(f"period = {T.min():g}..{T.max():g} s: an AffineController's "
-                            f"coefficients belong to the loop's period {loop.period:g} s only")
-    if any(filters) and not (p == len(st.channels) and all(ch.port == i for i, ch in
-                                                           enumerate(st.channels))):
+                            f"coefficients belong to the loop's period {pl.loop.period:g} s only")
+    if any(filters) and not (len(st.ports) == len(st.channels) and
+                             all(ch.port == i for i, ch in enumerate(st.channels))):
         raise AnalysisError("velocity_filter: the exact analysis takes filtered velocity with one "
                             "controller per port (HVE, PEB), not yet the 4-channel loop")
-    resp = LoopResponse(terms, ports, np.broadcast_to(np.array(ratios), (T.size, len(terms))).copy(),
-                        beta, scale, q, rigid, T, tuple(ch.port for ch in st.channels),
-                        tuple(ch.measures for ch in st.channels), gain, free, filters)
-    if p != len(ports) or (p > 2 and not resp.simple):
-        raise AnalysisError("loop: the exact analysis takes one or two ports")
-    _check_finite(resp, ctrls)
-    return resp
+    k = np.broadcast_to(np.array(pl.ratios), (T.size, len(pl.terms))).copy()
+    return k, beta, scale, q, rigid, filters, gain, free
 
 
-def _ports(st: Any, T: np.ndarray, terms: tuple) -> tuple[list[PortPoly], list[float]]:
-    """Each port's polynomials (with the termination force's where a force channel
-    measures it) and its mass."""
+def _port_matrices(st: Any, T: np.ndarray, terms: tuple) -> tuple[list[tuple], list[float]]:
+    """Each port's (A, B, force row, m_z/M, free, fractions) and its mass: the force
+    row where a force channel measures the port."""
     fracs: dict[int, set[float]] = {j: set() for j in range(len(st.ports))}
     forced = {j for ch in st.channels if ch.measures == "force" for j, _, _ in ch.terms}
     for ch in terms:
         for j, _, _, f in ch:
             if f:
                 fracs[j].add(f)
-    ports, masses = [], []
+    out, masses = [], []
     for j, pt in enumerate(st.ports):
         A, Bm, Cf = port_matrices(pt)
         fr = port_is_free(pt, float(T.max()))   # then the spring is dropped
@@ -429,17 +424,36 @@ def _ports(st: Any, T: np.ndarray, terms: tuple) -> tuple[list[PortPoly], list[f
         # rounding is bounded by the terms' magnitudes
         force = ((Cf[0] + mz * A[1], np.abs(Cf[0]) + mz * np.abs(A[1])) if j in forced
                  else None)
-        ports.append(_port_poly(A, Bm, fr, T, sorted(fracs[j]), force, mz / M))
+        out.append((A, Bm, force, mz / M, fr, sorted(fracs[j])))
+    return out, masses
+
+
+def _ports(plans: Sequence[ResponsePlan], T: np.ndarray) -> list[PortPoly]:
+    """Each port's polynomials over every item of the plans (their own matrices)."""
+    ports = []
+    for j in range(len(plans[0].matrices)):
+        _, _, force0, _, fr, fs = plans[0].matrices[j]
+        rows = [(pl.T.size, pl.matrices[j]) for pl in plans]
+        A, Bm, mz = (_rows(rows, lambda m, k=k: m[k]) for k in (0, 1, 3))
+        force = None if force0 is None else (_rows(rows, lambda m: m[2][0]),
+                                             _rows(rows, lambda m: m[2][1]))
+        ports.append(_port_poly(A, Bm, fr, T, fs, force, mz))
     for j, pp in enumerate(ports):
         arrays = [pp.d, pp.N, *list(pp.Nt.values()), *list(pp.D.values())]
         arrays += [pp.R] if pp.R is not None else []
-        if not all(np.all(np.isfinite(a)) for a in arrays) or not np.any(pp.N):
-            pt = st.ports[j]
+        # (N vanishing for any item: its plant underflows; one row of a batch may)
+        if not all(np.all(np.isfinite(a)) for a in arrays) or not np.all(np.any(pp.N, axis=1)):
+            pt = plans[0].st.ports[j]
             raise AnalysisError(
                 f"{pt.name} mass = {pt.device.mass:g} kg, {pt.name} damping = "
                 f"{pt.device.damping:g} N*s/m at T = {T.min():g}..{T.max():g} s: cannot analyse, "
                 "the discretised plant over- or underflows double precision")
-    return ports, masses
+    return ports
+
+
+def _rows(rows: list[tuple[int, tuple]], part: Any) -> np.ndarray:
+    """One part of each plan's port matrices, repeated for each of its periods."""
+    return np.concatenate([np.broadcast_to(part(m), (n, *np.shape(part(m)))) for n, m in rows])
 
 
 def _check_finite(resp: LoopResponse, ctrls) -> None:

@@ -137,23 +137,15 @@ def _evaluate(spec: Spec, chunk: int) -> dict[str, list[Any]]:
 
 def _kmax(loops: list[Any], good: list[int], out: dict[str, list[Any]],
           errors: list[list[str]]) -> None:
-    """K_max of every good point in one batch; if the batch refuses a loop, point by point
-    to find it (that point's row then carries the message and no quantities)."""
+    """K_max of every good point in one batch; a loop the core refuses gets its message
+    (and no quantities)."""
     from hapstab.analysis.exact.many import critical_stiffness_many
 
-    try:
-        results: list[Any] = list(critical_stiffness_many([loops[i] for i in good]))
-    except HapstabError:
-        results = []
-        for i in good:
-            try:
-                results += critical_stiffness_many([loops[i]])
-            except HapstabError as e:
-                results.append(None)
-                errors[i].append(_line(e))
-                loops[i] = None
+    results = critical_stiffness_many([loops[i] for i in good], errors="return")
     for i, r in zip(good, results, strict=True):
-        if r is None:
+        if isinstance(r, HapstabError):
+            errors[i].append(_line(r))
+            loops[i] = None
             continue
         out["critical_stiffness_N_per_m"][i] = float(r.critical_stiffness)
         out["reason"][i] = r.reason

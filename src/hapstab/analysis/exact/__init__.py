@@ -7,5 +7,6 @@ from hapstab.analysis.exact.core import (
     exact_kmax_batch,
     stability,
 )
+from hapstab.analysis.exact.many import critical_stiffness_many
 
-__all__ = ["stability", "exact_critical_stiffness", "exact_kmax_batch"]
+__all__ = ["stability", "exact_critical_stiffness", "exact_kmax_batch", "critical_stiffness_many"]

@@ -365,22 +365,29 @@ def _polish(resp: LoopResponse, c: Cells, cell: np.ndarray, ua: np.ndarray, ub: 
     u = 0.5 * (ua + ub)
     item = c.item[cell]
     z = np.zeros(th.shape)
+    live = np.arange(th.size)        # the boxes of the items not yet converged
     for _ in range(12):
-        F = resp.coefficients(item, th, z)
-        f = F[0].vc + u * (F[1].vc + u * F[2].vc)
-        ft = F[0].dc + u * (F[1].dc + u * F[2].dc)
-        fu = F[1].vc + 2 * u * F[2].vc
+        it, e = item[live], end[live]
+        uu = u[live]
+        F = resp.coefficients(it, th[live], z[live])
+        f = F[0].vc + uu * (F[1].vc + uu * F[2].vc)
+        ft = F[0].dc + uu * (F[1].dc + uu * F[2].dc)
+        fu = F[1].vc + 2 * uu * F[2].vc
         a, b, cc, d = ft.real, fu.real, ft.imag, fu.imag
         det = a * d - b * cc
         with np.errstate(all="ignore"):
-            dth = np.where(end, 0.0, -(d * f.real - b * f.imag) / det)
-            du = np.where(end, -f.real / b, -(-cc * f.real + a * f.imag) / det)
+            dth = np.where(e, 0.0, -(d * f.real - b * f.imag) / det)
+            du = np.where(e, -f.real / b, -(-cc * f.real + a * f.imag) / det)
         dth = np.where(np.isfinite(dth), dth, 0.0)
         du = np.where(np.isfinite(du), du, 0.0)
-        th = np.clip(th + dth, lo_t, hi_t)
-        u = np.clip(u + du, ua, ub)
-        if (np.all(np.abs(du) <= 4 * np.finfo(float).eps * u)
-                and np.all(np.abs(dth) <= NEWTON_ANGLE_STEP * (1 + th))):
+        th[live] = np.clip(th[live] + dth, lo_t[live], hi_t[live])
+        u[live] = np.clip(uu + du, ua[live], ub[live])
+        # an item stops once all its boxes have converged: each item's iterates are
+        # then those of its own search, whatever else is in the batch
+        done = (np.abs(du) <= 4 * np.finfo(float).eps * u[live]) & \
+            (np.abs(dth) <= NEWTON_ANGLE_STEP * (1 + th[live]))
+        live = live[np.isin(it, it[~done])]
+        if not live.size:
             break
     F = resp.coefficients(item, th, z)
     ft = F[0].dc + u * (F[1].dc + u * F[2].dc)

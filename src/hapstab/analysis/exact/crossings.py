@@ -43,14 +43,11 @@ M. J. Cloud, *Introduction to Interval Analysis*, SIAM 2009, ch. 8.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
 from hapstab.analysis.exact.boxes import (
-    THETA_FLOOR,
     U_FLOOR,
     U_HI,
     U_LO,
@@ -65,11 +62,12 @@ from hapstab.analysis.exact.boxes import (
     _theta_floor,
     _trim,
 )
-from hapstab.analysis.exact.stable_set import StableSet, first_only, stable_set
+from hapstab.analysis.exact.counts import _classify, _dedupe, _events, gap_counts, winding
+from hapstab.analysis.exact.stable_set import StableSet
 from hapstab.engine.frequency import LoopResponse
 from hapstab.errors import AnalysisError
 
-__all__ = ["analyse", "winding", "U_LO", "U_HI"]
+__all__ = ["analyse", "winding", "U_LO", "U_HI", "_classify", "_dedupe"]
 
 #: Phase turn of the delay per first cell (rad): the full analysis needs every crossing
 #: and starts fine; for K_max alone (small K, where the delayed part of F is small)
@@ -93,7 +91,9 @@ class _Search:
     cap: np.ndarray             # (L,) the u above which nothing is of interest (yet)
     guess: np.ndarray           # (L,) the cap is a guess that may have to be raised
     deferred: list[tuple[np.ndarray, np.ndarray, np.ndarray]]
-    rounds: int = 0
+    #: (L,) rounds in which each item still had boxes to split (counted per item, so a
+    #: batch of loops gives each the limit it has alone)
+    rounds: np.ndarray | None = None
     #: a family of loops (coefficient enclosures over a box of parameters): a crossing
     #: is recorded at its box's lower end and keeps the boxes below its upper end
     robust: bool = False
@@ -228,9 +228,11 @@ def _give_up(srch: _Search, cell: np.ndarray, ua: np.ndarray, ub: np.ndarray,
     th_done = th_small | (w_th <= noise)          # theta splits cannot help any more
     stuck = (th_done & (u_small | (w_u <= noise)) | th_small & (w_th >= f_abs)
              | ~np.isfinite(f_abs + w_th + w_u))
-    srch.rounds += 1
-    if srch.rounds > MAX_ROUNDS:
-        stuck[:] = True
+    items = srch.c.item[cell]
+    if srch.rounds is None:
+        srch.rounds = np.zeros(srch.cap.size, int)
+    srch.rounds[np.unique(items)] += 1
+    stuck |= srch.rounds[items] > MAX_ROUNDS
     for k in np.flatnonzero(stuck):
         i = int(srch.c.item[cell[k]])
         srch.found.unsure[i].append((float(ua[k]), float(ub[k])))
@@ -271,6 +273,7 @@ def _winding_cells(resp: LoopResponse, c: Cells, leaves: np.ndarray, u: np.ndarr
     split can exclude 0 there), and its item's count is not certified."""
     L = resp.size
     bad_item = np.zeros(L, bool)
+    kids = leaves[:0]
     for _ in range(200):
         it = c.item[leaves]
         fc, fr = _dpoly(c.vc[:, leaves], c.vr[:, leaves], u[it], np.zeros(leaves.size))
@@ -288,8 +291,8 @@ def _winding_cells(resp: LoopResponse, c: Cells, leaves: np.ndarray, u: np.ndarr
             break
         kids = c.add(resp, *_split_cells(c, split))
         leaves = np.concatenate([keep, kids])
-    else:
-        bad_item[c.item[leaves]] = True
+    else:       # the items still splitting (not every item of a batch)
+        bad_item[c.item[kids]] = True
     it = c.item[leaves]
     order = np.lexsort((c.th[leaves], it))
     leaves, it = leaves[order], it[order]
@@ -308,53 +311,6 @@ def _winding_cells(resp: LoopResponse, c: Cells, leaves: np.ndarray, u: np.ndarr
     # end values' arguments (~1e-15); 1e-6 off means something is wrong: not certified
     bad = bad_item | ~np.isfinite(turns) | (np.abs(turns - np.round(turns)) > 1e-6)
     return np.where(bad, -1, resp.q - np.round(np.where(np.isfinite(turns), turns, 0)).astype(int))
-
-
-def winding(resp: LoopResponse, items: np.ndarray, u: np.ndarray) -> np.ndarray:
-    """Poles outside the unit circle at u = K/scale for each item, by the argument
-    principle, certified: ``Z_out = q - wind(det M)``. -1 where a pole is within
-    the rounding floor of the circle (the count cannot be certified)."""
-    items, u = np.asarray(items, int), np.asarray(u, float)
-    m = max(8, int(np.ceil(np.pi * resp.phase_rate / 1.2)))
-    a0 = np.linspace(0.0, np.pi, m + 1)
-    row = np.repeat(np.arange(items.size), m)
-    a, b = np.tile(a0[:-1], items.size), np.tile(a0[1:], items.size)
-    done_a, done_b, done_row = [], [], []
-    bad_rows = np.zeros(items.size, bool)
-    for _ in range(200):
-        if not row.size:
-            break
-        mid, rho = 0.5 * (a + b), 0.5 * (b - a)
-        pts = resp.coefficients(items[row], mid, np.zeros_like(mid))
-        cel = resp.coefficients(items[row], mid, rho)
-        vd = [cc.value_disc(rho, p) for cc, p in zip(cel, pts, strict=True)]
-        fc, fr = _dpoly(np.array([v[0] for v in vd]), np.array([v[1] for v in vd]), u[row],
-                        np.zeros(row.size))
-        ok = np.abs(fc) > fr
-        done_a.append(a[ok])
-        done_b.append(b[ok])
-        done_row.append(row[ok])
-        a, b, row = a[~ok], b[~ok], row[~ok]
-        floor = (b - a) <= THETA_FLOOR * (1.0 + a)
-        bad_rows[row[floor]] = True
-        a, b, row = a[~floor], b[~floor], row[~floor]
-        mid = 0.5 * (a + b)
-        a, b, row = np.concatenate([a, mid]), np.concatenate([mid, b]), np.concatenate([row, row])
-    if row.size:
-        bad_rows[row] = True
-    A, Bv, R = np.concatenate(done_a), np.concatenate(done_b), np.concatenate(done_row)
-    ends = np.concatenate([A, Bv])
-    rr = np.concatenate([R, R])
-    F = resp.coefficients(items[rr], ends, np.zeros_like(ends))
-    val = F[0].vc + u[rr] * (F[1].vc + u[rr] * F[2].vc)
-    fa, fb = val[:A.size], val[A.size:]
-    inc = np.angle(fb / fa)
-    total = np.zeros(items.size)
-    np.add.at(total, R, inc)
-    turns = total / np.pi
-    out = resp.q - np.round(turns).astype(int)
-    bad = bad_rows | (np.abs(turns - np.round(turns)) > 1e-6)   # whole to ~1e-15: _winding_cells
-    return np.where(bad, -1, out)
 
 
 # ------------------------------------------------------------------ the analysis
@@ -383,94 +339,11 @@ def analyse(resp: LoopResponse, full: bool = True) -> list[StableSet]:
     found = _boxes(resp, need, np.where(np.isin(items, need), cap, -np.inf),
                    start=(c, first)) if need.size else \
         Found([[] for _ in range(L)], [[] for _ in range(L)])
-    out = []
-    for i in range(L):
-        out.append(_classify(resp, i, int(anchor[i]), _dedupe(found.cross[i]), found.unsure[i],
-                             full))
-    return out
+    cross = [_dedupe(found.cross[i]) for i in range(L)]
+    # the counts the stable sets need, for every item in a few batched calls
+    known = gap_counts(resp, anchor, [_events(cross[i], found.unsure[i])[1] for i in range(L)]) \
+        if full else None
+    return [_classify(resp, i, int(anchor[i]), cross[i], found.unsure[i], full, known)
+            for i in range(L)]
 
 
-def _classify(resp: LoopResponse, i: int, anchor: int, cross, unsure, full: bool) -> StableSet:
-    """Item i's stable set from the count of poles outside at U_LO (``anchor``, -1:
-    not certified), its crossings and its unresolved zones."""
-    s = float(resp.scale[i])
-    base: dict[str, Any] = {"rigid": resp.rigid, "outside_small_K": anchor}
-    unc = _merge(unsure)
-    if anchor < 0:
-        return StableSet(**base, kmax=0.0, intervals=(), theta=math.nan,
-                         uncertain=((0.0, U_LO * s),))
-    # a crossing inside an unresolved zone is part of it: the count after the zone comes
-    # from the argument principle above the zone, which accounts for all it holds
-    inside = lambda u: any(a <= u <= b for a, b in unc)  # noqa: E731
-    events = sorted([(u, u, t, d, m) for u, t, d, m in cross if not inside(u)] +
-                    [(a, b, math.nan, 0, 0) for a, b in unc])
-    if not full:
-        return StableSet(**base, **first_only(events, anchor, s))
-    counts = _counts(resp, i, events, anchor)
-    _verify(resp, i, events, counts)
-    return StableSet(**base, **stable_set(events, counts, s))
-
-
-def _counts(resp: LoopResponse, i: int, events: list[Any],
-            anchor: int) -> list[int | None]:
-    """The number of poles outside in each gap between events: each crossing changes
-    it by its direction times its multiplicity; after an unresolved zone it is
-    counted anew by the argument principle (None: not certifiable either, so that
-    gap is not claimed stable)."""
-    counts: list[int | None] = [anchor]
-    for g, (_a, b, _t, d, m) in enumerate(events):
-        prev = counts[-1]
-        if m == 0 or prev is None:
-            hi = events[g + 1][0] if g + 1 < len(events) else 4 * b
-            nxt = int(winding(resp, np.array([i]), np.array([math.sqrt(b * hi) if hi > b else b]))[0])
-            counts.append(nxt if nxt >= 0 else None)
-        else:
-            counts.append(prev + int(d * m))
-    if min(c for c in counts if c is not None) < 0:
-        raise AnalysisError("crossing analysis: a negative count of unstable poles; please "
-                            "report this loop")
-    return counts
-
-
-def _verify(resp: LoopResponse, i: int, events, counts) -> None:
-    """Cross-check the counts from crossing directions by the argument principle in
-    a few gaps (the first and last, and up to 6 others)."""
-    if not events:
-        return
-    gaps = sorted({1, len(events)} | set(range(2, len(events), max(1, len(events) // 6))))
-    us = []
-    for g in gaps:
-        lo = events[g - 1][1]
-        hi = events[g][0] if g < len(events) else lo * 4
-        us.append(math.sqrt(lo * hi) if hi > lo else lo)
-    got = winding(resp, np.full(len(us), i), np.array(us))
-    for g, c in zip(gaps, got, strict=True):
-        if c >= 0 and counts[g] is not None and c != counts[g]:
-            raise AnalysisError(f"crossing analysis: the pole count {counts[g]} from crossing "
-                                f"directions disagrees with the argument principle ({c}) at "
-                                f"K = {us[gaps.index(g)] * resp.scale[i]:.6g}; please report this loop")
-
-
-def _dedupe(cross: list[tuple[float, float, int, int]]) -> list[tuple[float, float, int, int]]:
-    """A safety net: one zero proved in two boxes would be polished by Newton's method
-    to the same point (to rounding), and is one crossing. Two distinct crossings are
-    never this close (the Krawczyk boxes that isolate them are disjoint)."""
-    out: list[tuple[float, float, int, int]] = []
-    for cr in sorted(cross):
-        # the same point to rounding: Newton polishes to ~1e-15 relative, and 1e-12 is
-        # still far closer than two Krawczyk-isolated crossings come (see above)
-        if (out and abs(cr[0] - out[-1][0]) <= 1e-12 * cr[0]  # u, then theta (+1: it may be 0)
-                and abs(cr[1] - out[-1][1]) <= 1e-12 * (1.0 + cr[1]) and cr[2] == out[-1][2]):
-            continue
-        out.append(cr)
-    return out
-
-
-def _merge(iv: list[tuple[float, float]]) -> list[tuple[float, float]]:
-    out: list[tuple[float, float]] = []
-    for a, b in sorted(iv):
-        if out and a <= out[-1][1]:
-            out[-1] = (out[-1][0], max(out[-1][1], b))
-        else:
-            out.append((a, b))
-    return out
