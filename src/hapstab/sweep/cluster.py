@@ -68,8 +68,9 @@ def on_dask(spec: Spec, todo: list[int], workers: int, scheduler: str | None
     cluster = None
     try:
         if scheduler is None:
-            cluster = LocalCluster(n_workers=workers, processes=True, threads_per_worker=1,
-                                   dashboard_address=None, silence_logs=50)
+            with _fast_malloc():
+                cluster = LocalCluster(n_workers=workers, processes=True, threads_per_worker=1,
+                                       dashboard_address=None, silence_logs=50)
             client = Client(cluster)
         else:
             client = _connect(check_address(scheduler))
@@ -85,6 +86,18 @@ def on_dask(spec: Spec, todo: list[int], workers: int, scheduler: str | None
         client.close()
         if cluster is not None:
             cluster.close()
+
+
+def _fast_malloc() -> Any:
+    """Dask's config without its ``MALLOC_TRIM_THRESHOLD_`` for the workers it spawns:
+    glibc then keeps its mmap threshold fixed at 128 KiB, every array of the exact core
+    above it is mapped and unmapped, and a chunk took 3-4 times as long (2.8-5.6 s
+    against 1.0-1.3 s for 500 HVE points, measured on the project's machine)."""
+    import dask
+
+    env = dict(dask.config.get("distributed.nanny.pre-spawn-environ", {}) or {})
+    env.pop("MALLOC_TRIM_THRESHOLD_", None)
+    return dask.config.set({"distributed.nanny.pre-spawn-environ": env})
 
 
 def _connect(address: str) -> Any:
