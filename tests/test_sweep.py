@@ -214,7 +214,9 @@ def test_the_same_study_in_python(tmp_path):
         assert r["critical_stiffness_N_per_m"] == pytest.approx(
             h.critical_stiffness(lp).critical_stiffness, rel=1e-9)  # as above
     assert res.to_dict()["summary"]["points"] == 4
-    assert "SweepResult" in res._repr_html_()
+    page, d = res._repr_html_(), res.to_dict()
+    assert "SweepResult" in page and page.count("<tr>") == len(d)
+    json.dumps(d, allow_nan=False)
     ax = res.plot()
     assert "minimum over" not in ax.get_title()
     import matplotlib.pyplot as plt
@@ -351,3 +353,36 @@ def test_budget_and_scheduler_messages(tmp_path):
         h.sweep(lambda o: h.paper_hve(), {"period": [1e-3] * 3}, str(tmp_path / "p"),
                 max_points=2)
     assert math.isinf(float("inf"))
+
+
+def test_the_example_sweep_runs(tmp_path):
+    path = os.path.join(os.path.dirname(HERE), "examples", "sweep_device.toml")
+    r = invoke(["sweep", path, "--out", str(tmp_path / "o"), "--workers", "1", "--json"])
+    assert r.exit_code == 0, r.stderr
+    d = json.loads(r.stdout)
+    assert d["manifest"]["points"] == 120 and d["summary"]["errors"] == 0
+    assert d["summary"]["heat_map"]["min_over"] == ["mass"]
+    assert (tmp_path / "o" / "kmax.png").read_bytes()[:4] == b"\x89PNG"
+
+
+def _hve_b(o):
+    return h.paper_hve(1e-3, o["delay"], damping=o["B"])
+
+
+def test_over_promises_are_counted_and_each_is_a_broken_promise(tmp_path):
+    # n = 4, B = 0.08: eq. (18) promises 40 N/m where the exact limit is 39.976 (test_audit)
+    res = h.sweep(_hve_b, {"B": [0.0, 0.04, 0.08], "delay": [2, 4]}, str(tmp_path / "o"),
+                  quantities=["closed-form"], workers=1)
+    t = res.table().to_pylist()
+    for r in t:
+        loop = _hve_b({"B": r["B"], "delay": r["delay"]})
+        # independent of the flag's rule: the exact loop just below the promise
+        broken = not h.stability(loop.with_stiffness(r["closed_form_N_per_m"] * (1 - 1e-6))).stable
+        assert r["closed_form_over_promises"] == broken, r
+    flagged = [r for r in t if r["closed_form_over_promises"]]
+    assert any(r["B"] == 0.08 and r["delay"] == 4 for r in flagged)
+    cf = res.summary["closed_form"]
+    assert cf["over_promises"] == len(flagged) and cf["compared"] == 6
+    assert {w["point_id"] for w in cf["worst"]} == {r["point_id"] for r in flagged}
+    ratios = [w["ratio"] for w in cf["worst"]]
+    assert ratios == sorted(ratios, reverse=True) and min(ratios) > 1

@@ -22,6 +22,8 @@ __all__ = ["SweepResult", "summarise", "heat_map"]
 HEAT_CELLS = 200
 #: The over-promising points listed in the summary (the worst first).
 WORST = 20
+#: N/m: the ratio of a closed form to an exact K_max of 0 is taken against this (huge).
+TINY = 1e-300  # not a tolerance: a floor that keeps the ratio finite
 
 
 @dataclass(frozen=True)
@@ -115,51 +117,52 @@ def summarise(paths: list[str], points: Points, quantities: tuple[str, ...],
         ``verdicts_at_K`` (check: each verdict and its number of points), and
         ``heat_map`` (its grid) with ``plot``.
     """
+    import pyarrow.compute as pc
+
     stats: dict[str, dict[str, Any]] = {}
     verdicts: dict[str, int] = {}
-    over: list[tuple[float, dict[str, Any]]] = []
-    n = errors = compared = 0
+    worst: list[tuple[float, dict[str, Any]]] = []
+    n = errors = compared = over = 0
     heat = _Heat(points, plot) if plot else None
     axes = [a.column for a in points.axes]
     for path in paths:
-        t = read_chunk(path).to_pydict()
-        ids = t["point_id"]
-        n += len(ids)
-        errors += sum(e is not None for e in t["error"])
+        t = read_chunk(path)
+        n += t.num_rows
+        errors += t.num_rows - t.column("error").null_count
         for col in _numeric(quantities):
             _extremes(stats, col, t, axes)
-        for v in t.get("verdict_at_K", []):
-            if v is not None:
-                verdicts[v] = verdicts.get(v, 0) + 1
-        if "closed_form_over_promises" in t:
-            flags = t["closed_form_over_promises"]
-            compared += sum(f is not None for f in flags)
-            for i, f in enumerate(flags):
-                if f:
-                    ratio = t["closed_form_N_per_m"][i] / max(t["critical_stiffness_N_per_m"][i],
-                                                             1e-300)   # (0 exact: ratio inf)
-                    over.append((ratio, _where(t, i, axes)))
-            over = sorted(over, key=lambda r: -r[0])[:max(WORST, len(over) // 1000 + WORST)]
+        if "verdict_at_K" in t.column_names:
+            for v in pc.value_counts(t.column("verdict_at_K")).to_pylist():
+                if v["values"] is not None:
+                    verdicts[v["values"]] = verdicts.get(v["values"], 0) + int(v["counts"])
+        if "closed_form_over_promises" in t.column_names:
+            flags = t.column("closed_form_over_promises")
+            compared += len(flags) - flags.null_count
+            hit = np.flatnonzero(pc.fill_null(flags, False).to_numpy(zero_copy_only=False))
+            over += hit.size
+            cf, K = _float(t, "closed_form_N_per_m"), _float(t, "critical_stiffness_N_per_m")
+            ratio = cf[hit] / np.maximum(K[hit], TINY)
+            for r, i in sorted(zip(-ratio, hit, strict=True))[:WORST]:
+                worst.append((float(-r), _where(t, int(i), axes)))
+            worst = sorted(worst, key=lambda r: -r[0])[:WORST]
         if heat is not None:
             heat.add(t)
     out: dict[str, Any] = {"points": n, "errors": errors, "quantities": stats}
     if verdicts:
         out["verdicts_at_K"] = [{"verdict": v, "points": k} for v, k in sorted(verdicts.items())]
     if "closed-form" in quantities:
-        count = len(over) if len(over) < WORST else None
-        out["closed_form"] = {"compared": compared, "over_promises_listed": len(over[:WORST]),
-                              "worst": [{"ratio": r, **w} for r, w in over[:WORST]]}
-        out["closed_form"]["over_promises"] = _count_over(paths) if count is None else count
-        out["closed_form"]["fraction"] = (out["closed_form"]["over_promises"] / compared
-                                          if compared else None)
+        out["closed_form"] = {"compared": compared, "over_promises": over,
+                              "fraction": over / compared if compared else None,
+                              "over_promises_listed": len(worst),
+                              "worst": [{"ratio": r, **w} for r, w in worst]}
     if heat is not None:
         out["heat_map"] = heat.result()
     return out
 
 
-def _count_over(paths: list[str]) -> int:
-    return sum(sum(bool(f) for f in read_chunk(p, ["closed_form_over_promises"])
-                   .column(0).to_pylist()) for p in paths)
+def _float(t: Any, col: str) -> np.ndarray:
+    """A float column as an array, null as NaN."""
+    return np.asarray(t.column(col).to_numpy(zero_copy_only=False), dtype=float)
 
 
 def _numeric(quantities: tuple[str, ...]) -> list[str]:
@@ -168,18 +171,17 @@ def _numeric(quantities: tuple[str, ...]) -> list[str]:
     return [c for q in quantities for c, t in QUANTITIES[q] if t == "float64"]
 
 
-def _where(t: dict[str, list[Any]], i: int, axes: list[str]) -> dict[str, Any]:
-    return {"point_id": t["point_id"][i], **{a: t[a][i] for a in axes}}
+def _where(t: Any, i: int, axes: list[str]) -> dict[str, Any]:
+    return {"point_id": t.column("point_id")[i].as_py(),
+            **{a: t.column(a)[i].as_py() for a in axes}}
 
 
-def _extremes(stats: dict[str, dict[str, Any]], col: str, t: dict[str, list[Any]],
-              axes: list[str]) -> None:
-    vals = np.array([math.nan if v is None else v for v in t[col]], dtype=float)
+def _extremes(stats: dict[str, dict[str, Any]], col: str, t: Any, axes: list[str]) -> None:
+    vals = _float(t, col)
+    s = stats.setdefault(col, {"min": None, "max": None})
     ok = ~np.isnan(vals)
     if not ok.any():
-        stats.setdefault(col, {"min": None, "max": None})
         return
-    s = stats.setdefault(col, {"min": None, "max": None})
     lo = int(np.flatnonzero(ok)[np.argmin(vals[ok])])
     hi = int(np.flatnonzero(ok)[np.argmax(vals[ok])])
     if s["min"] is None or vals[lo] < s["min"]:
@@ -197,15 +199,24 @@ class _Heat:
         self.edges = [_edges(a) for a in (self.x, self.y)]
         self.grid = np.full((len(self.edges[1]), len(self.edges[0])), np.nan)
         self.others = [a.name for a in points.axes if a.name not in plot]
+        self.points = points
 
-    def add(self, t: dict[str, list[Any]]) -> None:
-        K = np.array([math.nan if v is None else v for v in t["critical_stiffness_N_per_m"]],
-                     dtype=float)
-        ix = _cell(self.x, t[self.x.column], len(self.edges[0]))
-        iy = _cell(self.y, t[self.y.column], len(self.edges[1]))
+    def add(self, t: Any) -> None:
+        K = _float(t, "critical_stiffness_N_per_m")
+        ids = t.column("point_id").to_numpy()
+        ix = self._cells(0, t, ids)
+        iy = self._cells(1, t, ids)
         ok = ~np.isnan(K)
         flat = self.grid.reshape(-1)          # (a view: fmin.at writes into the grid)
         np.fmin.at(flat, iy[ok] * self.grid.shape[1] + ix[ok], K[ok])   # NaN: no value yet
+
+    def _cells(self, k: int, t: Any, ids: np.ndarray) -> np.ndarray:
+        a, cells = (self.x, self.y)[k], len(self.edges[k])
+        if not a.random:
+            j = [b.name for b in self.points.axes].index(a.name)
+            index = np.unravel_index(ids, self.points.shape)[j]     # the grid's own index
+            return index if len(a.values) <= HEAT_CELLS else index * cells // len(a.values)
+        return _cell(a, _float(t, a.column), cells)
 
     def result(self) -> dict[str, Any]:
         return {"x": self.x.column, "y": self.y.column, "x_values": self.edges[0],
@@ -221,23 +232,21 @@ def _is_log(a: Axis) -> bool:
 
 
 def _edges(a: Axis) -> list[Any]:
-    """The cells' labels: a grid axis's values (or HEAT_CELLS bins of a long one), a random
-    axis's bin centres."""
-    if not a.random and len(a.values) <= HEAT_CELLS:
-        return list(a.values)
-    lo, hi = (a.lo, a.hi) if a.random else (float(min(a.values)), float(max(a.values)))
-    if a.log or _is_log(a):
-        return np.geomspace(lo, hi, HEAT_CELLS).tolist()
-    return np.linspace(lo, hi, HEAT_CELLS).tolist()
+    """The cells' labels: a grid axis's values (a long one: the first value of each of its
+    HEAT_CELLS bins of indices), a random axis's bin centres."""
+    if not a.random:
+        n = len(a.values)
+        return list(a.values) if n <= HEAT_CELLS else \
+            [a.values[-(-k * n // HEAT_CELLS)] for k in range(HEAT_CELLS)]
+    if a.log:
+        return np.geomspace(a.lo, a.hi, HEAT_CELLS).tolist()
+    return np.linspace(a.lo, a.hi, HEAT_CELLS).tolist()
 
 
-def _cell(a: Axis, values: list[Any], cells: int) -> np.ndarray:
-    if not a.random and len(a.values) <= HEAT_CELLS:
-        index = {v: i for i, v in enumerate(a.values)}
-        return np.array([index[v] for v in values], dtype=np.int64)
-    v = np.asarray(values, dtype=float)
-    lo, hi = (a.lo, a.hi) if a.random else (float(min(a.values)), float(max(a.values)))
-    if a.log or _is_log(a):
+def _cell(a: Axis, v: np.ndarray, cells: int) -> np.ndarray:
+    """The bins of a random axis's values."""
+    lo, hi = a.lo, a.hi
+    if a.log:
         v, lo, hi = np.log(v), math.log(lo), math.log(hi)
     u = (v - lo) / (hi - lo) if hi > lo else np.zeros_like(v)
     return np.clip(np.rint(u * (cells - 1)).astype(np.int64), 0, cells - 1)

@@ -27,8 +27,9 @@ __all__ = ["Store", "MANIFEST", "CHUNKS", "chunk_name", "arrow_schema", "read_ch
 
 MANIFEST = "manifest.json"
 CHUNKS = "chunks"
-#: Seconds between two writes of the manifest (a sweep of 10^5 chunks must not rewrite
-#: a manifest of 10^5 entries after each of them).
+#: Seconds between two writes of the manifest at least (a sweep of 10^5 chunks must not
+#: rewrite a manifest of 10^5 entries after each of them; a long one waits 20 times as long
+#: as it took to write).
 MANIFEST_EVERY_S = 0.5
 
 
@@ -108,7 +109,7 @@ class Store:
         self.chunks_dir = os.path.join(folder, CHUNKS)
         self.path = os.path.join(folder, MANIFEST)
         self.done: dict[int, dict[str, Any]] = {}
-        self._written = 0.0
+        self._written, self._every = 0.0, MANIFEST_EVERY_S
         self._open(force)
 
     # ------------------------------------------------------------------ opening
@@ -261,14 +262,18 @@ class Store:
         Returns
         -------
         dict
-            The manifest.
+            The manifest written (empty if it was not written now).
         """
+        if not (now or time.monotonic() - self._written >= self._every):
+            return {}
+        t0 = time.monotonic()
         m = self.manifest(**extra)
-        if now or time.monotonic() - self._written >= MANIFEST_EVERY_S:
-            with atomic_file(self.path, "--out") as fh:
-                json.dump(m, fh, indent=1)
-                fh.write("\n")
-            self._written = time.monotonic()
+        with atomic_file(self.path, "--out") as fh:
+            json.dump(m, fh, indent=1)
+            fh.write("\n")
+        self._written = time.monotonic()
+        # a long manifest (10^5 chunks) is written less often: at most 5 % of the time
+        self._every = max(MANIFEST_EVERY_S, 20 * (self._written - t0))
         return m
 
     def manifest(self, **extra: Any) -> dict[str, Any]:
