@@ -386,3 +386,61 @@ def test_over_promises_are_counted_and_each_is_a_broken_promise(tmp_path):
     assert {w["point_id"] for w in cf["worst"]} == {r["point_id"] for r in flagged}
     ratios = [w["ratio"] for w in cf["worst"]]
     assert ratios == sorted(ratios, reverse=True) and min(ratios) > 1
+
+
+RANDOM = '''kind = "peb"
+[loop]
+environment = "spring:1000"
+[sweep]
+quantities = ["kmax", "closed-form"]
+chunk = CHUNK
+[sweep.axes]
+master-mass = "0.01:1:log"
+rate = "250Hz:4kHz:log"
+delay = "0:6"
+[sweep.random]
+samples = 30
+seed = 11
+[sweep.plot]
+x = "rate"
+y = "master-mass"
+'''
+
+
+def test_random_points_from_a_study_do_not_depend_on_the_chunks(tmp_path):
+    tables = []
+    for chunk in (7, 30):
+        (tmp_path / f"{chunk}.toml").write_text(RANDOM.replace("CHUNK", str(chunk)))
+        r = invoke(["sweep", str(tmp_path / f"{chunk}.toml"), "--out", str(tmp_path / str(chunk)),
+                    "--workers", "1", "--json"])
+        assert r.exit_code == 0, r.stderr
+        tables.append(rows(tmp_path / str(chunk)))
+    assert tables[0].equals(tables[1])
+    t = tables[0].to_pylist()
+    u = np.random.default_rng(11).random((30, 3))
+    assert [r["delay_samples"] for r in t] == np.floor(u[:, 2] * 7).astype(int).tolist()
+    assert np.allclose([r["rate_hz"] for r in t], 250 * 16 ** u[:, 1], rtol=1e-12)  # exp/log
+    for r in t[:5]:
+        loop = h.TeleoperationLoop(h.Device(r["master_mass_kg"], 0.02), h.Device(0.015, 0.02),
+                                   h.SpringDamper(1.0, 0), h.SpringDamper(1.0, 0),
+                                   operator=h.spring(1.0), environment=h.spring(1000.0),
+                                   period=1 / r["rate_hz"], delay_samples=r["delay_samples"])
+        assert r["critical_stiffness_N_per_m"] == pytest.approx(
+            h.critical_stiffness(loop).critical_stiffness, rel=1e-9)   # as above
+        eq = "eq29" if r["delay_samples"] == 0 else "eq34"
+        assert r["closed_form_N_per_m"] == h.critical_stiffness(loop, method=eq).critical_stiffness
+    heat = json.loads((tmp_path / "7" / "summary.json").read_text())["heat_map"]
+    assert heat["x_log"] and heat["min_over"] == ["delay"]
+    assert (tmp_path / "7" / "kmax.png").exists()
+
+
+def test_a_4ch_sweep_says_no_closed_form_applies(tmp_path):
+    (tmp_path / "s.toml").write_text('kind = "4ch"\n[sweep]\nquantities = ["closed-form"]\n'
+                                     '[sweep.axes]\ndelay = [0, 1]\n')
+    r = invoke(["sweep", str(tmp_path / "s.toml"), "--out", str(tmp_path / "o"), "--workers",
+                "1", "--json"])
+    assert r.exit_code == 0, r.stderr
+    for row in rows(tmp_path / "o").to_pylist():
+        assert row["closed_form_equation"] == "" and math.isnan(row["closed_form_N_per_m"])
+        assert row["closed_form_over_promises"] is None
+        assert row["error"].startswith("closed-form: ") and row["critical_stiffness_N_per_m"] > 0
