@@ -107,3 +107,27 @@ def mixed_loops(count: int, seed: int = SEED, most_delay: int = 30) -> list:
     for k in range(5, count, 23):           # duplicates
         out[k] = out[k - 3]
     return out
+
+
+def undamped_loops(count: int, seed: int = SEED + 1) -> list:
+    """Loops with (nearly) no damping anywhere: poles within rounding of the unit
+    circle, where the exact core answers "marginal" or leaves K-intervals uncertain."""
+    rng = np.random.default_rng(seed)
+
+    def z() -> str:
+        return str(rng.choice(["none", "spring:50", "msd:0.05,0,200", "msd:0.1,0.01,1000"]))
+
+    def dev() -> h.Device:
+        return h.Device(float(rng.uniform(0.01, 1)), float(rng.choice([0.0, 1e-6, 0.01])))
+
+    out = []
+    for _ in range(count):
+        T = float(rng.choice([1e-4, 1e-3, 5e-3]))
+        n = int(rng.integers(0, 4))
+        if rng.uniform() < 0.3:
+            out.append(h.HapticLoop(dev(), h.SpringDamper(1, float(rng.choice([0.0, 1e-5]))), z(), T, n))
+        else:
+            out.append(h.TeleoperationLoop(dev(), dev(), h.SpringDamper(1, float(rng.choice([0.0, 1e-5]))),
+                                           h.SpringDamper(1, float(rng.choice([0.0, 1e-5]))), z(), z(),
+                                           T, n))
+    return out

@@ -232,6 +232,8 @@ class ResponsePlan:
         Per port: (A, B, force row or None, m_z / M, free, fractions).
     masses : list of float
         Each port's total mass (kg).
+    numbers : tuple or None
+        The rows and checks of :func:`check_plan`, once it has run (then reused).
     """
 
     loop: Any
@@ -243,15 +245,20 @@ class ResponsePlan:
     ctrls: list
     matrices: list[tuple]
     masses: list[float]
+    numbers: tuple | None = None
 
     def key(self) -> tuple:
         """What loops must share to be one batch (see :func:`build_responses`)."""
+        nums = self.numbers if self.numbers is not None else _numbers(self)
+        # the expansion of several channels per port leaves out the terms of a channel
+        # with no stiffness or no damping (engine.expansion): part of the structure there
+        zeros = () if self.st.simple else (
+            tuple(r != 0 for r in self.ratios),
+            tuple(bool(np.any(nums[1][:, c])) for c in range(nums[1].shape[1])))
         return (self.terms, tuple((A.shape[0], fr, tuple(fs), force is None)
                                   for A, _b, force, _m, fr, fs in self.matrices),
-                rigid_modes(self.st, float(self.T.max())),
-                tuple(ch.port for ch in self.st.channels),
-                tuple(ch.measures for ch in self.st.channels),
-                _filter_key(filters_of([ch.controller for ch in self.st.channels], self.T)))
+                nums[4], tuple(ch.port for ch in self.st.channels),
+                tuple(ch.measures for ch in self.st.channels), _filter_key(nums[5]), zeros)
 
 
 def _filter_key(filters: tuple) -> tuple:
@@ -324,7 +331,7 @@ def build_responses(plans: Sequence[ResponsePlan]) -> LoopResponse:
     """
     T = np.concatenate([pl.T for pl in plans])
     ports = _ports(plans, T)
-    parts = [_numbers(pl) for pl in plans]
+    parts = [pl.numbers if pl.numbers is not None else _numbers(pl) for pl in plans]
     pl0 = plans[0]
     st, p = pl0.st, len(ports)
     filters = stack_filters([pt[5] for pt in parts]) if parts[0][5] else parts[0][5]
@@ -356,7 +363,7 @@ def check_plan(plan: ResponsePlan) -> None:
         :func:`build_responses` (its discretised plant or characteristic function
         overflows).
     """
-    _numbers(plan)
+    plan.numbers = _numbers(plan)
 
 
 def _numbers(pl: ResponsePlan) -> tuple:

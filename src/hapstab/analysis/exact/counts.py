@@ -55,8 +55,8 @@ def winding(resp: LoopResponse, items: np.ndarray, u: np.ndarray) -> np.ndarray:
         if not row.size:
             break
         mid, rho = 0.5 * (a + b), 0.5 * (b - a)
-        pts = resp.coefficients(items[row], mid, np.zeros_like(mid))
-        cel = resp.coefficients(items[row], mid, rho)
+        pts = _coefficients(resp, items[row], mid, np.zeros_like(mid))
+        cel = _coefficients(resp, items[row], mid, rho)
         vd = [cc.value_disc(rho, p) for cc, p in zip(cel, pts, strict=True)]
         fc, fr = _dpoly(np.array([v[0] for v in vd]), np.array([v[1] for v in vd]), u[row],
                         np.zeros(row.size))
@@ -75,7 +75,7 @@ def winding(resp: LoopResponse, items: np.ndarray, u: np.ndarray) -> np.ndarray:
     A, Bv, R = np.concatenate(done_a), np.concatenate(done_b), np.concatenate(done_row)
     ends = np.concatenate([A, Bv])
     rr = np.concatenate([R, R])
-    F = resp.coefficients(items[rr], ends, np.zeros_like(ends))
+    F = _coefficients(resp, items[rr], ends, np.zeros_like(ends))
     val = F[0].vc + u[rr] * (F[1].vc + u[rr] * F[2].vc)
     fa, fb = val[:A.size], val[A.size:]
     inc = np.angle(fb / fa)
@@ -86,6 +86,22 @@ def winding(resp: LoopResponse, items: np.ndarray, u: np.ndarray) -> np.ndarray:
     bad = bad_rows | (np.abs(turns - np.round(turns)) > 1e-6)   # whole to ~1e-15: _winding_cells
     return np.where(bad, -1, out)
 
+
+def _coefficients(resp: LoopResponse, it: np.ndarray, th: np.ndarray, rho: np.ndarray) -> list:
+    """:meth:`~LoopResponse.coefficients`, each distinct (item, theta, rho) evaluated once:
+    neighbouring cells share their ends, and the counts of one item at several u share
+    their cells. The evaluation is elementwise, so the values are those of the full call."""
+    order = np.lexsort((rho, th, it))
+    a, b, c = it[order], th[order], rho[order]
+    new = np.ones(it.size, bool)
+    new[1:] = (a[1:] != a[:-1]) | (b[1:] != b[:-1]) | (c[1:] != c[:-1])
+    if new.all():
+        return resp.coefficients(it, th, rho)
+    inv = np.empty(it.size, int)
+    inv[order] = np.cumsum(new) - 1
+    first = order[new]
+    F = resp.coefficients(it[first], th[first], rho[first])
+    return [type(j)(j.vc[inv], j.vr[inv], j.dc[inv], j.dr[inv]) for j in F]
 
 
 def gap_counts(resp: LoopResponse, anchor: np.ndarray, events: Sequence[list[Any]]) -> Known:

@@ -2,17 +2,18 @@
 
 Loops that share a *structure* (loop kind, ports and the order of their
 terminations, which port each channel measures with which sign and whole and
-fractional delay, velocity filters, free ports and rigid-body modes) have
+fractional delay, velocity filters, free ports and rigid-body modes; for several
+channels per port also which channels have no damper or no stiffness) have
 characteristic functions ``det M = F0 + u F1 + u^2 F2`` of the same form, differing
 only in numbers (masses, dampings, terminations, period, virtual damping B, K
-ratios, filter poles): :mod:`hapstab.engine.frequency` evaluates them as one batch
-(one row per loop), and the certified crossing search of
+ratios, filter poles): :func:`hapstab.engine.frequency.build_responses` builds them
+as one batch (one row per loop), and the certified crossing search of
 :mod:`~hapstab.analysis.exact.crossings` runs over every loop of the batch in the
-same vectorised rounds. The answer for each loop is the one the single-loop core
-gives (:func:`~hapstab.analysis.methods.critical_stiffness`); what is shared is
-only the Python overhead, which dominates at ~0.1-1 ms per loop.
+same vectorised rounds. The answer for each loop is bitwise the one the single-loop
+core gives (:func:`~hapstab.analysis.methods.critical_stiffness`); what is shared is
+the Python work per round and per call, most of a single call's time.
 
-A batch holds at most :data:`BATCH` loops, so a chunk of any size is analysed in
+Batches are sized by :func:`batch_size` so that a chunk of any size is analysed in
 bounded memory; a loop the core refuses (its parameters, or a search beyond the
 core's limits) is isolated by splitting its batch until it is alone, and then gets
 exactly the error the single-loop call raises.
