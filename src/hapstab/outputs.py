@@ -418,11 +418,11 @@ def signals_held() -> Iterator[None]:
     try:
         yield
     finally:
-        for sig, old in handlers.items():
-            signal.signal(sig, old)
+        for held, handler in handlers.items():
+            signal.signal(held, handler)
         signal.pthread_sigmask(signal.SIG_SETMASK, before)
-        for sig in noted:
-            signal.raise_signal(sig)
+        for signum in noted:
+            signal.raise_signal(signum)
 
 
 def _put(tmp: str, target: str, in_place: bool) -> None:
