@@ -35,8 +35,9 @@ MAX_POINTS = 10 ** 7
 #: What installs the sweep's dependencies.
 INSTALL = "pip install 'hapstab[sweep]'"
 #: Seconds per point of each quantity, for the default chunk size (about, on the project's
-#: machine; benchmarks/bench_sweep.py measures them): K_max 2-16 ms one by one and less
-#: batched, the passivity limit and a verdict ~4 ms, the best damping ~100 K_max.
+#: machine; benchmarks/bench_sweep.py measures them): K_max 1.4-6.4 ms batched in a chunk
+#: (12-85 ms one by one) on its HVE and PEB spaces, taken as 2 ms; the passivity limit and
+#: a verdict ~4 ms; the best damping ~100 K_max.
 POINT_SECONDS = {"kmax": 2e-3, "passivity": 4e-3, "closed-form": 1e-5, "check": 4e-3,
                  "best-damping": 0.1}
 #: A chunk takes about this long: a Dask task costs ~1 ms, under 1 % of it.

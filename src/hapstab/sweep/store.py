@@ -3,7 +3,8 @@
 
 A chunk is written to a temporary file in ``chunks/`` and renamed into place once it is
 complete and on disk (:func:`hapstab.outputs.atomic_file`); the manifest likewise, after
-the chunks it names (at most twice a second, and at the end). On a rerun a chunk counts
+the chunks it names (half a second apart at least, longer for a long manifest, and at
+the end). On a rerun a chunk counts
 as finished when its file is there and matches the manifest's row count and SHA-256; a
 complete chunk file the manifest does not name yet (a kill between the two renames) is
 checked (its rows and columns) and adopted; temporary files a kill left are removed. A
