@@ -21,9 +21,12 @@ MAY_IMPORT = {
     "analysis": {"models", "engine"},
     "simulation": {"models", "engine", "analysis"},
     "paper": {"models", "engine", "analysis", "simulation"},
-    "cli": {"models", "engine", "analysis", "simulation", "paper"},
+    # design sweeps: many loops in chunks, on Dask (its loops are built by a function the
+    # caller gives: the CLI's, from a study file's option names)
+    "sweep": {"models", "engine", "analysis", "simulation", "paper"},
+    "cli": {"models", "engine", "analysis", "simulation", "paper", "sweep"},
     # the explorer's web API runs the CLI's own commands (the same answers as --json)
-    "explorer": {"models", "engine", "analysis", "simulation", "paper", "cli"},
+    "explorer": {"models", "engine", "analysis", "simulation", "paper", "cli", "sweep"},
 }
 #: the exceptions, each with its reason
 EXCEPTIONS = {

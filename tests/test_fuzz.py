@@ -51,8 +51,9 @@ def _commands():
 #: the draw of every other command stays the one it was before the command existed)
 #: (explore starts a server that runs until stopped: its hostile options are tested in
 #: tests/test_explorer_server.py, which stops what it starts)
-COMMANDS = [c for c in _commands() if c[0][0] not in ("limit-cycle", "explore")]
+COMMANDS = [c for c in _commands() if c[0][0] not in ("limit-cycle", "explore", "sweep")]
 LIMIT_CYCLE = [c for c in _commands() if c[0][0] == "limit-cycle"]
+SWEEP = [c for c in _commands() if c[0][0] == "sweep"]
 #: (every loop kind of a command, hve, peb and 4ch, needs the same)
 NEEDS = {"region": ["--K", "0:100", "--B", "0:1", "--resolution", "12"], "reproduce": ["fig5"],
          "check": ["-K", "5"], "passivity": ["-K", "5"], "simulate": ["-K", "5"],
@@ -60,7 +61,8 @@ NEEDS = {"region": ["--K", "0:100", "--B", "0:1", "--resolution", "12"], "reprod
          "limit-cycle": ["-K", "5", "--resolution", "1e-4"],
          "zwidth": ["--K", "0:100", "--B", "0:1", "--rows", "4"],
          "robust": ["--operator-mass", "0.5", "--operator-damping", "5", "--operator-stiffness",
-                    "500"]}
+                    "500"],
+         "sweep": ["sweep.toml", "--out", "sweep-out", "--workers", "1"]}
 #: 4ch loops each command takes, one option of them then hostile: force reflection (C_m
 #: a damper, C_4 = 0, C_2 = 1) for the exact K_max, a force gain for the best damping,
 #: equal position controllers for the region, unequal ones for the position-only tests.
@@ -71,6 +73,8 @@ FOURCH = {"kmax": FORCE_REFLECTION, "boundary": FORCE_REFLECTION, "region": ["-n
 POSITION_ONLY = ["--c1-stiffness-ratio", "2", "--c4-virtual-damping", "0.3", "-n", "1"]
 #: The study the fuzz's `run` invocations use (written in the test's folder).
 STUDY = 'kind = "hve"\n[loop]\ndelay = 2\n[[variant]]\nname = "b"\nvirtual-damping = 1\n[run.kmax]\n'
+#: ... and `sweep`'s: two points, K_max only (no heat map with one axis).
+SWEEP_STUDY = 'kind = "hve"\n[loop]\ndelay = 2\n[sweep.axes]\nperiod = [0.001, 0.002]\n'
 
 
 
@@ -113,6 +117,11 @@ def _invocations(n, seed):
         calls.append((["kmax", "hve", "--study", rng.choice(HOSTILE)], ["--study"]))
         calls.append((["kmax", "hve", "--study", "study.toml", "--variant", rng.choice(HOSTILE)],
                       ["--variant"]))
+    # sweep (drawn after the others: their draws stay the ones they were), one hostile option
+    for _ in range(20):
+        path, opts = rng.choice(SWEEP)
+        o = rng.choice(opts)
+        calls.append(([*path, *NEEDS["sweep"], o, rng.choice(HOSTILE)], [o]))
     return calls
 
 
@@ -148,6 +157,7 @@ def test_hostile_command_lines(chunk, tmp_path):
     calls = _invocations(520, SEED)
     os.chdir(tmp_path)                       # reproduce writes ./out
     (tmp_path / "study.toml").write_text(STUDY)
+    (tmp_path / "sweep.toml").write_text(SWEEP_STUDY)
     for args, chosen in calls[chunk::10]:
         _check_cli(args, chosen, runner)
 
@@ -157,6 +167,7 @@ def test_more_hostile_command_lines(tmp_path):
     runner = CliRunner()
     os.chdir(tmp_path)
     (tmp_path / "study.toml").write_text(STUDY)
+    (tmp_path / "sweep.toml").write_text(SWEEP_STUDY)
     for args, chosen in _invocations(3000, SEED + 1):
         _check_cli(args, chosen, runner)
 

@@ -65,6 +65,7 @@ RUNS = [
     ("reproduce", ["reproduce", "fig5", "--periods", "0.003"]),
     ("demo", ["demo"]),
     ("run", ["run", "study.toml"]),
+    ("sweep", ["sweep", "sweep.toml", "--out", "sweep-out", "--workers", "1"]),
     ("kmax", ["kmax", "--study", "study.toml", "--variant", "stiff"]),
     ("kmax", ["kmax", "4ch", "--master-stiffness-ratio", "0", "--c4-stiffness-ratio", "0",
               "--c2", "1", "--environment", "spring:1000", "-B", "0.5", "-n", "2"]),
@@ -85,6 +86,10 @@ def outputs(tmp_path_factory):
     with open("study.toml", "w") as fh:
         fh.write('kind = "peb"\n[loop]\ndelay = 2\n[[variant]]\nname = "stiff"\n'
                  'environment = "spring:2000"\n[run.kmax]\n[run.check]\nK = 3\n')
+    with open("sweep.toml", "w") as fh:
+        fh.write('kind = "hve"\n[sweep]\nquantities = ["kmax", "closed-form", "check"]\n'
+                 '[sweep.check]\nstiffness = 20\n[sweep.axes]\nperiod = "1ms:2ms:2"\n'
+                 'delay = [0, 2]\n')
     out = []
     for name, args in RUNS:
         r = CliRunner().invoke(cli, [*args, "--json"])

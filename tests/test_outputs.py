@@ -269,6 +269,30 @@ def test_signals_are_held_during_a_commit_and_delivered_after():
     assert reached
 
 
+def test_signals_are_held_while_another_thread_does_not_block_them():
+    # a thread pool's thread (pyarrow's, OpenBLAS's) takes a signal sent to the process
+    # when the main thread blocks it; the held block must still run to its end
+    import signal
+    import threading
+    import time
+
+    import hapstab.outputs as outputs
+
+    stop = threading.Event()
+    other = threading.Thread(target=stop.wait)
+    other.start()
+    reached = False
+    try:
+        with pytest.raises(KeyboardInterrupt), outputs.signals_held():
+            os.kill(os.getpid(), signal.SIGINT)
+            time.sleep(0.05)
+            reached = True
+    finally:
+        stop.set()
+        other.join()
+    assert reached
+
+
 def test_a_file_without_write_permission_is_not_replaced_even_by_root(tmp_path):
     p = tmp_path / "ro.csv"
     p.write_text("old\n")

@@ -56,6 +56,7 @@ from hapstab.outputs import OutputError
 from hapstab.paper.loops import paper_hve, paper_peb
 from hapstab.results import BoundaryResult, CriticalStiffnessResult, StabilityResult
 from hapstab.simulation import TDPA, SimulationResult, critical_stiffness_simulation, simulate
+from hapstab.sweep import SweepResult, sweep
 
 __version__ = "0.1.0"
 
@@ -75,6 +76,6 @@ __all__ = [
     "TDPA", "abbott_okamura", "nonlinear_passivity", "NonlinearPassivityResult", "limit_cycles",
     "LimitCycleResult", "PredictedCycle",
     "OperatorBox", "operator_box", "robust_critical_stiffness", "RobustStiffnessResult",
-    "robust_best_damping", "RobustDampingResult",
+    "robust_best_damping", "RobustDampingResult", "sweep", "SweepResult",
     "critical_stiffness_many",
 ]

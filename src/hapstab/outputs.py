@@ -388,11 +388,18 @@ def signals_held() -> Iterator[None]:
     """Hold SIGINT, SIGTERM and SIGHUP inside the block; they are delivered when it ends
     (so that files are all replaced or all put back, and a staging folder is removed).
 
+    The signals are blocked in this thread; a signal sent to the process can still
+    arrive through another thread that does not block them (pyarrow's and OpenBLAS's
+    thread pools), and Python then runs its handler in the main thread. So in the main
+    thread the handlers are also replaced, for the block, by ones that note the signal,
+    and a noted signal is raised again once the block has ended.
+
     Yields
     ------
     None
     """
     import signal
+    import threading
 
     sigs = {signal.SIGINT, signal.SIGTERM, signal.SIGHUP}
     try:
@@ -400,10 +407,22 @@ def signals_held() -> Iterator[None]:
     except (AttributeError, OSError, ValueError):      # no POSIX signal masks here
         yield
         return
+    noted: list[int] = []
+    handlers: dict[int, Any] = {}
+    if threading.current_thread() is threading.main_thread():
+        for sig in sigs:
+            old = signal.getsignal(sig)
+            if callable(old):                  # (SIG_DFL / SIG_IGN / a C handler: kept)
+                handlers[sig] = old
+                signal.signal(sig, lambda signum, frame: noted.append(signum))
     try:
         yield
     finally:
+        for held, handler in handlers.items():
+            signal.signal(held, handler)
         signal.pthread_sigmask(signal.SIG_SETMASK, before)
+        for signum in noted:
+            signal.raise_signal(signum)
 
 
 def _put(tmp: str, target: str, in_place: bool) -> None:

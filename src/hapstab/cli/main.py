@@ -290,13 +290,15 @@ def _register() -> None:
         robust,
         run,
         simulation,
+        sweep,
     )
 
     for cmd in (analysis.kmax, analysis.check, analysis.boundary_cmd, analysis.demo,
                 paper.passivity_cmd, paper.twoport_cmd, paper.transparency_cmd,
                 paper.audit_cmd, nonlinear.limit_cycle_cmd, regions.region,
                 regions.best, robust.robust, devices.zwidth_cmd, simulation.simulate_cmd,
-                simulation.reproduce_cmd, run.run_cmd, explore.explore_cmd):
+                simulation.reproduce_cmd, run.run_cmd, explore.explore_cmd,
+                sweep.sweep_cmd):
         cli.add_command(cmd)
         _describe(cmd)
 

@@ -137,7 +137,7 @@ def load_study(path: Any, name: str = "--study") -> Study:
                          ) from None
     except (tomllib.TOMLDecodeError, ValueError) as e:   # ValueError: an integer of 4300+ digits
         raise StudyError(f"{name} = {p!r}: not a valid TOML file ({str(e)[:200]})") from None
-    known = {"kind", "title", "loop", "variant", "run"}
+    known = {"kind", "title", "loop", "variant", "run", "sweep"}     # [sweep]: hapstab sweep
     for key in data:
         if key not in known:
             raise StudyError(f"{p}{_at(text, key)}: unknown key {key!r}; allowed: "
