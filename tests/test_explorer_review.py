@@ -103,44 +103,79 @@ def _boundary_centre(pg) -> tuple[float, float, list[float]]:
         shown["boundary"]["period_s"]
 
 
-@pytest.mark.xfail(strict=True, reason="app.js:388-391 boundaryExtra: num() reads '2kHz' / "
-                   "'10ms' as no number, so the sweep falls back to the previous answer's T "
-                   "(or to none on first load) and, in rate mode, sends --period beside --rate "
-                   "(a 422 that app.js:357 hides): the plot is blank or a stale, greyed curve "
-                   "around the old T while the page says 'up to date'")
 @pytest.mark.parametrize("query, field, text", [
     ("?kind=hve&rate=2kHz", None, None),                 # the README's own unit, on load
     ("?kind=hve", "period", "10ms"),                     # typed after load
     ("?kind=hve&rate=1000", "period", "2kHz"),           # rate mode, typed
+    ("?kind=hve&period=1ms&delay=3", "period", "0.004"),
 ])
 def test_k_max_against_t_is_centred_on_a_period_given_with_a_unit(page, query, field, text):
+    """app.js read the centre with num(): '2kHz' / '10ms' gave no number, so the sweep
+    fell back to the previous answer's T and, in rate mode, sent --period beside --rate
+    (a hidden 422). The centre is now the kmax answer's period_s."""
     tb.open_page(page, query)
     if field:
         tb.set_field(page, field, text)
-    T, _kmax, periods = _boundary_centre(page)
+    T, kmax, periods = _boundary_centre(page)
     assert min(periods) <= T <= max(periods)
     assert page.eval_on_selector("#plot-boundary", "e => e.classList.contains('stale')") \
         is False
     assert float(page.get_attribute("#plot-boundary", "data-current-x")) in (T * 1e3, 1 / T)
+    assert page.get_attribute("body", "data-settled") == "ok"
+    assert page.inner_text("#status") == "up to date"
+    if T in periods:              # the centre, sent at full precision: the card's own K_max
+        curve = page.evaluate("window.HapstabExplorer.shown.boundary.critical_stiffness[0]")
+        assert curve[periods.index(T)] == kmax
 
 
-@pytest.mark.xfail(strict=True, reason="app.js:100 optionsFor drops options the command does "
-                   "not take: boundary peb has no --delay-forward/--delay-backward, so the "
-                   "K_max-against-T curve is the delay-0 loop's (20.0 N/m at the current T) "
-                   "while the card and the marker say 4.45 N/m")
-def test_k_max_against_t_is_the_same_loop_as_the_k_max_card(page):
+def test_k_max_against_t_is_never_another_loops(page):
+    """boundary peb takes no --delay-forward/--delay-backward: app.js dropped them and drew
+    the equal-delay loop's curve (20.0 N/m at T) beside the card's 4.45 N/m. The plot now
+    says why it is not available and draws nothing."""
     tb.open_page(page, "?kind=peb&delay-forward=2&delay-backward=5&stiffness=1")
-    T, kmax, periods = _boundary_centre(page)
-    curve = page.evaluate("window.HapstabExplorer.shown.boundary.critical_stiffness[0]")
-    at = curve[periods.index(T)]
-    assert at == pytest.approx(kmax, rel=1e-9)   # the same exact K_max at the same T
+    note = page.inner_text("#plot-boundary .note")
+    assert note.startswith("not available for this model") and "--delay-forward" in note
+    assert page.get_attribute("#plot-boundary", "data-points") == "0"
+    assert page.evaluate("'boundary' in window.HapstabExplorer.shown") is False
+    assert page.get_attribute('.field[data-name="delay"]', "class") == "field"
+    # the model is valid: K_max is shown; passivity refuses unequal delays on its own plot
+    kmax = cli_json("kmax", "peb", "--delay-forward=2", "--delay-backward=5", "--json")
+    assert tb.kmax_shown(page) == kmax["critical_stiffness"]
+    r = CliRunner().invoke(cli, ["passivity", "peb", "--delay-forward=2", "--delay-backward=5",
+                                 "-K", "1"])
+    assert page.inner_text("#plot-passivity .note") == \
+        r.stderr.strip().removeprefix("hapstab: error: ")
+    assert page.inner_text("#status") != "input refused"
+    assert page.locator("#form .field.invalid").count() == 0
+    tb.set_field(page, "delay", "3")    # the note stays while the delays stay unequal
+    assert page.locator("#plot-boundary .note").count() == 1
 
 
-@pytest.mark.xfail(strict=True, reason="app.js:85-88 jsonValue: '1e400' matches the number "
-                   "pattern, Number() gives Infinity and JSON.stringify sends null: the field "
-                   "says '(not null)' instead of the CLI's 'must be finite'")
+def test_a_refusal_by_one_command_is_shown_on_its_plot_not_on_the_field(page):
+    """PEB --slave-stiffness-ratio=2 is a valid model (kmax, check answer) that region
+    refuses: the region plot says why; no field is marked, the page does not say 'input
+    refused'."""
+    tb.open_page(page, "?kind=peb&slave-stiffness-ratio=2&delay=2")
+    assert page.eval_on_selector("#more", "d => d.open")     # the URL set a value in it
+    r = CliRunner().invoke(cli, ["region", "peb", "--slave-stiffness-ratio=2", "--K=0:1",
+                                 "--B=0:1"])
+    assert page.inner_text("#plot-region .note") == \
+        r.stderr.strip().removeprefix("hapstab: error: ")
+    assert page.locator("#form .field.invalid").count() == 0
+    assert page.inner_text("#status") != "input refused"
+    assert page.get_attribute("body", "data-settled") == "refused"
+    assert tb.kmax_shown(page) == cli_json("kmax", "peb", "--slave-stiffness-ratio=2",
+                                           "--delay=2", "--json")["critical_stiffness"]
+    tb.set_field(page, "slave-stiffness-ratio", "1")
+    assert page.locator("#plot-region .note").count() == 0
+    assert page.locator("#plot-region canvas").count() == 1
+    assert page.get_attribute("body", "data-settled") == "ok"
+
+
 def test_an_overflowing_number_gets_the_clis_message(page):
+    """app.js sent '1e400' as Infinity, i.e. JSON null ('not null'); it goes as the text."""
     tb.open_page(page, "?kind=hve")
+    assert not page.eval_on_selector("#more", "d => d.open")  # nothing set in it
     tb.set_field(page, "mass", "1e400")
     r = CliRunner().invoke(cli, ["kmax", "hve", "--mass=1e400"])
     assert tb.field_message(page, "mass") == r.stderr.strip().removeprefix("hapstab: error: ")
