@@ -231,3 +231,22 @@ def test_a_post_from_another_origin_is_refused(origin, status, path):
         if status == 403:
             assert r.json()["status"] == 403 and "Origin" in r.json()["error"]
         assert c.get("/api/v1", headers=headers).status_code == 200   # GETs: the page's own
+
+
+def test_audit_of_a_filtered_damper_says_which_rows_cannot_take_it(client):
+    """audit hve --velocity-filter said "needs SpringDamper controller(s) (a
+    DiscreteController ...)" of a filtered spring-damper: it names the circle rows."""
+    r = CliRunner().invoke(cli, ["audit", "hve", "--velocity-filter", "lowpass:50"])
+    assert r.exit_code == 2
+    line = r.stderr.strip().removeprefix("hapstab: error: ")
+    assert "\n" not in line and "DiscreteController" not in line
+    assert line.startswith("audit: the rows circle-forward, circle-backward and circle-tustin")
+    assert "filtered" in line
+    a = client.post("/api/v1/audit", json={"kind": "hve",
+                                           "options": {"velocity-filter": "lowpass:50"}})
+    assert a.status_code == 422 and a.json()["error"] == line
+    # what the message says takes the filter does
+    for cmd in ("kmax", "passivity"):
+        opts = {"velocity-filter": "lowpass:50", **({"stiffness": 10} if cmd != "kmax" else {})}
+        assert client.post(f"/api/v1/{cmd}", json={"kind": "hve", "options": opts}) \
+            .status_code == 200
