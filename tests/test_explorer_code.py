@@ -54,7 +54,7 @@ def client():
         warnings.simplefilter("ignore")
         from starlette.testclient import TestClient
 
-        with TestClient(create_app(), raise_server_exceptions=False) as c:
+        with TestClient(create_app(), base_url="http://127.0.0.1", raise_server_exceptions=False) as c:
             yield c
 
 

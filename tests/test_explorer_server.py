@@ -198,3 +198,18 @@ def test_a_port_in_use_is_one_line():
         port = s.getsockname()[1]
         r = CliRunner().invoke(cli, ["explore", "--port", str(port)])
     assert r.exit_code == 2 and r.stderr.count("\n") == 1 and "cannot listen" in r.stderr
+
+
+@pytest.mark.parametrize("host", ["localhost", "::1", "[::1]", "127.0.0.1", "127.0.0.2"])
+def test_a_loopback_host_does_not_warn(monkeypatch, host):
+    """--host localhost / ::1 / 127.x is this machine only: no 'other machines' warning."""
+    from hapstab.cli import explore
+
+    monkeypatch.setattr(explore, "_serve", lambda server, h, open_browser: None)
+    monkeypatch.setattr(explore, "_check_listen", lambda h, port: None)   # (::1 may be absent)
+    r = CliRunner().invoke(cli, ["explore", "--host", host, "--port", "0"])
+    assert r.exit_code == 0, r.output
+    assert r.stderr == ""
+    assert explore.is_loopback(host)
+    assert not explore.is_loopback("0.0.0.0") and not explore.is_loopback("192.168.1.2")
+    assert not explore.is_loopback("localhost.example.com")

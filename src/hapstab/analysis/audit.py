@@ -226,7 +226,11 @@ def audit(loop: HapticLoop | TeleoperationLoop, *, coulomb_friction_N: float | N
             continue  # not applicable to these parameters (e.g. C_m != C_s, operator attached)
         add(c.key, c.label, r.critical_stiffness, c.claims, r.reason)
     for a in ("forward", "backward", "tustin"):
-        r = critical_stiffness_circle(loop, a)
+        try:
+            r = critical_stiffness_circle(loop, a)
+        except AnalysisError as e:     # (say which rows: the exact one and passivity passed)
+            raise AnalysisError(f"audit: the rows circle-forward, circle-backward and "
+                                f"circle-tustin cannot be computed: {e}") from None
         note = r.reason
         add(f"circle-{a}", f"circle criterion, {a}", r.critical_stiffness, "passivity", note)
     add("passivity", "sampled-data passivity (Colgate-Schenkel)", passive, "passivity",

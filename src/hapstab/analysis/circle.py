@@ -346,9 +346,16 @@ def _affine_kmax(parts: Any, oscillations: int) -> tuple[float, float]:
 def _stiffness_side(loop: Any, what: str = "the circle criterion", forces: bool = False,
                     equal_delays: bool = True) -> DeviceSide:
     side = _side(loop, what, forces, equal_delays)
-    if not all(isinstance(ch.controller, SpringDamper) for ch in side.channels):
-        raise AnalysisError("critical stiffness: needs SpringDamper controller(s) "
-                            "(a DiscreteController has no stiffness to vary)")
+    other = [type(ch.controller).__name__ for ch in side.channels
+             if not isinstance(ch.controller, SpringDamper)]
+    if other and all(n == "FilteredSpringDamper" for n in other):
+        raise AnalysisError(f"{what}: needs SpringDamper controller(s) without a velocity "
+                            "filter; this loop's damper is filtered (a FilteredSpringDamper, "
+                            "a velocity filter): the exact K_max and sampled-data passivity "
+                            "take it")
+    if other:
+        raise AnalysisError(f"{what}: needs SpringDamper controller(s); this loop has "
+                            f"{other[0]} (a DiscreteController has no stiffness to vary)")
     if side.ratios is None:
         raise AnalysisError("controllers: the master's stiffness is 0 and the slave's is not, so "
                             "K_s/K_m is undefined; give the master a stiffness > 0 to vary K")

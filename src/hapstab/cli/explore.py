@@ -17,8 +17,8 @@ LOCAL = "127.0.0.1"
 @click.option("--port", type=click.IntRange(0, 65535), default=8765, show_default=True,
               help="TCP port (0: any free port; the address printed says which).")
 @click.option("--host", default=LOCAL, show_default=True,
-              help="Interface to listen on; anything but 127.0.0.1 lets other machines in "
-                   "(a warning says so).")
+              help="Interface to listen on; anything but localhost, 127.x or ::1 lets other "
+                   "machines in (a warning says so).")
 @click.option("--study", "study_path", metavar="FILE", default=None,
               help="A study file (kind hve or peb): its [loop] is the page's first state.")
 @click.option("--open", "open_browser", is_flag=True, help="Open the page in a browser.")
@@ -34,13 +34,36 @@ def explore_cmd(port: int, host: str, study_path: str | None, open_browser: bool
         raise HapstabError(f"hapstab explore needs starlette and uvicorn ({e.name} is "
                            "missing): pip install 'hapstab[explore]'") from None
     _check_listen(host, port)
-    app = create_app(study_path)
-    if host != LOCAL:
+    app = create_app(study_path, host)
+    if not is_loopback(host):
         click.echo(f"hapstab: warning: --host = {host}: the explorer is reachable from other "
                    "machines on that interface; it has no authentication", err=True)
     server = uvicorn.Server(uvicorn.Config(app, host=host, port=port, log_level="warning",
                                            access_log=False, lifespan="off"))
     _serve(server, host, open_browser)
+
+
+def is_loopback(host: str) -> bool:
+    """Whether ``host`` is this machine only: localhost, 127.x.y.z or ::1.
+
+    Parameters
+    ----------
+    host : str
+        The --host given (an IPv6 literal with or without brackets).
+
+    Returns
+    -------
+    bool
+    """
+    import ipaddress
+
+    name = host.strip().strip("[]").lower()
+    if name == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(name).is_loopback
+    except ValueError:
+        return False
 
 
 def _check_listen(host: str, port: int) -> None:

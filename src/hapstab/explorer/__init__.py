@@ -14,13 +14,16 @@ from typing import Any
 __all__ = ["create_app"]
 
 
-def create_app(study_path: str | None = None) -> Any:
+def create_app(study_path: str | None = None, host: str | None = None) -> Any:
     """The explorer's Starlette application (see :func:`hapstab.explorer.app.create_app`).
 
     Parameters
     ----------
     study_path : str, optional
         A study file (kind hve or peb) whose [loop] table is the page's initial state.
+    host : str, optional
+        The interface it listens on: accepted as a Host header beside 127.0.0.1,
+        localhost and ::1.
 
     Returns
     -------
@@ -28,4 +31,4 @@ def create_app(study_path: str | None = None) -> Any:
     """
     from hapstab.explorer.app import create_app as make
 
-    return make(study_path)
+    return make(study_path, host)

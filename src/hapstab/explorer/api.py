@@ -369,6 +369,11 @@ def run_command(argv: list[str]) -> str:
         msg = one_line(click_message(list(argv), e))
         raise ApiError(422, msg, long_name(p) if isinstance(p, click.Option)
                        else _parameter(msg, cmd, argv)) from None
+    except budget.BudgetError as e:    # (its "--yes" is the CLI's: the API takes none)
+        msg = one_line(e).split("; run it anyway with --yes")[0]
+        raise ApiError(422, f"{msg}: over the explorer's budget; narrow the request (fewer "
+                            "points, a smaller range) or run it with the CLI and --yes",
+                       _parameter(msg, cmd, argv)) from None
     except HapstabError as e:
         raise ApiError(422, one_line(e), _parameter(str(e), cmd, argv)) from None
     except MemoryError:

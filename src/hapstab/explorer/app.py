@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import sys
 import traceback
 from collections.abc import Awaitable, Callable
@@ -27,6 +28,8 @@ from typing import Any
 
 from starlette.applications import Starlette
 from starlette.exceptions import HTTPException
+from starlette.middleware import Middleware
+from starlette.middleware.trustedhost import TrustedHostMiddleware
 from starlette.requests import Request
 from starlette.responses import FileResponse, JSONResponse, Response
 from starlette.routing import Route
@@ -44,7 +47,7 @@ from hapstab.explorer.api import (
     schema,
 )
 
-__all__ = ["create_app", "STATIC", "WORKERS"]
+__all__ = ["create_app", "STATIC", "WORKERS", "LOCAL_HOSTS"]
 
 #: The page's files.
 STATIC = os.path.join(os.path.dirname(os.path.abspath(__file__)), "static")
@@ -54,6 +57,12 @@ WORKERS = 2
 MAX_CHANNELS = 1000
 ENDPOINTS = ["GET /", "GET /static/{path}", "GET /api/v1", "GET /api/v1/schema",
              "POST /api/v1/code", "POST /api/v1/{command}"]
+
+#: The Host headers always accepted (with the --host given): a page reached through another
+#: name (DNS rebinding) gets a 400.
+LOCAL_HOSTS = ("127.0.0.1", "localhost", "::1")
+#: ``X-Hapstab-Seq``: an optional minus, then at most 18 ASCII digits.
+SEQ_PATTERN = re.compile(r"-?[0-9]{1,18}")
 
 Handler = Callable[[Request], Awaitable[Response]]
 
@@ -93,8 +102,21 @@ async def _http_error(request: Request, exc: Exception) -> Response:
                   headers=dict(exc.headers or {}))
 
 
+def _same_origin(request: Request) -> None:
+    """A POST from another site's page (its ``Origin`` is not this server's) is a 403."""
+    origin = request.headers.get("origin")
+    if origin is None:
+        return
+    own = f"{request.url.scheme}://{request.headers.get('host', '')}".lower()
+    if origin.strip().lower().rstrip("/") != own:
+        raise ApiError(403, f"Origin {origin[:100]!r}: this API answers its own page only "
+                            f"({own[:100]})")
+
+
 async def _read_body(request: Request) -> dict[str, Any]:
-    """The JSON object of a POST (413 beyond :data:`MAX_BODY_BYTES`, read no further)."""
+    """The JSON object of a POST from the server's own origin (403 otherwise; 413 beyond
+    :data:`MAX_BODY_BYTES`, read no further)."""
+    _same_origin(request)
     ctype = request.headers.get("content-type", "").split(";")[0].strip().lower()
     if ctype != "application/json":
         raise ApiError(415, f"content type {ctype[:60]!r}: send application/json")
@@ -121,8 +143,8 @@ class _Sequencer:
         seq = request.headers.get("x-hapstab-seq")
         if channel is None and seq is None:
             return None
-        if channel is None or seq is None or not seq.strip().lstrip("-").isdigit() \
-                or len(seq) > 18 or len(channel) > 100:
+        if channel is None or seq is None or not SEQ_PATTERN.fullmatch(seq.strip()) \
+                or len(channel) > 100:
             raise ApiError(400, "X-Hapstab-Channel and X-Hapstab-Seq: give both, the channel a "
                                 "name (<= 100 characters), the seq an integer", None)
         n = int(seq)
@@ -135,7 +157,7 @@ class _Sequencer:
         return mark is not None and mark[1] < self.latest.get(mark[0], mark[1])
 
 
-def create_app(study_path: str | None = None) -> Starlette:
+def create_app(study_path: str | None = None, host: str | None = None) -> Starlette:
     """The explorer's application.
 
     Parameters
@@ -143,6 +165,9 @@ def create_app(study_path: str | None = None) -> Starlette:
     study_path : str, optional
         A study file of kind hve or peb: its [loop] table is the page's initial state
         (``GET /api/v1/schema``'s ``study``).
+    host : str, optional
+        The interface it listens on (``--host``): a Host header naming it is accepted
+        beside :data:`LOCAL_HOSTS` (any other is a 400: DNS rebinding).
 
     Returns
     -------
@@ -211,7 +236,10 @@ def create_app(study_path: str | None = None) -> Starlette:
               Route("/api/v1/schema", _guarded(get_schema), methods=["GET"]),
               Route("/api/v1/code", _guarded(code), methods=["POST"]),
               Route("/api/v1/{command}", _guarded(command), methods=["POST"])]
-    return Starlette(routes=routes, exception_handlers={HTTPException: _http_error})
+    names = [h.strip("[]") for h in (*LOCAL_HOSTS, *([host] if host else []))]
+    hosts = [f"[{h}]" if ":" in h else h for h in names]     # (IPv6 literals in brackets)
+    return Starlette(routes=routes, exception_handlers={HTTPException: _http_error},
+                     middleware=[Middleware(TrustedHostMiddleware, allowed_hosts=hosts)])
 
 
 def _static_file(path: str) -> Response:

@@ -205,7 +205,10 @@ def python_script(command: str, kind: str, options: dict[str, Any]) -> str:
                 "from hapstab.cli.main import main\n\n"
                 f"main({argv!r})\n")
     v = _values(command, kind, options)
-    K = "1.0" if command == "kmax" else repr(v.get("stiffness") or 0.0)
+    # A command without a stiffness (kmax, audit) builds its loop at K = 1, as the CLI does:
+    # the slave's stiffness is --slave-stiffness-ratio times K, lost at K = 0.
+    takes_k = any(p.name == "stiffness" for p in loop_command(command, kind).params)
+    K = repr(v["stiffness"]) if takes_k else "1.0"
     lines = ["import hapstab as h", "", f"K = {K}   # N/m", *_loop_lines(kind, v, "K"),
              *_analysis_lines(command, kind, v)]
     return "\n".join(lines) + "\n"

@@ -85,7 +85,9 @@
   function jsonValue(o, text) {
     if (o.type === "flag") return text === "true";
     const t = text.trim();
-    if ((o.type === "float" || o.type === "int") && /^[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$/.test(t)) return Number(t);
+    // (a number JSON cannot carry, 1e400, goes as the text: the CLI says "must be finite")
+    if ((o.type === "float" || o.type === "int") && /^[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$/.test(t) &&
+        isFinite(Number(t))) return Number(t);
     return t;
   }
 
@@ -104,7 +106,26 @@
       if (text === "" && o.type !== "flag") continue;
       out[name] = jsonValue(o, text);
     }
+    // an extra period (or rate, delay, delay-s) replaces the field's value both ways: the
+    // CLI refuses --period beside --rate
+    for (const k of Object.keys(extra || {})) {
+      const pair = ALT[k] ? ALT[k].other : ALT_OF[k];
+      if (pair) delete out[pair];
+    }
     return Object.assign(out, extra || {});
+  }
+
+  // the loop's options the user set that COMMAND does not take (boundary peb has no
+  // --delay-forward): its answer would be another loop's, so the page does not ask for it
+  function unavailable(command) {
+    if (!cmds()[command]) return `not available for this model: no "hapstab ${command} ${state.kind}"`;
+    const allowed = new Set(optsOf(command).map((o) => o.name));
+    const loop = new Set(loopOptions(state.kind).map((o) => o.name));
+    const missing = Object.keys(state.values).filter((n) => loop.has(n) && !allowed.has(n) &&
+      state.values[n] !== "" && !(VARIED[command] || []).includes(n));
+    if (!missing.length) return null;
+    return `not available for this model: hapstab ${command} ${state.kind} takes no ` +
+      missing.map((n) => "--" + n).join(", ");
   }
 
   // ------------------------------------------------------------------ the form
@@ -317,20 +338,35 @@
   }
   const stale = (channel, on) => document.querySelectorAll(`[data-channel="${channel}"]`).forEach((e) => e.classList.toggle("stale", on));
 
+  // a card's answer replaced by one line (a refusal, or "not available for this model")
+  function cardNote(command, text) {
+    if (command === "kmax") { setNum("#kmax", null); $("#kmax-detail").textContent = text; $("#kmax-detail").title = text; }
+    else if (command === "check") {
+      const v = $("#verdict"); v.textContent = "–"; v.dataset.value = ""; v.className = "big";
+      $("#verdict-detail").textContent = text; $("#verdict-detail").title = text;
+    } else if (command === "audit") { setNum("#passivity-kmax", null); $("#paper-rows").textContent = text; }
+  }
+  // the answer of COMMAND is this one line: on its plot (or card), nothing else drawn
+  function refused(command, channel, plot, text) {
+    delete shown[command];
+    stale(channel, false);
+    if (plot) HapstabPlots.note(plot, text); else cardNote(command, text);
+    if (command === "passivity") $("#passivity-detail").textContent = "at K: " + text;
+  }
+
+  // MODEL commands refuse what the model refuses: their errors mark the input fields; any
+  // other command's refusal of a valid model is that command's, shown on its plot or card
+  const MODEL = ["kmax", "check"];
   async function update() {
     const seq = ++SEQ;
     writeUrl();
-    const errors = [];
+    const errors = [], notes = [];
     const run = async (channel, command, extra, draw, plot) => {
+      const na = unavailable(command);
+      if (na) { if (seq === SEQ) { refused(command, channel, plot, na); notes.push(na); } return null; }
       const res = await call(channel, command, optionsFor(command, extra), seq);
       if (res.superseded) return null;
-      if (res.error) {
-        errors.push(res);
-        stale(channel, true);
-        if (plot && !fieldFor(res.parameter, res.error) && !errors.some((e) => e !== res && fieldFor(e.parameter, e.error)))
-          HapstabPlots.note(plot, res.error);
-        return null;
-      }
+      if (res.error) { errors.push(Object.assign(res, { command, channel, plot })); stale(channel, true); return null; }
       shown[command] = res.ok;
       stale(channel, false);
       try { draw(res.ok); } catch (e) { console.error(e); HapstabPlots.note(plot || "boundary", `cannot draw: ${e.message}`); }
@@ -343,32 +379,31 @@
     const simP = run("simulate", "simulate", simExtra(), (a) => HapstabPlots.simulate(a), "simulate");
     const pasP = run("passivity", "passivity", has("passivity", "curve") ? { curve: CURVE_POINTS } : {},
                      (a) => { drawPassivity(a); HapstabPlots.passivity(a); }, "passivity");
-    const sweep = boundaryExtra(cur);
-    const bP = sweep ? call("boundary", "boundary", optionsFor("boundary", sweep), seq) : Promise.resolve(null);
     const km = await kmaxP;
     const check = await checkP;
     cur.kmax = km ? km.critical_stiffness : null;
     cur.verdict = check ? check.verdict : null;
-    if (km) {
+    if (km) {    // the plots around the current T: the T the CLI read (a unit, a rate...)
       cur.period_s = km.period_s;
-      const rP = run("region", "region", regionExtra(km, cur), (a) => HapstabPlots.region(a, cur), "region");
-      const b = await bP;
-      if (b && b.ok) { shown.boundary = b.ok; stale("boundary", false); HapstabPlots.boundary(b.ok, cur); }
-      else if (b && b.error) { stale("boundary", true); if (!fieldFor(b.parameter, b.error)) HapstabPlots.note("boundary", b.error); }
-      await rP;
-    } else {
-      const b = await bP; stale("boundary", true); stale("region", true);
-      if (b && b.error && !errors.length) HapstabPlots.note("boundary", b.error);
-    }
+      await Promise.all([
+        run("region", "region", regionExtra(km, cur), (a) => HapstabPlots.region(a, cur), "region"),
+        run("boundary", "boundary", boundaryExtra(km.period_s),
+            (a) => HapstabPlots.boundary(a, cur), "boundary"),
+      ]);
+    } else { stale("boundary", true); stale("region", true); }
     await Promise.all([auditP, simP, pasP]);
     if (seq !== SEQ) return;
     clearErrors();
-    for (const e of errors) showError(e);
+    const model = errors.filter((e) => MODEL.includes(e.command));
+    for (const e of model) showError(e);
+    const own = model.length ? [] : errors;    // a valid model: each refusal is its command's
+    for (const e of own) refused(e.command, e.channel, e.plot, e.error);
     const s = $("#status");
-    if (errors.length) { s.className = "error"; s.textContent = "input refused"; }
-    else if (!inflight) { s.className = "idle"; s.textContent = "up to date"; }
+    if (model.length) { s.className = "error"; s.textContent = "input refused"; }
+    else if (own.length) { s.className = "error"; s.textContent = "refused: " + [...new Set(own.map((e) => e.command))].join(", "); }
+    else if (!inflight) { s.className = "idle"; s.textContent = notes.length ? "up to date (some plots not available)" : "up to date"; }
     document.body.dataset.seq = String(seq);
-    document.body.dataset.settled = errors.length ? "error" : "ok";
+    document.body.dataset.settled = model.length ? "error" : own.length ? "refused" : "ok";
     delete document.body.dataset.pending;
   }
 
@@ -384,19 +419,16 @@
     return { series: o.type === "flag" ? true : 1000 };
   }
 
-  // periods (or rates) T/4 ... 4T around the current one, log-spaced, the current one included
-  function boundaryExtra() {
+  // periods (or rates) T/4 ... 4T around the current T (the kmax answer's period_s, as the
+  // CLI read the field), log-spaced, the current one included at full precision
+  function boundaryExtra(period_s) {
+    if (!(period_s > 0)) return {};
     const rateMode = "rate" in state.values;
-    const centre = num(value(rateMode ? "rate" : "period"));
-    if (centre == null || centre <= 0) return shown.kmax ? periods(shown.kmax.period_s, false) : null;
-    return periods(centre, rateMode);
-  }
-  function periods(centre, rateMode) {
+    const centre = rateMode ? 1 / period_s : period_s;
     const xs = [];
-    for (let i = 0; i < SWEEP; i++) xs.push(centre * Math.pow(16, i / (SWEEP - 1)) / 4);
-    xs[(SWEEP - 1) / 2] = centre;
-    const list = xs.map((x) => String(+x.toPrecision(10))).join(",");
-    const extra = rateMode ? { rate: list } : { period: list };
+    for (let i = 0; i < SWEEP; i++) xs.push(String(+(centre * Math.pow(16, i / (SWEEP - 1)) / 4).toPrecision(10)));
+    xs[(SWEEP - 1) / 2] = String(centre);
+    const extra = rateMode ? { rate: xs.join(",") } : { period: xs.join(",") };
     if ("delay-s" in state.values) extra["delay-s"] = value("delay-s");
     else extra.delay = value("delay") === "" ? 0 : jsonValue({ type: "float" }, value("delay"));
     return extra;
@@ -482,7 +514,7 @@
     } catch (e) { box.value = "error: " + e.message; }
   }
   function extraFor(command) {
-    if (command === "boundary") return boundaryExtra() || {};
+    if (command === "boundary") return shown.kmax ? boundaryExtra(shown.kmax.period_s) : {};
     if (command === "region" && shown.kmax) return regionExtra(shown.kmax, current());
     if (command === "passivity") return {};
     return {};
@@ -517,6 +549,9 @@
     readUrl();
     $(`#kind input[value="${state.kind}"]`).checked = true;
     buildForm();
+    // a value the URL (or the study) sets in "More options" is shown, not hidden
+    if (Object.keys(state.values).some((k) => $(`#more-fields .field[data-name="${ALT_OF[k] || k}"], #view-fields .field[data-name="${k}"]`)))
+      $("#more").open = true;
     update();
   }
   window.HapstabExplorer = { state, shown, optionsFor };
