@@ -1,4 +1,5 @@
-"""Test-session set-up: one BLAS thread, and the campaign's summary at the end."""
+"""Test-session set-up: one BLAS thread, the campaign's summary at the end, and the
+explorer's TestClient (the `client` fixture)."""
 
 from __future__ import annotations
 
@@ -6,6 +7,8 @@ import ctypes
 import glob
 import json
 import os
+
+import pytest
 
 
 def _one_blas_thread() -> None:
@@ -54,3 +57,19 @@ def pytest_terminal_summary(terminalreporter, exitstatus, config):
         terminalreporter.write_line(f"full report: {path}")
     except OSError:
         pass
+
+
+@pytest.fixture(scope="module")
+def client():
+    """The explorer's app behind starlette's TestClient (tests/test_explorer_*.py; they
+    skip without starlette and httpx before asking for it)."""
+    import warnings
+
+    from hapstab.explorer.app import create_app
+
+    with warnings.catch_warnings():    # starlette 1.x: "httpx with TestClient is deprecated"
+        warnings.simplefilter("ignore")
+        from starlette.testclient import TestClient
+
+        with TestClient(create_app(), base_url="http://127.0.0.1", raise_server_exceptions=False) as c:
+            yield c

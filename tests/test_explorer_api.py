@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import json
 import os
-import warnings
 
 import pytest
 from click.testing import CliRunner
@@ -15,16 +14,6 @@ pytest.importorskip("httpx")
 
 from hapstab.cli.main import cli
 from hapstab.explorer.app import create_app
-
-
-@pytest.fixture(scope="module")
-def client():
-    with warnings.catch_warnings():    # starlette 1.x: "httpx with TestClient is deprecated"
-        warnings.simplefilter("ignore")
-        from starlette.testclient import TestClient
-
-        with TestClient(create_app(), base_url="http://127.0.0.1", raise_server_exceptions=False) as c:
-            yield c
 
 
 def cli_json(argv: list[str]) -> dict:

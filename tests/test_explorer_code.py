@@ -9,7 +9,6 @@ import os
 import shlex
 import subprocess
 import sys
-import warnings
 
 import pytest
 from click.testing import CliRunner
@@ -18,7 +17,6 @@ pytest.importorskip("starlette")
 pytest.importorskip("httpx")
 
 from hapstab.cli.main import cli
-from hapstab.explorer.app import create_app
 
 SRC = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "src")
 
@@ -48,14 +46,6 @@ HEADLINE = {"kmax": "critical_stiffness", "check": "verdict", "passivity": "verd
             "simulate": "verdict"}
 
 
-@pytest.fixture(scope="module")
-def client():
-    with warnings.catch_warnings():    # starlette 1.x: "httpx with TestClient is deprecated"
-        warnings.simplefilter("ignore")
-        from starlette.testclient import TestClient
-
-        with TestClient(create_app(), base_url="http://127.0.0.1", raise_server_exceptions=False) as c:
-            yield c
 
 
 @pytest.fixture(scope="module")

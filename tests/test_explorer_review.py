@@ -23,16 +23,6 @@ from hapstab.explorer.app import create_app
 from hapstab.explorer.code import python_script
 
 
-@pytest.fixture(scope="module")
-def client():
-    with warnings.catch_warnings():    # starlette 1.x: "httpx with TestClient is deprecated"
-        warnings.simplefilter("ignore")
-        from starlette.testclient import TestClient
-
-        with TestClient(create_app(), base_url="http://127.0.0.1", raise_server_exceptions=False) as c:
-            yield c
-
-
 def cli_json(*argv: str) -> dict:
     r = CliRunner().invoke(cli, list(argv))
     assert r.exit_code == 0, r.output
