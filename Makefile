@@ -30,6 +30,10 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_regions.py
 	$(BIN)/python benchmarks/bench_delay.py
 	$(BIN)/python benchmarks/bench_budget.py
+	$(BIN)/python benchmarks/bench_robust.py
+	$(BIN)/python benchmarks/bench_many.py
+	$(BIN)/python benchmarks/bench_sweep.py
+	$(BIN)/python benchmarks/bench_explorer.py
 
 clean:
 	rm -rf $(VENV) out .pytest_cache .hypothesis
