@@ -37,6 +37,8 @@ from functools import lru_cache
 
 import numpy as np
 
+from hapstab.models.parts import quantize
+
 __all__ = ["QUANTIZER_OFFSET", "quantize", "quantizer_describing_function",
            "staircase_harmonics", "Balance", "solve_balance", "waveform", "fundamental_residual",
            "loeb_stable"]
@@ -50,29 +52,6 @@ OUTSIDE = 1e3
 #: Points per period on which crossings are first bracketed (then polished by Newton's
 #: method): enough for trigonometric polynomials of a few tens of harmonics.
 GRID = 1024
-
-
-def quantize(x: np.ndarray, delta: float, quantizer: str) -> np.ndarray:
-    """The encoder's reading, as :func:`hapstab.simulation.run.quantize`: ``Δ floor(x/Δ)``
-    (``"floor"``) or the nearest multiple of Δ, ties away from zero (``"nearest"``).
-
-    Parameters
-    ----------
-    x : array
-        Positions in m.
-    delta : float
-        Δ in m.
-    quantizer : {"floor", "nearest"}
-        Which reading.
-
-    Returns
-    -------
-    array
-    """
-    x = np.asarray(x, float)
-    if quantizer == "floor":
-        return delta * np.floor(x / delta)
-    return delta * np.sign(x) * np.floor(np.abs(x) / delta + 0.5)
 
 
 def quantizer_describing_function(amplitude: float, offset: float, delta: float,

@@ -18,7 +18,7 @@ from hapstab.errors import ModelError, check_poly, check_real
 from hapstab.tolerances import COEFF_ZERO
 
 __all__ = ['friction_note', 'Device', 'Impedance', 'NO_IMPEDANCE', 'spring', 'mass_spring_damper',
-           'parse_impedance']
+           'parse_impedance', 'quantize']
 
 
 # --------------------------------------------------------------------------- devices
@@ -312,3 +312,27 @@ def friction_note(loop: Any) -> str:
             "2005 show friction enlarges the passive region); where it is unstable, large "
             "motions still grow, but friction may hold a small one at rest or in a limit cycle: "
             "simulate to see")
+
+
+def quantize(x: np.ndarray, resolution: float, quantizer: str = "floor") -> np.ndarray:
+    """The encoder's reading of ``x`` (the simulator's encoder and the describing
+    function's quantiser, :mod:`hapstab.analysis.harmonic`): ``Δ floor(x/Δ)`` or the nearest multiple of Δ
+    (ties away from zero, not to even).
+
+    Parameters
+    ----------
+    x : array
+        Positions in m.
+    resolution : float
+        Δ, the encoder's resolution in m (> 0).
+    quantizer : {"floor", "nearest"}
+        ``"floor"`` (an incremental encoder) or anything else for the nearest multiple.
+
+    Returns
+    -------
+    array
+        The readings, multiples of Δ in m.
+    """
+    if quantizer == "floor":
+        return resolution * np.floor(x / resolution)
+    return resolution * np.sign(x) * np.floor(np.abs(x) / resolution + 0.5)

@@ -56,6 +56,7 @@ from hapstab.engine.system import build
 from hapstab.engine.zoh import port_matrices
 from hapstab.errors import ModelError, check_real, check_reals
 from hapstab.models.loops import HapticLoop, TeleoperationLoop, headline, require_loop
+from hapstab.models.parts import quantize
 from hapstab.simulation.behaviour import assess_nonlinear
 from hapstab.simulation.friction import LoopFriction
 from hapstab.simulation.growth import BoundednessVerdict, assess, combine
@@ -287,29 +288,6 @@ def _nonlinear_options(haptic: bool, environment_force: Any, wall: Any, wall_pul
 
 #: How an encoder reading is formed from the position (see :func:`simulate`).
 QUANTIZERS = ("floor", "nearest")
-
-
-def quantize(x: np.ndarray, resolution: float, quantizer: str = "floor") -> np.ndarray:
-    """The encoder's reading of ``x``: ``Δ floor(x/Δ)`` or the nearest multiple of Δ
-    (ties away from zero, not to even).
-
-    Parameters
-    ----------
-    x : array
-        Positions in m.
-    resolution : float
-        Δ, the encoder's resolution in m (> 0).
-    quantizer : {"floor", "nearest"}
-        ``"floor"`` (an incremental encoder) or anything else for the nearest multiple.
-
-    Returns
-    -------
-    array
-        The readings, multiples of Δ in m.
-    """
-    if quantizer == "floor":
-        return resolution * np.floor(x / resolution)
-    return resolution * np.sign(x) * np.floor(np.abs(x) / resolution + 0.5)
 
 
 def _measurement(roles: Any, p: int, nl: dict[str, Any]) -> Any:
