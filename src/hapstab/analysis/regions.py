@@ -41,7 +41,7 @@ from hapstab.analysis.kb_plane import (
     d_decomposition,
     with_gains,
 )
-from hapstab.engine.frequency import loop_response, stack_responses
+from hapstab.engine.frequency import LoopResponse, loop_response, stack_responses
 from hapstab.engine.system import build
 from hapstab.errors import AnalysisError, ArgumentTypeError, check_real
 from hapstab.models.loops import headline
@@ -71,9 +71,14 @@ def kmax_over_B(loop: Loop, Bs: Sequence[float] | np.ndarray,
     list of StableSet
         One per damping.
     """
-    # one structure for every B (B enters only as beta = B/T): one batched analysis
-    resps = [loop_response(with_gains(loop, 1.0, float(B))) for B in np.asarray(Bs, float)]
-    return analyse(stack_responses(resps), full=intervals)
+    return analyse(_row_responses(loop, Bs), full=intervals)
+
+
+def _row_responses(loop: Loop, Bs: Sequence[float] | np.ndarray) -> LoopResponse:
+    """The characteristic functions of the loop at each virtual damping, stacked: one
+    structure for every B (B enters only as beta = B/T), so one batched analysis."""
+    return stack_responses([loop_response(with_gains(loop, 1.0, float(B)))
+                            for B in np.asarray(Bs, float)])
 
 
 # -------------------------------------------------------------- grid cross-check
@@ -300,7 +305,8 @@ def _region(loop: Loop, Kw: tuple[float, float], Bw: tuple[float, float], n: int
     progress after each (see :func:`stability_region`)."""
     (K_lo, K_hi), (B_lo, B_hi) = Kw, Bw
     Brows = np.linspace(B_lo, B_hi, n)
-    rows = kmax_over_B(loop, Brows, intervals=True)
+    resp = _row_responses(loop, Brows)
+    rows = analyse(resp, full=True)
     advance(1)
     intervals = tuple(tuple((max(a, K_lo), min(b, K_hi)) for a, b in r.intervals
                             if b > K_lo and a < K_hi) for r in rows)
@@ -312,7 +318,6 @@ def _region(loop: Loop, Kw: tuple[float, float], Bw: tuple[float, float], n: int
             exact[i] |= (Kg > a) & (Kg < b)
     if np.any(Kg == 0):
         # K = 0 itself (the intervals are for K > 0): the certified count at K = 0
-        resp = stack_responses([loop_response(with_gains(loop, 1.0, float(B))) for B in Brows])
         zero_ok = winding(resp, np.arange(n), np.zeros(n)) == 0
         exact[:, Kg == 0] = zero_ok[:, None]
     grid = _schur_cohn(_char_poly_grid(loop, KK, BB)).reshape(KK.shape)
