@@ -24,6 +24,7 @@ test: $(STAMP)
 
 bench: $(STAMP)
 	$(BIN)/python -m pip install --quiet -e '.[test,bench]'
+	$(BIN)/python benchmarks/bench_core.py
 	$(BIN)/python benchmarks/bench_boundary.py
 	$(BIN)/python benchmarks/bench_circle.py
 	$(BIN)/python benchmarks/bench_simulate.py
