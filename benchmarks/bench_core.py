@@ -256,12 +256,12 @@ def expert_many_hve(params, n: int) -> np.ndarray:
 # ----------------------------------------------------------------------- the rows
 def row(kind: str, n: int) -> dict:
     ports = PAPER[kind]
-    loop = (h.paper_hve if kind == "hve" else h.paper_peb)(delay_samples=n)
+    make = h.paper_hve if kind == "hve" else h.paper_peb
     reps = 3 if QUICK or n >= 1000 else 7
     r: dict = {"kind": kind, "n": n}
     r["t_expert"], r["K_expert"] = cpu(lambda: expert_kmax(ports, n, 0.0, T), reps)
     try:
-        r["t_hapstab"], res = cpu(lambda: h.critical_stiffness(loop), reps)
+        r["t_hapstab"], res = cpu(lambda: h.critical_stiffness(make(delay_samples=n)), reps)
         r["K_hapstab"] = res.critical_stiffness
     except h.HapstabError as e:
         r["t_hapstab"], r["K_hapstab"], r["hapstab_note"] = math.nan, math.nan, str(e)[:60]
@@ -278,6 +278,9 @@ def row(kind: str, n: int) -> dict:
         r["t_control"], r["K_control"] = cpu(lambda: control_kmax(ports, n, 0.0, T), 1)
     except (ImportError, RuntimeError) as e:
         r["t_control"], r["K_control"], r["control_note"] = math.nan, math.nan, str(e)[:40]
+    except Exception as e:     # python-control fails on the loop: say how (WRONG too)
+        r["t_control"], r["K_control"] = math.nan, math.nan
+        r["control_note"] = f"control FAILED: {type(e).__name__}: {str(e)[:40]}"
     return r
 
 

@@ -23,7 +23,7 @@ import pytest
 from references import brute, certified, phase
 
 #: the default lane: (class, count, longest delay)
-DEFAULT = [("wall", 60, 0), ("marginal", 25, 0), ("mass", 45, 0), ("delay", 15, 400)]
+DEFAULT = [("wall", 45, 0), ("marginal", 10, 0), ("mass", 40, 0), ("delay", 10, 400)]
 #: on demand (-m campaign): 5,000 scenarios, 1,600 of them stiff walls
 FULL = [("wall", 1600, 0), ("marginal", 700, 0), ("mass", 1900, 0), ("delay", 800, 10_000)]
 

@@ -223,8 +223,8 @@ class _Referee:
                 prev = K
                 continue
             v = self.stable(float(K))
-            if v is False:
-                return prev, float(K)
+            if v is False:          # unstable at the scan's bottom: K_max = 0
+                return (prev, float(K)) if prev > 0 else (0.0, 0.0)
             prev = float(K)
         return prev, math.inf
 
@@ -239,7 +239,7 @@ class _Referee:
             if hi / lo - 1 <= 1e-13:
                 break
             mid = math.sqrt(lo * hi)
-            if self.stable(mid) is False:
+            if self.stable(mid) is not True:    # undecided: the safe side (lower)
                 hi = mid
             else:
                 lo = mid
@@ -291,7 +291,7 @@ def _check(s: Scenario, long: bool, out: Outcome) -> None:
         _verdicts(s, ref, out.truth, K_h, out)
         return
     # 1. never above
-    above = (hi <= K_h) or (0 < K_h < math.inf and ref.stable(K_h) is False)
+    above = (0 < K_h and hi <= K_h) or (0 < K_h < math.inf and ref.stable(K_h) is False)
     if above:
         K_t = out.truth = ref.truth(lo, min(hi, K_h))
         out.rel = (K_h - K_t) / K_t if K_t > 0 else math.inf
@@ -301,7 +301,7 @@ def _check(s: Scenario, long: bool, out: Outcome) -> None:
     # 2. tight or uncertain
     tight = (hi == 0 and K_h == 0) or (math.isinf(hi) and math.isinf(K_h))
     if not tight and math.isfinite(K_h):
-        v = ref.stable(K_h * (1 + TIGHT)) if K_h > 0 else (hi == 0)
+        v = ref.stable(K_h * (1 + TIGHT)) if K_h > 0 else (hi != 0)
         tight = v is False
         if v is None:
             out.notes.append(f"referee undecided at K_max (1 + {TIGHT:g})")
