@@ -1,0 +1,189 @@
+# ruff: noqa: RUF001 - the unicode digits are the point of these tests
+"""Issue 27: hostile but accepted inputs -- each observed item a test (the command lines
+and calls of the issue, reproduced before the fix), and the class they belong to: an input
+that passes validation and then runs away, or an error outside the HapstabError family."""
+
+import math
+import os
+import warnings
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+import hapstab as h
+from hapstab.cli.main import cli
+from hapstab.errors import HapstabError, ascii_float
+
+
+def run(*args):
+    return CliRunner().invoke(cli, list(args))
+
+
+def refused(r, *needles):
+    """Exit 2, one line "hapstab: error: ..." naming each needle; no traceback."""
+    lines = r.stderr.strip().splitlines()
+    assert r.exit_code == 2, (r.exit_code, r.stderr, r.exception)
+    assert len(lines) == 1 and lines[0].startswith("hapstab: error: "), lines
+    for n in needles:
+        assert n in lines[0], (n, lines[0])
+    return lines[0]
+
+
+# ------------------------------------------------------------ 1. a tiny filter cutoff
+@pytest.mark.parametrize("cutoff", ["1e-320", "5e-324", "1e-12"])
+def test_a_cutoff_below_any_representable_pole_is_refused(cutoff):
+    refused(run("kmax", "hve", "--velocity-filter", f"lowpass:{cutoff}", "--json"),
+            "velocity filter cutoff", "too low")
+
+
+def test_the_cutoff_bound_is_where_the_pole_leaves_one():
+    """1 - exp(-2 pi f_c T) against the bound, at the period the loop has: just above
+    it the loop is built and analysed (a K_max), just below it is refused."""
+    from hapstab.models.controllers import MIN_FILTER_GAIN
+
+    T = 1e-3
+    edge = MIN_FILTER_GAIN / (2 * math.pi * T)
+    ok = h.HapticLoop(h.Device(0.15, 0.1), h.FilteredSpringDamper(
+        1.0, 0.1, velocity_filter=h.VelocityFilter("lowpass", cutoff_hz=edge * 1.01)), period=T)
+    assert h.critical_stiffness(ok).critical_stiffness > 0
+    with pytest.raises(HapstabError, match="cutoff"):
+        ok.replace(controller=h.FilteredSpringDamper(
+            1.0, 0.1, velocity_filter=h.VelocityFilter("lowpass", cutoff_hz=edge * 0.99)))
+    with pytest.raises(HapstabError, match="too low for the period 1e-06"):
+        ok.replace(period=1e-6)      # the same filter, degenerate at a shorter period
+
+
+# ------------------------------------------------------------ 2, 3. special and deep study files
+@pytest.mark.parametrize("path", ["/dev/zero", "/dev/urandom", "/dev/null", "."])
+def test_a_study_that_is_not_a_regular_file_is_refused(path):
+    refused(run("--study", path, "kmax", "hve"), "not a regular file")
+
+
+def test_a_fifo_study_is_refused_without_waiting(tmp_path):
+    fifo = tmp_path / "study.toml"
+    os.mkfifo(fifo)                  # no writer: a blocking open would wait forever
+    refused(run("--study", str(fifo), "kmax", "hve"), "not a regular file")
+
+
+def test_a_huge_study_is_refused_before_it_is_read(tmp_path):
+    from hapstab.cli.study import MAX_STUDY_BYTES
+
+    p = tmp_path / "big.toml"
+    with open(p, "wb") as fh:
+        fh.truncate(MAX_STUDY_BYTES + 1)          # sparse: no disk used
+    refused(run("--study", str(p), "kmax", "hve"), "bytes")
+
+
+@pytest.mark.parametrize("depth", [17, 3000])
+@pytest.mark.parametrize("shape", ["[", "{a="])
+@pytest.mark.parametrize("command", ["kmax", "run", "sweep"])
+def test_deep_nesting_is_a_user_error(tmp_path, depth, shape, command):
+    close = {"[": "]", "{a=": "}"}[shape]
+    p = tmp_path / "deep.toml"
+    p.write_text('kind = "hve"\nx = ' + shape * depth + "1" + close * depth + "\n")
+    args = {"kmax": ["--study", str(p), "kmax", "hve"], "run": ["run", str(p)],
+            "sweep": ["sweep", str(p), "--out", str(tmp_path / "o")]}[command]
+    refused(run(*args), "nested")
+
+
+# ------------------------------------------------------------ 4. an extreme rest position
+@pytest.mark.parametrize("rest", ["1e308", "-1e308", "1e12"])
+def test_an_extreme_rest_position_is_refused(rest):
+    refused(run("limit-cycle", "hve", "-K", "20", "--resolution", "1e-4", "--rest", rest),
+            "rest_position_m")
+
+
+def test_a_far_but_representable_rest_is_analysed():
+    loop = h.paper_hve(1e-3, 0).with_stiffness(20.0)
+    r = h.limit_cycles(loop, resolution_m=1e-4, rest_position_m=1.0)
+    assert r.rest_position_m == 1.0
+    with pytest.raises(HapstabError, match="rest_position_m"):
+        h.limit_cycles(loop, coulomb_friction_N=0.1, rest_position_m=1e300)
+
+
+# ------------------------------------------------------------ 7. errors outside the family
+with warnings.catch_warnings():
+    warnings.simplefilter("ignore")       # (numpy warns making these longdoubles themselves)
+    TINY, HUGE = np.longdouble("1e-4940"), np.longdouble("1e5000")
+
+
+@pytest.mark.parametrize("call", [
+    lambda: h.paper_hve(delay_samples=TINY),
+    lambda: h.NO_IMPEDANCE(None), lambda: h.NO_IMPEDANCE("x"), lambda: h.NO_IMPEDANCE(b"1"),
+    lambda: h.NO_IMPEDANCE([None]), lambda: h.NO_IMPEDANCE({}),
+    lambda: h.paper_hve(delay_samples=HUGE)])
+def test_errors_stay_in_the_family(call):
+    with pytest.raises(HapstabError):
+        call()
+
+
+def test_whole_delays_of_any_real_type_still_work():
+    from fractions import Fraction
+
+    for n in (Fraction(3), np.float32(3), np.longdouble(3), np.int8(3), 3.0):
+        assert h.paper_hve(delay_samples=n).delay_samples == 3
+    assert h.NO_IMPEDANCE(np.array([1j, 2.0])).shape == (2,)
+
+
+# ------------------------------------------------------------ 8. numbers and conflicting options
+@pytest.mark.parametrize("text", ["𝟐", "１", "1_000", "٣", "0x10", "1e", "²"])
+def test_ascii_float_refuses_what_python_float_takes(text):
+    with pytest.raises(ValueError):
+        ascii_float(text)
+
+
+@pytest.mark.parametrize("args", [
+    ["kmax", "hve", "-m", "𝟐"], ["kmax", "hve", "-T", "１"], ["kmax", "hve", "-m", "1_000"],
+    ["kmax", "hve", "-n", "３"], ["kmax", "hve", "--rate", "１kHz"],
+    ["kmax", "hve", "--operator", "msd:1,𝟐,3"], ["kmax", "hve", "--velocity-filter", "average:𝟐"],
+    ["boundary", "hve", "-T", "1ms:2ms:𝟐"], ["boundary", "hve", "-n", "0,1_0"],
+    ["region", "hve", "--K", "0:100", "--B", "0:1", "--resolution", "1_2"],
+    ["region", "hve", "--B", "0:1", "--K", "0:１00"]])
+def test_unicode_digits_and_separators_are_not_numbers(args):
+    refused(run(*args), args[-1])           # the message quotes what was refused
+
+
+def test_plain_numbers_still_read():
+    assert [ascii_float(t) for t in ("2", " -1.5e3 ", ".5", "5.", "+1E-3")] == \
+        [2.0, -1500.0, 0.5, 5.0, 1e-3]
+    assert run("kmax", "hve", "-m", "2", "-T", "1ms").exit_code == 0
+
+
+def test_an_empty_overlay_lets_no_warning_through(tmp_path):
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        r = run("region", "hve", "--K", "0:100", "--B", "0:1", "--resolution", "12",
+                "--overlay", "", "--plot", str(tmp_path / "r.png"))
+    assert r.exit_code == 0 and "warning" not in r.stderr.lower(), r.stderr
+
+
+# ------------------------------------------------------------ 9. symbolic links in a sweep
+SWEEP = 'kind = "hve"\n[loop]\ndelay = 2\n[sweep.axes]\nperiod = [0.001, 0.002]\n'
+
+
+@pytest.mark.parametrize("force", [False, True])
+def test_a_sweep_never_writes_or_deletes_through_a_linked_chunks_folder(tmp_path, force):
+    (tmp_path / "s.toml").write_text(SWEEP)
+    target, out = tmp_path / "elsewhere", tmp_path / "out"
+    target.mkdir()
+    out.mkdir()
+    (target / "chunk-000000.parquet").write_bytes(b"someone else's")
+    (out / "chunks").symlink_to(target)
+    r = run("sweep", str(tmp_path / "s.toml"), "--out", str(out), "--workers", "1",
+            *(["--force"] if force else []))
+    refused(r, "symbolic link")
+    assert sorted(os.listdir(target)) == ["chunk-000000.parquet"]
+    assert (target / "chunk-000000.parquet").read_bytes() == b"someone else's"
+
+
+@pytest.mark.parametrize("name", ["manifest.json", "summary.json", "chunks/chunk-000000.parquet"])
+def test_a_sweep_refuses_a_linked_file_of_its_own(tmp_path, name):
+    (tmp_path / "s.toml").write_text(SWEEP)
+    victim, out = tmp_path / "victim", tmp_path / "out"
+    victim.write_text("keep me")
+    (out / "chunks").mkdir(parents=True)
+    (out / name).symlink_to(victim)
+    refused(run("sweep", str(tmp_path / "s.toml"), "--out", str(out), "--workers", "1",
+                "--force"), "symbolic link")
+    assert victim.read_text() == "keep me"
