@@ -187,3 +187,49 @@ def test_a_sweep_refuses_a_linked_file_of_its_own(tmp_path, name):
     refused(run("sweep", str(tmp_path / "s.toml"), "--out", str(out), "--workers", "1",
                 "--force"), "symbolic link")
     assert victim.read_text() == "keep me"
+
+
+# ------------------------------------------------------------ 5. robust stops at its budget
+def test_robust_stops_at_the_time_budget_with_a_sound_gap():
+    """The issue's box ran 478 s; with a 3 s budget it stops after about 3 s (plus one
+    batch), and its bounds enclose the exact K_max of the operator it names."""
+    import time
+
+    from hapstab.analysis.robust import robust_critical_stiffness
+    from hapstab.models.operators import operator_box
+
+    loop = h.paper_hve(1e-3, 10)
+    box = operator_box(mass=(0.2, 1), damping=(1, 10), stiffness=(100, 1000))
+    t = time.perf_counter()
+    r = robust_critical_stiffness(loop, box, max_seconds=3.0)
+    took = time.perf_counter() - t
+    assert not r.converged and r.stopped == "time" and "time budget" in r.reason
+    assert took < 30                  # 3 s and the batch under way (a few s on a busy machine)
+    assert 0 <= r.critical_stiffness <= r.operator_critical_stiffness <= r.upper_bound * (1 + 1e-9)
+    assert r.to_dict()["stopped"] == "time"
+
+
+# ------------------------------------------------------------ 6. API calls refused up front
+@pytest.mark.parametrize("call,what", [
+    (lambda: h.boundary(h.paper_hve(1e-3, 2), periods=np.linspace(1e-4, 1e-2, 10 ** 6),
+                        delays=range(100)), "boundary"),
+    (lambda: h.boundary(h.paper_hve(1e-3, 2), periods=[1e-3], delays=np.arange(10 ** 7)),
+     "delay"),
+    (lambda: h.build(h.paper_hve(1e-3, 2), periods=np.full(10 ** 7, 1e-3)), "build"),
+    (lambda: h.build(h.paper_hve(1e-3, 2), periods=np.full(10 ** 6, 1e-3)), "build")])
+def test_huge_api_arrays_are_refused_in_seconds(call, what):
+    import time
+
+    t = time.perf_counter()
+    with pytest.raises(HapstabError, match=what):
+        call()
+    assert time.perf_counter() - t < 10       # was 13-24 s of checking, then minutes of work
+
+
+def test_a_bad_period_among_many_is_still_named():
+    T = np.full(10 ** 5, 1e-3)
+    T[777] = -1.0
+    with pytest.raises(HapstabError, match="period = -1"):
+        h.build(h.paper_hve(1e-3, 2), periods=T)
+    with pytest.raises(HapstabError, match="period = -1"):
+        h.boundary(h.paper_hve(1e-3, 2), periods=T, delays=[0])
