@@ -266,3 +266,39 @@ def test_the_held_observer_bounds_the_true_energy_by_its_prediction_errors(n, K,
     assert np.all(E >= -(S + np.maximum(p, 0)) - 1e-12)
     if K < 100:                                       # the issue's case: E >= 0 to rounding
         assert E.min() > -1e-15
+
+
+# ------------------------------------------------------------ 10. a hang-up mid-body
+def test_a_client_hanging_up_mid_body_is_not_an_internal_error(capfd):
+    """The ASGI receive channel says http.disconnect after part of the body: the server
+    answers (to nobody) without logging an internal error or a traceback."""
+    import anyio
+
+    from hapstab.explorer.app import create_app
+
+    app = create_app()
+    sent = []
+
+    async def main():
+        msgs = [{"type": "http.request", "body": b'{"kind": "hve", "opt', "more_body": True},
+                {"type": "http.disconnect"}]
+
+        async def receive():
+            return msgs.pop(0) if msgs else {"type": "http.disconnect"}
+
+        async def send(m):
+            sent.append(m)
+
+        scope = {"type": "http", "asgi": {"version": "3.0"}, "http_version": "1.1",
+                 "method": "POST", "scheme": "http", "path": "/api/v1/kmax", "raw_path":
+                 b"/api/v1/kmax", "query_string": b"", "root_path": "",
+                 "headers": [(b"host", b"127.0.0.1"), (b"content-type", b"application/json"),
+                             (b"content-length", b"400")],
+                 "client": ("127.0.0.1", 5555), "server": ("127.0.0.1", 8765)}
+        await app(scope, receive, send)
+
+    anyio.run(main)
+    err = capfd.readouterr().err
+    assert "internal error" not in err and "Traceback" not in err, err
+    starts = [m for m in sent if m["type"] == "http.response.start"]
+    assert not starts or starts[0]["status"] == 400

@@ -123,12 +123,17 @@ async def _read_body(request: Request) -> dict[str, Any]:
     length = request.headers.get("content-length", "")
     if length.isdigit() and int(length) > MAX_BODY_BYTES:
         raise ApiError(413, f"request body of {int(length)} bytes: at most {MAX_BODY_BYTES}")
+    from starlette.requests import ClientDisconnect
+
     raw = bytearray()
-    async for chunk in request.stream():
-        raw += chunk
-        if len(raw) > MAX_BODY_BYTES:
-            raise ApiError(413, f"request body over {MAX_BODY_BYTES} bytes: at most "
-                                f"{MAX_BODY_BYTES}")
+    try:
+        async for chunk in request.stream():
+            raw += chunk
+            if len(raw) > MAX_BODY_BYTES:
+                raise ApiError(413, f"request body over {MAX_BODY_BYTES} bytes: at most "
+                                    f"{MAX_BODY_BYTES}")
+    except ClientDisconnect:      # the client hung up mid-body: nobody to answer, no bug
+        raise ApiError(400, f"the client hung up after {len(raw)} bytes of the body") from None
     return parse_body(bytes(raw))
 
 
