@@ -302,3 +302,42 @@ def test_a_client_hanging_up_mid_body_is_not_an_internal_error(capfd):
     assert "internal error" not in err and "Traceback" not in err, err
     starts = [m for m in sent if m["type"] == "http.response.start"]
     assert not starts or starts[0]["status"] == 400
+
+
+# ------------------------------------------------------------ 10. a superseded computation ends
+def test_a_superseded_running_computation_is_ended_at_once():
+    """A slow region (seconds) of channel "slider", then a kmax of the same channel: the
+    region's worker process is ended, its request answered 409 within about a second of
+    the kmax's arrival (before: it ran to its end and answered 200), the kmax 200."""
+    import time
+
+    import anyio
+    import httpx
+
+    from hapstab.explorer.app import create_app
+
+    app = create_app()
+    slow = {"kind": "hve", "options": {"K": "0:100", "B": "0:5", "delay": 10,
+                                       "resolution": 300}}
+    fast = {"kind": "hve", "options": {"delay": 1}}
+    out = {}
+
+    async def main():
+        transport = httpx.ASGITransport(app=app)
+        async with httpx.AsyncClient(transport=transport, base_url="http://127.0.0.1",
+                                     timeout=120) as c:
+            async def post(name, cmd, body, seq):
+                r = await c.post(f"/api/v1/{cmd}", json=body, headers={
+                    "X-Hapstab-Channel": "slider", "X-Hapstab-Seq": str(seq)})
+                out[name] = (r.status_code, time.perf_counter(), r.text)
+
+            async with anyio.create_task_group() as tg:
+                tg.start_soon(post, "region", "region", slow, 1)
+                await anyio.sleep(1.5)                 # the region's worker is computing
+                out["sent"] = time.perf_counter()
+                tg.start_soon(post, "kmax", "kmax", fast, 2)
+
+    anyio.run(main)
+    assert out["region"][0] == 409, out["region"]
+    assert out["kmax"][0] == 200, out["kmax"]
+    assert out["region"][1] - out["sent"] < 1.0        # polled every 20 ms, then ended
