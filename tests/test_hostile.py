@@ -341,3 +341,28 @@ def test_a_superseded_running_computation_is_ended_at_once():
     assert out["region"][0] == 409, out["region"]
     assert out["kmax"][0] == 200, out["kmax"]
     assert out["region"][1] - out["sent"] < 1.0        # polled every 20 ms, then ended
+
+
+# ------------------------------------------------------------ 6. a whole study run's budget
+def _many_variants(tmp_path, n):
+    p = tmp_path / "many.toml"
+    p.write_text('kind = "hve"\n[loop]\ndelay = 2\n' + "".join(
+        f'[[variant]]\nname = "v{i}"\nvirtual-damping = {i * 1e-3}\n' for i in range(n))
+        + "[run.kmax]\n")
+    return p
+
+
+def test_a_whole_study_run_is_charged_before_any_work(tmp_path):
+    """20,000 variants x kmax is 20,001 analyses of at least 40 ms: 13 min, refused in one
+    line before a folder is made (the budget of 1 s here stands for the 5 min: 30 variants
+    need 1.24 s)."""
+    from hapstab import budget
+
+    p = _many_variants(tmp_path, 30)
+    with budget.limits(seconds=1.0):
+        r = run("run", str(p), "--out", str(tmp_path / "o"))
+    refused(r, "run: 31 analyses", "would need about")
+    assert not (tmp_path / "o").exists()
+    with budget.limits(seconds=1.0):
+        r = run("--yes", "run", str(p), "--out", str(tmp_path / "o"), "--only", "v1")
+    assert r.exit_code == 0, r.stderr
