@@ -11,6 +11,7 @@ from hapstab.cli.options import (
     LOOP_KINDS,
     PAPER_KINDS,
     IntRange,
+    Number,
     emit,
     fmt,
     given,
@@ -90,7 +91,7 @@ def _robust_command(kind: str) -> None:
     @loop_options(kind)
     @operator_box_options
     # rtol from 1e-12 (the exact core's accuracy) to 0.5; 1e-6 as the library's default
-    @click.option("--rtol", type=click.FloatRange(1e-12, 0.5), default=1e-6, show_default=True,
+    @click.option("--rtol", type=Number(span=(1e-12, 0.5)), default=1e-6, show_default=True,
                   help="Stop when upper - lower <= rtol * upper.")
     @click.option("--max-boxes", type=IntRange(1, 100000), default=6000,
                   show_default=True, help="Budget of operator sub-boxes.")
