@@ -36,6 +36,9 @@ def explore_cmd(port: int, host: str, study_path: str | None, open_browser: bool
                            "missing): pip install 'hapstab[explore]'") from None
     _check_listen(host, port)
     app = create_app(study_path, host)
+    from hapstab.explorer.app import warm_workers
+
+    warm_workers()            # the workers' server imports hapstab now, not at the first request
     if not is_loopback(host):
         click.echo(f"hapstab: warning: --host = {host}: the explorer is reachable from other "
                    "machines on that interface; it has no authentication", err=True)

@@ -169,6 +169,14 @@ IN_PROCESSES = True
 POLL_S = 0.02
 
 
+def warm_workers() -> None:
+    """Start the worker processes' server now (:func:`hapstab.explorer.workers.warm`)."""
+    if IN_PROCESSES:
+        from hapstab.explorer.workers import warm
+
+        warm()
+
+
 async def _in_process(request: Request, kind: str, arg: Any, superseded: Callable[[], bool],
                       limiter: Any) -> str | None:
     """``arg`` computed in a worker process; None (and the process ended) as soon as the

@@ -17,7 +17,7 @@ from typing import Any
 
 from hapstab.explorer.api import ApiError
 
-__all__ = ["Job"]
+__all__ = ["Job", "warm"]
 
 #: The modules the server process imports once, before it forks any worker.
 PRELOAD = ["hapstab.explorer.api", "hapstab.explorer.code", "hapstab.cli.main"]
@@ -30,6 +30,15 @@ def _context() -> Any:
         ctx.set_forkserver_preload(PRELOAD)
         _CONTEXT.append(ctx)
     return _CONTEXT[0]
+
+
+def warm() -> None:
+    """Start the server process the workers are forked from (it imports :data:`PRELOAD`,
+    seconds on a busy machine) now rather than at the first request."""
+    from multiprocessing import forkserver
+
+    _context()
+    forkserver.ensure_running()
 
 
 def _child(conn: Any, kind: str, arg: Any) -> None:
