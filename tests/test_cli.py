@@ -162,8 +162,14 @@ def test_extreme_input_is_one_line_and_exit_2(args, needle):
     assert len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr
 
 
-def test_delay_backward_alone_keeps_delay_for_the_other_side():
-    a = json.loads(run("kmax", "peb", "--delay", "4", "--delay-backward", "4", "--json").stdout)
+def test_delay_with_one_side_is_refused():
+    """Issue 27, 8: `-n 3 --delay-forward 2` was taken silently as forward 2, backward 3;
+    a delay given two ways is refused (both sides one way, or one --delay)."""
+    for args in (["--delay-forward", "2", "-n", "3"], ["--delay", "4", "--delay-backward", "4"]):
+        r = run("kmax", "peb", *args)
+        assert r.exit_code == 2 and "give the delay one way" in r.stderr, r.stderr
+    a = json.loads(run("kmax", "peb", "--delay-forward", "4", "--delay-backward", "4",
+                       "--json").stdout)
     b = json.loads(run("kmax", "peb", "--delay", "4", "--json").stdout)
     assert a["critical_stiffness"] == b["critical_stiffness"]
 

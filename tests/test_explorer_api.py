@@ -170,6 +170,7 @@ def test_two_computations_at_once_and_the_queue_is_superseded(monkeypatch):
         return "{}"
 
     monkeypatch.setattr(app_module, "run_command", slow)
+    monkeypatch.setattr(app_module, "IN_PROCESSES", False)    # (the queue; in threads here)
     app = create_app()
 
     async def main():

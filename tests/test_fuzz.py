@@ -11,6 +11,7 @@ import itertools
 import math
 import os
 import random
+import warnings
 
 import click
 import numpy as np
@@ -28,6 +29,11 @@ HOSTILE = ["", " ", "nan", "inf", "-inf", "-1", "0", "-0", "1e308", "-1e308", "1
            "abc", "1:2:3:4", "0.001::10", "::", ":", "1,,2", "1e999", "0x10", "1_000", "µ", "½",
            "--", "-", "None", "[1]", "1 2", "9" * 400, "1e-9", "3.5", "-3.5", "1e9", "none",
            "spring:", "msd:1,2", "msd:nan,1,1", "step:", "sine:1", "pulse:1,-1", "fig7"]
+#: Issue 27's shapes (drawn from their own list: the draws above stay the ones they were):
+#: other scripts' digits, digit separators, tiny cutoffs, special files, extreme positions.
+HOSTILE_27 = ["\U0001d7d0", "\uff11", "\u0663", "1_000", "2\u00b2", "lowpass:1e-320",
+              "lowpass:5e-324", "average:\U0001d7d0", "/dev/zero", "/dev/urandom", ".", "1e308",
+              "-1e308", "msd:1,\uff12,3", "1ms:2ms:\U0001d7d0", "0,1_0"]
 
 
 def _commands():
@@ -122,6 +128,15 @@ def _invocations(n, seed):
         path, opts = rng.choice(SWEEP)
         o = rng.choice(opts)
         calls.append(([*path, *NEEDS["sweep"], o, rng.choice(HOSTILE)], [o]))
+    # issue 27's shapes, any command (not sweep's workers: kept fast), then as a study file
+    for _ in range(40):
+        path, opts = rng.choice(COMMANDS + LIMIT_CYCLE)
+        if opts:
+            o = rng.choice(opts)
+            calls.append(([*path, *NEEDS.get(path[0], []), o, rng.choice(HOSTILE_27)], [o]))
+    for f in ("/dev/zero", "/dev/urandom", "/dev/null", ".", "deep.toml", "fifo.toml"):
+        calls.append((["kmax", "hve", "--study", f], ["--study"]))
+        calls.append((["run", f], ["STUDY.toml"]))
     return calls
 
 
@@ -130,6 +145,15 @@ def _names(option):
     bare = option.lstrip("-")
     words = {option, bare, bare.replace("-", "_"), bare.replace("-", " ")}
     return words | {w[:-1] for w in words if w.endswith("s")}     # --periods: "period = ..."
+
+
+def _files(tmp_path):
+    """The studies the campaign reads: a good one, a sweep's, one nested 3000 deep (tomllib
+    recursed past Python's limit) and a FIFO with no writer (an open would block)."""
+    (tmp_path / "study.toml").write_text(STUDY)
+    (tmp_path / "sweep.toml").write_text(SWEEP_STUDY)
+    (tmp_path / "deep.toml").write_text('kind = "hve"\nx = ' + "[" * 3000 + "]" * 3000 + "\n")
+    os.mkfifo(tmp_path / "fifo.toml")
 
 
 def _check_cli(args, chosen, runner):
@@ -156,8 +180,7 @@ def test_hostile_command_lines(chunk, tmp_path):
     runner = CliRunner()
     calls = _invocations(520, SEED)
     os.chdir(tmp_path)                       # reproduce writes ./out
-    (tmp_path / "study.toml").write_text(STUDY)
-    (tmp_path / "sweep.toml").write_text(SWEEP_STUDY)
+    _files(tmp_path)
     for args, chosen in calls[chunk::10]:
         _check_cli(args, chosen, runner)
 
@@ -166,14 +189,16 @@ def test_hostile_command_lines(chunk, tmp_path):
 def test_more_hostile_command_lines(tmp_path):
     runner = CliRunner()
     os.chdir(tmp_path)
-    (tmp_path / "study.toml").write_text(STUDY)
-    (tmp_path / "sweep.toml").write_text(SWEEP_STUDY)
+    _files(tmp_path)
     for args, chosen in _invocations(3000, SEED + 1):
         _check_cli(args, chosen, runner)
 
 
 # ------------------------------------------------------------------------------ API
 LOOP = h.paper_hve(1e-3, 2).with_stiffness(5.0)
+with warnings.catch_warnings():
+    warnings.simplefilter("ignore")        # (numpy warns making it: it underflows)
+    TINY_LONGDOUBLE = np.longdouble("1e-4940")
 PEB = h.paper_peb(1e-3, 2).with_stiffness(2.0)
 NOT_LOOPS = [None, 1, "x", [], {}, 1.5, object(), math.nan, np.zeros(3), PEB.master]
 
@@ -273,6 +298,23 @@ BAD_VALUES = {
     "transparency frequencies []": lambda: h.transparency(PEB, frequencies_hz=[]),
     "transparency environment 'x'": lambda: h.transparency(PEB, environment="x"),
     "transparency approximation 3": lambda: h.transparency(PEB, approximation=3),
+    # issue 27: huge arrays, tiny cutoffs, extreme rests, exotic numbers
+    "build 10**7 periods": lambda: h.build(LOOP, periods=np.full(10 ** 7, 1e-3)),
+    "boundary 10**6 periods x 100 delays": lambda: h.boundary(
+        LOOP, np.linspace(1e-4, 1e-2, 10 ** 6), range(100)),
+    "boundary 10**7 delays": lambda: h.boundary(LOOP, [1e-3], np.arange(10 ** 7)),
+    "VelocityFilter lowpass 1e-320": lambda: h.stability(LOOP.replace(
+        controller=h.FilteredSpringDamper(5.0, 0.1, velocity_filter="lowpass:1e-320"))),
+    "VelocityFilter average:\U0001d7d0": lambda: h.VelocityFilter.parse("average:\U0001d7d0"),
+    "parse_impedance unicode": lambda: h.parse_impedance("msd:1,\uff12,3"),
+    "limit_cycles rest 1e308": lambda: h.limit_cycles(LOOP, resolution_m=1e-4,
+                                                      rest_position_m=1e308),
+    "limit_cycles rest -1e300 friction": lambda: h.limit_cycles(
+        LOOP, coulomb_friction_N=0.1, rest_position_m=-1e300),
+    "delay longdouble 1e-4940": lambda: h.paper_hve(delay_samples=TINY_LONGDOUBLE),
+    "NO_IMPEDANCE(None)": lambda: h.NO_IMPEDANCE(None),
+    "NO_IMPEDANCE('x')": lambda: h.NO_IMPEDANCE("x"),
+    "NO_IMPEDANCE([None])": lambda: h.NO_IMPEDANCE([None]),
 }
 
 API_CALLS = ([(f"{name}({bad!r:.20})", (lambda f=f, b=bad: f(b)))

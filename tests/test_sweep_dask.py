@@ -7,6 +7,7 @@ and no temporary file left."""
 import json
 import os
 import signal
+import socket
 import subprocess
 import sys
 import time
@@ -15,6 +16,7 @@ import pytest
 from click.testing import CliRunner
 
 from hapstab.cli.main import cli
+from hapstab.sweep.cluster import NO_DASHBOARD
 
 pa = pytest.importorskip("pyarrow")
 pq = pytest.importorskip("pyarrow.parquet")
@@ -33,6 +35,21 @@ delay = "0:19:20"
 [sweep.check]
 stiffness = 20
 '''
+
+
+@pytest.fixture(autouse=True, scope="module")
+def port_8787_taken():
+    """Issue 27, 11: another cluster holds Dask's default dashboard port; every cluster
+    here (the sweep's own and the test's) must start and close without it, and leave no
+    socket open (a ResourceWarning is an error here)."""
+    s = socket.socket()
+    try:
+        s.bind(("", 8787))
+        s.listen()
+    except OSError:          # taken already (by another Dask): the same situation
+        pass
+    yield
+    s.close()
 
 
 def rows(folder):
@@ -59,7 +76,7 @@ def test_a_local_cluster_of_two_processes_gets_exactly_the_single_process_rows(r
     study, ref = reference
     out = str(study.parent / "dask")
     with distributed.LocalCluster(n_workers=2, processes=True, threads_per_worker=1,
-                                  dashboard_address=None) as cluster:
+                                  **NO_DASHBOARD) as cluster:
         r = CliRunner().invoke(cli, ["sweep", str(study), "--out", out, "--scheduler",
                                      cluster.scheduler_address, "--json"])
     assert r.exit_code == 0, r.stderr

@@ -7,6 +7,7 @@ that the CLI can print it as one line and a Python user can act on it.
 from __future__ import annotations
 
 import math
+import re
 import warnings
 from numbers import Integral, Real
 from typing import TYPE_CHECKING, Any
@@ -104,14 +105,51 @@ def check_reals(name: str, value: Any) -> np.ndarray:
         raise wrong() from None
 
 
+def _whole(value: Real) -> bool:
+    """``value`` is finite and whole as a float (numpy's longdouble has no ``__trunc__``;
+    one that underflows, 1e-4940, is not whole: it is not 0 either)."""
+    try:
+        with warnings.catch_warnings():   # longdouble -> float casts warn: we decide
+            warnings.simplefilter("ignore")
+            f = float(value)
+            exact = f == value
+    except (OverflowError, TypeError, ValueError):
+        return False
+    return bool(exact) and math.isfinite(f) and f.is_integer()
+
+
+#: A number as a user types it: ASCII digits, an optional sign, point and exponent, or
+#: nan / inf (refused as not finite by the callers, with their own message).
+_ASCII_NUMBER = re.compile(r"[-+]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][-+]?[0-9]+)?"
+                           r"|[-+]?(?:nan|inf|infinity)", re.ASCII | re.IGNORECASE)
+
+
+def ascii_float(text: Any) -> float:
+    """A number from text: ASCII decimal digits only, surrounding blanks ignored.
+
+    Python's :func:`float` also takes other scripts' digits (mathematical bold, fullwidth, Arabic-Indic) and
+    digit separators (``'1_000'``); a number on the command line or in a study is the
+    plain decimal spelling (what every other tool reads the same way).
+
+    Raises
+    ------
+    ValueError
+        Not such a number (the callers word the message with their parameter).
+    """
+    t = str(text).strip(" \t\r\n")
+    if not _ASCII_NUMBER.fullmatch(t):
+        raise ValueError(f"{t!r} is not a number (ASCII decimal digits only)")
+    return float(t)
+
+
 def check_delay(name: str, value: Any) -> int:
     """Return a whole, non-negative number of samples, or raise :class:`ModelError`."""
     if isinstance(value, bool):
         raise ModelError(f"{name} = {value}: must be a whole number of samples >= 0")
     if isinstance(value, Integral):
         v = int(value)
-    elif isinstance(value, Real) and math.isfinite(float(value)) and float(value).is_integer():
-        v = int(math.trunc(value))   # noqa: RUF046 - a Real's __trunc__ may give any Integral
+    elif isinstance(value, Real) and _whole(value):
+        v = int(float(value))        # whole and finite: exact below 2**53, refused above
     else:
         raise ModelError(
             f"{name} = {_fmt(value)}: must be a whole number of samples >= 0 "

@@ -357,6 +357,28 @@ def _distinct(cycles: list[PredictedCycle | None]) -> tuple[PredictedCycle, ...]
     return tuple(sorted(out, key=lambda c: c.amplitude_m))
 
 
+#: The farthest rest position from the encoder's zero, in encoder steps: a 32-bit
+#: encoder's count range. Beyond it the lines near the rest are not representable apart
+#: (2**31 steps of 1e-9 m and more lose the step in double precision only at 2**52).
+REST_STEPS_MAX = 2.0 ** 31
+#: ... and without an encoder, in metres: a haptic device moves centimetres; at 1e6 m
+#: the friction's balance still has 1e-10 m of double precision left.
+REST_MAX_M = 1e6
+
+
+def _rest(rest_position_m: float, delta: float) -> float:
+    """The rest position, refused (naming it) where the model degenerates."""
+    from hapstab.errors import check_real
+
+    r = check_real("rest_position_m", rest_position_m)
+    bound = REST_STEPS_MAX * delta if delta else REST_MAX_M
+    if abs(r) > bound:
+        what = (f"{REST_STEPS_MAX:.0f} encoder steps of {delta:g} m" if delta else "metres")
+        raise ModelError(f"rest_position_m = {r:g}: at most {bound:g} from 0 in size ({what}); "
+                         "farther, the balance's positions near the rest lose their precision")
+    return r
+
+
 def limit_cycles(loop: HapticLoop, *, resolution_m: float | None = None,
                  quantizer: str = "floor", coulomb_friction_N: float | None = None,
                  rest_position_m: float = 0.0, harmonics: int = 15,
@@ -415,8 +437,7 @@ def limit_cycles(loop: HapticLoop, *, resolution_m: float | None = None,
     K = loop.controller.stiffness                       # type: ignore[union-attr]
     from hapstab.errors import check_real
 
-    bal = Balance(C, P, k, K, delta, quantizer, fc,
-                  check_real("rest_position_m", rest_position_m))
+    bal = Balance(C, P, k, K, delta, quantizer, fc, _rest(rest_position_m, delta))
     amps, theta = _grids(bal, loop.delay_samples, max_amplitude_m)
     roots, near = _scan(bal, amps, theta)
     H = int(harmonics)

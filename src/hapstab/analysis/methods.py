@@ -21,6 +21,7 @@ from hapstab.analysis.passivity import critical_stiffness_passivity
 from hapstab.analysis.twoport import critical_stiffness_llewellyn
 from hapstab.errors import (
     MAX_DELAY_SAMPLES,
+    PERIOD_RANGE,
     AnalysisError,
     ArgumentTypeError,
     check_delay,
@@ -210,15 +211,25 @@ def _periods(periods: Any) -> np.ndarray:
     T = check_reals("periods", periods)       # not a string, a complex number, ...
     if T.size == 0:
         raise AnalysisError("periods: the range is empty; give at least one period")
-    for t in T:   # every period, by the models' own rule (not only the first, which builds the loop)
-        check_period("period", float(t))
+    lo, hi = PERIOD_RANGE     # every period, by the models' own rule, vectorised (10^7 in ms)
+    for t in T[~((T >= lo) & (T <= hi))][:1]:
+        check_period("period", float(t))       # the first bad one, with the models' message
     return T
+
+
+#: Above this many whole delays (an integer array), they are checked vectorised.
+MANY_DELAYS = 1000
 
 
 def _delay_rows(delays: Any, delays_s: Any) -> list[Any]:
     """Whole samples, or seconds (>= 0, finite) when ``delays_s`` is given."""
     if delays_s is None:
-        rows: list[Any] = [check_delay("delay", n) for n in np.atleast_1d(delays)]
+        given = np.atleast_1d(delays)
+        if given.size > MANY_DELAYS and given.dtype.kind in "iu":    # vectorised, as periods
+            for n in given[(given < 0) | (given > MAX_DELAY_SAMPLES)][:1]:
+                check_delay("delay", n)
+        rows: list[Any] = (given.tolist() if given.size > MANY_DELAYS and given.dtype.kind in "iu"
+                           else [check_delay("delay", n) for n in given])
         what = "delays"
     else:
         rows = [check_real("delays_s", d, nonnegative=True)

@@ -37,11 +37,12 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from hapstab import budget
+from hapstab import budget, progress
 from hapstab.analysis.exact.boxes import U_HI, U_LO
 from hapstab.analysis.exact.core import exact_critical_stiffness
 from hapstab.analysis.exact.families import crossing_gradient, first_events
@@ -341,20 +342,35 @@ def robust_critical_stiffness(loop: HapticLoop | TeleoperationLoop, box: Operato
     # cost, budget.exact_points_cost: the box and its centre; its point a only when a
     # gradient sign is known); the memory is that of one batch, whatever the budget
     per = budget.exact_points_cost("", 2, order_estimate(loop, max(delays)))
+    # (time is not refused up front: the search stops at the time budget, with its gap)
     budget.check(budget.Cost(f"robust K_max: up to {max_boxes} operator sub-boxes",
-                             2 * BATCH * per.memory_bytes, max_boxes * per.seconds),
-                 max_memory, max_seconds)
+                             2 * BATCH * per.memory_bytes, 0.0), max_memory, None)
+    seconds = budget.seconds_allowed(max_seconds)
     t0 = time.perf_counter()
     st = _State(loop, rtol)
     verts = _vertices(box.lo, box.hi)
     _, v_hi, _, _ = _points(loop, verts)
     _update_upper(st, verts, v_hi)
     leaves = [_Leaf(box.lo.astype(float), box.hi.astype(float))]
+    with progress.steps(max_boxes, f"robust K_max: up to {max_boxes} sub-boxes") as advance:
+        lower = _search(st, leaves, rtol, max_boxes, lambda: time.perf_counter() - t0 > seconds,
+                        advance)
+    stopped = "" if _done(st.upper, lower, rtol) else (
+        "boxes" if st.evaluated >= max_boxes else "time")
+    return _result(st, box, lower, rtol, verts, v_hi, time.perf_counter() - t0, stopped)
+
+
+def _search(st: _State, leaves: list[_Leaf], rtol: float, max_boxes: int,
+            late: Callable[[], bool], advance: Callable[[int], None]) -> float:
+    """Branch and bound until the gap is within ``rtol``, ``max_boxes`` are spent or
+    ``late()``; returns the certified lower bound (the least of the live leaves' and the
+    pruned ones': sound whenever it stops)."""
     _evaluate(st, leaves)
+    advance(st.evaluated)
     while True:
         lower = min([lf.lb for lf in leaves] + [st.pruned])
-        if _done(st.upper, lower, rtol) or st.evaluated >= max_boxes:
-            break
+        if _done(st.upper, lower, rtol) or st.evaluated >= max_boxes or late():
+            return lower
         live = [lf.lb < st.upper * (1 - rtol) for lf in leaves]
         keep = [lf for lf, ok in zip(leaves, live, strict=True) if ok]
         st.pruned = min([st.pruned] + [lf.lb for lf, ok in zip(leaves, live, strict=True)
@@ -362,9 +378,10 @@ def robust_critical_stiffness(loop: HapticLoop | TeleoperationLoop, box: Operato
         keep.sort(key=lambda lf: lf.lb)
         todo, rest = keep[:BATCH], keep[BATCH:]
         kids = _unique([k for lf in todo for k in _split(lf)])
+        before = st.evaluated
         _evaluate(st, kids)
+        advance(st.evaluated - before)
         leaves = rest + kids
-    return _result(st, box, lower, rtol, verts, v_hi, time.perf_counter() - t0)
 
 
 def _done(upper: float, lower: float, rtol: float) -> bool:
@@ -388,7 +405,7 @@ def _check(loop: HapticLoop | TeleoperationLoop, box: OperatorBox, rtol: float,
 
 
 def _result(st: _State, box: OperatorBox, lower: float, rtol: float, verts: np.ndarray,
-            v_hi: np.ndarray, seconds: float) -> RobustStiffnessResult:
+            v_hi: np.ndarray, seconds: float, stopped: str = "") -> RobustStiffnessResult:
     """The answer: the certified bound, the named operator with its exact K_max, the
     vertices' minimum beside it."""
     lower = max(0.0, lower)
@@ -402,4 +419,5 @@ def _result(st: _State, box: OperatorBox, lower: float, rtol: float, verts: np.n
     converged = _done(st.upper, lower, rtol)
     three = lambda p: (float(p[0]), float(p[1]), float(p[2]))  # noqa: E731
     return RobustStiffnessResult(lower, three(named), float(exact), st.upper, converged,
-                                 st.evaluated, rtol, vmin, three(vert), box, seconds, st.loop)
+                                 st.evaluated, rtol, vmin, three(vert), box, seconds, st.loop,
+                                 stopped)

@@ -51,6 +51,9 @@ class RobustStiffnessResult(Result):
         Wall time of the search.
     loop : HapticLoop or TeleoperationLoop
         The loop (its own operator is not used); kept for the plot.
+    stopped : {"", "boxes", "time"}
+        Why an unconverged search stopped: its ``max_boxes`` or its time budget
+        (:func:`hapstab.budget.seconds_allowed`) spent; the bounds hold either way.
     """
 
     critical_stiffness: float
@@ -65,6 +68,7 @@ class RobustStiffnessResult(Result):
     box: OperatorBox
     seconds: float
     loop: Any = field(repr=False, default=None)
+    stopped: str = ""
 
     @property
     def gap(self) -> float:
@@ -89,7 +93,10 @@ class RobustStiffnessResult(Result):
         if self.converged:
             words += f" (gap {self.gap:.3g} N/m, at most {self.rtol:g} relative)"
         else:
-            words += (f"; the budget of {self.boxes} sub-boxes is spent: the smallest K_max "
+            spent = (f"the time budget is spent after {self.seconds:.3g} s and {self.boxes} "
+                     "sub-boxes" if self.stopped == "time" else
+                     f"the budget of {self.boxes} sub-boxes is spent")
+            words += (f"; {spent}: the smallest K_max "
                       f"lies in [{self.critical_stiffness:.8g}, {self.upper_bound:.8g}] N/m")
         # above the gap asked for (and the enclosures' 1e-9): the vertices miss the minimum
         if self.vertex_minimum > self.upper_bound * (1 + max(self.rtol, 1e-9)):
@@ -109,7 +116,8 @@ class RobustStiffnessResult(Result):
                          "converged": self.converged, "rtol": self.rtol,
                          "sub_boxes": self.boxes, "vertex_minimum": self.vertex_minimum,
                          "vertex": vx, "operator_box": self.box.to_dict(),
-                         "seconds": self.seconds, "reason": self.reason})
+                         "seconds": self.seconds, "stopped": self.stopped,
+                         "reason": self.reason})
 
     def to_csv(self, path: Any) -> None:
         """Write the named operator and the box's vertices: mass_kg, damping_N_s_per_m,

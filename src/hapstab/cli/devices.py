@@ -7,9 +7,18 @@ from typing import Any, cast
 
 import click
 
-from hapstab.cli.options import LOOP_KINDS, NONNEG, POS, emit, fmt, loop_options, rich_table
+from hapstab.cli.options import (
+    LOOP_KINDS,
+    NONNEG,
+    POS,
+    IntRange,
+    emit,
+    fmt,
+    loop_options,
+    rich_table,
+)
 from hapstab.cli.regions import _range
-from hapstab.errors import HapstabError
+from hapstab.errors import HapstabError, ascii_float
 from hapstab.models.loops import HapticLoop
 
 
@@ -24,7 +33,7 @@ def _at(spec: str | None) -> tuple[float, float] | None:
     if spec is None:
         return None
     try:
-        K, B = (float(v) for v in spec.split(","))
+        K, B = (ascii_float(v) for v in spec.split(","))
     except ValueError:
         raise HapstabError(f"--at = {spec!r}: must be K,B (N/m, N*s/m)") from None
     return K, B
@@ -34,7 +43,7 @@ def _at(spec: str | None) -> tuple[float, float] | None:
 @loop_options("hve")
 @click.option("--K", "K_spec", required=True, help="Stiffness window lo:hi in N/m (the plot).")
 @click.option("--B", "B_spec", required=True, help="Virtual dampings lo:hi in N*s/m, either sign.")
-@click.option("--rows", type=click.IntRange(2, 2000), default=60, show_default=True,
+@click.option("--rows", type=IntRange(2, 2000), default=60, show_default=True,
               help="Virtual dampings scanned.")
 @click.option("--at", "at_spec", default=None, metavar="K,B",
               help="The wall whose displayed impedance is shown (default: -K and -B).")

@@ -7,6 +7,7 @@ from typing import Any
 
 import click
 
+from hapstab.cli.options import IntRange
 from hapstab.errors import HapstabError
 
 #: Where the explorer listens unless told otherwise (this machine only).
@@ -14,7 +15,7 @@ LOCAL = "127.0.0.1"
 
 
 @click.command("explore", short_help="The stability explorer: a local web page.")
-@click.option("--port", type=click.IntRange(0, 65535), default=8765, show_default=True,
+@click.option("--port", type=IntRange(0, 65535), default=8765, show_default=True,
               help="TCP port (0: any free port; the address printed says which).")
 @click.option("--host", default=LOCAL, show_default=True,
               help="Interface to listen on; anything but localhost, 127.x or ::1 lets other "
@@ -35,6 +36,9 @@ def explore_cmd(port: int, host: str, study_path: str | None, open_browser: bool
                            "missing): pip install 'hapstab[explore]'") from None
     _check_listen(host, port)
     app = create_app(study_path, host)
+    from hapstab.explorer.app import warm_workers
+
+    warm_workers()            # the workers' server imports hapstab now, not at the first request
     if not is_loopback(host):
         click.echo(f"hapstab: warning: --host = {host}: the explorer is reachable from other "
                    "machines on that interface; it has no authentication", err=True)

@@ -8,7 +8,7 @@ from typing import Any
 
 import click
 
-from hapstab.cli.options import LOOP_KINDS, POS, REAL, emit, loop_options, rich_table
+from hapstab.cli.options import LOOP_KINDS, POS, REAL, IntRange, emit, loop_options, rich_table
 
 
 @click.group("limit-cycle",
@@ -29,7 +29,7 @@ def limit_cycle_cmd() -> None:
 @click.option("--rest", type=REAL, default=0.0, show_default=True,
               help="Where the operator's spring is relaxed, m (simulate's --rest; here 0 by "
                    "default, where the virtual spring pulls).")
-@click.option("--harmonics", type=click.IntRange(1, 63), default=15, show_default=True,
+@click.option("--harmonics", type=IntRange(1, 63), default=15, show_default=True,
               help="Harmonics of the refining harmonic balance (1: the describing function alone).")
 @click.option("--max-amplitude", type=POS, default=None,
               help="Largest amplitude searched in m (default 64 Delta; 1e5 f_c/K with friction "

@@ -13,7 +13,7 @@ from typing import Any
 import click
 
 from hapstab.cli import output
-from hapstab.errors import PERIOD_RANGE, HapstabError
+from hapstab.errors import PERIOD_RANGE, HapstabError, ascii_float
 from hapstab.models.controllers import (
     Controller,
     FilteredSpringDamper,
@@ -42,9 +42,9 @@ class Number(click.ParamType):
             v = value
         else:
             try:
-                v = float(str(value).strip())
+                v = ascii_float(value)
             except ValueError:
-                self.fail(f"{value!r} is not a number", param, ctx)
+                self.fail(f"{value!r} is not a number (ASCII decimal digits)", param, ctx)
         if not math.isfinite(v):
             self.fail(f"{value!r}: must be finite (not NaN or inf)", param, ctx)
         if self.positive and not v > 0:
@@ -62,7 +62,7 @@ class Number(click.ParamType):
 #: spellings are read.
 UNITS = {"s": {"": 1.0, "s": 1.0, "ms": 1e-3, "us": 1e-6, "µs": 1e-6},
          "Hz": {"": 1.0, "Hz": 1.0, "hz": 1.0, "kHz": 1e3, "khz": 1e3, "KHz": 1e3, "MHz": 1e6}}
-_QUANTITY = re.compile(r"^\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*([^\d\s]*)\s*$")
+_QUANTITY = re.compile(r"^\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*([^\d\s]*)\s*$", re.ASCII)
 
 
 def parse_quantity(text: Any, unit: str) -> float:
@@ -76,7 +76,7 @@ def parse_quantity(text: Any, unit: str) -> float:
     if isinstance(text, (int, float)):
         return float(text)
     try:
-        return float(str(text).strip())        # a plain number (also nan and inf, refused later)
+        return ascii_float(text)        # a plain number (also nan and inf, refused later)
     except ValueError:
         pass
     m = _QUANTITY.match(str(text))
@@ -116,7 +116,7 @@ class Delay(click.ParamType):
             v = value
         else:
             try:
-                f = float(str(value).strip())
+                f = ascii_float(value)
             except ValueError:
                 self.fail(f"{value!r} is not a number; a whole number of samples >= 0 is allowed",
                           param, ctx)
@@ -126,6 +126,16 @@ class Delay(click.ParamType):
         if v < 0:
             self.fail(f"{value!r}: must be a whole number of samples >= 0", param, ctx)
         return v
+
+
+class IntRange(click.IntRange):
+    """:class:`click.IntRange` of ASCII decimal digits only (Python's :func:`int` also
+    takes mathematical bold or fullwidth digits and ``'1_000'``)."""
+
+    def convert(self, value: Any, param: Any, ctx: Any) -> Any:
+        if isinstance(value, str) and not re.fullmatch(r"\s*[-+]?[0-9]+\s*", value, re.ASCII):
+            self.fail(f"{value!r} is not a whole number (ASCII decimal digits)", param, ctx)
+        return super().convert(value, param, ctx)
 
 
 POS, NONNEG, REAL = Number(positive=True), Number(nonnegative=True), Number()
@@ -180,9 +190,11 @@ def _timing_options(kind: str, ranges: bool) -> list[Callable]:
             whole = "whole samples only" if kind == "4ch" else "fractional allowed"
             timing += [
                 click.option("--delay-forward", "delay_forward", type=NONNEG, default=None,
-                             help=f"Master->slave delay in samples ({whole}; default --delay)."),
+                             help=f"Master->slave delay in samples ({whole}; not with --delay; "
+                                  "default: the study's delay, else 0)."),
                 click.option("--delay-backward", "delay_backward", type=NONNEG, default=None,
-                             help=f"Slave->master delay in samples ({whole}; default --delay)."),
+                             help=f"Slave->master delay in samples ({whole}; not with --delay; "
+                                  "default: the study's delay, else 0)."),
             ]
     return timing
 
@@ -375,6 +387,11 @@ def with_delays(loop: TeleoperationLoop, kw: dict[str, Any]) -> TeleoperationLoo
     if ds is not None and (fwd is not None or bwd is not None or given("delay")):
         raise HapstabError("--delay-s with --delay or --delay-forward/--delay-backward: give the "
                            "delay one way (--delay is the default for a side not given)")
+    if (fwd is not None or bwd is not None) and given("delay"):
+        side = "--delay-forward" if fwd is not None else "--delay-backward"
+        raise HapstabError(f"--delay = {kw.get('delay')!r} with {side} = "
+                           f"{fwd if fwd is not None else bwd!r}: give the delay one way (both "
+                           "sides with --delay-forward and --delay-backward, or one --delay)")
     T = loop.period
     if ds is not None:
         loop = loop.with_delays_s(ds)

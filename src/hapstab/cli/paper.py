@@ -18,6 +18,7 @@ from hapstab.cli.options import (
     NONNEG,
     PAPER_KINDS,
     POS,
+    IntRange,
     bounds_of,
     console,
     damping_bound_options,
@@ -118,7 +119,7 @@ def _passivity_command(kind: str) -> None:
 
 #: ``passivity --curve POINTS``: the margin over frequency in the JSON.
 CURVE = click.option(
-    "--curve", "curve_points", type=click.IntRange(0, 100_000), default=0, show_default=True,
+    "--curve", "curve_points", type=IntRange(0, 100_000), default=0, show_default=True,
     help="With --json: add the passivity margin over frequency at POINTS evenly spaced "
          "frequencies from 0 to the Nyquist frequency (\"margin_curve\"; its minimum is the "
          "margin); 0: none.")

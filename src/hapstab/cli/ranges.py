@@ -6,7 +6,7 @@ from __future__ import annotations
 import math
 
 from hapstab.cli.options import UNITS, parse_quantity
-from hapstab.errors import HapstabError
+from hapstab.errors import HapstabError, ascii_float
 
 __all__ = ["parse_range", "parse_periods", "parse_delays", "RANGE_COUNT"]
 
@@ -76,14 +76,14 @@ def parse_range(spec: str, name: str, unit: str, *, count: bool = True,
 
 def _plain(text: str) -> float:
     try:
-        return float(text)
+        return ascii_float(text)
     except ValueError:
         raise ValueError(f"{text.strip()!r} is not a number") from None
 
 
 def _count(spec: str, name: str, text: str, allowed: str) -> int:
     try:
-        c = float(text)
+        c = ascii_float(text)
     except ValueError:
         raise HapstabError(f"{name} = {spec!r}: count {text!r} is not a number; {allowed}") from None
     if not (math.isfinite(c) and c.is_integer() and 1 <= c <= 100_000):
@@ -105,7 +105,7 @@ def parse_delays(spec: str) -> list[int]:
         if not x:
             continue
         try:
-            f = float(x)
+            f = ascii_float(x)
         except ValueError:
             raise HapstabError(f"--delay = {spec!r}: malformed number {x!r}; {allowed}") from None
         if not (math.isfinite(f) and f.is_integer() and f >= 0):

@@ -11,6 +11,7 @@ from hapstab.cli.options import (
     PAPER_KINDS,
     POS,
     REAL,
+    IntRange,
     emit,
     fmt,
     given,
@@ -75,7 +76,7 @@ def _region_command(kind: str) -> None:
     @click.option("--K", "K_spec", required=True, help="Stiffness window lo:hi in N/m.")
     @click.option("--B", "B_spec", required=True,
                   help="Virtual damping window lo:hi in N*s/m, either sign (e.g. -2:20).")
-    @click.option("--resolution", type=click.IntRange(2, 2000), default=200, show_default=True,
+    @click.option("--resolution", type=IntRange(2, 2000), default=200, show_default=True,
                   help="Rows (B values) and grid columns (K values).")
     @click.option("--overlay", "overlays", default=",".join(_overlays(kind)), show_default=True,
                   help=f"Comma list drawn on the plot: {', '.join(_overlays(kind))} (or none)"

@@ -7,7 +7,17 @@ from typing import Any
 
 import click
 
-from hapstab.cli.options import LOOP_KINDS, PAPER_KINDS, emit, fmt, given, loop_options, rich_table
+from hapstab.cli.options import (
+    LOOP_KINDS,
+    PAPER_KINDS,
+    IntRange,
+    Number,
+    emit,
+    fmt,
+    given,
+    loop_options,
+    rich_table,
+)
 from hapstab.cli.ranges import parse_range
 from hapstab.errors import HapstabError
 
@@ -81,9 +91,9 @@ def _robust_command(kind: str) -> None:
     @loop_options(kind)
     @operator_box_options
     # rtol from 1e-12 (the exact core's accuracy) to 0.5; 1e-6 as the library's default
-    @click.option("--rtol", type=click.FloatRange(1e-12, 0.5), default=1e-6, show_default=True,
+    @click.option("--rtol", type=Number(span=(1e-12, 0.5)), default=1e-6, show_default=True,
                   help="Stop when upper - lower <= rtol * upper.")
-    @click.option("--max-boxes", type=click.IntRange(1, 100000), default=6000,
+    @click.option("--max-boxes", type=IntRange(1, 100000), default=6000,
                   show_default=True, help="Budget of operator sub-boxes.")
     @click.option("--plot", "plot_path", type=click.Path(dir_okay=False), default=None,
                   help="Write a heat map of K_max over the box (PNG or SVG by extension).")

@@ -15,6 +15,7 @@ from hapstab.cli.options import (
     NONNEG,
     POS,
     STATE_SPACE_KINDS,
+    IntRange,
     Number,
     emit,
     loop_options,
@@ -62,7 +63,7 @@ def _simulate_command(kind: str) -> None:
                   help="Encoder reading: floor (count of lines passed) or nearest step.")
     @click.option("--rest", type=Number(), default=None,
                   help="Rest position of the operator's spring in m (default: --x0).")
-    @click.option("--dense", type=click.IntRange(0, 1000), default=0, show_default=True,
+    @click.option("--dense", type=IntRange(0, 1000), default=0, show_default=True,
                   help="Also compute the exact trajectory at this many points per sample (plot).")
     @click.option("--csv", "csv_path", type=click.Path(dir_okay=False), default=None,
                   help="Write the sampled time series as CSV.")
@@ -114,7 +115,7 @@ _TDPA_AND_SERIES = [
     click.option("--tdpa-max-damping", type=POS, default=None,
                  help="Cap on the TDPA controller's damping in N*s/m (default none). "
                       "Implies --tdpa."),
-    click.option("--series", "series_points", type=click.IntRange(0, 1_000_000), default=0,
+    click.option("--series", "series_points", type=IntRange(0, 1_000_000), default=0,
                  show_default=True,
                  help="With --json: add the sampled time series (the --csv columns) as "
                       "\"series\", every k-th sample so that at most this many rows (0: none)."),

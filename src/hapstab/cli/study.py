@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import os
 import re
+import stat
 import sys
 from dataclasses import dataclass, field
 from typing import Any
@@ -58,6 +59,12 @@ ALTERNATIVES = (("period", "rate"), ("delay", "delay_s"))
 #: a variant with its own B still has a K-B region).
 VARIED = {"region": ("virtual_damping",), "best-damping": ("virtual_damping",)}
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$")
+#: The largest study file read: 4 MiB, room for tens of thousands of variants (one is
+#: about 60 bytes); a larger one is refused before it is read.
+MAX_STUDY_BYTES = 4 * 1024 ** 2
+#: The deepest nesting of tables and arrays a study may have (the documented ones nest
+#: three deep: [run.boundary], [sweep.axes] and their lists).
+MAX_STUDY_DEPTH = 16
 
 
 class StudyError(HapstabError):
@@ -124,11 +131,7 @@ def load_study(path: Any, name: str = "--study") -> Study:
         The file is missing, not TOML, or its tables are not as documented.
     """
     p = os.fspath(path)
-    try:
-        with open(p, "rb") as fh:
-            raw = fh.read()
-    except OSError as e:
-        raise StudyError(f"{name} = {p!r}: cannot read it ({e.strerror or e})") from None
+    raw = _read_bounded(p, name)
     try:
         text = raw.decode("utf-8")       # TOML is UTF-8; the file is kept as it is
         data = tomllib.loads(text)
@@ -137,6 +140,12 @@ def load_study(path: Any, name: str = "--study") -> Study:
                          ) from None
     except (tomllib.TOMLDecodeError, ValueError) as e:   # ValueError: an integer of 4300+ digits
         raise StudyError(f"{name} = {p!r}: not a valid TOML file ({str(e)[:200]})") from None
+    except RecursionError:
+        raise StudyError(f"{name} = {p!r}: arrays or tables nested too deep to read (allowed: "
+                         f"at most {MAX_STUDY_DEPTH} levels)") from None
+    if _depth(data) > MAX_STUDY_DEPTH:
+        raise StudyError(f"{name} = {p!r}: arrays or tables nested {_depth(data)} deep; allowed: "
+                         f"at most {MAX_STUDY_DEPTH} levels")
     known = {"kind", "title", "loop", "variant", "run", "sweep"}     # [sweep]: hapstab sweep
     for key in data:
         if key not in known:
@@ -156,6 +165,54 @@ def load_study(path: Any, name: str = "--study") -> Study:
             raise StudyError(f"{p}{_at(text, name, 'run')}: run.{name} must be a table "
                              f"([run.{name}]) of that command's options")
     return Study(p, kind, str(title), _flat(loop), _variants(p, text, data), run, text)
+
+
+def _read_bounded(p: str, name: str) -> bytes:
+    """The bytes of the regular file ``p``, at most :data:`MAX_STUDY_BYTES` of them.
+
+    Opened without blocking (a FIFO would wait for a writer) and checked on the open
+    descriptor (no race with a rename): a device (``/dev/zero``), FIFO, socket or folder
+    is refused, and so is a file larger than the bound (read bounded as well: a file that
+    grows while it is read is refused too).
+    """
+    try:
+        fd = os.open(p, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
+    except OSError as e:
+        raise StudyError(f"{name} = {p!r}: cannot read it ({e.strerror or e})") from None
+    st = os.fstat(fd)
+    if not stat.S_ISREG(st.st_mode):
+        os.close(fd)
+        raise StudyError(f"{name} = {p!r}: not a regular file (a device, FIFO, socket or "
+                         "folder); a study is a TOML file")
+    with os.fdopen(fd, "rb") as fh:
+        if st.st_size > MAX_STUDY_BYTES:
+            raise StudyError(f"{name} = {p!r}: {st.st_size} bytes; a study file may have at "
+                             f"most {MAX_STUDY_BYTES} bytes")
+        try:
+            raw = fh.read(MAX_STUDY_BYTES + 1)
+        except OSError as e:
+            raise StudyError(f"{name} = {p!r}: cannot read it ({e.strerror or e})") from None
+    if len(raw) > MAX_STUDY_BYTES:
+        raise StudyError(f"{name} = {p!r}: more than {MAX_STUDY_BYTES} bytes; a study file may "
+                         f"have at most {MAX_STUDY_BYTES} bytes")
+    return raw
+
+
+def _depth(data: Any) -> int:
+    """How deep tables and arrays nest in ``data`` (iterative: no recursion limit)."""
+    deepest, todo = 0, [(data, 0)]
+    while todo:
+        x, d = todo.pop()
+        if isinstance(x, dict):
+            todo += [(v, d + 1) for v in x.values()]
+        elif isinstance(x, list):
+            todo += [(v, d + 1) for v in x]
+        else:
+            continue
+        deepest = max(deepest, d)
+        if deepest > MAX_STUDY_DEPTH:
+            break
+    return deepest
 
 
 def _table(p: str, text: str, data: dict[str, Any], name: str) -> dict[str, Any]:

@@ -43,7 +43,7 @@ from typing import Any
 
 import click
 
-from hapstab.cli.options import ARGV, LOOP_KINDS, provenance
+from hapstab.cli.options import ARGV, LOOP_KINDS, IntRange, provenance
 from hapstab.cli.study import (
     ALTERNATIVES,
     BASE,
@@ -287,7 +287,7 @@ def _number(study: Study, table: dict[str, Any], key: str, where: str, low: floa
 @click.option("--out", "out_dir", required=True, type=click.Path(file_okay=False),
               help="Folder of results: chunks/*.parquet, manifest.json, summary.json, kmax.png. "
                    "Rerun the same command to resume.")
-@click.option("--workers", type=click.IntRange(1, 4096), default=None,
+@click.option("--workers", type=IntRange(1, 4096), default=None,
               help="Local worker processes (default: every core); 1: in this process, "
                    "without Dask.")
 @click.option("--scheduler", default=None, metavar="ADDRESS",

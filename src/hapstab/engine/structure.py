@@ -12,7 +12,7 @@ from fractions import Fraction
 
 import numpy as np
 
-from hapstab.errors import ModelError, check_period
+from hapstab.errors import PERIOD_RANGE, ModelError, check_period
 from hapstab.models.controllers import (
     Controller,
     DiscreteController,
@@ -279,7 +279,11 @@ def periods_of(loop: HapticLoop | TeleoperationLoop, periods: object = None) -> 
         raise ModelError(f"periods = {periods!r}: must be numbers (s)") from None
     if T.size == 0:
         raise ModelError("periods: the list is empty; give at least one period")
-    return np.array([check_period("period", float(t)) for t in T])
+    lo, hi = PERIOD_RANGE
+    bad = ~((T >= lo) & (T <= hi))           # (vectorised: 10^7 periods are checked in ms)
+    for t in T[bad][:1]:
+        check_period("period", float(t))     # the first bad one, refused with its message
+    return T.copy()
 
 
 def structure_of(loop: HapticLoop | TeleoperationLoop) -> LoopStructure:

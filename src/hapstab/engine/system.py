@@ -426,7 +426,8 @@ def _check_finite(st: LoopStructure, T: np.ndarray, arrays: list[np.ndarray]) ->
 
 
 def build(loop: HapticLoop | TeleoperationLoop,
-          periods: Sequence[float] | np.ndarray | None = None) -> SampledSystem:
+          periods: Sequence[float] | np.ndarray | None = None, *,
+          max_memory: float | None = None, max_seconds: float | None = None) -> SampledSystem:
     """Assemble the exact closed loop of ``loop`` for each sampling period.
 
     The state is: each port's plant (ZOH), the whole-sample delay registers, the
@@ -442,14 +443,27 @@ def build(loop: HapticLoop | TeleoperationLoop,
     periods : array of float, optional
         Sampling periods (s); defaults to ``[loop.period]``. Everything else
         (devices, impedances, controllers, delays in samples) is the loop's.
+    max_memory, max_seconds : float, optional
+        Budget in bytes and seconds (default :mod:`hapstab.budget`'s): the matrices of
+        every period (:func:`hapstab.budget.build_cost`) are estimated first and
+        refused above it.
 
     Returns
     -------
     SampledSystem
+
+    Raises
+    ------
+    BudgetError
+        Over the budget, before any work.
     """
     st = structure_of(loop)
     T = periods_of(loop, periods)
     P = T.size
+    from hapstab import budget
+
+    budget.check(budget.build_cost(P, len(st.ports) * (loop.delay_in_samples + 4) + 2),
+                 max_memory, max_seconds)
     Ac, Bc, Cf, Ad, Bd, off_p = _plant(st, T)
     parts = [_controller_parts(ch.controller, T) for ch in st.channels]
     lay = _layout(st, off_p, [pa[0].shape[1] for pa in parts])

@@ -123,12 +123,17 @@ async def _read_body(request: Request) -> dict[str, Any]:
     length = request.headers.get("content-length", "")
     if length.isdigit() and int(length) > MAX_BODY_BYTES:
         raise ApiError(413, f"request body of {int(length)} bytes: at most {MAX_BODY_BYTES}")
+    from starlette.requests import ClientDisconnect
+
     raw = bytearray()
-    async for chunk in request.stream():
-        raw += chunk
-        if len(raw) > MAX_BODY_BYTES:
-            raise ApiError(413, f"request body over {MAX_BODY_BYTES} bytes: at most "
-                                f"{MAX_BODY_BYTES}")
+    try:
+        async for chunk in request.stream():
+            raw += chunk
+            if len(raw) > MAX_BODY_BYTES:
+                raise ApiError(413, f"request body over {MAX_BODY_BYTES} bytes: at most "
+                                    f"{MAX_BODY_BYTES}")
+    except ClientDisconnect:      # the client hung up mid-body: nobody to answer, no bug
+        raise ApiError(400, f"the client hung up after {len(raw)} bytes of the body") from None
     return parse_body(bytes(raw))
 
 
@@ -155,6 +160,67 @@ class _Sequencer:
 
     def superseded(self, mark: tuple[str, int] | None) -> bool:
         return mark is not None and mark[1] < self.latest.get(mark[0], mark[1])
+
+
+#: Computations run in worker processes that are ended when superseded or abandoned
+#: (:mod:`hapstab.explorer.workers`); False: in threads, which run to their end.
+IN_PROCESSES = True
+#: Seconds between two looks at a running computation (answer, superseded, hung up).
+POLL_S = 0.02
+
+
+def warm_workers() -> None:
+    """Start the worker processes' server now (:func:`hapstab.explorer.workers.warm`)."""
+    if IN_PROCESSES:
+        from hapstab.explorer.workers import warm
+
+        warm()
+
+
+async def _in_process(request: Request, kind: str, arg: Any, superseded: Callable[[], bool],
+                      limiter: Any) -> str | None:
+    """``arg`` computed in a worker process; None (and the process ended) as soon as the
+    request is superseded or its client has gone."""
+    import anyio
+
+    from hapstab.explorer.workers import Job
+
+    async with limiter:
+        if superseded():
+            return None
+        job = Job(kind, arg)
+        try:
+            while not job.ready():
+                if superseded() or await request.is_disconnected():
+                    return None
+                await anyio.sleep(POLL_S)
+            return job.result()
+        finally:
+            job.stop()
+
+
+async def _compute(request: Request, kind: str, arg: Any, seq: _Sequencer,
+                   limiter: Any) -> Response:
+    """One computation of a request (at most :data:`WORKERS` at once): 409 if superseded
+    before it starts or, in a worker process, while it runs."""
+    import anyio
+
+    mark = seq.arrive(request)
+    if not IN_PROCESSES:
+        from hapstab.explorer.code import code_for
+
+        work = (lambda: json.dumps(code_for(arg))) if kind == "code" else \
+            (lambda: run_command(arg))
+
+        def job() -> str | None:
+            return None if seq.superseded(mark) else work()
+
+        text = await anyio.to_thread.run_sync(job, limiter=limiter)
+    else:
+        text = await _in_process(request, kind, arg, lambda: seq.superseded(mark), limiter)
+    if text is None:
+        raise ApiError(409, "superseded: a later request of this channel arrived first")
+    return Response(text.encode("utf-8", "replace"), media_type="application/json")
 
 
 def create_app(study_path: str | None = None, host: str | None = None) -> Starlette:
@@ -186,18 +252,10 @@ def create_app(study_path: str | None = None, host: str | None = None) -> Starle
     seq = _Sequencer()
     limiter: list[anyio.CapacityLimiter] = []
 
-    async def compute(request: Request, work: Callable[[], str]) -> Response:
-        mark = seq.arrive(request)
+    async def compute(request: Request, kind: str, arg: Any) -> Response:
         if not limiter:
             limiter.append(anyio.CapacityLimiter(WORKERS))
-
-        def job() -> str | None:
-            return None if seq.superseded(mark) else work()
-
-        text = await anyio.to_thread.run_sync(job, limiter=limiter[0])
-        if text is None:
-            raise ApiError(409, "superseded: a later request of this channel arrived first")
-        return Response(text.encode("utf-8", "replace"), media_type="application/json")
+        return await _compute(request, kind, arg, seq, limiter[0])
 
     async def index(request: Request) -> Response:
         page = os.path.join(STATIC, "index.html")
@@ -217,10 +275,9 @@ def create_app(study_path: str | None = None, host: str | None = None) -> Starle
         return _Json({"kinds": schema(), "study": study})
 
     async def code(request: Request) -> Response:
-        from hapstab.explorer.code import code_for
 
         body = await _read_body(request)
-        return await compute(request, lambda: json.dumps(code_for(body)))
+        return await compute(request, "code", body)
 
     async def command(request: Request) -> Response:
         name = request.path_params["command"]
@@ -228,7 +285,7 @@ def create_app(study_path: str | None = None, host: str | None = None) -> Starle
             raise ApiError(405, "method POST not allowed on /api/v1/schema (GET it)")
         loop_command(name, "hve" if name not in ("twoport", "transparency") else "peb")
         argv = check_request(name, await _read_body(request))
-        return await compute(request, lambda: run_command(argv))
+        return await compute(request, "command", argv)
 
     routes = [Route("/", _guarded(index), methods=["GET"]),
               Route("/static/{path:path}", _guarded(static), methods=["GET"]),

@@ -10,13 +10,14 @@ Equation and figure numbers below are the paper's.
 from __future__ import annotations
 
 import dataclasses
+import re
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any, TypeGuard
 
 import numpy as np
 
-from hapstab.errors import ModelError, check_real
+from hapstab.errors import ModelError, ascii_float, check_real
 from hapstab.models.parts import _poly
 
 __all__ = ['SpringDamper', 'VelocityFilter', 'FilteredSpringDamper', 'AffineController',
@@ -67,6 +68,12 @@ class SpringDamper:
         """The controller as JSON-ready values, units in the keys."""
         return {"type": "spring-damper", "stiffness_N_per_m": self.stiffness,
                 "virtual_damping_N_s_per_m": self.damping}
+
+
+#: The smallest gain 1 - a of a low-pass velocity filter: 1000 ulps of 1, so that the
+#: pole a = exp(-2 pi f_c T), rounded to a double, still gives 1 - a to 1e-3 (below it
+#: the pole is not representable apart from 1, and at a = 1 the loop degenerates).
+MIN_FILTER_GAIN = 1000 * float(np.finfo(float).eps)
 
 
 @dataclass(frozen=True)
@@ -137,8 +144,8 @@ class VelocityFilter:
         kind, _, val = str(spec).partition(":")
         try:
             if kind == "lowpass":
-                return cls("lowpass", cutoff_hz=float(val))
-            if kind == "average" and val.strip().isdigit():
+                return cls("lowpass", cutoff_hz=ascii_float(val))
+            if kind == "average" and re.fullmatch("[0-9]+", val.strip()):
                 return cls("average", samples=int(val))
         except ValueError:
             pass
@@ -146,11 +153,27 @@ class VelocityFilter:
                          "average:N (N >= 1 samples)")
 
     def pole(self, period: np.ndarray | float) -> np.ndarray:
-        """The low-pass pole a = exp(-2 pi f_c T) per period (0 for ``"average"``)."""
+        """The low-pass pole a = exp(-2 pi f_c T) per period (0 for ``"average"``).
+
+        Raises
+        ------
+        ModelError
+            The cutoff is too low for the period: 1 - a, the filter's gain, is below
+            :data:`MIN_FILTER_GAIN` (``lowpass:1e-320`` makes a = 1 exactly: a filter
+            that passes nothing, with a pole on the unit circle).
+        """
         T = np.asarray(period, float)
         if self.kind != "lowpass":
             return np.zeros(T.shape)
-        return np.exp(-2.0 * np.pi * self.cutoff_hz * T)
+        x = 2.0 * np.pi * self.cutoff_hz * T
+        bad = -np.expm1(-x) < MIN_FILTER_GAIN
+        if np.any(bad):
+            t = float(np.max(np.atleast_1d(T)[np.atleast_1d(bad)]))
+            raise ModelError(f"velocity filter cutoff = {self.cutoff_hz:g} Hz: too low for the "
+                             f"period {t:g} s (the pole exp(-2 pi f_c T) is 1 to within "
+                             f"{MIN_FILTER_GAIN:g}: not representable apart from 1); allowed: "
+                             f"f_c >= {MIN_FILTER_GAIN / (2 * np.pi * t):.3g} Hz at this period")
+        return np.exp(-x)
 
     def transfer(self, period: float) -> tuple[np.ndarray, np.ndarray]:
         """(num, den) of F(z) in z, highest power first."""

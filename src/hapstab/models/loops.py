@@ -86,6 +86,7 @@ class HapticLoop:
         _check_controller("controller", self.controller)
         object.__setattr__(self, "operator", Impedance.from_any(self.operator, "operator"))
         object.__setattr__(self, "period", check_period("period", self.period))
+        _check_filters(self.controllers, self.period)
         object.__setattr__(self, "delay_samples", check_delay("delay_samples", self.delay_samples))
         object.__setattr__(self, "fractional_delay",
                            check_fraction("fractional_delay", self.fractional_delay))
@@ -216,6 +217,7 @@ class TeleoperationLoop:
         object.__setattr__(self, "operator", Impedance.from_any(self.operator, "operator"))
         object.__setattr__(self, "environment", Impedance.from_any(self.environment, "environment"))
         object.__setattr__(self, "period", check_period("period", self.period))
+        _check_filters(self.controllers, self.period)
         object.__setattr__(self, "delay_samples", check_delay("delay_samples", self.delay_samples))
         object.__setattr__(self, "fractional_delay",
                            check_fraction("fractional_delay", self.fractional_delay))
@@ -441,6 +443,15 @@ def _gain(c: Controller) -> str:
         return f"K {c.stiffness:g} P(z) + Q(z)" if has_stiffness(c) else "H(z)"
     vf = getattr(c, "velocity_filter", None)
     return f"K {c.stiffness:g}, B {c.damping:g}" + (f" on {vf}" if vf else "")
+
+
+def _check_filters(controllers: tuple[Controller, ...], period: float) -> None:
+    """Refuse a velocity filter degenerate at ``period`` (its pole; see
+    :meth:`VelocityFilter.pole`)."""
+    for c in controllers:
+        vf = getattr(c, "velocity_filter", None)
+        if vf is not None:
+            vf.pole(period)
 
 
 def require_loop(loop: Any, name: str = "loop") -> None:

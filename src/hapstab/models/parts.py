@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from hapstab.errors import ModelError, check_poly, check_real
+from hapstab.errors import ModelError, ModelTypeError, ascii_float, check_poly, check_real
 from hapstab.tolerances import COEFF_ZERO
 
 __all__ = ['friction_note', 'Device', 'Impedance', 'NO_IMPEDANCE', 'spring', 'mass_spring_damper',
@@ -162,7 +162,23 @@ class Impedance:
         return A, B, C
 
     def __call__(self, s: complex | np.ndarray) -> complex | np.ndarray:
-        """Evaluate Z(s)."""
+        """Evaluate Z(s).
+
+        Raises
+        ------
+        ModelTypeError
+            ``s`` is not a number or an array of numbers (``None``, a string).
+        """
+        if isinstance(s, (str, bytes, bool)) or s is None:
+            raise ModelTypeError(f"s = {s!r:.60}: must be a (complex) number or an array of "
+                                 f"numbers (got {type(s).__name__})")
+        try:
+            x = np.asarray(s)
+        except (TypeError, ValueError):
+            x = np.asarray(None)
+        if x.dtype.kind not in "biufc":
+            raise ModelTypeError(f"s = {s!r:.60}: must be a (complex) number or an array of "
+                                 f"numbers (got {type(s).__name__})")
         return np.polyval(self.num, s) / np.polyval(self.den, s)
 
     @classmethod
@@ -265,7 +281,7 @@ def parse_impedance(spec: str, name: str = "--operator") -> Impedance:
         return NO_IMPEDANCE
     kind, _, args = s.partition(":")
     try:
-        vals = [float(a) for a in args.split(",")] if args else []
+        vals = [ascii_float(a) for a in args.split(",")] if args else []
     except ValueError:
         raise ModelError(f"{name} = {spec!r}: malformed number; {allowed}") from None
     try:

@@ -429,7 +429,8 @@ def plot_region(res: Any, ax: Any = None) -> Any:
     ax.set_title(f"{res.kind.upper()} stable region (shaded), T = {T * 1e3:g} ms, "
                  f"t_d = {n:g} T" + (f"\n{_wrap(res.model, ax, 9)}" if getattr(res, "model", "")
                                       else ""), fontsize=9)
-    ax.legend(loc="best", fontsize=8)
+    if ax.get_legend_handles_labels()[0]:     # (no overlay and no boundary: no legend)
+        ax.legend(loc="best", fontsize=8)
     return ax
 
 

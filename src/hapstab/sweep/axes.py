@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from hapstab.errors import HapstabError
+from hapstab.errors import HapstabError, ascii_float
 
 __all__ = ["SweepError", "Axis", "Points", "parse_axis", "ids_of", "chunks_of"]
 
@@ -255,7 +255,7 @@ def parse_axis(name: str, spec: Any, *, column: str | None = None,
 
 def _count(key: str, spec: str, text: str) -> int:
     try:
-        f = float(text.strip())
+        f = ascii_float(text)
     except ValueError:
         f = math.nan
     if not (math.isfinite(f) and f.is_integer()):

@@ -70,7 +70,7 @@ def on_dask(spec: Spec, todo: list[int], workers: int, scheduler: str | None
         if scheduler is None:
             with _fast_malloc():
                 cluster = LocalCluster(n_workers=workers, processes=True, threads_per_worker=1,
-                                       dashboard_address=None, silence_logs=50)
+                                       **NO_DASHBOARD, silence_logs=50)
             client = Client(cluster)
         else:
             client = _connect(check_address(scheduler))
@@ -86,6 +86,14 @@ def on_dask(spec: Spec, todo: list[int], workers: int, scheduler: str | None
         client.close()
         if cluster is not None:
             cluster.close()
+
+
+#: A local cluster without a dashboard and without a fixed port: Dask's scheduler starts
+#: its HTTP server even with ``dashboard_address=None`` (at 8787, and with 8787 taken by
+#: another cluster it warns and leaves a socket behind); here it listens on a free port
+#: of the loopback interface only, with the dashboard off.
+NO_DASHBOARD: dict[str, Any] = {"dashboard_address": "127.0.0.1:0",
+                                "scheduler_kwargs": {"dashboard": False}}
 
 
 def _fast_malloc() -> Any:

@@ -28,6 +28,8 @@ __all__ = ["Store", "MANIFEST", "CHUNKS", "chunk_name", "arrow_schema", "read_ch
 
 MANIFEST = "manifest.json"
 CHUNKS = "chunks"
+#: The files a sweep writes in its folder, besides its chunks.
+OWN_FILES = ("summary.json", "kmax.png", MANIFEST)
 #: Seconds between two writes of the manifest at least (a sweep of 10^5 chunks must not
 #: rewrite a manifest of 10^5 entries after each of them; a long one waits 20 times as long
 #: as it took to write).
@@ -115,11 +117,15 @@ class Store:
 
     # ------------------------------------------------------------------ opening
     def _open(self, force: bool) -> None:
+        self._refuse_link(self.chunks_dir)
         try:
             os.makedirs(self.chunks_dir, exist_ok=True)
         except OSError as e:
             raise OutputError(f"--out = {self.folder!r:.80}: cannot create the folder "
                               f"({e.strerror or e})") from None
+        for path in (*self._chunk_files(), *self._parts(),
+                     *(os.path.join(self.folder, f) for f in OWN_FILES)):
+            self._refuse_link(path)
         old = None if force else self._read_manifest()
         if old is not None and old.get("study_sha256") != self.head["study_sha256"]:
             raise SweepError(f"--out = {self.folder!r:.80}: holds another sweep (study "
@@ -128,9 +134,8 @@ class Store:
                              "or --force to start over there")
         if force:
             self._clear()
-        for d in (self.chunks_dir, self.folder):     # a kill's leftovers: never complete
-            for tmp in glob.glob(os.path.join(glob.escape(d), ".*.part")):
-                os.remove(tmp)
+        for tmp in self._parts():      # a kill's leftovers: never complete
+            os.remove(tmp)
         if old is None and not force and self._chunk_files():
             raise SweepError(f"--out = {self.folder!r:.80}: has chunk files but no manifest "
                              "(not a sweep's folder, or its manifest was removed); choose "
@@ -142,6 +147,20 @@ class Store:
                     self.done[int(entry["chunk"])] = entry
         self._adopt()
         self.write_manifest(now=True)
+
+    def _refuse_link(self, path: str) -> None:
+        """Refuse a symbolic link where the sweep writes or deletes: the sweep never makes
+        one, so it is someone else's, and writing or deleting through it would reach
+        files outside the folder (``--force`` deleted ``chunk-*.parquet`` in a linked
+        ``chunks/``'s target)."""
+        if os.path.islink(path):
+            raise SweepError(f"--out = {self.folder!r:.80}: {os.path.relpath(path, self.folder)} "
+                             "is a symbolic link (a sweep never makes one, and never writes "
+                             "or deletes through one); remove it, or choose another folder")
+
+    def _parts(self) -> list[str]:
+        return [t for d in (self.chunks_dir, self.folder)
+                for t in glob.glob(os.path.join(glob.escape(d), ".*.part"))]
 
     def _read_manifest(self) -> dict[str, Any] | None:
         if not os.path.exists(self.path):
@@ -160,7 +179,7 @@ class Store:
     def _clear(self) -> None:
         for f in self._chunk_files():
             os.remove(f)
-        for f in ("summary.json", "kmax.png", MANIFEST):
+        for f in OWN_FILES:
             if os.path.exists(os.path.join(self.folder, f)):
                 os.remove(os.path.join(self.folder, f))
 
