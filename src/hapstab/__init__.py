@@ -11,8 +11,11 @@ from hapstab.analysis.closed_forms import colgate, eq18, eq29, eq34, gil, gil200
 from hapstab.analysis.damping import BestDampingResult, best_damping
 from hapstab.analysis.exact.core import stability
 from hapstab.analysis.exact.many import critical_stiffness_many
+from hapstab.analysis.interop import to_control
 from hapstab.analysis.limit_cycle_results import LimitCycleResult, PredictedCycle
 from hapstab.analysis.limit_cycles import limit_cycles
+from hapstab.analysis.margin_result import FrequencyView, MarginResult
+from hapstab.analysis.margins import frequency_view, margins
 from hapstab.analysis.methods import boundary, critical_stiffness, methods_for
 from hapstab.analysis.nonlinear_passivity import (
     NonlinearPassivityResult,
@@ -78,4 +81,5 @@ __all__ = [
     "OperatorBox", "operator_box", "robust_critical_stiffness", "RobustStiffnessResult",
     "robust_best_damping", "RobustDampingResult", "sweep", "SweepResult",
     "critical_stiffness_many",
+    "to_control", "margins", "frequency_view", "MarginResult", "FrequencyView",
 ]

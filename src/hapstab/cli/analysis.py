@@ -93,9 +93,18 @@ def _check_command(kind: str) -> None:
     @check.command(kind)
     @loop_options(kind)
     @click.option("--stiffness", "-K", type=NONNEG, required=True, help="K in N/m.")
-    def _cmd(stiffness: float, as_json: bool, **kw: Any) -> None:
+    @click.option("--margins/--no-margins", default=True, show_default=True,
+                  help="Also the delay margin (extra delay, added where the loop's delay is; "
+                       "teleoperation: to each direction), the stiffness range and the "
+                       "virtual-damping range with the loop stable (docs/guide/margins.md).")
+    @click.option("--plot", "plot_path", type=click.Path(dir_okay=False), default=None,
+                  help="Write the Nyquist and Bode views of the exact sampled loop at K.")
+    def _cmd(stiffness: float, margins: bool, plot_path: str | None, as_json: bool,
+             **kw: Any) -> None:
         from hapstab.analysis.exact.core import stability
+        from hapstab.cli.files import check_files
 
+        check_files(None, plot_path, as_json)
         loop = make(kw, stiffness)
         res = stability(loop)
         d = res.to_dict()
@@ -103,11 +112,31 @@ def _check_command(kind: str) -> None:
         rows = [("verdict", res.verdict), ("spectral radius", f"{res.spectral_radius:.12g}"),
                 ("dominant pole", f"{res.dominant_pole:.8g}"),
                 ("frequency", f"{res.frequency_hz:.6g} Hz"), ("why", res.reason)]
+        if margins or plot_path:
+            rows += _margins(loop, d, margins, plot_path)
         emit(d, as_json, lambda: rich_table(f"stability, {kind}, K = {stiffness:g} N/m", rows, loop),
              loop)
 
     _cmd.__doc__ = f"Stability of the {kind.upper()} loop at stiffness K."
 
+
+
+def _margins(loop: Any, d: dict[str, Any], keys: bool, plot_path: str | None
+             ) -> list[tuple[str, str]]:
+    """The margins' rows of ``check``'s table; their keys added to ``d`` (``--margins``)
+    and the Nyquist / Bode figure written (``--plot``)."""
+    from hapstab.analysis.margins import margins
+    from hapstab.cli.files import write_files
+
+    m = margins(loop, view=plot_path is not None)
+    if plot_path:
+        write_files(m, None, plot_path)
+    if not keys:
+        return []
+    md = {k: v for k, v in m.to_dict().items()
+          if k not in d and k not in ("verdict", "reason", "friction_note")}
+    d.update(md, margins_reason=m.reason)
+    return [r for r in m.rows() if r[0] != "verdict at K"] + [("margins", m.reason)]
 
 
 def _boundary_command(kind: str) -> None:
