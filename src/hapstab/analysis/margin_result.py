@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from hapstab.results import Result, html_table, jsonable, write_csv
+from hapstab.results import Result, jsonable, write_csv
 
 __all__ = ["MarginResult", "FrequencyView"]
 
@@ -56,13 +56,6 @@ class FrequencyView(Result):
                          "stiffness_N_per_m": self.stiffness, "period_s": self.period,
                          "open_loop_outside": self.open_loop_outside,
                          "open_loop_on_circle": self.open_loop_on_circle})
-
-    def _repr_html_(self) -> str:
-        return html_table("FrequencyView", [
-            ("stiffness", f"{self.stiffness:.6g} N/m"), ("period", f"{self.period * 1e3:g} ms"),
-            ("frequencies", f"{self.frequency_hz.size} from {self.frequency_hz[0]:.3g} to "
-                            f"{self.frequency_hz[-1]:.4g} Hz"),
-            ("open-loop poles outside (K = 0)", str(self.open_loop_outside))])
 
     def to_csv(self, path: Any) -> None:
         """Write frequency_hz, loop_re, loop_im, magnitude_db, phase_deg per frequency."""
@@ -181,10 +174,6 @@ class MarginResult(Result):
                      else "")),
                 ("damping range", f"[{_fmt(lo, '')}, {_fmt(hi, '')}] N*s/m around B = "
                                   f"{self.damping:.4g} N*s/m")]
-
-    def _repr_html_(self) -> str:
-        return html_table("MarginResult", [*self.rows(), ("why", self.reason),
-                                           *([("note", self.note)] if self.note else [])])
 
     def to_csv(self, path: Any) -> None:
         """Write the margins as name, value rows (the keys of :meth:`to_dict`)."""
