@@ -60,7 +60,13 @@ from hapstab.analysis.exact.core import stability
 from hapstab.analysis.margin_result import FrequencyView, MarginResult
 from hapstab.analysis.methods import critical_stiffness
 from hapstab.engine.system import build
-from hapstab.errors import AnalysisError, HapstabError, ModelError, check_real
+from hapstab.errors import (
+    MAX_DELAY_SAMPLES,
+    AnalysisError,
+    HapstabError,
+    ModelError,
+    check_real,
+)
 from hapstab.models.loops import require_loop
 from hapstab.models.variations import extra_damping, extra_delay, virtual_damping
 
@@ -142,6 +148,12 @@ def damping_margin(loop: Any, bisections: int = 10) -> list[tuple[float, float |
             lo, hi = _first_loss(ok, np.linspace(lo, hi, 9)[1:], bisections, start=lo)
         out.append((sign * lo, None if hi is None else sign * hi))
     return out
+
+
+def _delays(loop: Any) -> list[float]:
+    """The loop's delays in samples (one; teleoperation: forward and backward)."""
+    return [float(getattr(loop, n)) for n in ("delay_in_samples", "forward_delay_in_samples",
+                                             "backward_delay_in_samples") if hasattr(loop, n)]
 
 
 def _devices(loop: Any) -> list[Any]:
@@ -240,6 +252,11 @@ def margins(loop: Any, *, step_samples: float = 0.25, max_extra_samples: float =
             step_samples, bis = 1.0, 0
             why.append("this loop takes whole samples of delay only: the delay margin is "
                        "in whole samples")
+        room = MAX_DELAY_SAMPLES - max(_delays(loop))     # the model's longest delay
+        if room < max_extra_samples:
+            max_extra_samples = max(room, step_samples)
+            why.append(f"the delay search stops at hapstab's longest delay, "
+                       f"{MAX_DELAY_SAMPLES} samples")
         dm, du = delay_margin(loop, step_samples, max_extra_samples, bis)
         damp = _damping(loop, B, why)
     iv = _stiffness_interval(loop, K, why)

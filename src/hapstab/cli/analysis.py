@@ -93,13 +93,15 @@ def _check_command(kind: str) -> None:
     @check.command(kind)
     @loop_options(kind)
     @click.option("--stiffness", "-K", type=NONNEG, required=True, help="K in N/m.")
-    @click.option("--margins/--no-margins", default=True, show_default=True,
+    @click.option("--margins/--no-margins", default=None,
                   help="Also the delay margin (extra delay, added where the loop's delay is; "
                        "teleoperation: to each direction), the stiffness range and the "
-                       "virtual-damping range with the loop stable (docs/guide/margins.md).")
+                       "virtual-damping range with the loop stable (docs/guide/margins.md). "
+                       f"Default: computed when estimated under {AUTO_MARGIN_SECONDS:g} s "
+                       "(about 100 certified verdicts), else said how to ask for them.")
     @click.option("--plot", "plot_path", type=click.Path(dir_okay=False), default=None,
                   help="Write the Nyquist and Bode views of the exact sampled loop at K.")
-    def _cmd(stiffness: float, margins: bool, plot_path: str | None, as_json: bool,
+    def _cmd(stiffness: float, margins: bool | None, plot_path: str | None, as_json: bool,
              **kw: Any) -> None:
         from hapstab.analysis.exact.core import stability
         from hapstab.cli.files import check_files
@@ -112,13 +114,41 @@ def _check_command(kind: str) -> None:
         rows = [("verdict", res.verdict), ("spectral radius", f"{res.spectral_radius:.12g}"),
                 ("dominant pole", f"{res.dominant_pole:.8g}"),
                 ("frequency", f"{res.frequency_hz:.6g} Hz"), ("why", res.reason)]
+        if margins is None:
+            margins = _margins_cheap(loop, d)
+            if not margins:
+                rows.append(("margins", d["margins_reason"]))
         if margins or plot_path:
-            rows += _margins(loop, d, margins, plot_path)
+            try:
+                rows += _margins(loop, d, margins, plot_path)
+            except HapstabError as e:      # the verdict stands; the margins say why not
+                if plot_path:
+                    raise
+                d["margins_reason"] = f"no margins: {e}"
+                rows.append(("margins", d["margins_reason"]))
         emit(d, as_json, lambda: rich_table(f"stability, {kind}, K = {stiffness:g} N/m", rows, loop),
              loop)
 
     _cmd.__doc__ = f"Stability of the {kind.upper()} loop at stiffness K."
 
+
+
+#: ``check`` computes the margins unasked when they are estimated to take at most this
+#: (about 100 certified verdicts, each one eigenvalue problem of the loop's N states).
+AUTO_MARGIN_SECONDS = 10.0
+
+
+def _margins_cheap(loop: Any, d: dict[str, Any]) -> bool:
+    """Whether the margins are cheap enough to compute unasked; if not, ``d`` says so."""
+    from hapstab import budget
+    from hapstab.engine.system import build
+
+    est = 100 * budget.eig_seconds(build(loop).order)
+    if est <= AUTO_MARGIN_SECONDS:
+        return True
+    d["margins_reason"] = (f"margins not computed: estimated {est:.3g} s for this "
+                           f"{build(loop).order}-state loop; ask for them with --margins")
+    return False
 
 
 def _margins(loop: Any, d: dict[str, Any], keys: bool, plot_path: str | None
