@@ -274,9 +274,9 @@ def margins(loop: Any, *, step_samples: float = 0.25, max_extra_samples: float =
 def _words(dm: float, du: float | None, h: float, top: float) -> str:
     if du is None:
         return (f"stable for every extra delay up to the search's end, +{top:g} samples (grid "
-                f"of {h:g} sample, certified verdicts)")
+                f"of {h:g} sample; stability() verdicts, certified for spring-dampers)")
     return (f"stable for every extra delay in [0, {dm:.6g}] samples on a grid of {h:g} sample "
-            f"(certified verdicts), not stable at +{du:.6g} samples")
+            f"(stability() verdicts, certified for spring-dampers), not stable at +{du:.6g} samples")
 
 
 def _damping(loop: Any, B: float, why: list[str]) -> tuple[float | None, float | None]:
