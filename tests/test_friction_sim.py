@@ -337,7 +337,7 @@ def test_friction_holds_a_linearly_unstable_loop_at_rest():
     big = simulate(loop.with_stiffness(K), 3.0, force="pulse:5,0.05")   # a large one grows
     x = np.abs(big.position[:, 0])
     assert big.verdict.verdict != "bounded" and x[-1000:].max() > 10 * x[:1000].max()
-    assert "linear" in h.stability(loop.with_stiffness(K)).reason    # the note
+    assert "linear" in h.stability(loop.with_stiffness(K)).note    # the note, said once
 
 
 def test_a_stable_loop_with_friction_is_bounded_by_the_model():
@@ -353,10 +353,13 @@ def test_linear_analyses_say_they_are_friction_free():
     for method in ("exact", "circle", "passivity", "eq18"):
         ra, rb = h.critical_stiffness(a, method), h.critical_stiffness(b, method)
         assert ra.critical_stiffness == rb.critical_stiffness
-        assert "friction" not in ra.reason and "friction-free loop" in rb.reason
+        # said once, in its own field, not in every reason (issue 29, item 2)
+        assert ra.reason == rb.reason and not ra.note and "friction-free loop" in rb.note
+        assert rb.to_dict()["friction_note"] == rb.note
     sa, sb = h.stability(a), h.stability(b)
     assert sa.verdict == sb.verdict and sa.spectral_radius == sb.spectral_radius
-    assert "conservative" in sb.reason and "Abbott & Okamura" in sb.reason
+    assert "conservative" in sb.note and "Abbott & Okamura" in sb.note
+    assert sa.reason == sb.reason
 
 
 # ---------------------------------------------------------------------------- CLI
@@ -385,7 +388,7 @@ def test_cli_simulate_with_friction():
 def test_cli_linear_commands_note_friction(tmp_path):
     plain, fr = (_json(["kmax", "hve", "-n", "3", *x]) for x in ([], ["--friction", "0.1"]))
     assert plain["critical_stiffness"] == fr["critical_stiffness"]
-    assert "friction-free loop" in fr["reason"] and "friction_note" not in fr
+    assert "friction-free loop" in fr["friction_note"] and "friction" not in fr["reason"]
     b = _json(["boundary", "hve", "--period", "0.001", "--friction", "0.1"])
     assert "friction-free loop" in b["friction_note"]
     r = CliRunner().invoke(cli, ["boundary", "hve", "--period", "0.001", "--friction", "0.1"])
@@ -396,7 +399,7 @@ def test_cli_linear_commands_note_friction(tmp_path):
     s = _json(["simulate", "--study", str(study)])
     assert s["nonlinear"]["coulomb_friction_N"] == [0.05]
     k = _json(["kmax", "--study", str(study)])
-    assert "friction-free loop" in k["reason"]
+    assert "friction-free loop" in k["friction_note"]
 
 
 def test_a_run_that_overflows_says_so():

@@ -60,6 +60,9 @@ if TYPE_CHECKING:   # for type checkers and readers; at run time a name loads on
     from hapstab.results import BoundaryResult, CriticalStiffnessResult, StabilityResult
     from hapstab.simulation import TDPA, SimulationResult, critical_stiffness_simulation, simulate
     from hapstab.sweep import SweepResult, sweep
+    from hapstab.analysis.interop import to_control
+    from hapstab.analysis.margin_result import FrequencyView, MarginResult
+    from hapstab.analysis.margins import frequency_view, margins
 
 __version__ = "0.1.0"
 
@@ -108,6 +111,9 @@ _LAZY = {
     "hapstab.results": ("BoundaryResult", "CriticalStiffnessResult", "StabilityResult"),
     "hapstab.simulation": ("TDPA", "SimulationResult", "critical_stiffness_simulation", "simulate"),
     "hapstab.sweep": ("SweepResult", "sweep"),
+    "hapstab.analysis.interop": ("to_control",),
+    "hapstab.analysis.margin_result": ("FrequencyView", "MarginResult",),
+    "hapstab.analysis.margins": ("frequency_view", "margins",),
 }
 _MODULE_OF = {name: module for module, names in _LAZY.items() for name in names}
 
@@ -129,6 +135,7 @@ __all__ = [
     "OperatorBox", "operator_box", "robust_critical_stiffness", "RobustStiffnessResult",
     "robust_best_damping", "RobustDampingResult", "sweep", "SweepResult",
     "critical_stiffness_many",
+    "to_control", "margins", "frequency_view", "MarginResult", "FrequencyView",
 ]
 
 

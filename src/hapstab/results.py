@@ -92,7 +92,69 @@ class Result:
         raise NotImplementedError
 
     def _repr_html_(self) -> str:
-        return html_table(type(self).__name__, self.to_dict().items())
+        return html_table(type(self).__name__, display_rows(self.to_dict()))
+
+
+#: Units of to_dict keys, by suffix (``period_s``) or by name (``critical_stiffness``).
+UNIT_SUFFIXES = (("_N_s_per_m", "N*s/m"), ("_N_per_m", "N/m"), ("_hz", "Hz"),
+                 ("_samples", "samples"), ("_kg", "kg"), ("_N", "N"), ("_J", "J"),
+                 ("_s", "s"), ("_m", "m"))
+UNIT_NAMES = {"critical_stiffness": "N/m", "stiffness": "N/m", "damping": "N*s/m",
+              "delay_samples": "samples", "stable_intervals": "N/m", "uncertain_intervals": "N/m"}
+
+
+def display_value(key: str, v: Any) -> str:
+    """One value of a result for a notebook: with its unit (from the key), rounded to 6
+    significant digits (K_max's certified enclosure is far narrower; a reader compares a
+    few digits), a complex number as one (``0.998+0.029j``), not as ``{re, im}``.
+
+    Parameters
+    ----------
+    key : str
+        The to_dict key.
+    v : object
+        Its value.
+
+    Returns
+    -------
+    str
+    """
+    unit = UNIT_NAMES.get(key, "")
+    for suffix, u in UNIT_SUFFIXES:
+        if not unit and key.endswith(suffix):
+            unit = u
+    if isinstance(v, dict) and set(v) == {"re", "im"} and None not in v.values():
+        v = complex(v["re"], v["im"])
+    if isinstance(v, complex):
+        return f"{v.real:.6g}{v.imag:+.6g}j"
+    if isinstance(v, bool) or v is None:
+        return "n/a" if v is None else str(v)
+    if isinstance(v, (int, float)):
+        # |z| near 1 is what a spectral radius says: its distance to 1 needs 10 digits
+        return f"{v:.{10 if key == 'spectral_radius' else 6}g} {unit}".strip()
+    if isinstance(v, list) and v and all(isinstance(p, list) and len(p) == 2 for p in v):
+        return ", ".join(f"({_num(a)}, {_num(b)}]" for a, b in v) + f" {unit}".rstrip()
+    return _cell(v)
+
+
+def _num(x: Any) -> str:
+    return "inf" if x is None else f"{x:.6g}"
+
+
+def _label(key: str) -> str:
+    """A to_dict key as a row's name: its unit suffix dropped (the value carries it)."""
+    for suffix, _ in UNIT_SUFFIXES:
+        if key.endswith(suffix) and key != suffix[1:]:
+            return key[: -len(suffix)].replace("_", " ")
+    return key.replace("_", " ")
+
+
+def display_rows(d: dict[str, Any]) -> list[tuple[str, str]]:
+    """A result's to_dict as (name, value with unit) rows for :func:`html_table`
+    (:func:`display_value`); the infinities' index (``infinite``) as "inf" values."""
+    inf = d.get(INFINITE, {})
+    return [(_label(k), "inf" if inf.get(k) == 1 else display_value(k, v))
+            for k, v in d.items() if k != INFINITE]
 
 
 def html_table(caption: str, items: Any) -> str:
@@ -118,6 +180,8 @@ def html_table(caption: str, items: Any) -> str:
 
 def _cell(v: Any) -> str:
     """A value for one table cell: scalars as they are, long lists and tables summed up."""
+    if isinstance(v, dict) and set(v) == {"re", "im"} and None not in v.values():
+        return f"{v['re']:.6g}{v['im']:+.6g}j"             # a complex number, as one
     if isinstance(v, dict):
         return "{" + ", ".join(map(str, v)) + "}" if len(v) <= 6 else f"{{{len(v)} entries}}"
     if isinstance(v, list):
@@ -184,6 +248,10 @@ class StabilityResult(Result):
         All closed-loop poles at the sampling instants.
     rigid_body_modes : int
         Poles at z = 1 that no stiffness can move (nothing ties a mass to ground).
+    note : str
+        What applies to the whole analysis, said once (a device's Coulomb friction: the
+        linear loop is friction-free, :func:`~hapstab.models.parts.friction_note`); JSON
+        ``friction_note``, absent when empty.
     """
 
     verdict: str
@@ -194,6 +262,7 @@ class StabilityResult(Result):
     period: float
     poles: tuple[complex, ...] = field(repr=False, default=())
     rigid_body_modes: int = 0
+    note: str = field(default="", compare=False)
 
     @property
     def stable(self) -> bool:
@@ -205,6 +274,7 @@ class StabilityResult(Result):
             "dominant_pole": {"re": self.dominant_pole.real, "im": self.dominant_pole.imag},
             "frequency_hz": self.frequency_hz, "reason": self.reason, "period_s": self.period,
             "rigid_body_modes": self.rigid_body_modes,
+            **({"friction_note": self.note} if self.note else {}),
         })
 
     def plot(self, ax: Any = None) -> Any:
@@ -238,6 +308,9 @@ class CriticalStiffnessResult(Result):
     details : dict
         Method-specific extras (e.g. the simulation's bracket), added to
         :meth:`to_dict`.
+    note : str
+        What applies to the whole analysis, said once, not in ``reason`` (the
+        friction-free model); JSON ``friction_note``, absent when empty.
     """
 
     critical_stiffness: float
@@ -248,6 +321,7 @@ class CriticalStiffnessResult(Result):
     delay_samples: int | float
     crossing_frequency_hz: float = float("nan")
     details: dict[str, Any] = field(default_factory=dict, compare=False)
+    note: str = field(default="", compare=False)
 
     def to_dict(self) -> dict[str, Any]:
         return jsonable(merged({
@@ -255,7 +329,8 @@ class CriticalStiffnessResult(Result):
             "stable_intervals": [list(iv) for iv in self.stable_intervals],
             "reason": self.reason, "period_s": self.period,
             "delay_samples": float(self.delay_samples),
-            "crossing_frequency_hz": self.crossing_frequency_hz}, self.details, self.method))
+            "crossing_frequency_hz": self.crossing_frequency_hz,
+            **({"friction_note": self.note} if self.note else {})}, self.details, self.method))
 
 
 @dataclass(frozen=True)

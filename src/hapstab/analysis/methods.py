@@ -111,8 +111,8 @@ def critical_stiffness(loop: HapticLoop | TeleoperationLoop, method: str = "exac
     Returns
     -------
     CriticalStiffnessResult
-        Of the friction-free loop: with a device's Coulomb friction the reason says
-        so (:func:`~hapstab.models.parts.friction_note`).
+        Of the friction-free loop: with a device's Coulomb friction its ``note`` says
+        so, once (:func:`~hapstab.models.parts.friction_note`).
 
     Raises
     ------
@@ -123,7 +123,7 @@ def critical_stiffness(loop: HapticLoop | TeleoperationLoop, method: str = "exac
     _check_options(method, f, options)
     res = f(loop, **options)
     note = friction_note(loop)      # a linear method: the friction-free loop
-    return dataclasses.replace(res, reason=f"{res.reason}; {note}") if note else res
+    return dataclasses.replace(res, note=note) if note else res
 
 
 def _check_options(method: str, f: Callable[..., Any], options: dict[str, Any]) -> None:

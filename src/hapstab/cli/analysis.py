@@ -93,9 +93,20 @@ def _check_command(kind: str) -> None:
     @check.command(kind)
     @loop_options(kind)
     @click.option("--stiffness", "-K", type=NONNEG, required=True, help="K in N/m.")
-    def _cmd(stiffness: float, as_json: bool, **kw: Any) -> None:
+    @click.option("--margins/--no-margins", default=None,
+                  help="Also the delay margin (extra delay, added where the loop's delay is; "
+                       "teleoperation: to each direction), the stiffness range and the "
+                       "virtual-damping range with the loop stable (docs/guide/margins.md). "
+                       f"Default: computed when estimated under {AUTO_MARGIN_SECONDS:g} s "
+                       "(about 100 certified verdicts), else said how to ask for them.")
+    @click.option("--plot", "plot_path", type=click.Path(dir_okay=False), default=None,
+                  help="Write the Nyquist and Bode views of the exact sampled loop at K.")
+    def _cmd(stiffness: float, margins: bool | None, plot_path: str | None, as_json: bool,
+             **kw: Any) -> None:
         from hapstab.analysis.exact.core import stability
+        from hapstab.cli.files import check_files
 
+        check_files(None, plot_path, as_json)
         loop = make(kw, stiffness)
         res = stability(loop)
         d = res.to_dict()
@@ -103,11 +114,65 @@ def _check_command(kind: str) -> None:
         rows = [("verdict", res.verdict), ("spectral radius", f"{res.spectral_radius:.12g}"),
                 ("dominant pole", f"{res.dominant_pole:.8g}"),
                 ("frequency", f"{res.frequency_hz:.6g} Hz"), ("why", res.reason)]
+        if margins is None:
+            margins = _margins_cheap(loop, d)
+            if not margins:
+                rows.append(("margins", d["margins_reason"]))
+        if margins or plot_path:
+            try:
+                rows += _margins(loop, d, margins, plot_path)
+            except HapstabError as e:      # the verdict stands; the margins say why not
+                if plot_path:
+                    raise
+                d["margins_reason"] = f"no margins: {e}"
+                rows.append(("margins", d["margins_reason"]))
         emit(d, as_json, lambda: rich_table(f"stability, {kind}, K = {stiffness:g} N/m", rows, loop),
              loop)
 
     _cmd.__doc__ = f"Stability of the {kind.upper()} loop at stiffness K."
 
+
+
+#: ``check`` computes the margins unasked when they are estimated to take at most this
+#: (about 100 certified verdicts, each one eigenvalue problem of the loop's N states).
+AUTO_MARGIN_SECONDS = 10.0
+
+
+def _margins_cheap(loop: Any, d: dict[str, Any]) -> bool:
+    """Whether the margins are cheap enough to compute unasked; if not, ``d`` says so."""
+    from hapstab import budget
+    from hapstab.engine.system import build
+
+    # one certified verdict: an eigenvalue problem plus the winding count (~20 ms measured
+    # for a 22-state HVE); unasked, the margins also keep within a budget set lower
+    est = 100 * (budget.eig_seconds(build(loop).order) + 0.02)
+    try:
+        budget.check(budget.Cost("the margins", 0.0, est), None, None)
+        if est <= AUTO_MARGIN_SECONDS:
+            return True
+    except budget.BudgetError:
+        pass
+    d["margins_reason"] = (f"margins not computed: estimated {est:.3g} s for this "
+                           f"{build(loop).order}-state loop; ask for them with --margins")
+    return False
+
+
+def _margins(loop: Any, d: dict[str, Any], keys: bool, plot_path: str | None
+             ) -> list[tuple[str, str]]:
+    """The margins' rows of ``check``'s table; their keys added to ``d`` (``--margins``)
+    and the Nyquist / Bode figure written (``--plot``)."""
+    from hapstab.analysis.margins import margins
+    from hapstab.cli.files import write_files
+
+    m = margins(loop, view=plot_path is not None)
+    if plot_path:
+        write_files(m, None, plot_path)
+    if not keys:
+        return []
+    md = {k: v for k, v in m.to_dict().items()
+          if k not in d and k not in ("verdict", "reason", "friction_note")}
+    d.update(md, margins_reason=m.reason)
+    return [r for r in m.rows() if r[0] != "verdict at K"] + [("margins", m.reason)]
 
 
 def _boundary_command(kind: str) -> None:

@@ -36,6 +36,9 @@ class HapstabGroup(click.Group):
         argv = list(sys.argv[1:] if args is None else args)
         if args is None:                       # the real process (not a test's runner)
             _on_termination()
+            # the CLI writes figures to files: matplotlib's file backend unless the user
+            # chose one (the library itself never switches a backend)
+            os.environ.setdefault("MPLBACKEND", "Agg")
         # --yes: run past the cost budget (anywhere on the line, like --debug)
         ARGV.set(tuple(argv))                  # echoed as given (with --yes)
         STDOUT_TAKEN.set(False)

@@ -463,8 +463,9 @@ def emit(data: dict[str, Any], as_json: bool, table: Callable[[], None], loop: A
     from hapstab.models.parts import friction_note
 
     note = friction_note(loop) if loop is not None and "nonlinear" not in data else ""
-    if note and note in str(data.get("reason", "")):
-        note = ""
+    if note and (note in str(data.get("reason", ""))
+                 or (as_json and data.get("friction_note") == note)):
+        note = ""                 # said once: in the reason, or the JSON's friction_note
     if as_json:
         click.echo(dumps({**data, **({"friction_note": note} if note else {}),
                           **provenance(loop)}))

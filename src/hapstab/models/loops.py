@@ -38,7 +38,11 @@ __all__ = ["split_delay", "DELAY_SNAP", "HapticLoop", "TeleoperationLoop", "dela
            "whole_delay", "require_loop", "describe", "parameters"]
 
 
-def _check_controller(name: str, c: Any) -> Controller:
+def _check_controller(name: str, c: Any, period: Any = None) -> Controller:
+    from hapstab.models.interop import controller_from_control, is_control_system
+
+    if is_control_system(c):            # a discrete python-control H(z), dt = the period
+        return controller_from_control(c, name, check_period("period", period))
     if not isinstance(c, (SpringDamper, FilteredSpringDamper, AffineController,
                           DiscreteController)):
         raise ModelError(f"{name} = {c!r}: must be a SpringDamper, FilteredSpringDamper, "
@@ -83,7 +87,8 @@ class HapticLoop:
     def __post_init__(self) -> None:
         if not isinstance(self.device, Device):
             raise ModelError(f"device = {self.device!r}: must be a Device")
-        _check_controller("controller", self.controller)
+        object.__setattr__(self, "controller",
+                           _check_controller("controller", self.controller, self.period))
         object.__setattr__(self, "operator", Impedance.from_any(self.operator, "operator"))
         object.__setattr__(self, "period", check_period("period", self.period))
         _check_filters(self.controllers, self.period)
@@ -212,8 +217,8 @@ class TeleoperationLoop:
         for nm in ("master", "slave"):
             if not isinstance(getattr(self, nm), Device):
                 raise ModelError(f"{nm} = {getattr(self, nm)!r}: must be a Device")
-        _check_controller("master_controller", self.master_controller)
-        _check_controller("slave_controller", self.slave_controller)
+        for nm in ("master_controller", "slave_controller"):
+            object.__setattr__(self, nm, _check_controller(nm, getattr(self, nm), self.period))
         object.__setattr__(self, "operator", Impedance.from_any(self.operator, "operator"))
         object.__setattr__(self, "environment", Impedance.from_any(self.environment, "environment"))
         object.__setattr__(self, "period", check_period("period", self.period))

@@ -192,16 +192,11 @@ class Impedance:
             return obj
         if isinstance(obj, str):
             return parse_impedance(obj, name)
-        if hasattr(obj, "num") and hasattr(obj, "den"):  # python-control TransferFunction
-            dt = getattr(obj, "dt", 0)
-            if dt not in (0, None):
-                raise ModelError(f"{name}: a continuous-time transfer function is required, got dt = {dt}")
-            num, den = obj.num, obj.den
-            if isinstance(num, list):
-                if len(num) != 1 or len(num[0]) != 1:
-                    raise ModelError(f"{name}: a SISO transfer function is required")
-                num, den = num[0][0], den[0][0]
-            return cls(tuple(np.ravel(num)), tuple(np.ravel(den)), label="transfer function")
+        from hapstab.models.interop import continuous, is_control_system
+
+        if is_control_system(obj):        # python-control: a continuous SISO Z(s)
+            num, den = continuous(obj, name)
+            return cls(tuple(num), tuple(den), label="transfer function")
         if isinstance(obj, (tuple, list)) and len(obj) == 2:
             return cls(tuple(np.ravel(obj[0])), tuple(np.ravel(obj[1])))
         raise ModelError(f"{name} = {obj!r}: expected an Impedance, None, a spec string or (num, den)")

@@ -8,11 +8,10 @@ import numpy as np
 
 
 def _axes(ax: Any) -> Any:
+    """``ax`` itself, or the axes of a new figure on pyplot's current backend (a library
+    never switches the user's backend: in a notebook the figure shows inline, in a script
+    on screen, and the CLI, which writes files, chooses Agg itself)."""
     if ax is None:
-        import matplotlib
-
-        if matplotlib.get_backend().lower() not in ("agg", "svg", "pdf") and not _has_display():
-            matplotlib.use("Agg")
         import matplotlib.pyplot as plt
 
         _, ax = plt.subplots(figsize=(6, 4))
@@ -50,12 +49,6 @@ def save_figure(fig: Any, path: Any, name: str = "plot", **kw: Any) -> None:
     ext = target.rsplit(".", 1)[-1].lower()
     with writing(target, name, "wb") as fh:
         fig.savefig(fh, format=ext, **kw)
-
-
-def _has_display() -> bool:
-    import os
-
-    return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
 
 
 def _wrap(text: str, ax: Any, fontsize: float) -> str:
@@ -104,11 +97,7 @@ def plot_poles(res: Any, ax: Any = None) -> Any:
 
 # ------------------------------------------------ simulation and reproduction (issue 4)
 def _figure(nrows: int = 1, figsize: tuple[float, float] = (7, 4.5)) -> tuple[Any, Any]:
-    """A new figure on a non-interactive backend when there is no display."""
-    import matplotlib
-
-    if matplotlib.get_backend().lower() not in ("agg", "svg", "pdf") and not _has_display():
-        matplotlib.use("Agg")
+    """A new figure of ``nrows`` stacked axes on pyplot's current backend (see :func:`_axes`)."""
     import matplotlib.pyplot as plt
 
     return plt.subplots(nrows, 1, figsize=figsize, sharex=nrows > 1, squeeze=False)

@@ -115,7 +115,7 @@ def stability(loop: HapticLoop | TeleoperationLoop, *, max_memory: float | None 
         certified), ``marginal`` if a pole is on the circle to the model's accuracy
         (the count cannot be certified, or the dominant pole is within 1e-12 of the
         circle) or a rigid-body mode sits at z = 1. Of the friction-free loop: with a
-        device's Coulomb friction the reason says so
+        device's Coulomb friction its ``note`` says so
         (:func:`~hapstab.models.parts.friction_note`).
 
     References
@@ -152,10 +152,9 @@ def stability(loop: HapticLoop | TeleoperationLoop, *, max_memory: float | None 
     if (verdict == "unstable" and count > 0 and rho <= 1) or (verdict == "stable" and rho >= 1):
         reason += (f" (the eigenvalue solver puts the largest pole at |z| = {rho:.12g}; with "
                    "poles crowding z = 1 it is less accurate than the certified count)")
-    note = friction_note(loop)          # the linear loop: friction-free
-    if note:
-        reason += f"; {note}"
-    return StabilityResult(verdict, rho, dom, freq, reason, T, tuple(complex(e) for e in eigs), m)
+    note = friction_note(loop)          # the linear loop: friction-free (said once)
+    return StabilityResult(verdict, rho, dom, freq, reason, T, tuple(complex(e) for e in eigs), m,
+                           note)
 
 
 def _verdict(count: int, rho: float, dom: complex, T: float, m: int) -> tuple[str, str]:

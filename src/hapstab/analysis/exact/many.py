@@ -212,5 +212,5 @@ def _analyse_batch(loops: Sequence[Any], members: list[tuple[int, ResponsePlan]]
         loop = loops[i]
         r = _to_result(res, loop.period, loop.delay_in_samples)
         note = friction_note(loop)          # as critical_stiffness words it
-        out[i] = dataclasses.replace(r, reason=f"{r.reason}; {note}") if note else r
+        out[i] = dataclasses.replace(r, note=note) if note else r
     return None

@@ -467,7 +467,11 @@
     v.dataset.value = a.verdict; v.className = "big " + a.verdict;
     $("#verdict-detail").textContent = (a.stiffness != null ? `at K = ${fmt(a.stiffness)} N/m · ` : "") +
       `spectral radius ${fmt(a.spectral_radius, 8)}` +
-      (a.frequency_hz != null ? ` · ${fmt(a.frequency_hz, 4)} Hz` : "") + " · " + a.reason;
+      (a.frequency_hz != null ? ` · ${fmt(a.frequency_hz, 4)} Hz` : "") +
+      (a.delay_margin_s != null ? ` · delay margin ${fmt(a.delay_margin_s * 1e3, 4)} ms` +
+        (a.delay_unstable_s == null ? " (no loss in the search)" : "") : "") +
+      (a.stiffness_max_N_per_m != null ? ` · stable K up to ${fmt(a.stiffness_max_N_per_m)} N/m` : "") +
+      " · " + a.reason;
     $("#verdict-detail").title = a.reason;
   }
   function drawAudit(a) {
