@@ -1,0 +1,7 @@
+"""Networks as they are (issue 30): packet loss, exact in the mean-square sense
+(:mod:`~hapstab.analysis.network.loss`, on the Markov jump linear system of
+:mod:`~hapstab.analysis.network.jump`)."""
+
+from hapstab.analysis.network.loss import kmax_against_loss, loss_critical_stiffness
+
+__all__ = ["loss_critical_stiffness", "kmax_against_loss"]
