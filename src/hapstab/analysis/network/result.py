@@ -114,7 +114,7 @@ class LossStiffnessResult(Result):
             "loss_free_critical_stiffness": self.loss_free_critical_stiffness,
             "rho_at_critical_stiffness": self.rho_at, "rho_at_upper_bound": self.rho_above,
             "certified": self.certified, "search": self.search, "period_s": self.period,
-            "networked_terms": list(self.terms), "modes": self.modes, "order": self.order,
+            "networked_terms": list(self.terms), "modes": self.modes, "state_dimension": self.order,
             "seconds": self.seconds, "reason": self.reason})
 
     def to_csv(self, path: Any) -> None:
