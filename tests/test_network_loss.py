@@ -184,3 +184,17 @@ def test_rigid_teleoperator_is_deflated():
     res = loss_critical_stiffness(loop, 0.1)
     assert 0 < res.critical_stiffness < critical_stiffness(loop).critical_stiffness
     assert second_moment_radius(js.at(0.5 * res.critical_stiffness), js.transition) < 1
+
+
+def test_the_scan_with_arpack_agrees_with_the_roots(monkeypatch):
+    # the path taken for long delays (pencil above MAX_PENCIL): ARPACK on the operator's
+    # action, a scan and bisection; forced here on a loop the roots also solve
+    from hapstab.analysis.network import loss, moments
+
+    loop = peb_case(4)[0]
+    want = loss_critical_stiffness(loop, 0.1, 3.0)
+    monkeypatch.setattr(loss, "MAX_PENCIL", 0)
+    monkeypatch.setattr(moments, "DENSE_DIMENSION", 0)
+    got = loss_critical_stiffness(loop, 0.1, 3.0)
+    assert got.search == "scan" and want.search == "roots"
+    assert got.critical_stiffness == pytest.approx(want.critical_stiffness, rel=1e-7)

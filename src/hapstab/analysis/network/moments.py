@@ -36,8 +36,9 @@ from hapstab.errors import AnalysisError
 __all__ = ["second_moment_radius", "second_moment_step", "DENSE_DIMENSION"]
 
 #: Up to this dimension of the operator (N^2 or M N^2) it is formed and all its
-#: eigenvalues taken by LAPACK (about 10 ms at 400); above, ARPACK on its action.
-DENSE_DIMENSION = 400
+#: eigenvalues taken by LAPACK (about 10 ms at 400, 1 s at 1500); above, ARPACK on its
+#: action.
+DENSE_DIMENSION = 1500
 
 
 def second_moment_step(A: np.ndarray, transition: np.ndarray, Q: np.ndarray) -> np.ndarray:
@@ -112,13 +113,15 @@ def second_moment_radius(A: np.ndarray, transition: np.ndarray) -> float:
             return second_moment_step(A, transition, x.reshape(M, N, N)).ravel()
     op = spla.LinearOperator((dim, dim), matvec=mv, dtype=float)
     v0 = np.tile(np.eye(N).ravel(), 1 if independent else M)   # inside the PSD cone
-    try:
-        w = spla.eigs(op, k=3, which="LM", v0=v0, tol=1e-13, maxiter=20 * dim,
-                      return_eigenvectors=False)
-    except spla.ArpackNoConvergence as e:
-        raise AnalysisError(f"packet loss: ARPACK did not converge on the {dim}-dimensional "
-                            "second-moment operator; the mean-square radius is not known") from e
-    return float(np.abs(w).max())
+    for k, ncv in ((2, 40), (6, 120)):       # a wider Krylov space when eigenvalues crowd
+        try:
+            w = spla.eigs(op, k=k, which="LM", v0=v0, tol=1e-13, maxiter=20 * dim,
+                          ncv=min(dim - 1, ncv), return_eigenvectors=False)
+            return float(np.abs(w).max())
+        except spla.ArpackNoConvergence:
+            continue
+    raise AnalysisError(f"packet loss: ARPACK did not converge on the {dim}-dimensional "
+                        "second-moment operator; the mean-square radius is not known")
 
 
 def _symmetric_basis(N: int) -> tuple[np.ndarray, np.ndarray]:
