@@ -9,7 +9,7 @@ import click
 import numpy as np
 
 from hapstab.cli.fourchannel import refuse_force_gains
-from hapstab.cli.network import network_kmax, network_options
+from hapstab.cli.network import network_kmax, network_options, range_kmax
 from hapstab.cli.options import (
     LOOP_KINDS,
     NONNEG,
@@ -61,7 +61,11 @@ def _kmax_command(kind: str) -> None:
     def _cmd(method: str, approximation: str | None, as_json: bool, **kw: Any) -> None:
         from hapstab.analysis.methods import critical_stiffness
 
-        net = {k: kw.pop(k) for k in ("loss", "burst")}
+        net = {k: kw.pop(k) for k in ("loss", "burst", "delay_range")}
+        if net["delay_range"] is not None:
+            if net["loss"] is not None:
+                raise HapstabError("--delay-range and --loss: give one of them, not both")
+            return range_kmax(kind, net["delay_range"], make(kw, stiffness=1.0), method, as_json)
         if net["loss"] is not None:
             return network_kmax(kind, net, make(kw, stiffness=1.0), method, as_json)
         if net["burst"] is not None:

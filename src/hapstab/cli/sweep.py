@@ -69,7 +69,7 @@ SUB = {"random": {"samples", "seed"}, "plot": {"x", "y"}, "check": {"stiffness"}
        "best-damping": {"min-damping", "max-damping", "resolution"}}
 #: Options of ``kmax`` that are not the loop's: neither an axis nor a [loop] key here.
 NOT_LOOP = {"method", "approximation", "operator_damping_min", "environment_damping_min",
-            "loss", "burst"}
+            "loss", "burst", "delay_range"}
 
 
 def column_of(name: str) -> str:
