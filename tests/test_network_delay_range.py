@@ -26,13 +26,14 @@ def _case(seed: int):
     if seed % 2:
         m, b, B = rng.uniform(0.05, 1), rng.uniform(0.05, 2), rng.uniform(0, 3)
         loop = HapticLoop(Device(m, b), SpringDamper(1.0, B), op, T, 0)
-        ref = lambda n: brute.hve_loop(m, b, T, n, B, op)  # noqa: E731
+        ref = lambda n, _: brute.hve_loop(m, b, T, n, B, op)  # noqa: E731
     else:
         mm, ms, bm, bs = rng.uniform(0.01, 0.3, 4)
         B, env = rng.uniform(0, 0.5), f"spring:{rng.uniform(1, 300):.6g}"
         loop = TeleoperationLoop(Device(mm, bm), Device(ms, bs), SpringDamper(1.0, B),
                                  SpringDamper(1.0, B), op, env, T, 0)
-        ref = lambda n: brute.peb_loop(mm, bm, ms, bs, T, n, n, B, B, 1.0, op, env)  # noqa: E731
+        ref = lambda nf, nb: brute.peb_loop(mm, bm, ms, bs, T, nf, nb, B, B, 1.0, op,  # noqa: E731
+                                            env)
     return loop, ref, lo, hi
 
 
@@ -42,11 +43,13 @@ def _check(seed: int) -> None:
     grid = np.linspace(lo, hi, 1000)
     # the receiver uses a sample from the first instant at or after its arrival
     ns = sorted({max(0, math.ceil(t / loop.period - 1e-9)) for t in grid})
-    kref = {n: brute.stable_intervals(ref(n)).kmax for n in ns}
     two = len(loop.controllers) == 2
-    for n in ns:                      # never above K_max at any delay of the grid
-        assert (2 * n if two else n) in res.delays_samples
-        assert res.critical_stiffness <= kref[n] * (1 + RTOL)
+    # PEB: each direction's delay anywhere on the grid, independently
+    pairs = [(f, b) for f in ns for b in ns] if two else [(n, 0) for n in ns]
+    kref = {pr: brute.stable_intervals(ref(*pr)).kmax for pr in pairs}
+    for pr in pairs:                  # never above K_max at any delay of the grid
+        assert (pr[0] + pr[1] if two else pr[0]) in res.delays_samples
+        assert res.critical_stiffness <= kref[pr] * (1 + RTOL)
     assert res.critical_stiffness == pytest.approx(min(kref.values()), rel=RTOL)
 
 
