@@ -67,7 +67,12 @@ def _compare(case) -> None:
     res = loss_critical_stiffness(loop, P, L)
     k0 = critical_stiffness(loop).critical_stiffness
     assert math.isfinite(k0) and k0 > 0
-    want = lossy.kmax(ref, P, L, hi=3.0 * k0, grid=40)
+    # loss can raise K_max above the loss-free one (PEB seed 73: 150.6 against 46.4 N/m):
+    # the reference widens its scan until it finds the first crossing
+    for top in (3.0, 12.0, 48.0):
+        want = lossy.kmax(ref, P, L, hi=top * k0, grid=40)
+        if math.isfinite(want):
+            break
     assert res.critical_stiffness <= want * (1 + 1e-9)         # the stable end of a bracket
     assert res.critical_stiffness == pytest.approx(want, rel=RTOL), res.reason
     assert res.rho_at < 1.0 <= res.rho_above
