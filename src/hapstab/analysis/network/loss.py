@@ -51,6 +51,8 @@ SCAN = np.concatenate([np.geomspace(1e-6, 0.05, 12, endpoint=False),
 #: K*(1 + s)]. rho - 1 is then about s K* rho'(K*) ~ 1e-11 on either side, three orders
 #: above its rounding (~1e-14), so both sides are checked with room to spare.
 ROOT_STEP = 1e-8
+#: Points below the first root where rho is checked < 1 as well (evenly spaced).
+CHECKS = 8
 #: Bisection stops when the bracket is this narrow (relative): far below the 1e-6 the
 #: answer is tested to, and above the rounding of rho near a simple crossing.
 BISECTION_RTOL = 1e-10
@@ -104,8 +106,9 @@ def _scan(js: JumpSystem, scale: float) -> tuple:
 
 def _roots(js: JumpSystem, scale: float) -> tuple:
     """The same bracket from the first real root of det(I - T(K)) = 0
-    (:func:`unit_crossings`): rho is checked below 1 as K -> 0+ and on both sides of the
-    root (``ROOT_STEP``); a check that fails falls back to :func:`_scan`."""
+    (:func:`unit_crossings`): rho is checked below 1 as K -> 0+, at ``CHECKS`` points
+    below the root and on both sides of it (``ROOT_STEP``); a check that fails falls
+    back to :func:`_scan`."""
     roots = unit_crossings(js.A0, js.A1, js.transition)
     roots = roots[roots > 1e-12 * scale]
     K0 = min(1e-6 * scale, 0.5 * roots[0]) if roots.size else 1e-6 * scale
@@ -115,12 +118,16 @@ def _roots(js: JumpSystem, scale: float) -> tuple:
     if not roots.size:
         return _scan(js, scale)
     lo, hi = roots[0] * (1.0 - ROOT_STEP), roots[0] * (1.0 + ROOT_STEP)
+    # a guard against a real root taken for complex (an ill-conditioned crossing): rho
+    # must also be below 1 at CHECKS points below the first root
+    below = roots[0] * np.arange(1, CHECKS + 1) / (CHECKS + 1)
+    r_below = [second_moment_radius(js.at(float(K)), js.transition) for K in below]
     r_lo = second_moment_radius(js.at(lo), js.transition)
     r_hi = second_moment_radius(js.at(hi), js.transition)
-    if not r_lo < 1.0:
+    if not (r_lo < 1.0 and max(r_below) < 1.0):
         return _scan(js, scale)
-    return (float(lo), float(hi), r_lo, r_hi, np.array([K0, lo, hi]), np.array([r0, r_lo, r_hi]),
-            "roots")
+    return (float(lo), float(hi), r_lo, r_hi, np.array([K0, *below, lo, hi]),
+            np.array([r0, *r_below, r_lo, r_hi]), "roots")
 
 
 def loss_critical_stiffness(loop, loss: float, burst: float | None = None
