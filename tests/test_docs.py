@@ -17,7 +17,8 @@ import pytest
 from numpydoc.docscrape import NumpyDocString
 
 PACKAGES = ["hapstab", "hapstab.models", "hapstab.engine", "hapstab.analysis",
-            "hapstab.analysis.exact", "hapstab.simulation", "hapstab.paper"]
+            "hapstab.analysis.exact", "hapstab.analysis.network", "hapstab.simulation",
+            "hapstab.paper"]
 
 
 def _public() -> dict[str, object]:

@@ -71,6 +71,11 @@ RUNS = [
               "--c2", "1", "--environment", "spring:1000", "-B", "0.5", "-n", "2"]),
     ("twoport", ["twoport", "4ch", "-K", "5", "-n", "2", "--c1-stiffness-ratio", "2"]),
     ("region", ["region", "4ch", "--K", "0:100", "--B", "0:1", "--resolution", "6"]),
+    ("kmax-loss", ["kmax", "hve", "--delay", "2", "--loss", "0.05"]),
+    ("kmax-loss", ["kmax", "peb", "--delay", "1", "--loss", "0.1", "--burst", "3"]),
+    ("kmax-loss-curve", ["kmax", "hve", "--loss", "0:0.2:3"]),
+    ("kmax-delay-range", ["kmax", "hve", "--delay-range", "5ms:8ms"]),
+    ("kmax-delay-range", ["kmax", "peb", "--delay-range", "1:2"]),
     ("error", ["kmax", "hve", "--delay", "x"]),
     ("error", ["simulate", "hve", "-K", "9", "--duration", "1e9"]),              # budget
 ]

@@ -9,6 +9,7 @@ import click
 import numpy as np
 
 from hapstab.cli.fourchannel import refuse_force_gains
+from hapstab.cli.network import network_kmax, network_options, range_kmax
 from hapstab.cli.options import (
     LOOP_KINDS,
     NONNEG,
@@ -56,8 +57,19 @@ def _kmax_command(kind: str) -> None:
     @click.option("--approximation", default=None,
                   help="For --method circle: forward | backward | tustin; for llewellyn "
                        "(peb, 4ch): forward | backward | tustin.")
+    @network_options
     def _cmd(method: str, approximation: str | None, as_json: bool, **kw: Any) -> None:
         from hapstab.analysis.methods import critical_stiffness
+
+        net = {k: kw.pop(k) for k in ("loss", "burst", "delay_range")}
+        if net["delay_range"] is not None:
+            if net["loss"] is not None:
+                raise HapstabError("--delay-range and --loss: give one of them, not both")
+            return range_kmax(kind, net["delay_range"], make(kw, stiffness=1.0), method, as_json)
+        if net["loss"] is not None:
+            return network_kmax(kind, net, make(kw, stiffness=1.0), method, as_json)
+        if net["burst"] is not None:
+            raise HapstabError(f"--burst = {net['burst']!r}: applies with --loss only")
 
         refuse_method(kind, method)
         if method in ("circle", "passivity"):

@@ -68,7 +68,8 @@ KEYS = {"quantities", "chunk", "axes", "random", "plot", "check", "best-damping"
 SUB = {"random": {"samples", "seed"}, "plot": {"x", "y"}, "check": {"stiffness"},
        "best-damping": {"min-damping", "max-damping", "resolution"}}
 #: Options of ``kmax`` that are not the loop's: neither an axis nor a [loop] key here.
-NOT_LOOP = {"method", "approximation", "operator_damping_min", "environment_damping_min"}
+NOT_LOOP = {"method", "approximation", "operator_damping_min", "environment_damping_min",
+            "loss", "burst", "delay_range"}
 
 
 def column_of(name: str) -> str:

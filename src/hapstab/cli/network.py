@@ -1,0 +1,121 @@
+"""``hapstab kmax hve|peb --loss P [--burst L]``: mean-square K_max with packet loss
+(:mod:`hapstab.analysis.network`)."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from typing import Any
+
+import click
+
+from hapstab.cli.options import emit, fmt, rich_table
+from hapstab.cli.ranges import parse_range
+from hapstab.errors import HapstabError
+
+__all__ = ["network_options", "network_kmax", "range_kmax"]
+
+
+def network_options(f: Callable) -> Callable:
+    """The --loss, --burst and --delay-range options of ``kmax``."""
+    f = click.option("--delay-range", "delay_range", default=None, metavar="A:B",
+                     help="An unknown constant delay anywhere in A:B (seconds with a unit, "
+                          "e.g. 5ms:15ms, at a receiver acting at the sampling instants; or "
+                          "whole samples, e.g. 5:15): the certified minimum K_max over the "
+                          "range and the worst delay.")(f)
+    f = click.option("--burst", type=float, default=None, metavar="L",
+                     help="With --loss: losses come in bursts, a Gilbert-Elliott chain per "
+                          "networked term with mean burst length L samples (L >= 1).")(f)
+    return click.option("--loss", default=None, metavar="P|P1:P2[:N]|P1,P2",
+                        help="Packet loss: each networked position packet (hve: the device's; "
+                             "peb: each direction) is lost with probability P and the receiver "
+                             "holds its last value; K_max is then mean-square (exact criterion, "
+                             "evaluated in floating point). A range gives K_max against P.")(f)
+
+
+def network_kmax(kind: str, kw: dict[str, Any], loop: Any, method: str, as_json: bool) -> None:
+    """Answer ``kmax --loss``: one loss rate as a table / JSON object, several as a curve.
+
+    Parameters
+    ----------
+    kind : str
+        The loop kind (``hve``, ``peb``).
+    kw : dict
+        The command's options (``loss``, ``burst``).
+    loop : HapticLoop or TeleoperationLoop
+        The loop built from them.
+    method : str
+        ``--method`` (only ``exact`` applies).
+    as_json : bool
+        Print JSON.
+    """
+    from hapstab.analysis.network import kmax_against_loss, loss_critical_stiffness
+
+    if method != "exact":
+        raise HapstabError(f"--loss with --method {method}: the mean-square analysis is its own "
+                           "method; leave --method at exact")
+    if kind == "4ch":
+        raise HapstabError("--loss: modelled for hve and peb (the 4-channel loop's force "
+                           "channels are not)")
+    losses = parse_range(kw["loss"], "--loss", "N/m", values=">= 0")   # 1 and above: loss_chain refuses
+    if len(losses) > 1:
+        curve = kmax_against_loss(loop, losses, kw["burst"])
+        rows = [(f"P = {r.loss:g}", f"{fmt(r.critical_stiffness)} N/m"
+                 + ("" if r.certified else " (mean-square)")) for r in curve.rows]
+        emit(curve.to_dict(), as_json, lambda: rich_table(f"K_max against loss, {kind}", rows,
+                                                          loop), loop)
+        return
+    res = loss_critical_stiffness(loop, losses[0], kw["burst"])
+    rows = [("critical stiffness", f"{fmt(res.critical_stiffness)} N/m"),
+            ("method", res.method),
+            ("unstable from", f"{fmt(res.upper_bound)} N/m" if math.isfinite(res.upper_bound)
+             else "none found"),
+            ("without loss", f"{fmt(res.loss_free_critical_stiffness)} N/m"),
+            ("why", res.reason)]
+    emit(res.to_dict(), as_json, lambda: rich_table(f"K_max with packet loss, {kind}", rows,
+                                                    loop), loop)
+
+
+def range_kmax(kind: str, spec: str, loop: Any, method: str, as_json: bool) -> None:
+    """Answer ``kmax --delay-range A:B``.
+
+    Parameters
+    ----------
+    kind : str
+        The loop kind.
+    spec : str
+        ``A:B`` in seconds (with a unit) or whole samples.
+    loop : HapticLoop or TeleoperationLoop
+        The loop (its delay is replaced by the range's).
+    method : str
+        ``--method`` (only ``exact``).
+    as_json : bool
+        Print JSON.
+    """
+    from hapstab.analysis.network.delay_range import delay_range_critical_stiffness
+
+    if method != "exact":
+        raise HapstabError(f"--delay-range with --method {method}: the range's minimum uses the "
+                           "exact core; leave --method at exact")
+    parts = spec.split(":")
+    if len(parts) != 2:
+        raise HapstabError(f"--delay-range = {spec!r}: allowed: A:B, e.g. 5ms:15ms or 5:15")
+    seconds = any(p.strip().lower().endswith("s") for p in parts)
+    if seconds:
+        vals = parse_range(spec, "--delay-range", "s", values=">= 0")
+        lo, hi = vals[0], vals[-1]
+    else:
+        try:
+            lo, hi = (int(p) for p in parts)
+        except ValueError:
+            raise HapstabError(f"--delay-range = {spec!r}: whole samples (5:15) or seconds "
+                               "with a unit (5ms:15ms)") from None
+    res = delay_range_critical_stiffness(loop, lo, hi, seconds=seconds)
+    rows = [("critical stiffness", f"{fmt(res.critical_stiffness)} N/m"),
+            ("worst delay", f"{res.worst_delay_samples} samples"
+             + (" (round trip)" if res.round_trip else "")),
+            ("delays analysed", f"{res.delays_samples[0]}..{res.delays_samples[-1]}"),
+            ("why", res.reason)]
+    # the table names no loop: its own delay is not the one analysed (the range is)
+    emit(res.to_dict(), as_json, lambda: rich_table(f"K_max over a delay range, {kind}", rows),
+         loop)

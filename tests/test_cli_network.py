@@ -1,0 +1,63 @@
+"""``hapstab kmax ... --loss P [--burst L]`` (issue 30): the CLI gives the library's answer."""
+
+import json
+
+import pytest
+from click.testing import CliRunner
+
+from hapstab import paper_hve, paper_peb
+from hapstab.analysis.network import loss_critical_stiffness
+from hapstab.cli.main import cli
+
+
+def _run(*args):
+    return CliRunner().invoke(cli, list(args))
+
+
+def test_kmax_loss_is_the_librarys():
+    r = _run("kmax", "hve", "--delay", "2", "--loss", "0.05", "--json")
+    assert r.exit_code == 0, r.stderr
+    d = json.loads(r.stdout)
+    want = loss_critical_stiffness(paper_hve(delay_samples=2), 0.05)
+    assert d["critical_stiffness"] == want.critical_stiffness and d["method"] == "mean-square"
+
+
+def test_kmax_burst_peb_and_curve():
+    r = _run("kmax", "peb", "--delay", "1", "--loss", "0.1", "--burst", "3", "--json")
+    assert r.exit_code == 0, r.stderr
+    d = json.loads(r.stdout)
+    assert d["critical_stiffness"] == loss_critical_stiffness(
+        paper_peb(delay_samples=1), 0.1, 3.0).critical_stiffness
+    r = _run("kmax", "hve", "--loss", "0:0.2:3", "--json")
+    assert r.exit_code == 0, r.stderr
+    c = json.loads(r.stdout)
+    assert c["losses"] == [0.0, 0.1, 0.2] and c["certified"] == [True, False, False]
+    assert c["critical_stiffness"][0] > c["critical_stiffness"][1] > c["critical_stiffness"][2]
+
+
+@pytest.mark.parametrize("args, words", [
+    (("--loss", "1.5"), "loss = 1.5"),
+    (("--burst", "2"), "--burst"),
+    (("--loss", "0.1", "--method", "eq18"), "--method eq18"),
+    (("--loss", "0.1", "--delay-s", "1.5ms"), "whole samples"),
+    (("--loss", "0.6", "--burst", "1.2"), "burst"),
+])
+def test_refusals_are_one_line_and_exit_2(args, words):
+    r = _run("kmax", "hve", *args)
+    assert r.exit_code == 2 and words in r.stderr and r.stderr.count("\n") == 1, r.stderr
+
+
+def test_kmax_delay_range_is_the_librarys():
+    from hapstab.analysis.network.delay_range import delay_range_critical_stiffness
+
+    r = _run("kmax", "hve", "--delay-range", "5ms:15ms", "--json")
+    assert r.exit_code == 0, r.stderr
+    d = json.loads(r.stdout)
+    want = delay_range_critical_stiffness(paper_hve(), 5e-3, 15e-3)
+    assert d["critical_stiffness"] == want.critical_stiffness and d["worst_delay_samples"] == 15
+    r = _run("kmax", "peb", "--delay-range", "1:3", "--json")
+    assert json.loads(r.stdout)["delays_samples"] == [2.0, 3.0, 4.0, 5.0, 6.0]
+    for bad in (["--delay-range", "5"], ["--delay-range", "5:x"],
+                ["--delay-range", "1:2", "--loss", "0.1"]):
+        r = _run("kmax", "hve", *bad)
+        assert r.exit_code == 2 and r.stderr.count("\n") == 1, r.stderr
