@@ -11,6 +11,8 @@ from hapstab.analysis.closed_forms import colgate, eq18, eq29, eq34, gil, gil200
 from hapstab.analysis.damping import BestDampingResult, best_damping
 from hapstab.analysis.exact.core import stability
 from hapstab.analysis.exact.many import critical_stiffness_many
+from hapstab.analysis.identify import identify
+from hapstab.analysis.identify_result import IdentificationResult
 from hapstab.analysis.limit_cycle_results import LimitCycleResult, PredictedCycle
 from hapstab.analysis.limit_cycles import limit_cycles
 from hapstab.analysis.methods import boundary, critical_stiffness, methods_for
@@ -78,4 +80,5 @@ __all__ = [
     "OperatorBox", "operator_box", "robust_critical_stiffness", "RobustStiffnessResult",
     "robust_best_damping", "RobustDampingResult", "sweep", "SweepResult",
     "critical_stiffness_many",
+    "identify", "IdentificationResult",
 ]

@@ -7,7 +7,7 @@ from typing import Any, cast
 
 import click
 
-from hapstab.cli.options import LOOP_KINDS, NONNEG, POS, emit, fmt, loop_options, rich_table
+from hapstab.cli.options import LENGTH, LOOP_KINDS, NONNEG, emit, fmt, loop_options, rich_table
 from hapstab.cli.regions import _range
 from hapstab.errors import HapstabError
 from hapstab.models.loops import HapticLoop
@@ -40,9 +40,9 @@ def _at(spec: str | None) -> tuple[float, float] | None:
               help="The wall whose displayed impedance is shown (default: -K and -B).")
 @click.option("--stiffness", "-K", type=NONNEG, default=0.0, show_default=True,
               help="K of the wall shown, N/m (with --at unset).")
-@click.option("--resolution", "resolution_m", type=POS, default=None,
-              help="Encoder resolution in m: adds Abbott and Okamura's passive limit at B = 0 "
-                   "(with the device's --friction).")
+@click.option("--resolution", "resolution_m", type=LENGTH, default=None,
+              help="Encoder resolution, m or with a unit (2um): adds Abbott and Okamura's "
+                   "passive limit at B = 0 (with the device's --friction).")
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False), default=None,
               help="Write the Z-width figure (PNG or SVG by extension).")
 @click.option("--csv", "csv_path", type=click.Path(dir_okay=False), default=None,

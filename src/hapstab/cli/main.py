@@ -284,6 +284,7 @@ def _register() -> None:
         analysis,
         devices,
         explore,
+        identify,
         nonlinear,
         paper,
         regions,
@@ -298,7 +299,7 @@ def _register() -> None:
                 paper.audit_cmd, nonlinear.limit_cycle_cmd, regions.region,
                 regions.best, robust.robust, devices.zwidth_cmd, simulation.simulate_cmd,
                 simulation.reproduce_cmd, run.run_cmd, explore.explore_cmd,
-                sweep.sweep_cmd):
+                sweep.sweep_cmd, identify.identify_cmd):
         cli.add_command(cmd)
         _describe(cmd)
 

@@ -61,7 +61,8 @@ class Number(click.ParamType):
 #: Case matters where it changes the meaning (mHz is not MHz, Ms is not ms): only these
 #: spellings are read.
 UNITS = {"s": {"": 1.0, "s": 1.0, "ms": 1e-3, "us": 1e-6, "µs": 1e-6},
-         "Hz": {"": 1.0, "Hz": 1.0, "hz": 1.0, "kHz": 1e3, "khz": 1e3, "KHz": 1e3, "MHz": 1e6}}
+         "Hz": {"": 1.0, "Hz": 1.0, "hz": 1.0, "kHz": 1e3, "khz": 1e3, "KHz": 1e3, "MHz": 1e6},
+         "m": {"": 1.0, "m": 1.0, "mm": 1e-3, "um": 1e-6, "µm": 1e-6, "nm": 1e-9}}
 _QUANTITY = re.compile(r"^\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*([^\d\s]*)\s*$")
 
 
@@ -132,6 +133,8 @@ POS, NONNEG, REAL = Number(positive=True), Number(nonnegative=True), Number()
 #: K_s/K_m and the scaling factors: scaled teleoperators use 1e-3...1e3; beyond 1e6 the
 #: loop's numbers overflow
 RATIO = Number(positive=True, span=(1e-6, 1e6))
+#: A length such as an encoder's step: metres, or with a unit (2um, 0.01mm)
+LENGTH = Quantity("m", positive=True)
 
 
 def _stack(*decorators: Callable) -> Callable:

@@ -11,6 +11,7 @@ import click
 
 from hapstab.cli.files import check_files, write_files
 from hapstab.cli.options import (
+    LENGTH,
     LOOP_KINDS,
     NONNEG,
     POS,
@@ -56,7 +57,8 @@ def _simulate_command(kind: str) -> None:
     @click.option("--x0", type=Number(), default=0.0, show_default=True,
                   help="Initial position of the device / master in m (history at rest there).")
     @click.option("--saturation", type=POS, default=None, help="Actuator force limit in N.")
-    @click.option("--resolution", type=POS, default=None, help="Encoder resolution in m.")
+    @click.option("--resolution", type=LENGTH, default=None,
+                  help="Encoder resolution: m, or with a unit (2um).")
     @click.option("--quantizer", type=click.Choice(["floor", "nearest"]), default="floor",
                   show_default=True,
                   help="Encoder reading: floor (count of lines passed) or nearest step.")
