@@ -160,18 +160,17 @@ class IdentificationResult(Result):
 
     def summary(self) -> str:
         """One line: each parameter with its interval."""
-        parts = [f"m = {self.mass:.4g} kg [{self.low[0]:.4g}, {self.high[0]:.4g}]",
-                 f"b = {self.damping:.4g} N*s/m [{self.low[1]:.4g}, {self.high[1]:.4g}]"]
+        iv = [interval_text(self.estimate[i], self.low[i], self.high[i]) for i in range(3)]
+        parts = [f"m = {iv[0]} kg", f"b = {iv[1]} N*s/m"]
         if self.friction_fitted:
-            parts.append(f"f_c = {self.coulomb_friction:.4g} N [{self.low[2]:.4g}, "
-                         f"{self.high[2]:.4g}]")
+            parts.append(f"f_c = {iv[2]} N")
         elif self.friction_upper_N is not None:
             parts.append(f"no Coulomb friction detected (f_c <= {self.friction_upper_N:.3g} N)")
         return f"{', '.join(parts)} ({100 * self.confidence:g} % intervals)"
 
     def _repr_html_(self) -> str:
         items = [(f"{n} ({100 * self.confidence:g} % interval)",
-                  f"{e:.4g} [{lo:.4g}, {hi:.4g}]") for n, e, lo, hi, _ in self.rows()]
+                  interval_text(e, lo, hi)) for n, e, lo, hi, _ in self.rows()]
         items += [("residual_std_m", f"{self.residual_std_m:.3g}"),
                   ("samples", str(self.time_s.size)), ("period_s", f"{self.period_s:.6g}"),
                   ("noise model", NOISE_MODEL), ("kmax", self.commands()["estimate"])]
@@ -184,3 +183,14 @@ def _down(x: float, digits: int = 4) -> str:
         return "0"
     e = math.floor(math.log10(x)) - digits + 1
     return f"{math.floor(x / 10.0 ** e) * 10.0 ** e:.{digits}g}"
+
+
+def interval_text(est: float, lo: float, hi: float) -> str:
+    """``est [lo, hi]`` with the digits the interval's width supports (two beyond its
+    first significant digit), so that a narrow interval does not read ``0.25 [0.25, 0.25]``."""
+    width = hi - lo
+    scale = max(abs(est), abs(lo), abs(hi))
+    if not (width > 0 and scale > 0 and math.isfinite(width)):
+        return f"{est:.4g} [{lo:.4g}, {hi:.4g}]"
+    digits = min(12, max(3, math.ceil(math.log10(scale / width)) + 2))
+    return f"{est:.{digits}g} [{lo:.{digits}g}, {hi:.{digits}g}]"

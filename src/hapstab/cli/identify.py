@@ -63,12 +63,14 @@ def identify_cmd(log: str, resolution_m: float | None, quantizer: str, friction:
 
 
 def _table(res: Any) -> None:
+    from hapstab.analysis.identify_result import interval_text
+
     pct = f"{100 * res.confidence:g} %"
     units = {"mass_kg": ("mass m", "kg"), "damping_N_s_per_m": ("damping b", "N*s/m"),
              "coulomb_friction_N": ("Coulomb friction f_c", "N"),
              "initial_position_m": ("initial position", "m"),
              "initial_velocity_m_per_s": ("initial velocity", "m/s")}
-    rows = [(units[n][0], f"{e:.5g} {units[n][1]}  ({pct} interval {lo:.4g} ... {hi:.4g})")
+    rows = [(units[n][0], f"{interval_text(e, lo, hi)} {units[n][1]} ({pct} interval)")
             for n, e, lo, hi, _ in res.rows()]
     if not res.friction_fitted and res.friction_upper_N is not None:
         rows.append(("Coulomb friction f_c", f"not detected (<= {res.friction_upper_N:.3g} N)"))
