@@ -213,6 +213,9 @@ def click_message(argv: list[str], e: click.exceptions.ClickException) -> str:
     """
     msg = e.format_message()
     hint = _kind_hint(argv, msg)
+    if "No such option" in msg and "'--encoder" in msg:
+        hint += ("; the encoder's step is --resolution (m, or with a unit: --resolution 2um; "
+                 "simulate, limit-cycle, zwidth, passivity, audit, identify)")
     return (msg.split(" Did you mean")[0].rstrip(".") + hint) if hint else msg
 
 

@@ -88,7 +88,10 @@ def parse_quantity(text: Any, unit: str) -> float:
     if scale is None:
         raise ValueError(f"{text!r}: unknown unit {m.group(2)!r}; allowed: "
                          f"{', '.join(u for u in UNITS[unit] if u)} (or none: {unit})")
-    return float(m.group(1)) * scale
+    # decimal arithmetic: "100um" is the double nearest 1e-4, as "1e-4" is (100 * 1e-6 is not)
+    from decimal import Decimal
+
+    return float(Decimal(m.group(1)) * Decimal(repr(scale)))
 
 
 class Quantity(Number):
@@ -171,9 +174,12 @@ def _timing_options(kind: str, ranges: bool) -> list[Callable]:
             click.option("--rate", type=Quantity("Hz", positive=True), default=None,
                          help="Sampling rate instead of --period: Hz, or with a unit (1kHz)."),
             click.option("--delay", "-n", "delay", type=Delay(), default=0, show_default=True,
-                         help="Delay n in whole samples (t_d = n T)."),
+                         help="Delay n in whole samples (t_d = n T)"
+                              + (": one-way, in each direction (the round trip is 2n)."
+                                 if kind in ("peb", "4ch") else ".")),
             click.option("--delay-s", "delay_s", type=Quantity("s", nonnegative=True), default=None,
                          help="Delay in seconds or with a unit (20ms), "
+                              + ("one-way in each direction, " if kind in ("peb", "4ch") else "")
                               + ("a whole number of samples (4ch takes no fractional delay)"
                                  if kind == "4ch" else
                                  "any value (fractional samples modelled exactly)")

@@ -302,10 +302,15 @@ def _option_names(params: dict[str, click.Option]) -> dict[str, str]:
 
 
 def _unknown(study: Study, table: str, key: str, command: str, names: dict[str, str]) -> StudyError:
+    import difflib
+
+    allowed = sorted(k.replace('_', '-') for k in names)
+    close = difflib.get_close_matches(key.replace('_', '-'), allowed, n=1)
     why = ("where the answer goes is chosen on the command line (or by hapstab run)"
            if key in OUTPUT_KEYS else
-           f"not an option of {command} {study.kind}; allowed: "
-           f"{', '.join(sorted(k.replace('_', '-') for k in names))}")
+           f"not an option of {command} {study.kind}"
+           + (f" (did you mean {close[0]}?)" if close else "")
+           + f"; allowed: {', '.join(allowed)}")
     return StudyError(f"{study.where(key, table)}{key.replace('_', '-')}: {why}")
 
 

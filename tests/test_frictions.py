@@ -1,0 +1,57 @@
+"""Issue 29 item 8's smaller frictions, each a test: units on --resolution, a delay in
+seconds that was meant in ms, --encoder, a study typo, PEB's one-way --delay."""
+
+from __future__ import annotations
+
+import pytest
+from click.testing import CliRunner
+
+from hapstab.cli.main import cli
+
+
+def _run(*args):
+    return CliRunner().invoke(cli, list(args))
+
+
+@pytest.mark.parametrize("cmd", [
+    ["simulate", "hve", "-K", "5", "--duration", "0.05"],
+    ["limit-cycle", "hve", "-K", "8", "-n", "10"],
+    ["audit", "hve", "--friction", "0.005"],
+])
+def test_resolution_takes_units(cmd):
+    with_unit = _run(*cmd, "--resolution", "100um", "--json")
+    plain = _run(*cmd, "--resolution", "1e-4", "--json")
+    assert with_unit.exit_code == 0, with_unit.stderr
+    assert with_unit.stdout.split('"hapstab_version"')[0] == \
+        plain.stdout.split('"hapstab_version"')[0]
+    bad = _run(*cmd, "--resolution", "2 furlongs")
+    assert bad.exit_code == 2 and "m, mm, um" in bad.stderr
+
+
+def test_a_delay_in_seconds_meant_in_ms_is_pointed_out():
+    r = _run("kmax", "hve", "--rate", "2kHz", "--delay-s", "10")
+    assert r.exit_code == 2 and "did you mean 10ms (= 0.01 s)?" in r.stderr
+    r = _run("kmax", "hve", "--rate", "2kHz", "--delay-s", "1e4")   # not in ms either
+    assert r.exit_code == 2 and "did you mean" not in r.stderr
+
+
+def test_encoder_points_to_resolution():
+    r = _run("simulate", "hve", "-K", "5", "--encoder", "2um")
+    assert r.exit_code == 2 and "--resolution" in r.stderr and "2um" in r.stderr
+
+
+def test_a_study_typo_gets_a_suggestion(tmp_path):
+    p = tmp_path / "typo.toml"
+    p.write_text('kind = "hve"\n[loop]\ndampning = 2\n')
+    r = _run("kmax", "--study", str(p))
+    assert r.exit_code == 2 and "dampning: not an option of kmax hve (did you mean damping?)" \
+        in r.stderr
+    p.write_text('kind = "hve"\n[loop]\nzzqx = 2\n')                 # nothing close
+    assert "did you mean" not in _run("kmax", "--study", str(p)).stderr
+
+
+def test_pebs_delay_is_one_way_in_the_help():
+    for kind in ("peb", "4ch"):
+        text = " ".join(_run("kmax", kind, "--help").stdout.split())
+        assert "one- way, in each direction" in text or "one-way, in each direction" in text
+    assert "one-way" not in " ".join(_run("kmax", "hve", "--help").stdout.split())
