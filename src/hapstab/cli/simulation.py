@@ -184,9 +184,10 @@ def _table(kind: str, stiffness: float, loop: Any, res: Any, d: dict[str, Any],
            files: list[str]) -> None:
     """The readable table of a run."""
     v = res.verdict
-    rows = [("simulated", f"{v.verdict}: {v.behaviour} ({v.confidence} confidence, {v.basis})"),
-            ("growth rate", f"{_g(v.growth_rate)} 1/s (+- {_g(v.growth_rate_uncertainty, '.2g')})"
-                            f"{_doubling(v.growth_rate)}")]
+    rate = (v.rate_words() if v.growth_rate == -math.inf else
+            f"{_g(v.growth_rate)} 1/s (+- {_g(v.growth_rate_uncertainty, '.2g')})"
+            f"{_doubling(v.growth_rate)}")
+    rows = [("simulated", v.words()), ("growth rate", rate)]
     for lab in res.labels:       # what the plot shows: the swing at the start and at the end
         rows.append((f"swing of x, {lab}", f"{_g(d[f'swing_start_m_{lab}'])} m in the first "
                                            f"tenth of the run, {_g(d[f'swing_end_m_{lab}'])} m "
