@@ -55,3 +55,18 @@ def test_pebs_delay_is_one_way_in_the_help():
         text = " ".join(_run("kmax", kind, "--help").stdout.split())
         assert "one- way, in each direction" in text or "one-way, in each direction" in text
     assert "one-way" not in " ".join(_run("kmax", "hve", "--help").stdout.split())
+
+
+def test_a_run_table_does_not_silently_replace_the_variants_delay(tmp_path):
+    p = tmp_path / "v.toml"
+    p.write_text('kind = "hve"\n[loop]\nmass = 0.3\n[[variant]]\nname = "a"\ndelay = 2\n'
+                 '[[variant]]\nname = "b"\ndelay = 5\n[run.boundary]\ndelay-s = "1ms,2ms"\n'
+                 'period = "1ms"\n')
+    r = _run("run", str(p), "--out", str(tmp_path / "out"))
+    assert r.exit_code == 2
+    assert "v.toml line 11: delay-s: would replace the delay of variant 'a'" in r.stderr
+    # an option no variant sets is the run table's to give
+    p.write_text('kind = "hve"\n[[variant]]\nname = "a"\ndelay = 2\n[[variant]]\nname = "b"\n'
+                 'delay = 5\n[run.kmax]\nmass = 0.3\n')
+    ok = _run("run", str(p), "--out", str(tmp_path / "out2"), "--json")
+    assert ok.exit_code == 0, ok.stderr
