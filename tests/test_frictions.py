@@ -70,3 +70,21 @@ def test_a_run_table_does_not_silently_replace_the_variants_delay(tmp_path):
                  'delay = 5\n[run.kmax]\nmass = 0.3\n')
     ok = _run("run", str(p), "--out", str(tmp_path / "out2"), "--json")
     assert ok.exit_code == 0, ok.stderr
+
+
+def test_zwidth_says_the_exact_passive_limit_at_b0_and_shows_a_real_wall():
+    """Colgate and Schenkel: the HVE without delay is passive up to K = 2 b / T exactly
+    (0.1 N*s/m at 1 ms: 200 N/m) -- also when no row of the grid lies at B = 0."""
+    import json
+
+    r = _run("zwidth", "hve", "--K", "0:5000", "--B", "-1:10", "--rows", "4", "--json")
+    assert r.exit_code == 0, r.stderr
+    d = json.loads(r.stdout)
+    assert 0.0 not in d["rows"]["virtual_damping_N_s_per_m"]
+    # 1e-6 relative: far above rounding, far below a grid row's step (3.7 N*s/m here)
+    assert abs(d["passive_up_to_at_B0_N_per_m"] - 200.0) <= 1e-6 * 200
+    assert d["displayed"]["stiffness_N_per_m"] == d["passive_up_to_at_B0_N_per_m"]
+    shown = d["displayed"]["displayed_stiffness_N_per_m"]
+    assert max(shown) - min(shown) > 1.0                                   # not a flat line
+    table = _run("zwidth", "hve", "--K", "0:5000", "--B", "-1:10", "--rows", "4").stdout
+    assert "passive up to (B = 0)" in table and "200" in table
