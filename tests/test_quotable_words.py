@@ -39,3 +39,17 @@ def test_a_run_at_rest_has_no_growth_rate_to_print():
     assert out.exit_code == 0, out.stderr
     assert "-inf" not in out.stdout and "none: nothing moves" in out.stdout
     assert "bounded: at rest (high confidence, observed)" in out.stdout
+
+
+def test_the_quantisation_condition_says_what_the_gain_margin_means():
+    """Not "gain margin must be below 2.115: here 1.25" (which reads as a requirement on
+    the user) but what the comparison implies for this loop."""
+    import json
+
+    out = CliRunner().invoke(cli, ["limit-cycle", "hve", "-K", "8", "-n", "10",
+                                   "--resolution", "1e-4", "--json"])
+    assert out.exit_code == 0, out.stderr
+    text = json.loads(out.stdout)["conditions"]
+    assert "must be below that" not in text
+    assert "a cycle is possible only where the loop's gain margin" in text
+    assert "below it, so quantisation can sustain a cycle there" in text
