@@ -443,4 +443,24 @@ def test_a_4ch_sweep_says_no_closed_form_applies(tmp_path):
     for row in rows(tmp_path / "o").to_pylist():
         assert row["closed_form_equation"] == "" and math.isnan(row["closed_form_N_per_m"])
         assert row["closed_form_over_promises"] is None
-        assert row["error"].startswith("closed-form: ") and row["critical_stiffness_N_per_m"] > 0
+        assert row["not_applicable"].startswith("closed-form: ") and row["error"] is None
+        assert row["critical_stiffness_N_per_m"] > 0
+
+
+def test_passivity_at_a_fractional_delay_is_not_applicable_not_an_error(tmp_path):
+    """Issue 29 item 6: the sampled-data passivity is derived for whole samples of delay; at
+    t_d = 2.5 T it does not apply, which is not an error (K_max is fine there)."""
+    (tmp_path / "s.toml").write_text('kind = "hve"\n[sweep]\nquantities = ["kmax", '
+                                     '"passivity"]\n[sweep.axes]\ndelay-s = [0.002, 0.0025]\n')
+    r = invoke(["sweep", str(tmp_path / "s.toml"), "--out", str(tmp_path / "o"), "--workers",
+                "1", "--json"])
+    assert r.exit_code == 0, r.stderr
+    whole, frac = sorted(rows(tmp_path / "o").to_pylist(), key=lambda row: row["point_id"])
+    assert whole["not_applicable"] is None and whole["error"] is None
+    assert whole["passivity_kmax_N_per_m"] > 0
+    assert frac["error"] is None and frac["critical_stiffness_N_per_m"] > 0
+    assert frac["not_applicable"] == ("passivity: derived for whole samples of delay; this "
+                                      "point has t_d = 2.5 T")
+    assert math.isnan(frac["passivity_kmax_N_per_m"])
+    s = json.loads(r.stdout)["summary"]
+    assert s["errors"] == 0 and s["not_applicable"] == 1

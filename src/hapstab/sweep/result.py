@@ -122,13 +122,15 @@ def summarise(paths: list[str], points: Points, quantities: tuple[str, ...],
     stats: dict[str, dict[str, Any]] = {}
     verdicts: dict[str, int] = {}
     worst: list[tuple[float, dict[str, Any]]] = []
-    n = errors = compared = over = 0
+    n = errors = inapplicable = compared = over = 0
     heat = _Heat(points, plot) if plot else None
     axes = [a.column for a in points.axes]
     for path in paths:
         t = read_chunk(path)
         n += t.num_rows
         errors += t.num_rows - t.column("error").null_count
+        if "not_applicable" in t.column_names:
+            inapplicable += t.num_rows - t.column("not_applicable").null_count
         for col in _numeric(quantities):
             _extremes(stats, col, t, axes)
         if "verdict_at_K" in t.column_names:
@@ -147,7 +149,8 @@ def summarise(paths: list[str], points: Points, quantities: tuple[str, ...],
             worst = sorted(worst, key=lambda r: -r[0])[:WORST]
         if heat is not None:
             heat.add(t)
-    out: dict[str, Any] = {"points": n, "errors": errors, "quantities": stats}
+    out: dict[str, Any] = {"points": n, "errors": errors, "not_applicable": inapplicable,
+                           "quantities": stats}
     if verdicts:
         out["verdicts_at_K"] = [{"verdict": v, "points": k} for v, k in sorted(verdicts.items())]
     if "closed-form" in quantities:
