@@ -464,3 +464,22 @@ def test_passivity_at_a_fractional_delay_is_not_applicable_not_an_error(tmp_path
     assert math.isnan(frac["passivity_kmax_N_per_m"])
     s = json.loads(r.stdout)["summary"]
     assert s["errors"] == 0 and s["not_applicable"] == 1
+
+
+def test_the_heat_map_axes_have_names_units_and_a_tick_per_value():
+    """Issue 29 item 6: not the raw column names (rate_hz) and one tick on a log axis."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from hapstab.sweep.result import draw_heat_map
+
+    h = {"x": "rate_hz", "y": "virtual_damping_N_s_per_m", "x_values": [500.0, 1000.0, 2000.0],
+         "y_values": [0.0, 1.0], "x_log": True, "y_log": False, "min_over": [],
+         "critical_stiffness_N_per_m": [[10.0, 20.0, 40.0], [15.0, 30.0, 60.0]]}
+    _fig, ax = plt.subplots()
+    draw_heat_map(h, ax)
+    assert ax.get_xlabel() == "sampling rate (Hz)"
+    assert ax.get_ylabel() == "virtual damping B (N·s/m)"
+    assert [t.get_text() for t in ax.get_xticklabels()] == ["500", "1000", "2000"]
+    plt.close("all")
