@@ -88,3 +88,20 @@ def test_zwidth_says_the_exact_passive_limit_at_b0_and_shows_a_real_wall():
     assert max(shown) - min(shown) > 1.0                                   # not a flat line
     table = _run("zwidth", "hve", "--K", "0:5000", "--B", "-1:10", "--rows", "4").stdout
     assert "passive up to (B = 0)" in table and "200" in table
+
+
+def test_the_explorers_force_field_is_in_newtons_and_a_delay_keeps_its_unit():
+    """The force field's unit came from its help's "(N, s, Hz)" (read as Hz), and a delay
+    typed as 10ms was labelled "delay 10ms s". Checked on the page's script (the browser
+    tests need Debian's chromium, absent here): the unit table names the force in N, and
+    the legend's delay appends " s" only to a plain number."""
+    import pathlib
+    import re
+
+    js = (pathlib.Path(__file__).resolve().parent.parent / "src" / "hapstab" / "explorer"
+          / "static" / "app.js").read_text()
+    units = js[js.index("const UNITS"):js.index("};", js.index("const UNITS"))]
+    assert 'force: "N"' in units and '"environment-force": "N"' in units
+    rule = re.search(r"/\[a-zµμ\]\$/i\.test\(ds\) \? ds : ds \+ \" s\"", js)
+    assert rule, "the delay label must not append ' s' to a delay with a unit"
+    assert 'value("delay-s") + " s"' not in js
