@@ -105,3 +105,12 @@ def test_the_explorers_force_field_is_in_newtons_and_a_delay_keeps_its_unit():
     rule = re.search(r"/\[a-zµμ\]\$/i\.test\(ds\) \? ds : ds \+ \" s\"", js)
     assert rule, "the delay label must not append ' s' to a delay with a unit"
     assert 'value("delay-s") + " s"' not in js
+
+
+def test_the_explorers_long_reasons_scroll_instead_of_being_cut_off():
+    import pathlib
+
+    css = (pathlib.Path(__file__).resolve().parent.parent / "src" / "hapstab" / "explorer"
+           / "static" / "app.css").read_text()
+    rule = css[css.index(".sub {"):css.index("}", css.index(".sub {"))]
+    assert "line-clamp" not in rule and "overflow-y: auto" in rule
