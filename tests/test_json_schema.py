@@ -76,9 +76,28 @@ RUNS = [
     ("kmax-loss-curve", ["kmax", "hve", "--loss", "0:0.2:3"]),
     ("kmax-delay-range", ["kmax", "hve", "--delay-range", "5ms:8ms"]),
     ("kmax-delay-range", ["kmax", "peb", "--delay-range", "1:2"]),
+    ("identify", ["identify", "log.csv", "--resolution", "2um"]),
     ("error", ["kmax", "hve", "--delay", "x"]),
     ("error", ["simulate", "hve", "-K", "9", "--duration", "1e9"]),              # budget
 ]
+
+
+def _write_log(path):
+    """A short identification log: a 0.25 kg, 0.8 N*s/m device under a multisine (exact
+    ZOH positions from hapstab's simulator, read by a 2 um encoder)."""
+    import numpy as np
+
+    import hapstab
+    from hapstab.models.parts import quantize
+
+    t = np.arange(600) * 5e-4
+    F = 0.4 * np.sin(2 * np.pi * 3 * t) + 0.2 * np.sin(2 * np.pi * 17 * t)
+    loop = hapstab.HapticLoop(hapstab.Device(0.25, 0.8), operator=None, period=5e-4)
+    x = hapstab.simulate(loop, 599 * 5e-4, force=F[:-1]).position[:, 0]
+    with open(path, "w") as fh:
+        fh.write("time_s,force_N,position_m\n")
+        fh.writelines(f"{a:.17g},{b:.17g},{c:.17g}\n" for a, b, c in zip(t, F, quantize(x, 2e-6),
+                                                                  strict=True))
 
 
 def _validator(name):
@@ -91,6 +110,7 @@ def outputs(tmp_path_factory):
     with open("study.toml", "w") as fh:
         fh.write('kind = "peb"\n[loop]\ndelay = 2\n[[variant]]\nname = "stiff"\n'
                  'environment = "spring:2000"\n[run.kmax]\n[run.check]\nK = 3\n')
+    _write_log("log.csv")
     with open("sweep.toml", "w") as fh:
         fh.write('kind = "hve"\n[sweep]\nquantities = ["kmax", "closed-form", "check"]\n'
                  '[sweep.check]\nstiffness = 20\n[sweep.axes]\nperiod = "1ms:2ms:2"\n'

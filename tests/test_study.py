@@ -100,7 +100,8 @@ def test_a_failing_analysis_leaves_the_previous_results(study, tmp_path):
 
 
 @pytest.mark.parametrize("edit,needle", [
-    (("mass = 0.3", "mas = 0.3"), "dev.toml line 5: mas: not an option of kmax hve; allowed:"),
+    (("mass = 0.3", "mas = 0.3"),
+     "dev.toml line 5: mas: not an option of kmax hve (did you mean mass?); allowed:"),
     (("mass = 0.3", "mass = \"heavy\""), "dev.toml line 5: mass = 'heavy': 'heavy' is not a number"),
     (("mass = 0.3", "mass = -1"), "dev.toml line 5: mass = -1: -1: must be > 0"),
     (("kind = \"hve\"", "kind = \"haptic\""), "dev.toml line 1: kind = 'haptic': allowed"),

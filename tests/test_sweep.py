@@ -443,4 +443,43 @@ def test_a_4ch_sweep_says_no_closed_form_applies(tmp_path):
     for row in rows(tmp_path / "o").to_pylist():
         assert row["closed_form_equation"] == "" and math.isnan(row["closed_form_N_per_m"])
         assert row["closed_form_over_promises"] is None
-        assert row["error"].startswith("closed-form: ") and row["critical_stiffness_N_per_m"] > 0
+        assert row["not_applicable"].startswith("closed-form: ") and row["error"] is None
+        assert row["critical_stiffness_N_per_m"] > 0
+
+
+def test_passivity_at_a_fractional_delay_is_not_applicable_not_an_error(tmp_path):
+    """Issue 29 item 6: the sampled-data passivity is derived for whole samples of delay; at
+    t_d = 2.5 T it does not apply, which is not an error (K_max is fine there)."""
+    (tmp_path / "s.toml").write_text('kind = "hve"\n[sweep]\nquantities = ["kmax", '
+                                     '"passivity"]\n[sweep.axes]\ndelay-s = [0.002, 0.0025]\n')
+    r = invoke(["sweep", str(tmp_path / "s.toml"), "--out", str(tmp_path / "o"), "--workers",
+                "1", "--json"])
+    assert r.exit_code == 0, r.stderr
+    whole, frac = sorted(rows(tmp_path / "o").to_pylist(), key=lambda row: row["point_id"])
+    assert whole["not_applicable"] is None and whole["error"] is None
+    assert whole["passivity_kmax_N_per_m"] > 0
+    assert frac["error"] is None and frac["critical_stiffness_N_per_m"] > 0
+    assert frac["not_applicable"] == ("passivity: derived for whole samples of delay; this "
+                                      "point has t_d = 2.5 T")
+    assert math.isnan(frac["passivity_kmax_N_per_m"])
+    s = json.loads(r.stdout)["summary"]
+    assert s["errors"] == 0 and s["not_applicable"] == 1
+
+
+def test_the_heat_map_axes_have_names_units_and_a_tick_per_value():
+    """Issue 29 item 6: not the raw column names (rate_hz) and one tick on a log axis."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from hapstab.sweep.result import draw_heat_map
+
+    h = {"x": "rate_hz", "y": "virtual_damping_N_s_per_m", "x_values": [500.0, 1000.0, 2000.0],
+         "y_values": [0.0, 1.0], "x_log": True, "y_log": False, "min_over": [],
+         "critical_stiffness_N_per_m": [[10.0, 20.0, 40.0], [15.0, 30.0, 60.0]]}
+    _fig, ax = plt.subplots()
+    draw_heat_map(h, ax)
+    assert ax.get_xlabel() == "sampling rate (Hz)"
+    assert ax.get_ylabel() == "virtual damping B (N·s/m)"
+    assert [t.get_text() for t in ax.get_xticklabels()] == ["500", "1000", "2000"]
+    plt.close("all")

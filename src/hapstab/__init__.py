@@ -63,6 +63,8 @@ if TYPE_CHECKING:   # for type checkers and readers; at run time a name loads on
     from hapstab.analysis.interop import to_control
     from hapstab.analysis.margin_result import FrequencyView, MarginResult
     from hapstab.analysis.margins import frequency_view, margins
+    from hapstab.analysis.identify import identify
+    from hapstab.analysis.identify_result import IdentificationResult
 
 __version__ = "0.1.0"
 
@@ -114,6 +116,8 @@ _LAZY = {
     "hapstab.analysis.interop": ("to_control",),
     "hapstab.analysis.margin_result": ("FrequencyView", "MarginResult",),
     "hapstab.analysis.margins": ("frequency_view", "margins",),
+    "hapstab.analysis.identify": ("identify",),
+    "hapstab.analysis.identify_result": ("IdentificationResult",),
 }
 _MODULE_OF = {name: module for module, names in _LAZY.items() for name in names}
 
@@ -136,6 +140,7 @@ __all__ = [
     "robust_best_damping", "RobustDampingResult", "sweep", "SweepResult",
     "critical_stiffness_many",
     "to_control", "margins", "frequency_view", "MarginResult", "FrequencyView",
+    "identify", "IdentificationResult",
 ]
 
 

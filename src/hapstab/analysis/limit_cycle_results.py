@@ -177,11 +177,15 @@ class LimitCycleResult(Result):
         if self.resolution_m:
             gm = min((g for _, g in self.crossovers), default=math.inf)
             f = next((f for f, g in self.crossovers if g == gm), math.nan)
+            verdict = ("below it, so quantisation can sustain a cycle there"
+                       if gm < self.max_gain else
+                       "not below it, so quantisation alone cannot sustain one")
             out.append(f"quantisation: a cycle needs the quantiser's gain N(A) = 1/|C| at a phase "
                        f"crossover of the loop it sees; N is at most {self.max_gain:.4g} (4/pi = "
-                       f"1.273 for a centred quantiser), so the gain margin must be below that: "
-                       + (f"here {gm:.4g} at {f:.4g} Hz" if math.isfinite(gm) else
-                          "this loop has no phase crossover"))
+                       f"1.273 for a centred quantiser), so a cycle is possible only where the "
+                       f"loop's gain margin (1/|C| there) is below {self.max_gain:.4g}: "
+                       + (f"here it is {gm:.4g} at {f:.4g} Hz, {verdict}" if math.isfinite(gm)
+                          else "this loop has no phase crossover, so none is possible"))
         if self.rests == "free in a step":
             out.append("rest: no operator's spring and friction below K Delta/2 (Abbott-Okamura's "
                        "quantisation condition): the device coasts within an encoder step and may "

@@ -33,6 +33,7 @@ sampling rate on virtual-wall passivity", IEEE Trans. Robotics 21(5), 2005.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Any, cast
 
@@ -110,6 +111,8 @@ class ZWidthResult(Result):
         The displayed impedance at (``K_at``, ``B_at``): N/m and N*s/m.
     K_at, B_at : float
         The wall whose impedance is shown.
+    K_passive_B0, K_stable_B0 : float
+        The largest passive K and the exact K_max at B = 0 exactly (not the nearest row).
     K_window : (float, float)
         The stiffness range drawn, N/m.
     period : float
@@ -131,6 +134,8 @@ class ZWidthResult(Result):
     K_window: tuple[float, float]
     period: float
     headline: str
+    K_passive_B0: float = float("nan")
+    K_stable_B0: float = float("nan")
 
     def to_dict(self) -> dict[str, Any]:
         return jsonable({
@@ -138,6 +143,8 @@ class ZWidthResult(Result):
             "rows": {"virtual_damping_N_s_per_m": self.B_rows,
                      "passive_up_to_N_per_m": self.K_passive,
                      "stable_up_to_N_per_m": self.K_stable},
+            "passive_up_to_at_B0_N_per_m": self.K_passive_B0,
+            "stable_up_to_at_B0_N_per_m": self.K_stable_B0,
             "quantised_passive_up_to_N_per_m": self.K_quantised,
             "nonlinear_reason": self.nonlinear_reason,
             "displayed": {"stiffness_N_per_m": self.K_at, "virtual_damping_N_s_per_m": self.B_at,
@@ -215,7 +222,8 @@ def zwidth(loop: HapticLoop, K: tuple[float, float], B: tuple[float, float],
     resolution : int
         Rows in B (2..2000).
     at : (K, B), optional
-        The wall whose displayed impedance is computed; default the loop's own.
+        The wall whose displayed impedance is computed; default the loop's own, or, when
+        that is no wall (K = B = 0: a flat zero), the passive limit at B = 0.
     frequencies_hz : array, optional
         Default 200 points from 0.1 Hz to Nyquist, logarithmic.
     coulomb_friction_N, resolution_m : float, optional
@@ -245,11 +253,15 @@ def zwidth(loop: HapticLoop, K: tuple[float, float], B: tuple[float, float],
     Bs = np.linspace(b0, b1, resolution)
     passive, stable = _rows(loop, Bs)
     kq, why = _quantised(loop, coulomb_friction_N, resolution_m)
+    (p0,), (s0,) = _rows(loop, np.array([0.0]))
     c = loop.controller
     K_at, B_at = ((getattr(c, "stiffness", 0.0), getattr(c, "damping", 0.0)) if at is None
                   else (check_real("at K", at[0]), check_real("at B", at[1])))
+    if at is None and K_at == 0 and B_at == 0 and 0 < p0 < math.inf:
+        K_at = float(p0)
     T = loop.period
     f = np.geomspace(min(0.1, 0.05 / T), 0.5 / T, 200) if frequencies_hz is None else frequencies_hz
     ks, bs = displayed_impedance(cast(HapticLoop, with_gains(loop, K_at, B_at)), f)
     return ZWidthResult(Bs, passive, stable, kq, why, np.asarray(f, float), ks, bs,
-                        float(K_at), float(B_at), (k0, k1), T, headline(loop))
+                        float(K_at), float(B_at), (k0, k1), T, headline(loop),
+                        float(p0), float(s0))

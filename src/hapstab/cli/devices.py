@@ -8,6 +8,7 @@ from typing import Any, cast
 import click
 
 from hapstab.cli.options import (
+    LENGTH,
     LOOP_KINDS,
     NONNEG,
     POS,
@@ -49,9 +50,9 @@ def _at(spec: str | None) -> tuple[float, float] | None:
               help="The wall whose displayed impedance is shown (default: -K and -B).")
 @click.option("--stiffness", "-K", type=NONNEG, default=0.0, show_default=True,
               help="K of the wall shown, N/m (with --at unset).")
-@click.option("--resolution", "resolution_m", type=POS, default=None,
-              help="Encoder resolution in m: adds Abbott and Okamura's passive limit at B = 0 "
-                   "(with the device's --friction).")
+@click.option("--resolution", "resolution_m", type=LENGTH, default=None,
+              help="Encoder resolution, m or with a unit (2um): adds Abbott and Okamura's "
+                   "passive limit at B = 0 (with the device's --friction).")
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False), default=None,
               help="Write the Z-width figure (PNG or SVG by extension).")
 @click.option("--csv", "csv_path", type=click.Path(dir_okay=False), default=None,
@@ -66,13 +67,15 @@ def zwidth_hve(K_spec: str, B_spec: str, rows: int, at_spec: str | None, stiffne
     check_files(csv_path, plot_path, as_json)
     B_at = kw["virtual_damping"]
     K, B = _range(K_spec, "--K"), _range(B_spec, "--B", signed=True)
-    loop = cast(HapticLoop, LOOP_KINDS["hve"](kw, 1.0))
-    at = _at(at_spec) or (stiffness, B_at)
+    # without --at, -K or -B the wall shown is the passive limit at B = 0 (K = B = 0 would
+    # display a flat zero)
+    at = _at(at_spec) or ((stiffness, B_at) if stiffness or B_at else None)
+    loop = cast(HapticLoop, LOOP_KINDS["hve"](kw, 0.0 if at is None else 1.0))
     res = zwidth(loop, K, B, rows, at=at, resolution_m=resolution_m)
+    at = (res.K_at, res.B_at)
     write_files(res, csv_path, plot_path, dpi=120, bbox_inches="tight")
-    i = int(abs(res.B_rows).argmin())
-    table = [(f"passive up to (at B = {res.B_rows[i]:.4g})", f"{fmt(res.K_passive[i])} N/m"),
-             ("stable up to (same B)", f"{fmt(res.K_stable[i])} N/m"),
+    table = [("passive up to (B = 0)", f"{fmt(res.K_passive_B0)} N/m"),
+             ("stable up to (B = 0)", f"{fmt(res.K_stable_B0)} N/m"),
              ("largest passive K", f"{fmt(res.K_passive.max())} N/m at B = "
                                    f"{res.B_rows[int(res.K_passive.argmax())]:.6g} N*s/m"),
              ("with friction and encoder", "-" if res.K_quantised is None

@@ -216,6 +216,9 @@ def click_message(argv: list[str], e: click.exceptions.ClickException) -> str:
     """
     msg = e.format_message()
     hint = _kind_hint(argv, msg)
+    if "No such option" in msg and "'--encoder" in msg:
+        hint += ("; the encoder's step is --resolution (m, or with a unit: --resolution 2um; "
+                 "simulate, limit-cycle, zwidth, passivity, audit, identify)")
     return (msg.split(" Did you mean")[0].rstrip(".") + hint) if hint else msg
 
 
@@ -287,6 +290,7 @@ def _register() -> None:
         analysis,
         devices,
         explore,
+        identify,
         nonlinear,
         paper,
         regions,
@@ -301,7 +305,7 @@ def _register() -> None:
                 paper.audit_cmd, nonlinear.limit_cycle_cmd, regions.region,
                 regions.best, robust.robust, devices.zwidth_cmd, simulation.simulate_cmd,
                 simulation.reproduce_cmd, run.run_cmd, explore.explore_cmd,
-                sweep.sweep_cmd):
+                sweep.sweep_cmd, identify.identify_cmd):
         cli.add_command(cmd)
         _describe(cmd)
 

@@ -8,7 +8,16 @@ from typing import Any
 
 import click
 
-from hapstab.cli.options import LOOP_KINDS, POS, REAL, IntRange, emit, loop_options, rich_table
+from hapstab.cli.options import (
+    LENGTH,
+    LOOP_KINDS,
+    POS,
+    REAL,
+    IntRange,
+    emit,
+    loop_options,
+    rich_table,
+)
 
 
 @click.group("limit-cycle",
@@ -22,7 +31,8 @@ def limit_cycle_cmd() -> None:
 @limit_cycle_cmd.command("hve")
 @loop_options("hve")
 @click.option("--stiffness", "-K", type=POS, required=True, help="K in N/m.")
-@click.option("--resolution", type=POS, default=None, help="Encoder resolution Delta in m.")
+@click.option("--resolution", type=LENGTH, default=None,
+              help="Encoder resolution Delta: m, or with a unit (2um).")
 @click.option("--quantizer", type=click.Choice(["floor", "nearest"]), default="floor",
               show_default=True, help="The encoder's reading: Delta floor(x/Delta), or the "
                                       "nearest multiple (as simulate's).")

@@ -61,7 +61,8 @@ class Number(click.ParamType):
 #: Case matters where it changes the meaning (mHz is not MHz, Ms is not ms): only these
 #: spellings are read.
 UNITS = {"s": {"": 1.0, "s": 1.0, "ms": 1e-3, "us": 1e-6, "µs": 1e-6},
-         "Hz": {"": 1.0, "Hz": 1.0, "hz": 1.0, "kHz": 1e3, "khz": 1e3, "KHz": 1e3, "MHz": 1e6}}
+         "Hz": {"": 1.0, "Hz": 1.0, "hz": 1.0, "kHz": 1e3, "khz": 1e3, "KHz": 1e3, "MHz": 1e6},
+         "m": {"": 1.0, "m": 1.0, "mm": 1e-3, "um": 1e-6, "µm": 1e-6, "nm": 1e-9}}
 _QUANTITY = re.compile(r"^\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*([^\d\s]*)\s*$", re.ASCII)
 
 
@@ -87,7 +88,10 @@ def parse_quantity(text: Any, unit: str) -> float:
     if scale is None:
         raise ValueError(f"{text!r}: unknown unit {m.group(2)!r}; allowed: "
                          f"{', '.join(u for u in UNITS[unit] if u)} (or none: {unit})")
-    return float(m.group(1)) * scale
+    # decimal arithmetic: "100um" is the double nearest 1e-4, as "1e-4" is (100 * 1e-6 is not)
+    from decimal import Decimal
+
+    return float(Decimal(m.group(1)) * Decimal(repr(scale)))
 
 
 class Quantity(Number):
@@ -142,6 +146,8 @@ POS, NONNEG, REAL = Number(positive=True), Number(nonnegative=True), Number()
 #: K_s/K_m and the scaling factors: scaled teleoperators use 1e-3...1e3; beyond 1e6 the
 #: loop's numbers overflow
 RATIO = Number(positive=True, span=(1e-6, 1e6))
+#: A length such as an encoder's step: metres, or with a unit (2um, 0.01mm)
+LENGTH = Quantity("m", positive=True)
 
 
 def _stack(*decorators: Callable) -> Callable:
@@ -178,9 +184,12 @@ def _timing_options(kind: str, ranges: bool) -> list[Callable]:
             click.option("--rate", type=Quantity("Hz", positive=True), default=None,
                          help="Sampling rate instead of --period: Hz, or with a unit (1kHz)."),
             click.option("--delay", "-n", "delay", type=Delay(), default=0, show_default=True,
-                         help="Delay n in whole samples (t_d = n T)."),
+                         help="Delay n in whole samples (t_d = n T)"
+                              + (": one-way, in each direction (the round trip is 2n)."
+                                 if kind in ("peb", "4ch") else ".")),
             click.option("--delay-s", "delay_s", type=Quantity("s", nonnegative=True), default=None,
                          help="Delay in seconds or with a unit (20ms), "
+                              + ("one-way in each direction, " if kind in ("peb", "4ch") else "")
                               + ("a whole number of samples (4ch takes no fractional delay)"
                                  if kind == "4ch" else
                                  "any value (fractional samples modelled exactly)")

@@ -14,6 +14,7 @@ import numpy as np
 
 from hapstab.cli.fourchannel import refuse_force_gains
 from hapstab.cli.options import (
+    LENGTH,
     LOOP_KINDS,
     NONNEG,
     PAPER_KINDS,
@@ -130,10 +131,11 @@ def _resolution_option(kind: str, command: str) -> Any:
     Abbott-Okamura condition with the device's ``--friction``; no option for the others."""
     if kind != "hve":
         return lambda f: f
-    return click.option("--resolution", type=POS, default=None,
-                        help="Encoder resolution Delta in m: adds the Abbott-Okamura condition "
-                             "(b >= KT/2 and f_c >= K Delta/2, with --friction f_c; B = 0 and no "
-                             "delay)" + (" as a row." if command == "audit" else "."))
+    return click.option("--resolution", type=LENGTH, default=None,
+                        help="Encoder resolution Delta, m or with a unit (2um): adds the "
+                             "Abbott-Okamura condition (b >= KT/2 and f_c >= K Delta/2, with "
+                             "--friction f_c; B = 0 and no delay)"
+                             + (" as a row." if command == "audit" else "."))
 
 
 def _nonlinear_passivity(loop: Any, stiffness: float, resolution: float | None,

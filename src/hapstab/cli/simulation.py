@@ -11,6 +11,7 @@ import click
 
 from hapstab.cli.files import check_files, write_files
 from hapstab.cli.options import (
+    LENGTH,
     LOOP_KINDS,
     NONNEG,
     POS,
@@ -57,7 +58,8 @@ def _simulate_command(kind: str) -> None:
     @click.option("--x0", type=Number(), default=0.0, show_default=True,
                   help="Initial position of the device / master in m (history at rest there).")
     @click.option("--saturation", type=POS, default=None, help="Actuator force limit in N.")
-    @click.option("--resolution", type=POS, default=None, help="Encoder resolution in m.")
+    @click.option("--resolution", type=LENGTH, default=None,
+                  help="Encoder resolution: m, or with a unit (2um).")
     @click.option("--quantizer", type=click.Choice(["floor", "nearest"]), default="floor",
                   show_default=True,
                   help="Encoder reading: floor (count of lines passed) or nearest step.")
@@ -183,9 +185,10 @@ def _table(kind: str, stiffness: float, loop: Any, res: Any, d: dict[str, Any],
            files: list[str]) -> None:
     """The readable table of a run."""
     v = res.verdict
-    rows = [("simulated", f"{v.verdict}: {v.behaviour} ({v.confidence} confidence, {v.basis})"),
-            ("growth rate", f"{_g(v.growth_rate)} 1/s (+- {_g(v.growth_rate_uncertainty, '.2g')})"
-                            f"{_doubling(v.growth_rate)}")]
+    rate = (v.rate_words() if v.growth_rate == -math.inf else
+            f"{_g(v.growth_rate)} 1/s (+- {_g(v.growth_rate_uncertainty, '.2g')})"
+            f"{_doubling(v.growth_rate)}")
+    rows = [("simulated", v.words()), ("growth rate", rate)]
     for lab in res.labels:       # what the plot shows: the swing at the start and at the end
         rows.append((f"swing of x, {lab}", f"{_g(d[f'swing_start_m_{lab}'])} m in the first "
                                            f"tenth of the run, {_g(d[f'swing_end_m_{lab}'])} m "

@@ -307,6 +307,7 @@ def study_defaults(study: Study, cmd: click.Command, command: str, variant: str,
     params = {p.name: p for p in cmd.params if isinstance(p, click.Option) and p.name}
     names = _option_names(params)
     out: dict[str, Any] = {}
+    by_variant: set[str] = set()
     layers = [("loop", study.loop), ("variant", study.variants[variant]),
               (f"run.{command}", _flat(study.run.get(command, {})))]
     for table, opts in layers:
@@ -321,11 +322,28 @@ def study_defaults(study: Study, cmd: click.Command, command: str, variant: str,
                     raise StudyError(f"{study.where(key, table)}{key.replace('_', '-')}: "
                                      f"{command} varies it itself; give its window instead")
                 continue
+            if table.startswith("run."):
+                _not_over_variant(study, table, key, name, variant, by_variant)
+            elif table == "variant":
+                by_variant.add(name)
             _drop_alternative(out, name)
             out[name] = _convert(study, table, key, value, params[name])
     for name in _given(params, argv).values():
         _drop_alternative(out, name)
     return out
+
+
+def _not_over_variant(study: Study, table: str, key: str, name: str, variant: str,
+                      by_variant: set[str]) -> None:
+    """Refuse a [run.<command>] option that would replace what the variant sets (itself or
+    its alternative: ``delay-s`` for ``delay``): every variant would silently get the same."""
+    alts = {name, *(b for a, b in ALTERNATIVES if a == name), *(a for a, b in ALTERNATIVES
+                                                                 if b == name)}
+    hit = sorted(alts & by_variant)
+    if hit:
+        raise StudyError(f"{study.where(key, table)}{key.replace('_', '-')}: would replace "
+                         f"the {hit[0].replace('_', '-')} of variant {variant!r} (every variant "
+                         "would get the same); set it in each variant or in [loop] instead")
 
 
 def _once(study: Study, table: str, key: str, name: str, seen: dict[str, str]) -> None:
@@ -359,10 +377,15 @@ def _option_names(params: dict[str, click.Option]) -> dict[str, str]:
 
 
 def _unknown(study: Study, table: str, key: str, command: str, names: dict[str, str]) -> StudyError:
+    import difflib
+
+    allowed = sorted(k.replace('_', '-') for k in names)
+    close = difflib.get_close_matches(key.replace('_', '-'), allowed, n=1)
     why = ("where the answer goes is chosen on the command line (or by hapstab run)"
            if key in OUTPUT_KEYS else
-           f"not an option of {command} {study.kind}; allowed: "
-           f"{', '.join(sorted(k.replace('_', '-') for k in names))}")
+           f"not an option of {command} {study.kind}"
+           + (f" (did you mean {close[0]}?)" if close else "")
+           + f"; allowed: {', '.join(allowed)}")
     return StudyError(f"{study.where(key, table)}{key.replace('_', '-')}: {why}")
 
 

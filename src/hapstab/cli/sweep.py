@@ -382,6 +382,9 @@ def _table(res: Any) -> None:
                          f"{cf['compared']} points"))
     if s["errors"]:
         con.print(escape(f"{s['errors']} points carry a message in the error column"))
+    if s.get("not_applicable"):
+        con.print(escape(f"{s['not_applicable']} points have a quantity that does not apply "
+                         "there (the not_applicable column; not errors)"))
     con.print(escape(f"wrote {os.path.join(res.out_dir, 'chunks')}/ and "
                      f"{', '.join(res.files)} to {res.out_dir}"))
 

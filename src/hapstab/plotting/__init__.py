@@ -170,8 +170,7 @@ def plot_simulation(res: Any, ax: Any = None) -> Any:
             ax2.axhline(sign * nl["saturation"], color="k", lw=1.0, ls=":",
                         label=f"saturation +-{nl['saturation']:g} N" if sign > 0 else None)
     ax1.set_title(f"K = {res.stiffness:g} N/m, T = {res.period * 1e3:g} ms, n = "
-                  f"{res.delay_samples:g}: {v.verdict}: {v.behaviour} ({v.confidence} "
-                  f"confidence, rate {v.growth_rate:.3g} 1/s)"
+                  f"{res.delay_samples:g}: {v.words()}; growth rate {v.rate_words()}"
                   + (f"\n{_wrap(res.model, ax1, 8)}" if getattr(res, "model", "") else ""),
                   fontsize=8)
     for a in axs:

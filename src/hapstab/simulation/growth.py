@@ -50,6 +50,11 @@ SNAPSHOTS_PER_STATE = 4
 SVD_RTOL = 1e-9
 
 
+#: What a verdict was read from, in words (``basis``).
+_BASIS = {"bound": "proved by a bound of the model", "rate estimate": "from the decay rate",
+          "observed": "observed", "trajectory": "from the trajectory"}
+
+
 @dataclass(frozen=True)
 class BoundednessVerdict(Result):
     """Is the simulated loop bounded, how fast does it grow, and how sure is that.
@@ -114,6 +119,27 @@ class BoundednessVerdict(Result):
     @property
     def bounded(self) -> bool:
         return self.verdict == "bounded"
+
+    def words(self) -> str:
+        """The verdict in words one can quote: ``bounded: settles (high confidence, from
+        the decay rate)``; a bounded run whose pattern is not clear yet says so instead of
+        ``bounded: undecided``, a run too short to tell instead of ``undecided: undecided``."""
+        basis = _BASIS.get(self.basis, self.basis)
+        if self.behaviour == "undecided":
+            what = ("bounded, its pattern not yet settled" if self.verdict == "bounded"
+                    else "undecided: the run is too short to tell")
+        elif self.behaviour == self.verdict:
+            what = self.verdict
+        else:
+            what = f"{self.verdict}: {self.behaviour}"
+        return f"{what} ({self.confidence} confidence, {basis})"
+
+    def rate_words(self) -> str:
+        """The growth rate in words: ``-0.325 1/s``, or ``none: nothing moves`` at rest
+        (not ``-inf 1/s``)."""
+        if self.growth_rate == -math.inf:
+            return "none: nothing moves"
+        return f"{self.growth_rate:.3g} 1/s"
 
     def to_dict(self) -> dict[str, Any]:
         return jsonable({"verdict": self.verdict, "behaviour": self.behaviour,

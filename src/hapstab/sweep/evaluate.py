@@ -5,8 +5,10 @@ writes nothing (the driver does), so workers need no shared file system.
 
 A point whose loop is refused (a model error) is a row with its one-line message in the
 ``error`` column and no quantities; a quantity that does not apply to a point (the
-paper's closed form of a 4-channel loop, the passivity limit of a filtered damper) is
-empty (NaN or null) with the reason in ``error``.
+paper's closed form of a 4-channel loop, the sampled-data passivity at a fractional
+delay) is empty (NaN or null) with the reason in ``not_applicable``, which is not an
+error; a quantity whose analysis refuses the point otherwise (the passivity limit of a
+filtered damper) says why in ``error``.
 """
 
 from __future__ import annotations
@@ -87,7 +89,7 @@ def columns(spec: Spec) -> list[tuple[str, str]]:
     out = [("point_id", "int64")] + [(a.column, a.dtype) for a in spec.points.axes]
     for q in spec.quantities:
         out += list(QUANTITIES[q])
-    return [*out, ("error", "string")]
+    return [*out, ("not_applicable", "string"), ("error", "string")]
 
 
 def evaluate_chunk(spec: Spec, chunk: int) -> dict[str, list[Any]]:
@@ -128,9 +130,11 @@ def _evaluate(spec: Spec, chunk: int) -> dict[str, list[Any]]:
     good = [i for i in range(n) if loops[i] is not None]
     if "kmax" in spec.quantities:
         _kmax(loops, good, out, errors)
+    na: list[list[str]] = [[] for _ in range(n)]
     for i in good:
         if loops[i] is not None:
-            _others(spec, loops[i], i, out, errors[i])
+            _others(spec, loops[i], i, out, errors[i], na[i])
+    out["not_applicable"] = ["; ".join(e) if e else None for e in na]
     out["error"] = ["; ".join(e) if e else None for e in errors]
     return out
 
@@ -152,13 +156,22 @@ def _kmax(loops: list[Any], good: list[int], out: dict[str, list[Any]],
         out["crossing_frequency_hz"][i] = float(r.crossing_frequency_hz)
 
 
-def _others(spec: Spec, loop: Any, i: int, out: dict[str, list[Any]], errors: list[str]) -> None:
-    """The quantities other than K_max, at one point."""
+def _others(spec: Spec, loop: Any, i: int, out: dict[str, list[Any]], errors: list[str],
+            na: list[str]) -> None:
+    """The quantities other than K_max, at one point; one that does not apply there (the
+    sampled-data passivity at a fractional delay, no closed form for the loop) is said in
+    ``na``, not counted as an error."""
     q = spec.quantities
     if "passivity" in q:
-        out["passivity_kmax_N_per_m"][i] = _try(errors, "passivity", lambda: _passivity(loop))
+        frac = _fractional(loop)
+        if frac:
+            na.append(f"passivity: derived for whole samples of delay; this point has {frac}")
+            out["passivity_kmax_N_per_m"][i] = math.nan
+        else:
+            out["passivity_kmax_N_per_m"][i] = _try(errors, "passivity",
+                                                    lambda: _passivity(loop))
     if "closed-form" in q:
-        eq, K = _closed_form(loop, errors)
+        eq, K = _closed_form(loop, errors, na)
         exact = out["critical_stiffness_N_per_m"][i]
         out["closed_form_equation"][i] = eq
         out["closed_form_N_per_m"][i] = K
@@ -185,15 +198,25 @@ def _passivity(loop: Any) -> float:
     return float(critical_stiffness(loop, method="passivity").critical_stiffness)
 
 
-def _closed_form(loop: Any, errors: list[str]) -> tuple[str, float]:
+def _fractional(loop: Any) -> str:
+    """The loop's fractional delays in words ("t_d = 2.5 T"), or "" when every delay is a
+    whole number of samples."""
+    parts = [(name, getattr(loop, attr, 0) or 0) for name, attr in
+             (("t_d", "fractional_delay"), ("backward t_d", "fractional_delay_backward"))]
+    n = float(getattr(loop, "delay_in_samples", 0.0))
+    return ", ".join(f"{name} = {n:g} T" if name == "t_d" else f"a fractional {name}"
+                     for name, f in parts if f)
+
+
+def _closed_form(loop: Any, errors: list[str], na: list[str]) -> tuple[str, float]:
     """The paper's condition for the loop (eq. 13 / 18 / 29 / 34) and its K, or ("", NaN)
-    with the reason where none applies."""
+    with the reason (in ``na``) where none applies."""
     from hapstab.analysis.closed_forms import EQUATION, paper_condition
 
     try:
         cond = paper_condition(loop)
     except HapstabError as e:
-        errors.append(f"closed-form: {_line(e)}")
+        na.append(f"closed-form: {_line(e)}")
         return "", math.nan
     K = _try(errors, "closed-form", lambda: float(cond.function(loop).critical_stiffness))
     return EQUATION.get(cond.key, cond.key), K

@@ -122,13 +122,15 @@ def summarise(paths: list[str], points: Points, quantities: tuple[str, ...],
     stats: dict[str, dict[str, Any]] = {}
     verdicts: dict[str, int] = {}
     worst: list[tuple[float, dict[str, Any]]] = []
-    n = errors = compared = over = 0
+    n = errors = inapplicable = compared = over = 0
     heat = _Heat(points, plot) if plot else None
     axes = [a.column for a in points.axes]
     for path in paths:
         t = read_chunk(path)
         n += t.num_rows
         errors += t.num_rows - t.column("error").null_count
+        if "not_applicable" in t.column_names:
+            inapplicable += t.num_rows - t.column("not_applicable").null_count
         for col in _numeric(quantities):
             _extremes(stats, col, t, axes)
         if "verdict_at_K" in t.column_names:
@@ -147,7 +149,8 @@ def summarise(paths: list[str], points: Points, quantities: tuple[str, ...],
             worst = sorted(worst, key=lambda r: -r[0])[:WORST]
         if heat is not None:
             heat.add(t)
-    out: dict[str, Any] = {"points": n, "errors": errors, "quantities": stats}
+    out: dict[str, Any] = {"points": n, "errors": errors, "not_applicable": inapplicable,
+                           "quantities": stats}
     if verdicts:
         out["verdicts_at_K"] = [{"verdict": v, "points": k} for v, k in sorted(verdicts.items())]
     if "closed-form" in quantities:
@@ -292,12 +295,42 @@ def draw_heat_map(h: dict[str, Any] | None, ax: Any = None) -> Any:
         ax.set_yscale("log" if h["y_log"] else "linear")
         for axis in (ax.xaxis, ax.yaxis):
             axis.set_minor_formatter(NullFormatter())     # (the decades' labels only)
+        for set_ticks, vals in ((ax.set_xticks, xs), (ax.set_yticks, ys)):
+            if len(vals) <= 12:                           # each value the sweep took
+                set_ticks([float(v) for v in vals], [f"{float(v):g}" for v in vals])
     ax.figure.colorbar(mesh, ax=ax, label="K_max (N/m)")
-    ax.set_xlabel(h["x"])
-    ax.set_ylabel(h["y"])
+    ax.set_xlabel(axis_label(h["x"]))
+    ax.set_ylabel(axis_label(h["y"]))
     over = f", minimum over {', '.join(h['min_over'])}" if h["min_over"] else ""
     ax.set_title(f"exact K_max (N/m){over}; blank: no stable K or refused")
     return ax
+
+
+#: A column's unit suffix -> the unit as a reader writes it.
+_UNIT_SUFFIXES = (("_N_s_per_m", "N·s/m"), ("_N_per_m", "N/m"), ("_hz", "Hz"), ("_Hz", "Hz"),
+                  ("_kg", "kg"), ("_samples", "samples"), ("_N", "N"), ("_s", "s"), ("_m", "m"))
+#: Names that read better spelled out.
+_NAMES = {"rate": "sampling rate", "period": "sampling period", "delay": "delay",
+          "virtual_damping": "virtual damping B", "mass": "mass", "damping": "damping"}
+
+
+def axis_label(column: str) -> str:
+    """A sweep column as an axis label, name and unit: ``rate_hz`` -> ``sampling rate
+    (Hz)``, ``virtual_damping_N_s_per_m`` -> ``virtual damping B (N·s/m)``.
+
+    Parameters
+    ----------
+    column : str
+
+    Returns
+    -------
+    str
+    """
+    for suffix, unit in _UNIT_SUFFIXES:
+        if column.endswith(suffix) and len(column) > len(suffix):
+            name = column[:-len(suffix)]
+            return f"{_NAMES.get(name, name.replace('_', ' '))} ({unit})"
+    return _NAMES.get(column, column.replace("_", " "))
 
 
 heat_map = draw_heat_map

@@ -33,7 +33,9 @@
                   "master-damping": "N·s/m", "slave-damping": "N·s/m", stiffness: "N/m",
                   "virtual-damping": "N·s/m", "slave-virtual-damping": "N·s/m", friction: "N",
                   "master-friction": "N", "slave-friction": "N", duration: "s", x0: "m", rest: "m",
-                  wall: "m", saturation: "N", resolution: "m", operator: "Z", environment: "Z" };
+                  wall: "m", saturation: "N", resolution: "m", operator: "Z", environment: "Z",
+                  // a force spec (step:F, sine:F,Hz): newtons, not the sine's Hz of its help
+                  force: "N", "environment-force": "N" };
   const PAGE_DEFAULTS = { hve: { stiffness: "50" }, peb: { stiffness: "5" } };
   const CLOSED = ["colgate", "gil", "eq18", "gil2004", "eq29", "eq34"];
   // options a command varies itself (the CLI refuses a given value: cli/study.py VARIED)
@@ -409,7 +411,9 @@
 
   function current() {
     const K = num(value("stiffness")), B = num(value("virtual-damping"));
-    const delay = state.values["delay-s"] != null ? value("delay-s") + " s" : `${value("delay") || 0} samples`;
+    // a delay typed with its unit (10ms) keeps it; a plain number is seconds
+    const ds = state.values["delay-s"] != null ? String(value("delay-s")).trim() : null;
+    const delay = ds != null ? (/[a-zµμ]$/i.test(ds) ? ds : ds + " s") : `${value("delay") || 0} samples`;
     return { stiffness: K, B: B == null ? 0 : B, delayLabel: delay, rateMode: "rate" in state.values };
   }
 

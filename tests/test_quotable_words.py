@@ -1,0 +1,55 @@
+"""Issue 29 item 7: words one can quote. A run at rest has no growth rate (not "-inf
+1/s"); a bounded run whose pattern is not clear is not "bounded: undecided (high
+confidence, bound)"; a run too short to tell is not "undecided: undecided"."""
+
+from __future__ import annotations
+
+import math
+
+from click.testing import CliRunner
+
+from hapstab.cli.main import cli
+from hapstab.simulation.growth import BoundednessVerdict
+
+
+def _v(verdict, behaviour, confidence, basis, rate=-1.0):
+    return BoundednessVerdict(verdict, rate, 0.0, confidence, basis, 1.0, 0.0, "why",
+                              behaviour=behaviour)
+
+
+def test_the_verdicts_read_as_sentences():
+    assert _v("bounded", "undecided", "high", "bound").words() == \
+        "bounded, its pattern not yet settled (high confidence, proved by a bound of the model)"
+    assert _v("undecided", "undecided", "low", "trajectory").words() == \
+        "undecided: the run is too short to tell (low confidence, from the trajectory)"
+    assert _v("bounded", "settles", "high", "rate estimate").words() == \
+        "bounded: settles (high confidence, from the decay rate)"
+    assert _v("marginal", "marginal", "medium", "rate estimate").words() == \
+        "marginal (medium confidence, from the decay rate)"
+    for v in (_v("bounded", "undecided", "high", "bound"),
+              _v("undecided", "undecided", "low", "trajectory")):
+        assert "undecided (" not in v.words() and "undecided: undecided" not in v.words()
+
+
+def test_a_run_at_rest_has_no_growth_rate_to_print():
+    v = _v("bounded", "", "high", "observed", rate=-math.inf)
+    assert v.behaviour == "at rest" and v.rate_words() == "none: nothing moves"
+    out = CliRunner().invoke(cli, ["simulate", "hve", "-K", "5", "--duration", "0.5",
+                                   "--force", "none"])
+    assert out.exit_code == 0, out.stderr
+    assert "-inf" not in out.stdout and "none: nothing moves" in out.stdout
+    assert "bounded: at rest (high confidence, observed)" in out.stdout
+
+
+def test_the_quantisation_condition_says_what_the_gain_margin_means():
+    """Not "gain margin must be below 2.115: here 1.25" (which reads as a requirement on
+    the user) but what the comparison implies for this loop."""
+    import json
+
+    out = CliRunner().invoke(cli, ["limit-cycle", "hve", "-K", "8", "-n", "10",
+                                   "--resolution", "1e-4", "--json"])
+    assert out.exit_code == 0, out.stderr
+    text = json.loads(out.stdout)["conditions"]
+    assert "must be below that" not in text
+    assert "a cycle is possible only where the loop's gain margin" in text
+    assert "below it, so quantisation can sustain a cycle there" in text
