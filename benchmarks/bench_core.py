@@ -206,7 +206,15 @@ def expert_kmax(ports, n: int, B: float, T: float) -> float:
             x = nx
             break
         x = nx
-    _, K = _F(*_char(ports, n, B, T, x), quad)
+    c0, c1, c2 = _char(ports, n, B, T, x)
+    _, K = _F(c0, c1, c2, quad)
+    # the resultant also vanishes where c2 = 1 - w = 0 (theta = k pi / n) with no common
+    # root: keep only sign changes where the characteristic function itself vanishes
+    # (a refined root leaves ~1e-12 of its terms; a spurious one is of their order)
+    with np.errstate(all="ignore"):
+        res = np.abs(c0 + c1 * K + c2 * K * K) / (np.abs(c0) + np.abs(c1 * K)
+                                                  + np.abs(c2) * K * K)
+    K = K[np.isfinite(res) & (res < 1e-6)]
     ends = []
     for t in (0.0, math.pi):                 # z = +-1: real polynomials in K
         c0, c1, c2 = (complex(c).real for c in _char(ports, n, B, T, np.array(t)))

@@ -14,8 +14,13 @@ if TYPE_CHECKING:   # for type checkers and readers; at run time a name loads on
     from hapstab.analysis.damping import BestDampingResult, best_damping
     from hapstab.analysis.exact.core import stability
     from hapstab.analysis.exact.many import critical_stiffness_many
+    from hapstab.analysis.identify import identify
+    from hapstab.analysis.identify_result import IdentificationResult
+    from hapstab.analysis.interop import to_control
     from hapstab.analysis.limit_cycle_results import LimitCycleResult, PredictedCycle
     from hapstab.analysis.limit_cycles import limit_cycles
+    from hapstab.analysis.margin_result import FrequencyView, MarginResult
+    from hapstab.analysis.margins import frequency_view, margins
     from hapstab.analysis.methods import boundary, critical_stiffness, methods_for
     from hapstab.analysis.nonlinear_passivity import (
         NonlinearPassivityResult,
@@ -60,11 +65,6 @@ if TYPE_CHECKING:   # for type checkers and readers; at run time a name loads on
     from hapstab.results import BoundaryResult, CriticalStiffnessResult, StabilityResult
     from hapstab.simulation import TDPA, SimulationResult, critical_stiffness_simulation, simulate
     from hapstab.sweep import SweepResult, sweep
-    from hapstab.analysis.interop import to_control
-    from hapstab.analysis.margin_result import FrequencyView, MarginResult
-    from hapstab.analysis.margins import frequency_view, margins
-    from hapstab.analysis.identify import identify
-    from hapstab.analysis.identify_result import IdentificationResult
 
 __version__ = "0.1.0"
 

@@ -11,7 +11,6 @@ from hapstab.cli.options import (
     LENGTH,
     LOOP_KINDS,
     NONNEG,
-    POS,
     IntRange,
     emit,
     fmt,
