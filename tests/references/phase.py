@@ -144,7 +144,8 @@ def _real_root_fn(c0, c1, c2, quadratic: bool):
         return F, K
     Ar, Ai, Br, Bi, Cr, Ci = c2.real, c2.imag, c1.real, c1.imag, c0.real, c0.imag
     u, v, w = Ar * Ci - Ai * Cr, Ar * Bi - Ai * Br, Br * Ci - Bi * Cr
-    return u * u - v * w, -u / v
+    with np.errstate(all="ignore"):     # v = 0 where c2 = 0: K is then discarded (crossings)
+        return u * u - v * w, -u / v
 
 
 def _mp_real_root_fn(loop: brute.Loop, theta):
