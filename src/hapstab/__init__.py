@@ -31,6 +31,7 @@ from hapstab.analysis.robust import RobustStiffnessResult, robust_critical_stiff
 from hapstab.analysis.robust_damping import RobustDampingResult, robust_best_damping
 from hapstab.analysis.transparency import TransparencyResult, transparency
 from hapstab.analysis.twoport import TwoPortResult, llewellyn_test
+from hapstab.analysis.verify import CertificateCheck, verify_certificate
 from hapstab.budget import BudgetError
 from hapstab.engine.system import SampledSystem, build
 from hapstab.errors import AnalysisError, ArgumentTypeError, HapstabError, ModelError
@@ -78,4 +79,5 @@ __all__ = [
     "OperatorBox", "operator_box", "robust_critical_stiffness", "RobustStiffnessResult",
     "robust_best_damping", "RobustDampingResult", "sweep", "SweepResult",
     "critical_stiffness_many",
+    "verify_certificate", "CertificateCheck",
 ]
