@@ -1,6 +1,6 @@
 """``python -m hapstab``: the command line."""
 
-from hapstab.cli.main import main
+from hapstab.cli import main
 
 if __name__ == "__main__":
     main()

@@ -1,5 +1,42 @@
-"""The command-line interface (the library never imports it)."""
+"""The command-line interface (the library never imports it).
 
-from hapstab.cli.main import cli, main
+``hapstab --version`` answers without importing the commands (numpy, scipy, the
+analyses): the entry point :func:`main` loads :mod:`hapstab.cli.main` only for a real
+command; ``cli`` (the click group) loads on first use.
+"""
+
+from __future__ import annotations
+
+import sys
+from typing import Any
 
 __all__ = ["cli", "main"]
+
+
+def main(argv: list[str] | None = None) -> None:
+    """Console entry point: ``hapstab --version`` at once, anything else by the click group.
+
+    Parameters
+    ----------
+    argv : list of str, optional
+        The command line after ``hapstab`` (default ``sys.argv[1:]``).
+    """
+    args = sys.argv[1:] if argv is None else list(argv)
+    if args == ["--version"]:
+        from hapstab import __version__
+
+        # click's version_option prints "%(prog)s, version %(version)s" (tests compare)
+        print(f"hapstab, version {__version__}")
+        sys.exit(0)
+    from hapstab.cli.main import main as run
+
+    run(argv)
+
+
+def __getattr__(name: str) -> Any:
+    """``hapstab.cli.cli``: the click group, imported on first use (PEP 562)."""
+    if name == "cli":
+        from hapstab.cli.main import cli
+
+        return cli
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
