@@ -49,7 +49,7 @@ START_PIECES = 32
 #: A piece narrower than this (relative) is not split again: the proof gives up there.
 FLOOR = 4e-16
 #: Most pieces one exclusion or count may try (a valve on time: beyond it, uncertain).
-MAX_PIECES = 8000
+MAX_PIECES = 4000
 
 
 def theta_ball(a: float, b: float) -> Any:
@@ -462,7 +462,7 @@ def prove(params: dict[str, Any], events: tuple, k0: float, k_top: float,
         if c.outside:       # unstable there: counted, not excluded (see Gap.sampled)
             gaps.append(Gap(lo, hi, False, c.outside, Exclusion(), c, True))
         else:
-            gaps += _prove_gap(al, lo, hi, c, 2)
+            gaps += _prove_gap(al, lo, hi, c, 1)
     return _assemble(al, params, k0, k_top, wins, gaps, base)
 
 
