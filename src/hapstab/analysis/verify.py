@@ -102,8 +102,11 @@ def _increment(al: ArbLoop, a: float, b: float, K: Any, how: str) -> Any:
 
 
 def _start(n: int) -> list[tuple[float, float]]:
+    """The n equal pieces of [0, pi], the first cut again at pi/n 2^-k, k = 1..40."""
     step = math.pi / n
-    return [(i * step, math.pi if i == n - 1 else (i + 1) * step) for i in range(n)]
+    near = [(0.0, step * 2.0 ** -40)] + [(step * 2.0 ** -k, step * 2.0 ** (1 - k))
+                                          for k in range(40, 0, -1)]
+    return near + [(i * step, math.pi if i == n - 1 else (i + 1) * step) for i in range(1, n)]
 
 
 def _check_count(al: ArbLoop, c: dict[str, Any], n0: int) -> int:

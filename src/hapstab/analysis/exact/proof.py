@@ -46,7 +46,8 @@ __all__ = ["Proof", "prove", "prove_base", "count", "exclude", "theta_ball", "DE
 DELTA = 2.0 ** -40
 #: Pieces of [0, pi] a search starts from.
 START_PIECES = 32
-#: A piece narrower than this (relative) is not split again: the proof gives up there.
+#: A piece narrower than this relative to its upper end (theta or K) is not split again:
+#: the proof gives up there (double-precision ends cannot be halved much further).
 FLOOR = 4e-16
 #: Most pieces one exclusion or count may try (a valve on time: beyond it, uncertain).
 MAX_PIECES = 4000
@@ -67,11 +68,13 @@ def k_ball(a: float, b: float) -> Any:
 
 
 # ----------------------------------------------------------------- exclusion
-def _start() -> list[tuple[float, float]]:
-    """The START_PIECES equal pieces of [0, pi] (the last ends at pi itself)."""
-    step = math.pi / START_PIECES
-    return [(i * step, math.pi if i == START_PIECES - 1 else (i + 1) * step)
-            for i in range(START_PIECES)]
+def _start(n: int = START_PIECES) -> list[tuple[float, float]]:
+    """The n equal pieces of [0, pi] (the last ends at pi itself), the first cut again
+    at pi/n 2^-k, k = 1..40 (the poles of a fast-sampled loop crowd z = 1, theta = 0)."""
+    step = math.pi / n
+    near = [(0.0, step * 2.0 ** -40)] + [(step * 2.0 ** -k, step * 2.0 ** (1 - k))
+                                          for k in range(40, 0, -1)]
+    return near + [(i * step, math.pi if i == n - 1 else (i + 1) * step) for i in range(1, n)]
 
 
 def box_status(al: ArbLoop, a: float, b: float, ka: float, kb: float) -> tuple[str | None, float]:
@@ -117,7 +120,6 @@ def _theta_share(al: ArbLoop, a: float, b: float, ka: float, kb: float) -> float
 @dataclass
 class Exclusion:
     """Pieces (a, b, K_a, K_b, how) proved free of zeros, and the boxes that were not."""
-
     pieces: list[tuple[float, float, float, float, str]] = field(default_factory=list)
     failed: list[tuple[float, float, float, float]] = field(default_factory=list)
     #: per box taken from the stack, in order: "x" excluded (the next piece), "t" halved
@@ -161,7 +163,7 @@ def exclude(al: ArbLoop, ka: float, kb: float, max_pieces: int = MAX_PIECES) -> 
             out.pieces.append((a, b, k0, k1, how))
             out.splits.append("x")
             continue
-        th_ok = (b - a) > FLOOR * max(1.0, b)
+        th_ok = (b - a) > FLOOR * b
         k_ok = (k1 - k0) > FLOOR * k1
         if th_ok and (share >= 0.5 or not k_ok):
             m = 0.5 * (a + b)
@@ -217,7 +219,6 @@ def piece_increment(al: ArbLoop, a: float, b: float, K: Any, cache: dict) -> tup
 @dataclass
 class Count:
     """Poles outside at K (None: not proved), with the pieces of [0, pi] used."""
-
     K: float
     outside: int | None
     pieces: list[tuple[float, float, str]] = field(default_factory=list)
@@ -245,9 +246,7 @@ def count(al: ArbLoop, K: float, max_pieces: int = MAX_PIECES) -> Count:
     Kb = arb(K)
     cache: dict = {}
     res = Count(K, None)
-    step = math.pi / START_PIECES
-    stack = [(i * step, math.pi if i == START_PIECES - 1 else (i + 1) * step)
-             for i in range(START_PIECES)][::-1]
+    stack = _start()[::-1]
     total = arb(0)
     tried = 0
     while stack:
@@ -261,7 +260,7 @@ def count(al: ArbLoop, K: float, max_pieces: int = MAX_PIECES) -> Count:
             with working_precision(al.prec):
                 total = total + inc
             continue
-        if (b - a) <= FLOOR * max(1.0, b):
+        if (b - a) <= FLOOR * b:
             return res
         m = 0.5 * (a + b)
         stack += [(m, b), (a, m)]
@@ -308,7 +307,6 @@ def polish(al: ArbLoop, theta: float, K: float, real: bool) -> tuple[float, floa
 class Gap:
     """A K-range proved free of poles on the circle (or not: ``proved`` False), with
     its count of poles outside."""
-
     lo: float
     hi: float
     proved: bool
