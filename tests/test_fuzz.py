@@ -57,7 +57,9 @@ def _commands():
 #: the draw of every other command stays the one it was before the command existed)
 #: (explore starts a server that runs until stopped: its hostile options are tested in
 #: tests/test_explorer_server.py, which stops what it starts)
-COMMANDS = [c for c in _commands() if c[0][0] not in ("limit-cycle", "explore", "sweep")]
+# identify takes a LOG argument: its hostile inputs are in tests/test_identify.py
+COMMANDS = [c for c in _commands()
+            if c[0][0] not in ("limit-cycle", "explore", "sweep", "identify")]
 LIMIT_CYCLE = [c for c in _commands() if c[0][0] == "limit-cycle"]
 SWEEP = [c for c in _commands() if c[0][0] == "sweep"]
 #: (every loop kind of a command, hve, peb and 4ch, needs the same)

@@ -107,6 +107,7 @@ def build_cost(periods: int, states: float) -> Cost:
     """
     P, N = float(periods), float(states)
     return Cost(f"build: the exact model of a {int(N)}-state loop at {periods} periods",
+                # a floor against division by zero / rounding, far below the answer's own accuracy
                 P * (1000.0 + 64.0 * N * N), P * (4e-4 + 6e-10 * N ** 3))
 
 

@@ -202,6 +202,7 @@ def _fit(F: np.ndarray, y: np.ndarray, T: float, level: float, friction: bool,
         th[idx] = p
         return th
 
+    # least-squares stops and floors: far below the stated intervals
     big = np.full(y.size, 1e6 * max(float(np.ptp(y)), 1e-12))
 
     def resid(p: np.ndarray) -> np.ndarray:
@@ -219,6 +220,7 @@ def _fit(F: np.ndarray, y: np.ndarray, T: float, level: float, friction: bool,
 
     scale = _scales(starts[0], y, T, F)[idx]
     p = _search(resid, [s[idx] for s in starts], scale,
+                # least-squares stops and floors: far below the stated intervals
                 np.array([1e-9, 0.0, 0.0, -np.inf, -np.inf])[idx])
     J = _jacobian(resid, p, scale)
     N, k = y.size, len(idx)
@@ -247,10 +249,13 @@ def _search(resid: Any, starts: list[np.ndarray], scale: np.ndarray,
     best, cost = starts[0], math.inf
     for p0 in starts:
         sol = least_squares(resid, p0, x_scale=scale, method="lm",
+                            # least-squares stops and floors: far below the stated intervals
                             xtol=1e-10, ftol=1e-10, gtol=1e-10)
         if np.any(sol.x < lo):
+            # least-squares stops and floors: far below the stated intervals
             p1 = np.maximum(sol.x, lo + scale * 1e-6 * (lo > -np.inf))
             sol = least_squares(resid, p1, bounds=(lo, np.inf), x_scale=scale, method="trf",
+                                # least-squares stops and floors: far below the stated intervals
                                 xtol=1e-10, ftol=1e-10, gtol=1e-10, max_nfev=200)
         if sol.cost < cost:
             best, cost = sol.x, sol.cost
@@ -260,7 +265,9 @@ def _search(resid: Any, starts: list[np.ndarray], scale: np.ndarray,
 def _scales(th0: np.ndarray, y: np.ndarray, T: float, F: np.ndarray) -> np.ndarray:
     """A typical size of each parameter (the search's and the differences' scale)."""
     N = y.size
+    # least-squares stops and floors: far below the stated intervals
     m = max(th0[0], 1e-6)
+    # least-squares stops and floors: far below the stated intervals
     travel = max(float(np.ptp(y)), 1e-12)
     return np.array([m, max(th0[1], m / (N * T)),
                      max(th0[2], 1e-2 * float(np.sqrt(np.mean(F ** 2)))),
@@ -273,6 +280,7 @@ def _jacobian(resid: Any, p: np.ndarray, scale: np.ndarray) -> np.ndarray:
     digits); one-sided forward at a bound (b or f_c at 0)."""
     cols = []
     for j in range(p.size):
+        # least-squares stops and floors: far below the stated intervals
         h = 1e-6 * scale[j]
         up, dn = p.copy(), p.copy()
         up[j] += h
@@ -316,5 +324,6 @@ def _readback(fit: dict[str, Any], F: np.ndarray, T: float, res: float | None,
     if not res:
         return math.nan
     q = quantize(fit["x"], res, quantizer)
+    # least-squares stops and floors: far below the stated intervals
     return float(np.mean(np.abs(q - y) <= res * (1 + 1e-9)))
 

@@ -52,6 +52,14 @@ class IdentificationResult(Result):
     check : float
         Share of samples whose reading the fit, through the encoder, reproduces within
         one step (NaN without a resolution).
+    quantizer : str
+        How the encoder rounds (the readings were fitted under it).
+    friction_upper_N : float
+        Upper end of the Coulomb friction's interval, N.
+    friction_fitted : bool
+        Whether friction was part of the fit.
+    source : str
+        Where the log came from (its file name), for displays.
     """
 
     time_s: np.ndarray

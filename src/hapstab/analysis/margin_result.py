@@ -59,6 +59,7 @@ class FrequencyView(Result):
 
     def to_csv(self, path: Any) -> None:
         """Write frequency_hz, loop_re, loop_im, magnitude_db, phase_deg per frequency."""
+        # a floor against division by zero / rounding, far below the answer's own accuracy
         mag = 20 * np.log10(np.maximum(np.abs(self.loop), 1e-300))
         write_csv(path, ["frequency_hz", "loop_re", "loop_im", "magnitude_db", "phase_deg"],
                   zip(self.frequency_hz, self.loop.real, self.loop.imag, mag,

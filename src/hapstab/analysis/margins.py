@@ -123,6 +123,7 @@ def delay_margin(loop: Any, step_samples: float = 0.25, max_extra_samples: float
     up to ``max_extra_samples``); see the module docstring for what it rests on."""
     h = check_real("step_samples", step_samples, positive=True)
     top = check_real("max_extra_samples", max_extra_samples, positive=True)
+    # a floor against division by zero / rounding, far below the answer's own accuracy
     grid = np.arange(1, int(np.floor(top / h + 1e-9)) + 1) * h
     return _first_loss(lambda x: certified_stable(stability(extra_delay(loop, x))), grid,
                        bisections)
@@ -188,6 +189,7 @@ def frequency_view(loop: Any, frequencies_hz: Any = None) -> FrequencyView:
                             f"K > 0 to vary; {sysm.fixed_reason or f'K = {K:g} N/m'}")
     T = loop.period
     fN = 0.5 / T
+    # a floor against division by zero / rounding, far below the answer's own accuracy
     f = (np.unique(np.concatenate([np.geomspace(1e-4 * fN, fN, 400),
                                    np.linspace(fN / 400, fN, 400)]))
          if frequencies_hz is None else np.asarray(frequencies_hz, float))

@@ -141,3 +141,23 @@ def controller_from_control(obj: Any, name: str, period: float) -> Any:
         raise ModelError(f"{name}: dt = {dt:g} s differs from the loop's period {period:g} s; "
                          "sample the controller at the loop's period")
     return DiscreteController(tuple(num), tuple(den))
+
+
+def check_controller(name: str, c: Any, period: Any = None) -> Any:
+    """The controller ``c`` (a hapstab controller, or a discrete python-control H(z) with
+    dt = the period), checked."""
+    from hapstab.errors import ModelError, check_period
+    from hapstab.models.controllers import (
+        AffineController,
+        DiscreteController,
+        FilteredSpringDamper,
+        SpringDamper,
+    )
+
+    if is_control_system(c):            # a discrete python-control H(z), dt = the period
+        return controller_from_control(c, name, check_period("period", period))
+    if not isinstance(c, (SpringDamper, FilteredSpringDamper, AffineController,
+                          DiscreteController)):
+        raise ModelError(f"{name} = {c!r}: must be a SpringDamper, FilteredSpringDamper, "
+                         "AffineController or DiscreteController")
+    return c

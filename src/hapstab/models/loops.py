@@ -22,9 +22,7 @@ from hapstab.errors import (
     check_real,
 )
 from hapstab.models.controllers import (
-    AffineController,
     Controller,
-    DiscreteController,
     FilteredSpringDamper,
     SpringDamper,
     has_stiffness,
@@ -32,22 +30,11 @@ from hapstab.models.controllers import (
     stiffness_ratios,
 )
 from hapstab.models.delays import DELAY_SNAP, check_fraction, delay_from_seconds, split_delay
+from hapstab.models.interop import check_controller as _check_controller
 from hapstab.models.parts import Device, Impedance
 
 __all__ = ["split_delay", "DELAY_SNAP", "HapticLoop", "TeleoperationLoop", "delay_from_seconds",
            "whole_delay", "require_loop", "describe", "parameters"]
-
-
-def _check_controller(name: str, c: Any, period: Any = None) -> Controller:
-    from hapstab.models.interop import controller_from_control, is_control_system
-
-    if is_control_system(c):            # a discrete python-control H(z), dt = the period
-        return controller_from_control(c, name, check_period("period", period))
-    if not isinstance(c, (SpringDamper, FilteredSpringDamper, AffineController,
-                          DiscreteController)):
-        raise ModelError(f"{name} = {c!r}: must be a SpringDamper, FilteredSpringDamper, "
-                         "AffineController or DiscreteController")
-    return c
 
 
 # ----------------------------------------------------------------------------- loops

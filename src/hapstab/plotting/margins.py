@@ -36,6 +36,7 @@ def _nyquist(view: Any, ax: Any) -> None:
 def _bode(view: Any, mag: Any, phase: Any) -> None:
     """|L| in dB and its phase against frequency, with 0 dB and -180 deg marked."""
     f, L = view.frequency_hz, view.loop
+    # a floor against division by zero / rounding, far below the answer's own accuracy
     mag.semilogx(f, 20 * np.log10(np.maximum(np.abs(L), 1e-300)), "-", color="tab:blue", lw=1.0)
     mag.axhline(0.0, color="tab:red", lw=0.8, ls="--", label="|L| = 1 (0 dB)")
     mag.set_ylabel("|L| (dB)")

@@ -243,6 +243,7 @@ def _deflate(A0: np.ndarray, A1: np.ndarray, lay: _Layout, pos: np.ndarray
     scale = max(1.0, float(np.abs(A0).max()))
     # 1e-12 relative: the eigenvector equation holds to rounding of the matrices' entries
     if not (np.abs(A0 @ v - v).max() <= 1e-12 * scale and np.abs(A1 @ v).max()
+            # a floor against division by zero / rounding, far below the answer's own accuracy
             <= 1e-12 * max(1.0, float(np.abs(A1).max()))):
         return A0, A1, False
     u = v / np.linalg.norm(v)

@@ -110,7 +110,9 @@ def _roots(js: JumpSystem, scale: float) -> tuple:
     below the root and on both sides of it (``ROOT_STEP``); a check that fails falls
     back to :func:`_scan`."""
     roots = unit_crossings(js.A0, js.A1, js.transition)
+    # a floor against division by zero / rounding, far below the answer's own accuracy
     roots = roots[roots > 1e-12 * scale]
+    # a floor against division by zero / rounding, far below the answer's own accuracy
     K0 = min(1e-6 * scale, 0.5 * roots[0]) if roots.size else 1e-6 * scale
     r0 = second_moment_radius(js.at(K0), js.transition)
     if r0 >= 1.0:

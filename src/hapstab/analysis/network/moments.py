@@ -115,6 +115,7 @@ def second_moment_radius(A: np.ndarray, transition: np.ndarray) -> float:
     v0 = np.tile(np.eye(N).ravel(), 1 if independent else M)   # inside the PSD cone
     for k, ncv in ((2, 40), (6, 120)):       # a wider Krylov space when eigenvalues crowd
         try:
+            # a floor against division by zero / rounding, far below the answer's own accuracy
             w = spla.eigs(op, k=k, which="LM", v0=v0, tol=1e-13, maxiter=20 * dim,
                           ncv=min(dim - 1, ncv), return_eigenvectors=False)
             return float(np.abs(w).max())
@@ -211,6 +212,7 @@ def unit_crossings(A0: np.ndarray, A1: np.ndarray, transition: np.ndarray) -> np
     lhs = np.block([[zero, eye], [eye - T0, -T1]])
     rhs = np.block([[eye, zero], [zero, T2]])
     alpha, beta = sla.eig(lhs, rhs, right=False, homogeneous_eigvals=True)
+    # a floor against division by zero / rounding, far below the answer's own accuracy
     finite = np.abs(beta) > 1e-14 * np.abs(alpha)
     K = alpha[finite] / beta[finite]
     real = K[(np.abs(K.imag) <= REAL_ROOT * np.abs(K)) & (K.real > 0)].real
