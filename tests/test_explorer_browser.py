@@ -232,9 +232,6 @@ def test_url_restores_the_view(page):
     assert page.get_attribute("#verdict", "data-value") == "stable"      # 200 < 286.3 N/m
 
 
-@pytest.mark.xfail(strict=False, reason="KNOWN REGRESSION after this round's merges (the copied "
-                   "CLI line does not appear for this PEB state within 15 s); to fix first next "
-                   "session, see the closing note")
 def test_copy_as_cli_reproduces_kmax(page):
     open_page(page, "?kind=peb&delay=3&virtual-damping=0.01&environment=msd%3A0.1%2C1%2C300")
     page.click("#copy-cli")

@@ -317,8 +317,11 @@ def test_a_superseded_running_computation_is_ended_at_once():
     from hapstab.explorer.app import create_app
 
     app = create_app()
-    slow = {"kind": "hve", "options": {"K": "0:100", "B": "0:5", "delay": 10,
-                                       "resolution": 300}}
+    # ~8 s on the 2-core dev machine (the CLI's region at these options), so that no
+    # runner, however fast, ends it within the 1.5 s before the kmax arrives (CI's did at
+    # delay 10, resolution 300).
+    slow = {"kind": "hve", "options": {"K": "0:100", "B": "0:5", "delay": 40,
+                                       "resolution": 600}}
     fast = {"kind": "hve", "options": {"delay": 1}}
     out = {}
 

@@ -206,6 +206,14 @@ async def _compute(request: Request, kind: str, arg: Any, seq: _Sequencer,
     import anyio
 
     mark = seq.arrive(request)
+    if kind == "code":
+        # A translation of the options, no computation: answered at once in a thread,
+        # not queued behind the page's plots in the worker processes (it waited for
+        # them: the "Copy as CLI" box stayed empty > 15 s on a loaded 2-core machine).
+        from hapstab.explorer.code import code_for
+
+        text = await anyio.to_thread.run_sync(lambda: json.dumps(code_for(arg)))
+        return Response(text.encode("utf-8", "replace"), media_type="application/json")
     if not IN_PROCESSES:
         from hapstab.explorer.code import code_for
 
