@@ -212,8 +212,8 @@ async def _compute(request: Request, kind: str, arg: Any, seq: _Sequencer,
         # them: the "Copy as CLI" box stayed empty > 15 s on a loaded 2-core machine).
         from hapstab.explorer.code import code_for
 
-        text = await anyio.to_thread.run_sync(lambda: json.dumps(code_for(arg)))
-        return Response(text.encode("utf-8", "replace"), media_type="application/json")
+        answer = await anyio.to_thread.run_sync(lambda: json.dumps(code_for(arg)))
+        return Response(answer.encode("utf-8", "replace"), media_type="application/json")
     if not IN_PROCESSES:
         from hapstab.explorer.code import code_for
 
