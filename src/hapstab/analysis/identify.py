@@ -19,8 +19,10 @@ Widrow's model) is treated as independent with one unknown variance ``s^2``.
 Confidence intervals
 --------------------
 Wald intervals of nonlinear least squares: ``theta_hat +- t_{1-alpha/2, N-p} se``,
-``se = sqrt(diag(s^2 (J^T J)^{-1}))``, ``s^2 = RSS / (N - p)``, J the Jacobian of the
-model's positions at the estimate (central differences). They are asymptotic: they
+``se`` the larger of ``sqrt(diag(s^2 (J^T J)^{-1}))`` (``s^2 = RSS / (N - p)``) and the
+Newey-West sandwich's (errors correlated from sample to sample: an encoder reading of a
+slowly moving device), J the Jacobian of the model's positions at the estimate (central
+differences). They are asymptotic: they
 cover the truth at about the nominal rate when the errors are as above and the
 estimates far from their bounds (b, f_c >= 0); a lower end below 0 is cut at 0.
 Friction is kept (``friction="auto"``) when its interval excludes 0.
@@ -30,7 +32,10 @@ References
 L. Ljung, *System Identification: Theory for the User*, 2nd ed., 1999, Sec. 7.3
 (output-error models) and Sec. 9.3 (eq. 9.17: the covariance of the estimate);
 G. A. F. Seber and C. J. Wild, *Nonlinear Regression*, 1989, Sec. 5.1 (eq. 5.4,
-the t-based intervals); B. Widrow and I. Kollar, *Quantization Noise*, 2008, Ch. 4.
+the t-based intervals); B. Widrow and I. Kollar, *Quantization Noise*, 2008, Ch. 4; W. K. Newey and K. D.
+West, "A simple, positive semi-definite, heteroskedasticity and autocorrelation
+consistent covariance matrix", *Econometrica* 55(3), 1987 (eq. 2, Bartlett weights);
+D. W. K. Andrews, *Econometrica* 59(3), 1991 (bandwidths).
 """
 
 from __future__ import annotations
@@ -226,7 +231,7 @@ def _fit(F: np.ndarray, y: np.ndarray, T: float, level: float, friction: bool,
     N, k = y.size, len(idx)
     r = resid(p)
     s2 = float(r @ r) / (N - k)
-    se = np.sqrt(np.diag(_covariance(J, s2, idx)))
+    se = np.sqrt(np.diag(_covariance(J, s2, idx, r, N / (N - k))))
     q = float(student.ppf(0.5 + level / 2, N - k))
     th, ses = full(p), full(se)
     low, high = th - q * ses, th + q * ses
@@ -292,8 +297,20 @@ def _jacobian(resid: Any, p: np.ndarray, scale: np.ndarray) -> np.ndarray:
     return np.column_stack(cols)
 
 
-def _covariance(J: np.ndarray, s2: float, idx: list[int]) -> np.ndarray:
-    """``s^2 (J^T J)^{-1}``, refusing a Jacobian whose columns the data cannot tell apart."""
+def _covariance(J: np.ndarray, s2: float, idx: list[int], r: np.ndarray,
+                dof: float) -> np.ndarray:
+    """The estimate's covariance: the larger of ``s^2 (J^T J)^{-1}`` and the Newey-West
+    sandwich (serially correlated errors), per parameter; refusing a Jacobian whose
+    columns the data cannot tell apart.
+
+    Quantisation errors are not independent when the device moves less than an encoder
+    step between samples (Widrow's condition fails: a reading stays in one step for
+    several samples, its error drifts slowly). The heteroskedasticity and autocorrelation
+    consistent sandwich ``A^{-1} S A^{-1}`` (``A = J^T J``; ``S`` the Bartlett-weighted
+    sum of ``J_k^T r_k r_{k+l} J_{k+l}`` over lags ``|l| <= L``) covers that; ``dof``
+    (``N / (N - p)``) is its small-sample factor. Without it the 95 % intervals held b
+    only 86 % of the time on noise-free, slowly moving logs (Newey and West 1987;
+    Andrews 1991)."""
     names = ["mass", "damping", "friction", "initial position", "initial velocity"]
     d = np.linalg.norm(J, axis=0)
     if np.any(d == 0):
@@ -307,7 +324,39 @@ def _covariance(J: np.ndarray, s2: float, idx: list[int]) -> np.ndarray:
                             f"number {cond:.3g} > {_CONDITION:.0e}); use a richer force "
                             "(several amplitudes and frequencies, reversals)")
     inv = np.linalg.inv(Js.T @ Js)
-    return s2 * inv / np.outer(d, d)
+    sandwich = inv @ _long_run(Js * r[:, None], _bandwidth(r)) @ inv * dof
+    white = s2 * inv
+    out = white.copy()
+    np.fill_diagonal(out, np.maximum(np.diag(white), np.diag(sandwich)))
+    return out / np.outer(d, d)
+
+
+def _bandwidth(r: np.ndarray) -> int:
+    """Lags of the sandwich: Newey and West's ``4 (N / 100)^{2/9}``, widened to the lag
+    where the residuals' autocorrelation first falls below ``2 / sqrt(N)`` (the white
+    noise band; quantisation errors of a slow device stay correlated longer), at most
+    ``N / 10`` lags."""
+    N = r.size
+    base = int(4 * (N / 100) ** (2 / 9))
+    c = r - r.mean()
+    den = float(c @ c)
+    if den <= 0:
+        return base
+    limit = max(base, N // 10)
+    for lag in range(1, limit + 1):
+        if abs(float(c[lag:] @ c[:-lag]) / den) < 2 / math.sqrt(N):
+            return max(base, 2 * lag)
+    return limit
+
+
+def _long_run(g: np.ndarray, L: int) -> np.ndarray:
+    """Bartlett-weighted long-run covariance ``sum_{|l| <= L} (1 - |l| / (L + 1))
+    sum_k g_k^T g_{k+l}`` of the score rows ``g_k = J_k r_k``."""
+    S = g.T @ g
+    for lag in range(1, L + 1):
+        G = g[lag:].T @ g[:-lag]
+        S = S + (1 - lag / (L + 1)) * (G + G.T)
+    return S
 
 
 def _lag1(r: np.ndarray) -> float:
