@@ -4,7 +4,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test bench clean
+.PHONY: demo test test-campaign test-full bench clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -20,7 +20,17 @@ demo: $(STAMP)
 test: $(STAMP)
 	$(BIN)/ruff check src tests benchmarks
 	$(BIN)/mypy src
-	$(BIN)/python -m pytest
+	$(BIN)/python -m pytest -n auto --dist loadgroup
+
+# the rest of every seeded draw and the long campaigns (tests/lanes.py): with `make test`,
+# each case once
+test-campaign: $(STAMP)
+	$(BIN)/python -m pytest -n auto --dist loadgroup -m 'slow or campaign'
+
+# everything: every draw whole, slow and campaign included
+test-full: $(STAMP)
+	HAPSTAB_CAMPAIGN=full $(BIN)/python -m pytest -n auto --dist loadgroup \
+		-m 'slow or campaign or not (slow or campaign)'
 
 bench: $(STAMP)
 	$(BIN)/python -m pip install --quiet -e '.[test,bench]'

@@ -46,6 +46,9 @@ from playwright import sync_api  # noqa: E402 - after the checks above
 from hapstab.cli.main import cli  # noqa: E402 - after the checks above
 from hapstab.explorer.app import create_app  # noqa: E402 - after the checks above
 
+# one worker runs every test holding a server or a browser (pytest -n --dist loadgroup)
+pytestmark = pytest.mark.xdist_group("explorer-server")
+
 CHROMIUM = next((p for p in ("/usr/bin/chromium", shutil.which("chromium"))
                  if p and os.path.exists(p)), None)
 if CHROMIUM is None:

@@ -18,6 +18,9 @@ from click.testing import CliRunner
 
 from hapstab.cli.main import cli
 
+# one worker runs every test holding a server or a browser (pytest -n --dist loadgroup)
+pytestmark = pytest.mark.xdist_group("explorer-server")
+
 pytest.importorskip("uvicorn")
 httpx = pytest.importorskip("httpx")
 SRC = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "src")

@@ -25,6 +25,7 @@ import pytest
 import hapstab as h
 from hapstab.analysis.exact.core import exact_critical_stiffness
 from hapstab.simulation.run import simulate
+from lanes import draw
 from references import brute, simref
 
 SEED = int(os.environ.get("HAPSTAB_VERDICT_SEED", "20261124"))
@@ -117,7 +118,11 @@ def _linear_cases(count: int) -> list[int]:
     return list(range(count))
 
 
-@pytest.mark.parametrize("i", _linear_cases(320))
+# REDUCED_* of each draw (evenly spaced) in the default lane, the rest -m campaign (tests/lanes.py)
+REDUCED_LINEAR, REDUCED_NONLINEAR = 80, 20
+
+
+@pytest.mark.parametrize("i", draw(_linear_cases(320), REDUCED_LINEAR))
 def test_linear_verdicts(i):
     _check_linear(i)
 
@@ -229,7 +234,9 @@ def truth(x_long: np.ndarray, M: int) -> str:
 OUTCOMES: list[tuple[str, str, str]] = []
 
 
-@pytest.mark.parametrize("i", range(60))
+# the draw and the coverage test below share one process (pytest -n: one xdist worker)
+@pytest.mark.xdist_group("nonlinear-verdicts")
+@pytest.mark.parametrize("i", draw(range(60), REDUCED_NONLINEAR))
 def test_nonlinear_verdicts(i):
     _check_nonlinear(i)
 
@@ -266,10 +273,12 @@ def _check_nonlinear(i: int) -> None:
         assert v.duration_hint_s and v.duration_hint_s > c.samples * c.T
 
 
+@pytest.mark.xdist_group("nonlinear-verdicts")
 def test_nonlinear_campaign_covers_every_outcome():
-    """Run after the campaign (same module): the draws exercise settling, limit
-    cycles and growth, confidently, so the checks above are not vacuous."""
-    if len(OUTCOMES) < 50:
+    """Run after the campaign (same module, same xdist worker): the draws exercise
+    settling, limit cycles and growth, confidently, so the checks above are not vacuous."""
+    # most of the default lane's draw (a few cases are skipped as None): it ran here
+    if len(OUTCOMES) < REDUCED_NONLINEAR * 5 // 6:
         pytest.skip("the nonlinear campaign did not run in this session")
     seen = {b for b, conf, _ in OUTCOMES if conf in CONFIDENT}
     assert {"settles", "limit cycle", "grows"} <= seen, OUTCOMES

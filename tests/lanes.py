@@ -1,0 +1,71 @@
+"""The test lanes: how much of each seeded draw the default lane runs (one place).
+
+A seeded campaign is one list of cases. ``draw(cases, reduced)`` turns it into pytest
+parameters: an evenly spaced ``reduced`` of them (first and last included, so every kind
+the draw cycles through keeps a representative) run in the default lane; the rest are
+marked ``campaign`` and run on demand.
+
+- ``make test`` (``pytest``, addopts ``-m 'not slow and not campaign'``): the reduced draws;
+- ``make test-campaign`` (``pytest -m 'slow or campaign'``): the rest of every draw and the
+  long campaigns, so ``make test`` + ``make test-campaign`` run each case once;
+- ``HAPSTAB_CAMPAIGN=full``: no case is marked, the default lane runs every draw whole
+  (``make test-full``: that, with ``slow`` and ``campaign`` selected too: everything).
+
+The marked cases are the same cases (same seed, same index, same checks): moving a case
+out of the default lane never changes what it asserts.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterable, Sequence
+from typing import Any
+
+import pytest
+
+#: ``HAPSTAB_CAMPAIGN=full``: every draw whole in the default lane
+FULL = os.environ.get("HAPSTAB_CAMPAIGN", "").strip().lower() == "full"
+
+
+def reduced_indices(count: int, reduced: int) -> list[int]:
+    """``reduced`` evenly spaced indices of ``range(count)``, 0 and count - 1 included."""
+    if reduced >= count:
+        return list(range(count))
+    if reduced <= 1:
+        return [0][:reduced]
+    step = (count - 1) / (reduced - 1)
+    return sorted({round(j * step) for j in range(reduced)})
+
+
+def draw(cases: Iterable[Any], reduced: int, ids: Any = None) -> list[Any]:
+    """The cases as pytest parameters: ``reduced`` in the default lane, the rest ``campaign``.
+
+    Parameters
+    ----------
+    cases : iterable
+        The seeded draw (a case, or a tuple of a parametrization's values, each).
+    reduced : int
+        How many of them the default lane runs (evenly spaced, see `reduced_indices`).
+    ids : callable, optional
+        The test id of a case (as ``pytest.mark.parametrize``'s ``ids``).
+
+    Returns
+    -------
+    list of pytest.param
+        Every case once, the ones outside the default lane marked ``campaign`` (none
+        under ``HAPSTAB_CAMPAIGN=full``).
+    """
+    cases = list(cases)
+    keep = set(range(len(cases))) if FULL else set(reduced_indices(len(cases), reduced))
+    out = []
+    for i, c in enumerate(cases):
+        values: Sequence[Any] = c if isinstance(c, tuple) else (c,)
+        marks = () if i in keep else (pytest.mark.campaign,)
+        out.append(pytest.param(*values, marks=marks,
+                                id=None if ids is None else ids(c)))
+    return out
+
+
+def size(reduced: int, full: int) -> int:
+    """A draw's size inside one test: ``full`` under ``HAPSTAB_CAMPAIGN=full``, else ``reduced``."""
+    return full if FULL else reduced
