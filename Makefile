@@ -48,3 +48,10 @@ bench: $(STAMP)
 
 clean:
 	rm -rf $(VENV) out .pytest_cache .hypothesis
+
+# the documentation site (docs/): offline, warnings (unresolved references included) are errors
+.PHONY: docs
+docs: $(STAMP)
+	$(BIN)/python -m pip install --quiet -e '.[docs]'
+	$(BIN)/python -m sphinx -W --keep-going -n -b html docs docs/_build/html
+	@echo "documentation written to $(CURDIR)/docs/_build/html/index.html"

@@ -15,7 +15,7 @@ tustin        (T/2)(z + 1)/(z - 1)
 
 Forward difference is the paper's worst case, and it is special: its condition
 (iii) is *identical* to the exact sampled-data passivity condition of Colgate and
-Schenkel (see :mod:`hapstab.passivity`), so its K_max never exceeds the exact
+Schenkel (see :mod:`hapstab.analysis.passivity`), so its K_max never exceeds the exact
 stability limit with passive terminations. Backward difference and Tustin are
 not bounds: at n = 0 they accept every K (Re{z/(z-1)} = 1/2 and
 Re{(z+1)/(z-1)} = 0 on the circle), although the loop goes unstable.

@@ -99,7 +99,7 @@ def critical_stiffness(loop: HapticLoop | TeleoperationLoop, method: str = "exac
         K is the master's stiffness and K_s/K_m is kept (equal in the paper).
     method : str
         ``"exact"`` (default): the exact sampled-data loop, see
-        :mod:`hapstab.exact`; ``"circle"`` (the paper's circle criterion, eq. 15/30;
+        :mod:`hapstab.analysis.exact`; ``"circle"`` (the paper's circle criterion, eq. 15/30;
         option ``approximation="forward"|"backward"|"tustin"``), ``"passivity"``
         (exact sampled-data passivity, Colgate-Schenkel), ``"simulation"`` (the
         paper's simulation search); or a closed form: ``"colgate"`` (eq. 1/13),

@@ -17,7 +17,7 @@ gives the matrix condition
 
     D diag(b_m, b_s) - (T/2) Herm{(1 - e^{-jwT}) D H(e^{jwT})} / (1 - cos wT) >= 0
 
-with H of eq. (21) and the port weights D of :func:`hapstab.circle.port_scaling`
+with H of eq. (21) and the port weights D of :func:`hapstab.analysis.circle.port_scaling`
 (D = I for C_m = C_s); this is sufficient for stability with passive
 terminations. It coincides with the forward-difference circle criterion: the
 paper's "worst-case approximation" is exactly sampled-data passivity.
@@ -142,7 +142,7 @@ def sampled_passivity(loop: HapticLoop | TeleoperationLoop, scaling: str | None 
         Any controller (SpringDamper or a stable DiscreteController). The
         terminations do not enter: passivity is a property of the device side.
     scaling : {"auto", None}
-        PEB port weighting (see :func:`hapstab.circle.port_scaling`).
+        PEB port weighting (see :func:`hapstab.analysis.circle.port_scaling`).
     curve_points : int
         Also return the margin over frequency at this many evenly spaced frequencies from
         the w -> 0 limit to the Nyquist frequency (0: none; at most

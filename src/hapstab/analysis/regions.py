@@ -13,7 +13,7 @@ boundary in closed form (D-decomposition):
 * z = -1: the lines ``K + 2B/T = 1/mu(G(-1))``.
 
 The stable set is then exact along every line B = const (the crossing analysis of
-:mod:`hapstab.exact`, batched over B), and a Schur-Cohn test of the characteristic
+:mod:`hapstab.analysis.exact`, batched over B), and a Schur-Cohn test of the characteristic
 polynomial on a grid cross-checks it independently.
 
 References

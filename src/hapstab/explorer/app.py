@@ -1,6 +1,6 @@
 """The explorer's Starlette application: the page, its static files and the JSON API.
 
-Routes (see README.md, "Explorer", for the requests and answers)::
+Routes (see docs/guide/explorer.md for the requests and answers)::
 
     GET  /                    the page (static/index.html)
     GET  /static/{path}       its files

@@ -7,7 +7,7 @@ delay (Fig. 5: n = 0 and 10; Fig. 6: n = 0 and 4) this computes
   for PEB (solid lines in the paper's figures);
 * ``simulation``: the paper's procedure, the largest K whose simulated loop stays
   bounded (:func:`hapstab.simulate.critical_stiffness_simulation`, the stars);
-* ``exact``: the exact K_max of the sampled-data loop (:mod:`hapstab.exact`);
+* ``exact``: the exact K_max of the sampled-data loop (:mod:`hapstab.analysis.exact`);
 * ``circle``: the circle-criterion K_max, when that method is registered.
 
 and writes ``figN.png``, ``figN.svg`` and ``figN.csv``.

@@ -86,13 +86,13 @@ def critical_stiffness_simulation(loop: HapticLoop | TeleoperationLoop, *,
     start (e.g. a negative virtual damping B that nearly cancels the device
     damping b leaves K_max ~ (b + B)/(T/2 + t_d), arbitrarily small), K is
     lowered by ``ratio`` down to ``1e-10 m/T^2`` before K_max = 0 is reported. Each verdict
-    is :func:`hapstab.growth.assess` on ``n_samples`` samples (observed explosion, else the
+    is :func:`hapstab.simulation.growth.assess` on ``n_samples`` samples (observed explosion, else the
     fitted growth rate).
 
     Parameters
     ----------
     loop : HapticLoop or TeleoperationLoop
-        Spring-damper controller(s); K is varied as in :meth:`with_stiffness`.
+        Spring-damper controller(s); K is varied as in :meth:`hapstab.HapticLoop.with_stiffness`.
     n_samples : int
         Samples per simulated run.
     window : int
