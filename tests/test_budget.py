@@ -131,10 +131,14 @@ def test_circle_test_and_positive_real_are_charged_before_they_start():
 
 
 def test_the_eigenvalue_estimate_covers_the_measured_times_without_refusing_twice_over():
-    # measured on the project's machine: 2.5 s at N = 2004, 18.8 s at N = 4004 (numpy eigvals)
-    for N, measured in ((2004, 2.5), (4004, 18.8)):
-        assert measured < budget.eig_seconds(N) < 3 * measured
-    assert budget.eig_seconds(300) == pytest.approx(0.01 + 2e-9 * 300 ** 3)
+    # measured on the project's machine (numpy eigvals): 29.7 s at N = 2002 for the HVE's
+    # delay chain (the slowest structure measured, issue 27), 2.5 s at N = 2004 and 18.8 s
+    # at N = 4004 for the PEB's: the estimate is above every one, and within 3x of the slowest
+    for N, measured in ((2002, 29.7), (2004, 2.5), (4004, 18.8)):
+        assert measured < budget.eig_seconds(N)
+    assert budget.eig_seconds(2002) < 3 * 29.7
+    # the HVE floor (4e-9) is above the small-N rate (2e-9) too: it holds at every N
+    assert budget.eig_seconds(300) == pytest.approx(0.01 + 4e-9 * 300 ** 3)
 
 
 @pytest.mark.parametrize("kw,needle", [
@@ -149,3 +153,15 @@ def test_a_budget_of_the_wrong_type_is_a_type_error_naming_it(kw, needle):
 def test_a_budget_that_is_not_positive_is_refused():
     with pytest.raises(BudgetError, match=r"max_seconds = 0: must be > 0 \(math.inf: no limit\)"):
         h.stability(h.paper_hve().with_stiffness(10.0), max_seconds=0)
+
+
+def test_stability_of_a_long_hve_delay_chain_is_refused_at_once_within_a_short_budget():
+    # issue 27: stability(paper_hve(delay_samples=2000, stiffness=1e308)) ran 30-150 s in
+    # one dense eigenvalue problem estimated at 4.8 s; now estimated at about 30 s and
+    # refused before any eigenvalue is computed when the budget is shorter
+    import time
+    loop = h.paper_hve(delay_samples=2000, stiffness=1e308)
+    t0 = time.perf_counter()
+    with pytest.raises(BudgetError, match=r"stability: the eigenvalues of a 2002-state closed loop"):
+        h.stability(loop, max_seconds=20)
+    assert time.perf_counter() - t0 < 10   # the build alone (ms), never the eigenproblem (30 s+)
