@@ -150,10 +150,9 @@ class DelayRangeResult(Result):
         -------
         matplotlib Axes
         """
-        import matplotlib.pyplot as plt
+        from hapstab.plotting import _axes
 
-        if ax is None:
-            _, ax = plt.subplots(figsize=(6, 4))
+        ax = _axes(ax)
         ax.plot(self.delays_samples, self.kmax, "o-", label="certified K_max")
         ax.plot([self.worst_delay_samples], [self.critical_stiffness], "r*", ms=12,
                 label="worst delay")

@@ -141,10 +141,9 @@ class LossStiffnessResult(Result):
         -------
         matplotlib Axes
         """
-        import matplotlib.pyplot as plt
+        from hapstab.plotting import _axes
 
-        if ax is None:
-            _, ax = plt.subplots(figsize=(6, 4))
+        ax = _axes(ax)
         ax.plot(self.scan_K, self.scan_rho, "o-", ms=3, label="rho (second moment)")
         ax.axhline(1.0, color="k", lw=0.8)
         if math.isfinite(self.critical_stiffness) and self.critical_stiffness > 0:
@@ -209,10 +208,9 @@ class LossCurveResult(Result):
         -------
         matplotlib Axes
         """
-        import matplotlib.pyplot as plt
+        from hapstab.plotting import _axes
 
-        if ax is None:
-            _, ax = plt.subplots(figsize=(6, 4))
+        ax = _axes(ax)
         ax.plot(self.losses, self.critical_stiffness, "o-", label="mean-square K_max")
         ax.set_xlabel("packet loss P")
         ax.set_ylabel("K_max (N/m)")
