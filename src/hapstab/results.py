@@ -322,6 +322,9 @@ class CriticalStiffnessResult(Result):
     crossing_frequency_hz: float = float("nan")
     details: dict[str, Any] = field(default_factory=dict, compare=False)
     note: str = field(default="", compare=False)
+    #: the exact core's proof as a checkable certificate (JSON-ready dict; None when
+    #: not proved in ball arithmetic): ``hapstab.verify_certificate`` re-checks it
+    certificate: dict[str, Any] | None = field(default=None, compare=False, repr=False)
 
     def to_dict(self) -> dict[str, Any]:
         return jsonable(merged({

@@ -135,7 +135,9 @@ def stability(loop: HapticLoop | TeleoperationLoop, *, max_memory: float | None 
         resp = loop_response(loop)
         m = resp.rigid
         u = float(sysm.stiffness[0] / resp.scale[0])
-        count = int(winding(resp, np.zeros(1, int), np.array([u]))[0])
+        count = _proved_count(loop, float(sysm.stiffness[0]))
+        if count is None:       # not covered by the ball-arithmetic core
+            count = int(winding(resp, np.zeros(1, int), np.array([u]))[0])
     else:
         m = sysm.rigid_modes
         count = -2
@@ -155,6 +157,19 @@ def stability(loop: HapticLoop | TeleoperationLoop, *, max_memory: float | None 
     note = friction_note(loop)          # the linear loop: friction-free (said once)
     return StabilityResult(verdict, rho, dom, freq, reason, T, tuple(complex(e) for e in eigs), m,
                            note)
+
+
+def _proved_count(loop: HapticLoop | TeleoperationLoop, K: float) -> int | None:
+    """Poles outside at K by the argument principle in ball arithmetic
+    (:func:`~hapstab.analysis.exact.proof.count`): -1 if the balls cannot decide
+    (a pole on or within their width of the circle); None if the loop is not covered."""
+    from hapstab.engine.arb_loop import ArbLoop, arb_parameters
+    params = arb_parameters(loop)
+    if params is None:
+        return None
+    from hapstab.analysis.exact.proof import count
+    got = count(ArbLoop(params), K).outside
+    return -1 if got is None else int(got)
 
 
 def _verdict(count: int, rho: float, dom: complex, T: float, m: int) -> tuple[str, str]:
@@ -245,6 +260,19 @@ def _to_result(res: StableSet, T: float, n: int | float) -> CriticalStiffnessRes
         reason += (f"; marginal within K in {spans}: a pole is within rounding of the unit "
                    "circle there, so the numerics cannot decide"
                    + (" (K_max is its lower end, the safe side)" if at else ""))
-    return CriticalStiffnessResult(kmax, "exact", res.intervals, reason, T, n, freq,
-                                   {"rigid_body_modes": res.rigid,
-                                    "uncertain_intervals": [list(iv) for iv in res.uncertain]})
+    details: dict = {"rigid_body_modes": res.rigid,
+                     "uncertain_intervals": [list(iv) for iv in res.uncertain]}
+    pr = res.proof
+    if pr is not None:
+        details["proof"] = "ball arithmetic (python-flint Arb)"
+        details["kmax_enclosure"] = [kmax, pr.kmax_hi if kmax > 0 or pr.kmax_hi < math.inf
+                                     else math.inf]
+        details["base_point_N_per_m"] = pr.k0
+    else:
+        details["proof"] = "float enclosures (not re-proved in ball arithmetic)"
+    cert = None
+    if pr is not None:
+        from hapstab.analysis.exact.certificate import certificate
+        cert = certificate(pr)
+    return CriticalStiffnessResult(kmax, "exact", res.intervals, reason, T, n, freq, details,
+                                   certificate=cert)

@@ -1,0 +1,278 @@
+"""Re-check a K_max certificate from the loop's numbers alone, in ball arithmetic.
+
+A certificate (:func:`hapstab.analysis.exact.proof.certificate`, ``hapstab kmax ...
+--certificate FILE``) claims: the closed loop is stable for every K in each listed
+interval [K_a, K_b], K_max is the upper end of the one from the base point K_0, and
+(when given) it is unstable at ``kmax_upper``. This module does not import the search
+that produced it: it rebuilds the characteristic function from the certificate's
+``loop`` numbers (:class:`~hapstab.engine.arb_loop.ArbLoop`, Arb balls) and checks
+
+1. **counts** -- each count's pieces, replayed from the ``start_pieces`` equal pieces
+   of [0, pi] by halving (so they tile [0, pi] by construction: a dropped or altered
+   piece breaks the replay), each prove its increment of arg det M (``P``: |P| > |Q|,
+   ``Q``: |Q| > |P|, ``F``: 0 not in the ball); the winding gives the poles outside,
+   which must equal the count claimed;
+2. **gaps** -- each excluded gap's pieces, replayed from ``start_pieces`` x [lo, hi]
+   (halving theta at the midpoint, or K at the geometric mean of a wide range, else
+   the midpoint), each excluding 0 for the reason given;
+3. **the claim** -- every stable interval is a chain of excluded gaps with a verified
+   count 0 inside, starting and ending where the interval does; K_max is the upper
+   end of the one from K_0; ``kmax_upper`` has a verified count > 0 at it; each
+   crossing's direction agrees with the counts either side.
+
+References
+----------
+F. Johansson, "Arb: efficient arbitrary-precision midpoint-radius interval
+arithmetic", IEEE Trans. Computers 66 (2017) 1281-1292.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+from hapstab.engine.arb_loop import ArbLoop, poly_k, working_precision
+
+__all__ = ["verify_certificate", "CertificateCheck"]
+
+
+@dataclass(frozen=True)
+class CertificateCheck:
+    """The verdict on a certificate.
+
+    Attributes
+    ----------
+    valid : bool
+        Every check passed.
+    reason : str
+        What was verified, or the first check that failed.
+    kmax : float or None
+        The verified K_max (N/m) when valid.
+    """
+
+    valid: bool
+    reason: str
+    kmax: float | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready."""
+        return {"valid": self.valid, "reason": self.reason, "kmax_N_per_m": self.kmax}
+
+
+class _Invalid(Exception):
+    pass
+
+
+def _ball(a: float, b: float) -> Any:
+    from flint import arb
+    lo = arb.pi() if a == math.pi else arb(a)
+    hi = arb.pi() if b == math.pi else arb(b)
+    return lo.union(hi)
+
+
+def _excludes(al: ArbLoop, a: float, b: float, ka: float, kb: float, how: str) -> bool:
+    """Whether the box [a, b] x [ka, kb] has no zero of det M, for the reason ``how``."""
+    from flint import arb
+    P, Q, F = al.box(_ball(a, b), arb(ka).union(arb(kb)))
+    with working_precision(al.prec):
+        if how == "P":
+            return bool(P.abs_lower() > Q.abs_upper())
+        if how == "Q":
+            return bool(Q.abs_lower() > P.abs_upper())
+        return how == "F" and not F.contains(0)
+
+
+def _increment(al: ArbLoop, a: float, b: float, K: Any, how: str) -> Any:
+    """The proved increment of arg det M over [a, b] at K (raises _Invalid)."""
+    P, Q, F = al.box(_ball(a, b), K)
+    pa, qa, wa = al.parts(_ball(a, a))
+    pb, qb, wb = al.parts(_ball(b, b))
+    with working_precision(al.prec):
+        Pa, Qa, Pb, Qb = poly_k(pa, K), poly_k(qa, K), poly_k(pb, K), poly_k(qb, K)
+        if how == "P" and P.abs_lower() > Q.abs_upper():
+            return (Pb / Pa).arg() + (1 + wb * Qb / Pb).arg() - (1 + wa * Qa / Pa).arg()
+        if how == "Q" and Q.abs_lower() > P.abs_upper():
+            return ((Qb / Qa).arg() - al.n_phase * (_ball(b, b) - _ball(a, a))
+                    + (1 + Pb / (wb * Qb)).arg() - (1 + Pa / (wa * Qa)).arg())
+        if how == "F" and not F.contains(0):
+            return ((Pb + wb * Qb) / (Pa + wa * Qa)).arg()
+    raise _Invalid(f"piece theta in [{a!r}, {b!r}] at K = {float(K.mid())!r}: '{how}' does not "
+                   "hold in ball arithmetic")
+
+
+def _start(n: int) -> list[tuple[float, float]]:
+    """The n equal pieces of [0, pi], the first cut again at pi/n 2^-k, k = 1..40."""
+    step = math.pi / n
+    near = [(0.0, step * 2.0 ** -40)] + [(step * 2.0 ** -k, step * 2.0 ** (1 - k))
+                                          for k in range(40, 0, -1)]
+    return near + [(i * step, math.pi if i == n - 1 else (i + 1) * step) for i in range(1, n)]
+
+
+def _check_count(al: ArbLoop, c: dict[str, Any], n0: int) -> int:
+    """Replay a count's pieces; the verified number of poles outside."""
+    from flint import arb
+    K = arb(c["K_N_per_m"])
+    pieces = [tuple(p) for p in c["pieces"]]
+    stack = _start(n0)[::-1]
+    total, i = arb(0), 0
+    while stack:
+        a, b = stack.pop()
+        if i >= len(pieces):
+            raise _Invalid(f"count at K = {c['K_N_per_m']!r}: pieces missing (theta in "
+                           f"[{a!r}, {b!r}] not covered)")
+        pa, pb, how = pieces[i]
+        if (pa, pb) == (a, b):
+            inc = _increment(al, a, b, K, how)
+            with working_precision(al.prec):
+                total = total + inc
+            i += 1
+        elif a <= pa and pb <= b and (pa, pb) != (a, b):
+            m = 0.5 * (a + b)
+            stack += [(m, b), (a, m)]
+        else:
+            raise _Invalid(f"count at K = {c['K_N_per_m']!r}: piece [{pa!r}, {pb!r}] is not "
+                           f"part of [{a!r}, {b!r}]")
+    if i != len(pieces):
+        raise _Invalid(f"count at K = {c['K_N_per_m']!r}: pieces beyond [0, pi]")
+    with working_precision(al.prec):
+        turns = (total / arb.pi()).unique_fmpz()
+    if turns is None:
+        raise _Invalid(f"count at K = {c['K_N_per_m']!r}: the winding is not a whole number")
+    out = al.q - int(turns)
+    if out != c["outside"]:
+        raise _Invalid(f"count at K = {c['K_N_per_m']!r}: {out} poles outside, not "
+                       f"{c['outside']} as claimed")
+    return out
+
+
+def _split_k(k0: float, k1: float) -> float:
+    return math.sqrt(k0 * k1) if k1 > 4 * k0 else 0.5 * (k0 + k1)
+
+
+def _check_gap(al: ArbLoop, g: dict[str, Any], n0: int) -> None:
+    """Replay an excluded gap's subdivision of [0, pi] x [lo, hi], boxes taken lowest K
+    first (``splits``: per box "x" the next piece excludes it, "t" halve theta, "k"
+    split K) and check each piece."""
+    import heapq
+    lo, hi = g["lo_N_per_m"], g["hi_N_per_m"]
+    pieces = [tuple(p) for p in g["pieces"]]
+    heap = [(lo, a, b, hi) for a, b in _start(n0)]       # lowest K first, as written
+    heapq.heapify(heap)
+    i = 0
+    for step in g["splits"]:
+        if not heap:
+            raise _Invalid(f"gap [{lo!r}, {hi!r}]: more steps than boxes")
+        k0, a, b, k1 = heapq.heappop(heap)
+        box = (a, b, k0, k1)
+        if step == "t":
+            m = 0.5 * (a + b)
+            heapq.heappush(heap, (k0, a, m, k1))
+            heapq.heappush(heap, (k0, m, b, k1))
+        elif step == "k":
+            m = _split_k(k0, k1)
+            heapq.heappush(heap, (k0, a, b, m))
+            heapq.heappush(heap, (m, a, b, k1))
+        elif step == "x":
+            if i >= len(pieces) or pieces[i][:4] != box:
+                raise _Invalid(f"gap [{lo!r}, {hi!r}]: the box theta in [{a!r}, {b!r}], K in "
+                               f"[{k0!r}, {k1!r}] has no piece of its own")
+            if not _excludes(al, *box, pieces[i][4]):
+                raise _Invalid(f"gap [{lo!r}, {hi!r}]: the piece theta in [{a!r}, {b!r}], K in "
+                               f"[{k0!r}, {k1!r}] is not excluded by '{pieces[i][4]}'")
+            i += 1
+        else:
+            raise _Invalid(f"gap [{lo!r}, {hi!r}]: a box is not excluded ('{step}')")
+    if heap:
+        k0, a, b, k1 = heap[0]
+        raise _Invalid(f"gap [{lo!r}, {hi!r}]: pieces missing (theta in [{a!r}, {b!r}], K in "
+                       f"[{k0!r}, {k1!r}] not covered)")
+    if i != len(pieces):
+        raise _Invalid(f"gap [{lo!r}, {hi!r}]: pieces beyond the gap")
+
+
+def _check_claim(cert: dict[str, Any], counts: dict[float, int]) -> float | None:
+    """The claim against the verified gaps and counts; the verified K_max."""
+    claim, k0 = cert["claim"], cert["base_point_N_per_m"]
+    gaps = [g for g in cert["gaps"] if g["excluded"]]
+    for lo, hi in claim["stable_intervals_N_per_m"]:
+        edge = lo
+        while edge < hi:
+            g = next((g for g in gaps if g["lo_N_per_m"] == edge and g["hi_N_per_m"] <= hi),
+                     None)
+            if g is None:
+                raise _Invalid(f"stable interval [{lo!r}, {hi!r}]: K = {edge!r} is not the "
+                               "start of an excluded gap")
+            c = g["count"]
+            if c is None or not (g["lo_N_per_m"] <= c["K_N_per_m"] <= g["hi_N_per_m"]) or \
+                    counts.get(c["K_N_per_m"]) != 0:
+                raise _Invalid(f"stable interval [{lo!r}, {hi!r}]: the gap from {edge!r} has no "
+                               "verified count 0 inside it")
+            edge = g["hi_N_per_m"]
+    ivs = claim["stable_intervals_N_per_m"]
+    kmax = claim["kmax_N_per_m"]
+    first = ivs[0][1] if ivs and ivs[0][0] == k0 else 0.0
+    if kmax is not None and kmax != first:
+        raise _Invalid(f"K_max = {kmax!r} is not the end of the stable interval from "
+                       f"K_0 = {k0!r} ({first!r})")
+    up = claim["kmax_upper_N_per_m"]
+    if up is not None and not (counts.get(up, 0) > 0 and (kmax is None or up >= kmax)):
+        raise _Invalid(f"K_max's upper bound {up!r}: no verified count > 0 there")
+    for cr in cert["crossings"]:
+        below, above = cr["poles_outside_below"], cr["poles_outside_above"]
+        d = "outwards" if above > below else "inwards" if above < below else "touching"
+        if cr["direction"] != d:
+            raise _Invalid(f"crossing in [{cr['K_lo_N_per_m']!r}, {cr['K_hi_N_per_m']!r}]: "
+                           f"direction '{cr['direction']}' but the counts say '{d}'")
+    return kmax
+
+
+def verify_certificate(cert: dict[str, Any], loop: Any = None) -> CertificateCheck:
+    """Re-check a certificate in ball arithmetic (module doc).
+
+    Parameters
+    ----------
+    cert : dict
+        The certificate (as written by ``hapstab kmax ... --certificate FILE``).
+    loop : HapticLoop or TeleoperationLoop, optional
+        If given, the certificate must be about this loop's numbers.
+
+    Returns
+    -------
+    CertificateCheck
+        ``valid`` with what was verified, or invalid with the first failed check.
+    """
+    try:
+        if not isinstance(cert, dict) or cert.get("format") != "hapstab-certificate":
+            raise _Invalid("not a hapstab certificate (format != 'hapstab-certificate')")
+        if loop is not None:
+            from hapstab.engine.arb_loop import arb_parameters
+            if arb_parameters(loop) != cert["loop"]:
+                raise _Invalid("the certificate is about another loop")
+        al = ArbLoop(cert["loop"], int(cert["precision_bits"]))
+        n0 = int(cert["start_pieces"])
+        counts: dict[float, int] = {}
+        for g in cert["gaps"]:
+            if g["count"] is not None:
+                counts[g["count"]["K_N_per_m"]] = _check_count(al, g["count"], n0)
+            if g["excluded"]:
+                _check_gap(al, g, n0)
+        for cr in cert["crossings"]:
+            for key, at in (("poles_outside_below", "K_lo_N_per_m"),
+                            ("poles_outside_above", "K_hi_N_per_m")):
+                near = [g for g in cert["gaps"] if g["count"] is not None and (
+                    (g["excluded"] and g["hi_N_per_m"] == cr[at]) if key.endswith("below") else
+                    (g["lo_N_per_m"] == cr[at] and
+                     (g["excluded"] or g["count"]["K_N_per_m"] == cr[at])))]
+                if not near or any(counts[g["count"]["K_N_per_m"]] != cr[key] for g in near):
+                    raise _Invalid(f"crossing at [{cr['K_lo_N_per_m']!r}, "
+                                   f"{cr['K_hi_N_per_m']!r}]: '{key}' not verified")
+        kmax = _check_claim(cert, counts)
+    except _Invalid as e:
+        return CertificateCheck(False, str(e))
+    except (KeyError, TypeError, ValueError, IndexError) as e:
+        return CertificateCheck(False, f"malformed certificate: {type(e).__name__}: {e}")
+    n_pieces = sum(len(g["pieces"]) for g in cert["gaps"])
+    return CertificateCheck(True, f"valid: {len(counts)} count(s) and {n_pieces} excluded "
+                                  f"pieces re-checked in {al.prec}-bit ball arithmetic; K_max = "
+                                  f"{kmax!r} N/m", kmax)
