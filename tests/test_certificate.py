@@ -6,6 +6,7 @@ own 50-digit referee (tests/references/brute.py: closed-loop matrix + mpmath Abe
 which shares no code with hapstab."""
 
 import copy
+import math
 import json
 import pathlib
 
@@ -144,3 +145,40 @@ def test_cli_writes_and_verifies_a_certificate(tmp_path):
     path.write_text(json.dumps(cert))
     r = CliRunner().invoke(cli, ["verify", str(path)])
     assert r.exit_code == 1 and r.output.startswith("INVALID"), r.output
+
+
+# the review's false K_max = inf: the first crossing lies above the float search's top
+# U_HI m/T^2 = 1.05e16 N/m (b = 1e13 N s/m at T = 1 ms: a real pole through z = -1 at
+# K ~ 2 b/T = 2e16 N/m)
+HUGE_DAMPING = HapticLoop(Device(1.0, 1e13), SpringDamper(0, 0.0), spring(0.0), 1e-3, 0)
+
+
+def test_kmax_above_the_float_search_top_is_found_not_inf():
+    res = h.critical_stiffness(HUGE_DAMPING)
+    k = res.critical_stiffness
+    lo, hi = res.details["kmax_enclosure"]
+    assert math.isfinite(k) and lo == k
+    # the enclosure is the crossing's window: 2 * 2^-40 = 1.8e-12 wide, relative
+    assert hi <= k * (1 + 2.0 ** -38)
+    # the 50-digit referee (closed-loop matrix, mpmath) on both sides of the enclosure
+    ref = _brute_hve(HUGE_DAMPING)
+    assert brute.robust(ref, k).stable is True
+    assert brute.robust(ref, hi).stable is False
+    assert "stable for every K" not in res.reason
+    chk = h.verify_certificate(res.certificate, HUGE_DAMPING)
+    assert chk.valid, chk.reason
+    assert chk.kmax == k
+
+
+def test_a_proof_stopped_below_a_crossing_never_claims_inf():
+    from hapstab.analysis.exact.proof import prove
+    from hapstab.analysis.exact.top import prove_tail
+    from hapstab.engine.arb_loop import ArbLoop, arb_parameters
+    params = arb_parameters(HUGE_DAMPING)
+    # examined only up to 1e15 N/m, below the crossing at 2.0000000004e16 N/m
+    pr = prove(params, (), 1e-8, 1e15, False)
+    assert pr.kmax == 1e15 and not pr.tail_proved
+    assert (1e15, math.inf) in pr.uncertain
+    al = ArbLoop(params)
+    assert not prove_tail(al, 1e16)        # the crossing lies in [1e16, inf)
+    assert prove_tail(al, 2.1e16)          # and nothing above it (|Q| dominates)

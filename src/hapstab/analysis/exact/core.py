@@ -243,6 +243,8 @@ def _to_result(res: StableSet, T: float, n: int | float) -> CriticalStiffnessRes
                   "and terminations alone destabilise the loop)")
     elif math.isinf(kmax):
         reason = "stable for every K > 0 (no closed-loop pole reaches the unit circle)"
+    elif not np.isfinite(th):
+        reason = "no closed-loop pole reaches the unit circle up to K_max"
     elif th == 0.0:
         reason = "a real closed-loop pole crosses z = +1 at K_max (static divergence)"
     elif th == math.pi:
@@ -254,9 +256,15 @@ def _to_result(res: StableSet, T: float, n: int | float) -> CriticalStiffnessRes
         reason += f"; the stable set in K is not one interval ({len(res.intervals)} intervals)"
     if res.rigid:
         reason += f"; {res.rigid} rigid-body mode(s) at z = 1 (marginal, K-independent) divided out"
-    if res.uncertain:
-        spans = ", ".join(f"[{a:.8g}, {b:.8g}]" for a, b in res.uncertain)
-        at = any(a == kmax for a, _ in res.uncertain)
+    near = [iv for iv in res.uncertain if math.isfinite(iv[1])]
+    above = [a for a, b in res.uncertain if not math.isfinite(b)]
+    if above:
+        reason += (f"; not proved above K = {above[0]:.8g} N/m (the top of the range examined "
+                   "in ball arithmetic; no pole on the unit circle up to there)"
+                   + (": K_max is that top, the safe side" if kmax == above[0] else ""))
+    if near:
+        spans = ", ".join(f"[{a:.8g}, {b:.8g}]" for a, b in near)
+        at = any(a == kmax for a, _ in near)
         reason += (f"; marginal within K in {spans}: a pole is within rounding of the unit "
                    "circle there, so the numerics cannot decide"
                    + (" (K_max is its lower end, the safe side)" if at else ""))
@@ -268,6 +276,12 @@ def _to_result(res: StableSet, T: float, n: int | float) -> CriticalStiffnessRes
         details["kmax_enclosure"] = [kmax, pr.kmax_hi if kmax > 0 or pr.kmax_hi < math.inf
                                      else math.inf]
         details["base_point_N_per_m"] = pr.k0
+        # what the balls proved: [K_0, K_max], K_0 standing for K -> 0+ (upper end
+        # inf only when the tail above the examined range is proved, top.py)
+        details["proved_range_N_per_m"] = [pr.k0, kmax]
+        if kmax > 0:
+            reason += (f"; proved stable for K in [K_0, K_max] = [{pr.k0:.6g}, {kmax:.10g}] N/m in "
+                       "ball arithmetic, K_0 standing for K -> 0+ ((0, K_0) is not proved)")
     else:
         details["proof"] = "float enclosures (not re-proved in ball arithmetic)"
     cert = None

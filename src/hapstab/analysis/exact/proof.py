@@ -357,6 +357,10 @@ class Proof:
     k_top: float = math.inf
     #: poles outside at K_0, proved (None: the balls could not decide)
     base_outside: int | None = None
+    #: no pole on the circle for any K >= k_top, proved
+    #: (:func:`~hapstab.analysis.exact.top.prove_tail`): only then does a stable
+    #: interval reaching k_top stand for [.., inf)
+    tail_proved: bool = False
 
 
 def _windows(al: ArbLoop, events: tuple, k0: float, k_top: float) -> list[tuple[float, float, float]]:
@@ -466,7 +470,13 @@ def prove(params: dict[str, Any], events: tuple, k0: float, k_top: float,
 
 def _assemble(al: ArbLoop, params: dict[str, Any], k0: float, k_top: float,
               wins: list[tuple[float, float, float]], gaps: list[Gap], base: Count) -> Proof:
-    """Stable intervals, K_max and its enclosure from the proved gaps."""
+    """Stable intervals, K_max and its enclosure from the proved gaps. A stable
+    interval reaching ``k_top`` stands for [.., inf) only when the tail above it is
+    proved (:func:`~hapstab.analysis.exact.top.prove_tail`); otherwise it ends at
+    ``k_top`` and (k_top, inf) is uncertain."""
+    from hapstab.analysis.exact.top import prove_tail
+    tail = any(g.proved and g.outside == 0 and g.hi == k_top for g in gaps) and \
+        prove_tail(al, k_top)
     intervals: list[tuple[float, float]] = []
     uncertain: list[tuple[float, float]] = []
     for g in gaps:
@@ -490,7 +500,9 @@ def _assemble(al: ArbLoop, params: dict[str, Any], k0: float, k_top: float,
             else:
                 uncertain.append((win[0], win[1]))
         elif kmax == k_top:
-            kmax = math.inf
+            kmax = math.inf if tail else kmax
+    if not tail and any(g.proved and g.outside == 0 and g.hi == k_top for g in gaps):
+        uncertain.append((k_top, math.inf))    # not examined above the top: not claimed
     # a window between two stable gaps: what happens inside is not proved
     for lo, hi, _t in wins:
         below = any(g.hi == lo and g.proved and g.outside == 0 for g in gaps)
@@ -498,7 +510,7 @@ def _assemble(al: ArbLoop, params: dict[str, Any], k0: float, k_top: float,
         if below and above:
             uncertain.append((lo, hi))
     return Proof(params, k0, wins, gaps, intervals, kmax, kmax_hi, sorted(set(uncertain)),
-                 theta, al.prec, k_top, base.outside)
+                 theta, al.prec, k_top, base.outside, tail)
 
 
 def prove_base(params: dict[str, Any], k0: float) -> tuple[ArbLoop, Count]:

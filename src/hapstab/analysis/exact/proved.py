@@ -79,7 +79,19 @@ def _prove_one(resp: LoopResponse, i: int, ss: StableSet, params: dict, full: bo
     # gaps to examine; when it could not count at K -> 0+ it has none: examine them all
     hint = tuple((a * (1 - 1e-6), b * (1 + 1e-6)) for a, b in ss.intervals + ss.uncertain) \
         if ss.outside_small_K >= 0 else ((0.0, math.inf),)
-    return _from_proof(ss, prove(params, events, k0, k_top, full, hint))
+    pr = prove(params, events, k0, k_top, full, hint)
+    if _reaches_top(pr):
+        # stable up to the float search's top: look above it (analysis/exact/top.py)
+        from hapstab.analysis.exact.top import raise_top
+        from hapstab.engine.arb_loop import ArbLoop
+        top, extra = raise_top(ArbLoop(params), events, k_top)
+        pr = prove(params, tuple(sorted(events + extra)), k0, top, full, hint)
+    return _from_proof(ss, pr)
+
+
+def _reaches_top(pr: Any) -> bool:
+    """Whether a proved stable interval ends at the top of the examined range."""
+    return any(b >= pr.k_top for _a, b in pr.intervals)
 
 
 #: Smallest largest dimensionless group (b T / m, |B| T / m, k T^2 / m over the ports)
@@ -131,7 +143,7 @@ def _from_proof(ss: StableSet, pr: Any) -> StableSet:
     """The StableSet of a proof: intervals (the first from K -> 0+ reported from 0),
     K_max the safe end, the base count, the uncertain ranges."""
     base = pr.base_outside
-    intervals = [(0.0 if a == pr.k0 else a, math.inf if b >= pr.k_top else b)
+    intervals = [(0.0 if a == pr.k0 else a, math.inf if b >= pr.k_top and pr.tail_proved else b)
                  for a, b in pr.intervals]
     unc = list(pr.uncertain)
     if base is None:
