@@ -6,8 +6,8 @@ own 50-digit referee (tests/references/brute.py: closed-loop matrix + mpmath Abe
 which shares no code with hapstab."""
 
 import copy
-import math
 import json
+import math
 import pathlib
 
 import pytest
