@@ -45,7 +45,8 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Any
 
-__all__ = ["ArbLoop", "arb_parameters", "working_precision", "PREC", "poly_k", "dpoly_k", "Dual"]
+__all__ = ["ArbLoop", "arb_parameters", "working_precision", "PREC", "poly_k", "dpoly_k", "Dual",
+           "base_point", "k_scale", "damping_scale", "BASE_RATIO"]
 
 #: Working precision in bits. The port polynomials cancel: with E ~ T^2/m the
 #: coefficients are 1e-35 of the unit terms for a 1e29 kg device at T = 1 ms
@@ -55,6 +56,42 @@ PREC = 320
 #: Bits of relative accuracy the port polynomials must keep (else the precision is
 #: doubled): far more than any exclusion needs, so the balls are never the bottleneck.
 MIN_BITS = 80
+
+
+#: The base point K_0 standing for K -> 0+, relative to the loop's K scale (the
+#: smaller of m/T^2 and b/T): the float search's lower end U_LO
+#: (:mod:`hapstab.analysis.exact.boxes`, the same number; a test pins it). What holds
+#: for K in (0, K_0) is not proved.
+BASE_RATIO = 1e-14
+
+
+def k_scale(params: dict[str, Any]) -> float:
+    """The loop's K scale (N/m): the power of two nearest min M / T^2 over the ports
+    (M = device + termination mass), as :mod:`hapstab.engine.frequency` takes it."""
+    import numpy as np
+    T = params["period_s"]
+    masses = [p["mass_kg"] + p["termination_mass_kg"] for p in params["ports"]]
+    return float(2.0 ** np.round(np.log2(min(masses) / T ** 2)))
+
+
+def damping_scale(params: dict[str, Any]) -> float:
+    """The smallest positive b/T or |B|/T of the loop (N/m; inf if none): with m/T^2
+    it sets the base point K_0 standing for K -> 0+, so that a heavy device (m/T^2
+    far above the stiffness its damping allows, K_max ~ 2 b/T) is not examined
+    from a K_0 above its K_max."""
+    T = params["period_s"]
+    vals = [p["damping_N_s_per_m"] + p["termination_damping_N_s_per_m"] for p in params["ports"]]
+    vals += [abs(c["damping_N_s_per_m"]) for c in params["channels"]]
+    pos = [v / T for v in vals if v > 0]
+    return min(pos) if pos else math.inf
+
+
+def base_point(params: dict[str, Any]) -> float:
+    """The base point K_0 (N/m) standing for K -> 0+, from the loop's numbers alone:
+    :data:`BASE_RATIO` times the smaller of :func:`k_scale` and :func:`damping_scale`.
+    The proof counts the poles there and proves stability on [K_0, K_max]; a
+    certificate's K_0 is re-derived with this (:mod:`hapstab.analysis.verify`)."""
+    return BASE_RATIO * min(k_scale(params), damping_scale(params))
 
 
 @contextmanager

@@ -12,8 +12,9 @@ from typing import Any
 
 import numpy as np
 
-from hapstab.analysis.exact.boxes import U_HI, U_LO
+from hapstab.analysis.exact.boxes import U_HI
 from hapstab.analysis.exact.stable_set import StableSet
+from hapstab.engine.arb_loop import base_point
 from hapstab.engine.frequency import LoopResponse
 from hapstab.engine.port_poly import PortPoly
 
@@ -67,7 +68,8 @@ def _prove_one(resp: LoopResponse, i: int, ss: StableSet, params: dict, full: bo
     from hapstab.analysis.exact.proof import prove_base
     _refuse_heavy(params)
     s = float(resp.scale[i])
-    k0, k_top = U_LO * min(s, _damping_scale(params)), U_HI * s
+    # K_0 from the loop's numbers alone (a certificate's is re-derived the same way)
+    k0, k_top = base_point(params), U_HI * s
     events = ss.events
     if not full and ss.outside_small_K != 0 and not events:
         al, base = prove_base(params, k0)
@@ -119,18 +121,6 @@ def _refuse_heavy(params: dict) -> None:
                             f"(largest {max(groups):.3g}), so every pole crowds z = 1 closer "
                             "than the certified core resolves; a lighter device, more damping "
                             "or a longer period is within range")
-
-
-def _damping_scale(params: dict) -> float:
-    """The smallest positive b/T or |B|/T of the loop (N/m; inf if none): with m/T^2
-    it sets the base point K_0 standing for K -> 0+, so that a heavy device (m/T^2
-    far above the stiffness its damping allows, K_max ~ 2 b/T) is not examined
-    from a K_0 above its K_max."""
-    T = params["period_s"]
-    vals = [p["damping_N_s_per_m"] + p["termination_damping_N_s_per_m"] for p in params["ports"]]
-    vals += [abs(c["damping_N_s_per_m"]) for c in params["channels"]]
-    pos = [v / T for v in vals if v > 0]
-    return min(pos) if pos else math.inf
 
 
 def _unstable(al: Any, params: dict, k0: float, k_top: float, base: Any) -> Any:
