@@ -270,6 +270,10 @@ def _check_shape(cert: Any) -> None:
     _int(cert["precision_bits"], "precision_bits", *PREC_RANGE)
     _int(cert["start_pieces"], "start_pieces", 1, MAX_START_PIECES)
     k0 = _num(cert["base_point_N_per_m"], "base_point_N_per_m", positive=True)
+    if k0 != base_point(cert["loop"]):
+        raise _Invalid(f"base_point_N_per_m = {k0!r}: the loop's numbers give the base point "
+                       f"K_0 = {base_point(cert['loop'])!r} (1e-14 times the smaller of m/T^2 "
+                       "and b/T)")
     for i, g in enumerate(_list(cert["gaps"], "gaps", nonempty=True)):
         _check_gap_shape(g, i)
     _check_claim_shape(cert, k0)
@@ -480,11 +484,7 @@ def _check(cert: dict[str, Any], loop: Any) -> CertificateCheck:
         from hapstab.engine.arb_loop import arb_parameters
         if arb_parameters(loop) != params:
             raise _Invalid("the certificate is about another loop")
-    k0 = base_point(params)
-    if cert["base_point_N_per_m"] != k0:
-        raise _Invalid(f"base_point_N_per_m = {cert['base_point_N_per_m']!r}: the loop's "
-                       f"numbers give the base point K_0 = {k0!r} (1e-14 times the smaller of "
-                       "m/T^2 and b/T)")
+    k0 = base_point(params)         # re-derived, and equal to the certificate's (shape)
     al = ArbLoop(params, cert["precision_bits"])
     n0 = cert["start_pieces"]
     counts: dict[float, int] = {}

@@ -71,7 +71,8 @@ def k_scale(params: dict[str, Any]) -> float:
     import numpy as np
     T = params["period_s"]
     masses = [p["mass_kg"] + p["termination_mass_kg"] for p in params["ports"]]
-    return float(2.0 ** np.round(np.log2(min(masses) / T ** 2)))
+    with np.errstate(all="ignore"):     # a scale beyond doubles is inf: no K_0 matches it
+        return float(2.0 ** np.round(np.log2(np.float64(min(masses)) / np.float64(T) ** 2)))
 
 
 def damping_scale(params: dict[str, Any]) -> float:
