@@ -182,3 +182,12 @@ def test_a_proof_stopped_below_a_crossing_never_claims_inf():
     al = ArbLoop(params)
     assert not prove_tail(al, 1e16)        # the crossing lies in [1e16, inf)
     assert prove_tail(al, 2.1e16)          # and nothing above it (|Q| dominates)
+
+
+def test_base_point_is_one_function_of_the_loops_numbers():
+    from hapstab.analysis.exact.boxes import U_LO
+    from hapstab.engine.arb_loop import BASE_RATIO, arb_parameters, k_scale
+    from hapstab.engine.frequency import loop_response
+    assert BASE_RATIO == U_LO           # the proof's K_0 is the float search's lower end
+    for loop in (STIFF, UNDAMPED, HUGE_DAMPING, h.paper_peb(delay_samples=2)):
+        assert k_scale(arb_parameters(loop)) == float(loop_response(loop).scale[0])

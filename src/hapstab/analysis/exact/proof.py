@@ -23,11 +23,14 @@ pole crosses the unit circle. This module proves, on :class:`~hapstab.engine.arb
    after it is proved > 0. A gap that cannot be proved is reported *uncertain* with
    its extent, never as stable.
 
-The base point K_0 = 1e-14 m/T^2 (:data:`~hapstab.analysis.exact.boxes.U_LO` times
-the loop's K scale) stands for K -> 0+: what holds for (0, K_0) is not proved (a
-pole could only cross the circle there at a stiffness 1e-14 of the device's own
-scale). The certificate (:func:`certificate`) lists every piece, so anyone can
-re-check it (:mod:`hapstab.verify`).
+The base point K_0 (:func:`~hapstab.engine.arb_loop.base_point`: 1e-14 times the
+smaller of the loop's K scale m/T^2 and its damping scale b/T) stands for K -> 0+:
+what is proved is [K_0, K_max]; what holds for (0, K_0) is not proved (a pole could
+only cross the circle there at a stiffness 1e-14 of the device's own scale). Above
+the top of the examined range nothing is claimed unless the tail is proved
+(:mod:`~hapstab.analysis.exact.top`). The certificate
+(:func:`~hapstab.analysis.exact.certificate.certificate`) lists every piece, so anyone
+can re-check it (:mod:`hapstab.analysis.verify`).
 """
 
 from __future__ import annotations
