@@ -153,19 +153,22 @@ def test_cli_writes_and_verifies_a_certificate(tmp_path):
 HUGE_DAMPING = HapticLoop(Device(1.0, 1e13), SpringDamper(0, 0.0), spring(0.0), 1e-3, 0)
 
 
-def test_kmax_above_the_float_search_top_is_found_not_inf():
-    res = h.critical_stiffness(HUGE_DAMPING)
+@pytest.mark.parametrize("damping", [1e13, 1e16])
+def test_kmax_above_the_float_search_top_is_found_not_inf(damping):
+    # b = 1e16: the crossing at 2e19 N/m is 2e3 times above the float search's top
+    loop = HapticLoop(Device(1.0, damping), SpringDamper(0, 0.0), spring(0.0), 1e-3, 0)
+    res = h.critical_stiffness(loop)
     k = res.critical_stiffness
     lo, hi = res.details["kmax_enclosure"]
     assert math.isfinite(k) and lo == k
     # the enclosure is the crossing's window: 2 * 2^-40 = 1.8e-12 wide, relative
     assert hi <= k * (1 + 2.0 ** -38)
     # the 50-digit referee (closed-loop matrix, mpmath) on both sides of the enclosure
-    ref = _brute_hve(HUGE_DAMPING)
+    ref = _brute_hve(loop)
     assert brute.robust(ref, k).stable is True
     assert brute.robust(ref, hi).stable is False
     assert "stable for every K" not in res.reason
-    chk = h.verify_certificate(res.certificate, HUGE_DAMPING)
+    chk = h.verify_certificate(res.certificate, loop)
     assert chk.valid, chk.reason
     assert chk.kmax == k
 
@@ -191,3 +194,19 @@ def test_base_point_is_one_function_of_the_loops_numbers():
     assert BASE_RATIO == U_LO           # the proof's K_0 is the float search's lower end
     for loop in (STIFF, UNDAMPED, HUGE_DAMPING, h.paper_peb(delay_samples=2)):
         assert k_scale(arb_parameters(loop)) == float(loop_response(loop).scale[0])
+
+
+def test_a_top_not_raised_is_reported_uncertain_above_not_stable(monkeypatch):
+    # with no segment examined above the float search's top (1.05e16 N/m), the b = 1e13
+    # loop's crossing at 2e16 N/m is out of reach: K_max is the top, finite, below the
+    # truth, and (top, inf) is uncertain, never "stable for every K > 0"
+    import hapstab.analysis.exact.top as top
+    monkeypatch.setattr(top, "RAISE_STEPS", 0)
+    res = h.critical_stiffness(HUGE_DAMPING)
+    k = res.critical_stiffness
+    assert k == 1e10 * 2.0 ** 20           # U_HI times the K scale 2^20 N/m (m/T^2 = 1e6)
+    assert [k, math.inf] in res.details["uncertain_intervals"]
+    assert "not proved above K" in res.reason and "stable for every K" not in res.reason
+    assert brute.robust(_brute_hve(HUGE_DAMPING), k).stable is True
+    chk = h.verify_certificate(res.certificate, HUGE_DAMPING)
+    assert chk.valid and chk.kmax == k
