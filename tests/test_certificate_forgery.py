@@ -325,3 +325,27 @@ def test_raised_kmax_is_never_valid(genuine, factor):
             g["hi_N_per_m"] = k
     chk = h.verify_certificate(t)
     assert not chk.valid, chk.reason
+
+
+def test_kmax_zero_needs_poles_outside_at_the_base_point(genuine):
+    _, cert = genuine
+    # this loop is stable at K_0: a claim "K_max = 0" (unstable already at K -> 0+)
+    # with no stable interval is not what its counts say
+    t = _forged(cert, lambda t: (_set_kmax(t, 0.0), t["claim"].update(
+        stable_intervals_N_per_m=[], kmax_upper_N_per_m=None),
+        t.update(proved_range_N_per_m=None)))
+    chk = h.verify_certificate(t)
+    assert not chk.valid and "no verified count > 0 there" in chk.reason
+
+
+def test_unstable_at_the_base_point_certificate_is_valid():
+    # virtual damping B = -0.02 N s/m on a light damped device: a pole outside as K -> 0+
+    loop = h.HapticLoop(h.Device(0.05, 0.01), h.SpringDamper(0, -0.02), h.spring(50.0), 1e-3, 3)
+    res = h.critical_stiffness(loop)
+    assert res.critical_stiffness == 0.0
+    chk = h.verify_certificate(json.loads(json.dumps(res.certificate)), loop)
+    assert chk.valid and chk.kmax == 0.0 and chk.proved_range is None
+    assert "outside already at K_0" in chk.reason
+    # the referee: unstable at the base point
+    ref = brute.hve_loop(0.05, 0.01, 1e-3, 3, B=-0.02, operator=("spring", 50.0))
+    assert brute.robust(ref, res.certificate["base_point_N_per_m"]).stable is False

@@ -449,6 +449,9 @@ def _check_claim(cert: dict[str, Any], counts: dict[float, int]) -> float:
     if kmax != first:
         raise _Invalid(f"K_max = {kmax!r} is not the end of the stable interval from "
                        f"K_0 = {k0!r} ({first!r})")
+    if kmax == 0 and not counts.get(k0, 0) > 0:
+        raise _Invalid(f"K_max = 0 claims instability already at K_0 = {k0!r}, but there is no "
+                       "verified count > 0 there")
     up = claim["kmax_upper_N_per_m"]
     if up is not None and not counts.get(up, 0) > 0:
         raise _Invalid(f"K_max's upper bound {up!r}: no verified count > 0 there")
@@ -498,11 +501,12 @@ def _check(cert: dict[str, Any], loop: Any) -> CertificateCheck:
     said = cert.get("proved_range_N_per_m", [k0, kmax] if kmax > 0 else None)
     if said != ([k0, kmax] if kmax > 0 else None):
         raise _Invalid(f"proved_range_N_per_m = {said!r}: the proved range is [K_0, K_max] = "
-                       f"[{k0!r}, {kmax!r}]" if kmax > 0 else "K_max = 0: nothing is proved")
+                       f"[{k0!r}, {kmax!r}]" if kmax > 0 else "K_max = 0: no range is proved stable")
     n_pieces = sum(len(g["pieces"]) for g in cert["gaps"])
     what = (f"proved stable for K in [K_0, K_max] = [{k0!r}, {kmax!r}] N/m, K_0 the base point "
             "standing for K -> 0+ ((0, K_0) is not proved)" if kmax > 0 else
-            "K_max = 0: no K proved stable")
+            f"K_max = 0: {counts[k0]} pole(s) outside already at K_0 = {k0!r}, the base point "
+            "standing for K -> 0+")
     return CertificateCheck(True, f"valid: {len(counts)} count(s) and {n_pieces} excluded pieces "
                                   f"re-checked in {al.prec}-bit ball arithmetic; {what}", kmax,
                             (k0, kmax) if kmax > 0 else None)

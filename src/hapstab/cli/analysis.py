@@ -315,6 +315,9 @@ def demo(as_json: bool) -> None:
 def write_certificate(res: Any, path: str) -> None:
     """Write a K_max result's certificate as JSON (refused if it has none)."""
     import json
+    if res.certificate is None and str(res.details.get("proof", "")).startswith("ball"):
+        raise HapstabError(f"--certificate = {path!r}: the proof has nothing to certify "
+                           f"(K_max = {res.critical_stiffness:g} N/m: {res.reason})")
     if res.certificate is None:
         raise HapstabError(f"--certificate = {path!r}: this K_max has no ball-arithmetic "
                            f"certificate (method {res.method!r}; only --method exact on loops "

@@ -285,7 +285,9 @@ def _to_result(res: StableSet, T: float, n: int | float) -> CriticalStiffnessRes
     else:
         details["proof"] = "float enclosures (not re-proved in ball arithmetic)"
     cert = None
-    if pr is not None:
+    # a certificate of something: a stable range, or poles outside at K_0 (not of a
+    # K_max = 0 the balls could not decide, e.g. an undamped loop, marginal at K -> 0+)
+    if pr is not None and (kmax > 0 or (pr.base_outside or 0) > 0):
         from hapstab.analysis.exact.certificate import certificate
         cert = certificate(pr)
     return CriticalStiffnessResult(kmax, "exact", res.intervals, reason, T, n, freq, details,
