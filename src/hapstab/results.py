@@ -311,6 +311,11 @@ class CriticalStiffnessResult(Result):
     note : str
         What applies to the whole analysis, said once, not in ``reason`` (the
         friction-free model); JSON ``friction_note``, absent when empty.
+    certificate : dict or None
+        The exact core's ball-arithmetic proof as a JSON-ready certificate of the
+        range [K_0, K_max] it proved (K_0 the base point standing for K -> 0+; (0, K_0)
+        is not proved); ``hapstab.verify_certificate`` re-checks it. None when not
+        proved in ball arithmetic or when the proof has nothing to certify.
     """
 
     critical_stiffness: float
