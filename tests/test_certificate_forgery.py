@@ -349,3 +349,24 @@ def test_unstable_at_the_base_point_certificate_is_valid():
     # the referee: unstable at the base point
     ref = brute.hve_loop(0.05, 0.01, 1e-3, 3, B=-0.02, operator=("spring", 50.0))
     assert brute.robust(ref, res.certificate["base_point_N_per_m"]).stable is False
+
+
+JSON = st.recursive(st.none() | st.booleans() | st.integers() | st.floats() | st.text(max_size=5),
+                    lambda kids: st.lists(kids, max_size=4)
+                    | st.dictionaries(st.text(max_size=8), kids, max_size=4), max_leaves=20)
+
+
+@given(fields=st.dictionaries(st.sampled_from(["loop", "precision_bits", "start_pieces",
+                                               "base_point_N_per_m", "top_N_per_m", "claim",
+                                               "gaps", "crossings", "proved_range_N_per_m"]),
+                              JSON))
+@settings(max_examples=150, deadline=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])
+def test_arbitrary_json_shapes_are_a_verdict_not_an_exception(genuine, fields):
+    _, cert = genuine
+    t = copy.deepcopy(cert)
+    t.update(fields)                          # any field replaced by any JSON value
+    chk = h.verify_certificate(t)
+    assert isinstance(chk, CertificateCheck) and chk.reason
+    if chk.valid:                             # only if nothing that matters was replaced
+        assert chk.kmax <= cert["claim"]["kmax_upper_N_per_m"]
