@@ -37,7 +37,7 @@ def _brute_hve(loop):
 
 
 def test_stiff_wall_kmax_not_above_the_truth():
-    res = h.critical_stiffness(STIFF)
+    res = h.critical_stiffness(STIFF, certify=True)
     k = res.critical_stiffness
     # never above the truth; within 1e-9 below it (the window is 2^-40 ~ 1e-12 wide)
     assert k <= STIFF_TRUE
@@ -48,14 +48,14 @@ def test_stiff_wall_kmax_not_above_the_truth():
 
 def test_stiff_wall_check_is_not_confidently_stable_above_the_truth():
     # the issue: at K = 481.82645 the old core said "stable"; the true radius is 1 + 1e-10
-    res = h.stability(STIFF.with_stiffness(481.82645))
+    res = h.stability(STIFF.with_stiffness(481.82645), certify=True)
     assert res.verdict == "unstable"
     assert brute.robust(_brute_hve(STIFF), 481.82645).stable is False
 
 
 @pytest.mark.slow
 def test_stiff_wall_second_reproducer():
-    res = h.critical_stiffness(STIFF2)
+    res = h.critical_stiffness(STIFF2, certify=True)
     assert STIFF2_TRUE * (1 - 1e-6) <= res.critical_stiffness <= STIFF2_TRUE
     # below 1e-9 of the truth only with an uncertain zone reported up to it
     if res.critical_stiffness < STIFF2_TRUE * (1 - 1e-9):
@@ -64,7 +64,7 @@ def test_stiff_wall_second_reproducer():
 
 
 def test_undamped_loop_keeps_its_stable_set():
-    res = h.critical_stiffness(UNDAMPED)
+    res = h.critical_stiffness(UNDAMPED, certify=True)
     k = res.critical_stiffness
     assert k == pytest.approx(70.94136, rel=1e-6)
     lo, hi = res.details["kmax_enclosure"]
@@ -80,13 +80,13 @@ def test_undamped_loop_keeps_its_stable_set():
 def test_heavy_device_is_refused_not_answered_wrongly(mass):
     loop = HapticLoop(Device(mass, 0.1), SpringDamper(0, 0.0), spring(1.0), 0.001, 0)
     with pytest.raises(h.AnalysisError, match="dimensionless groups"):
-        h.critical_stiffness(loop)
+        h.critical_stiffness(loop, certify=True)
 
 
 @pytest.fixture(scope="module")
 def paper_cert():
     loop = h.paper_hve(delay_samples=4)
-    res = h.critical_stiffness(loop)
+    res = h.critical_stiffness(loop, certify=True)
     return loop, res, json.loads(json.dumps(res.certificate))
 
 
@@ -157,7 +157,7 @@ HUGE_DAMPING = HapticLoop(Device(1.0, 1e13), SpringDamper(0, 0.0), spring(0.0), 
 def test_kmax_above_the_float_search_top_is_found_not_inf(damping):
     # b = 1e16: the crossing at 2e19 N/m is 2e3 times above the float search's top
     loop = HapticLoop(Device(1.0, damping), SpringDamper(0, 0.0), spring(0.0), 1e-3, 0)
-    res = h.critical_stiffness(loop)
+    res = h.critical_stiffness(loop, certify=True)
     k = res.critical_stiffness
     lo, hi = res.details["kmax_enclosure"]
     assert math.isfinite(k) and lo == k
@@ -202,7 +202,7 @@ def test_a_top_not_raised_is_reported_uncertain_above_not_stable(monkeypatch):
     # truth, and (top, inf) is uncertain, never "stable for every K > 0"
     import hapstab.analysis.exact.top as top
     monkeypatch.setattr(top, "RAISE_STEPS", 0)
-    res = h.critical_stiffness(HUGE_DAMPING)
+    res = h.critical_stiffness(HUGE_DAMPING, certify=True)
     k = res.critical_stiffness
     assert k == 1e10 * 2.0 ** 20           # U_HI times the K scale 2^20 N/m (m/T^2 = 1e6)
     assert [k, math.inf] in res.details["uncertain_intervals"]
@@ -210,3 +210,41 @@ def test_a_top_not_raised_is_reported_uncertain_above_not_stable(monkeypatch):
     assert brute.robust(_brute_hve(HUGE_DAMPING), k).stable is True
     chk = h.verify_certificate(res.certificate, HUGE_DAMPING)
     assert chk.valid and chk.kmax == k
+
+
+@pytest.mark.parametrize("mass", [1e12, 1e20])
+def test_heavy_device_is_refused_by_the_float_search_too(mass):
+    """Issue 26 item 3: without certify the float search must not answer either (it
+    said "unstable for every K > 0"; the truth is ~2 b / T = 200 N/m)."""
+    loop = HapticLoop(Device(mass, 0.1), SpringDamper(0, 0.0), spring(1.0), 0.001, 0)
+    with pytest.raises(h.AnalysisError, match="dimensionless groups"):
+        h.critical_stiffness(loop)
+
+
+def test_cli_certify_flag_proves_kmax_and_the_verdict():
+    from click.testing import CliRunner
+
+    from hapstab.cli.main import cli
+
+    args = ["--mass", "0.0011034930256540415", "--damping", "2.793119774241153e-05",
+            "--operator", "spring:1000000.0", "--period", "0.0008382324672663228",
+            "--delay", "4", "-B", "0.008156767423636477"]
+    r = CliRunner().invoke(cli, ["kmax", "hve", *args, "--certify", "--json"])
+    assert r.exit_code == 0, r.output
+    d = json.loads(r.output)
+    # the 40-digit truth 481.82184543319056 (issue 26 item 1): the safe end, below it
+    assert 481.8218454 < d["critical_stiffness"] <= 481.82184543319056
+    assert d["proof"].startswith("ball arithmetic")
+    # at 481.82645 the true spectral radius is 1 + 1.0e-10: never "stable" when proved
+    r = CliRunner().invoke(cli, ["check", "hve", *args, "-K", "481.82645", "--certify", "--json"])
+    assert r.exit_code == 0, r.output
+    assert json.loads(r.output)["verdict"] != "stable"
+
+
+def test_cli_certify_applies_to_the_exact_method_only():
+    from click.testing import CliRunner
+
+    from hapstab.cli.main import cli
+
+    r = CliRunner().invoke(cli, ["kmax", "hve", "--method", "circle", "--certify"])
+    assert r.exit_code == 2 and "--method exact only" in r.output

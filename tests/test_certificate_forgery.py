@@ -25,7 +25,7 @@ from references import brute
 @pytest.fixture(scope="module")
 def genuine():
     loop = h.paper_hve(delay_samples=4)
-    res = h.critical_stiffness(loop)
+    res = h.critical_stiffness(loop, certify=True)
     return loop, json.loads(json.dumps(res.certificate))
 
 
@@ -71,7 +71,7 @@ def test_base_point_is_the_loops_own(genuine):
     assert base_point(p) == cert["base_point_N_per_m"] == 1e-14 * min(
         s, (p["ports"][0]["damping_N_s_per_m"] + p["ports"][0]["termination_damping_N_s_per_m"])
         / p["period_s"], abs(p["channels"][0]["damping_N_s_per_m"]) / p["period_s"] or math.inf)
-    res = h.critical_stiffness(loop)
+    res = h.critical_stiffness(loop, certify=True)
     assert res.details["proved_range_N_per_m"] == [cert["base_point_N_per_m"],
                                                    res.critical_stiffness]
     assert "[K_0, K_max]" in res.reason and "(0, K_0) is not proved" in res.reason
@@ -341,7 +341,7 @@ def test_kmax_zero_needs_poles_outside_at_the_base_point(genuine):
 def test_unstable_at_the_base_point_certificate_is_valid():
     # virtual damping B = -0.02 N s/m on a light damped device: a pole outside as K -> 0+
     loop = h.HapticLoop(h.Device(0.05, 0.01), h.SpringDamper(0, -0.02), h.spring(50.0), 1e-3, 3)
-    res = h.critical_stiffness(loop)
+    res = h.critical_stiffness(loop, certify=True)
     assert res.critical_stiffness == 0.0
     chk = h.verify_certificate(json.loads(json.dumps(res.certificate)), loop)
     assert chk.valid and chk.kmax == 0.0 and chk.proved_range is None

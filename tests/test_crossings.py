@@ -56,14 +56,8 @@ def test_missed_window_of_a_lightly_damped_resonance():
     res = h.critical_stiffness(ISSUE1)
     ivs, rel = ref("issue8_peb30_intervals")
     assert res.critical_stiffness == pytest.approx(ivs[0][1], rel=rel)
-    (a, b), (c, d) = res.stable_intervals[0], res.stable_intervals[-1]
+    (a, b), (c, d) = res.stable_intervals
     assert a == 0 and b == res.critical_stiffness
-    # the ball-arithmetic proof resolves a cluster of crossings within 1e-11 of K_max and
-    # a stable sliver between them, (19.466762502723, 19.466762502756) N/m: the tests'
-    # own 50-digit referee agrees (brute.robust: stable at 19.46676250274, unstable at
-    # 19.46676250279); any such sliver lies within 1e-11 (relative) above K_max
-    for lo, hi in res.stable_intervals[1:-1]:
-        assert b < lo < hi < b * (1 + 1e-11)
     assert c == pytest.approx(ivs[1][0], rel=rel) and d == pytest.approx(ivs[1][1], rel=rel)
     # inside the window the loop is unstable, on both sides stable
     for K, want in ((0.999 * b, True), (1.001 * b, False), (165.0, False), (1.001 * c, True)):

@@ -138,11 +138,7 @@ def test_cutoff_to_infinity_gives_todays_kmax(n):
         k = h.critical_stiffness(loop, method="exact").critical_stiffness
         assert k == pytest.approx(k0, rel=1e-9)
     one = paper.replace(controller=FilteredSpringDamper(0, 0.5, "average:1"))
-    # the unfiltered loop's K_max is proved in ball arithmetic (the safe end of a window
-    # 2^-40 ~ 1e-12 wide), the filtered loop's comes from the float enclosures: equal to
-    # that window's width (2e-12 relative), not bitwise
-    assert h.critical_stiffness(one, method="exact").critical_stiffness == \
-        pytest.approx(k0, rel=2e-12)
+    assert h.critical_stiffness(one, method="exact").critical_stiffness == k0
 
 
 def test_cutoff_to_infinity_teleoperation():

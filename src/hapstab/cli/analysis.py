@@ -58,11 +58,15 @@ def _kmax_command(kind: str) -> None:
                   help="For --method circle: forward | backward | tustin; for llewellyn "
                        "(peb, 4ch): forward | backward | tustin.")
     @network_options
+    @click.option("--certify", is_flag=True,
+                  help="Prove the exact K_max in ball arithmetic (python-flint Arb): the safe "
+                       "end of a proved enclosure, never above the truth; 10-100x slower "
+                       "than the float search (docs/guide/certificate.md).")
     @click.option("--certificate", "cert_path", type=click.Path(dir_okay=False), default=None,
                   help="Write the exact method's proof as a JSON certificate to this file "
-                       "(re-check it with `hapstab verify FILE`).")
-    def _cmd(method: str, approximation: str | None, as_json: bool, cert_path: str | None,
-             **kw: Any) -> None:
+                       "(implies --certify; re-check it with `hapstab verify FILE`).")
+    def _cmd(method: str, approximation: str | None, as_json: bool, certify: bool,
+             cert_path: str | None, **kw: Any) -> None:
         from hapstab.analysis.methods import critical_stiffness
 
         net = {k: kw.pop(k) for k in ("loss", "burst", "delay_range")}
@@ -87,6 +91,11 @@ def _kmax_command(kind: str) -> None:
             raise HapstabError(f"--approximation = {approximation!r}: applies to --method circle "
                                f"or llewellyn only (got --method {method})")
         opts = {"approximation": approximation, **bounds} if approximation else dict(bounds)
+        if certify or cert_path is not None:
+            if method != "exact":
+                raise HapstabError(f"--certify / --certificate: apply to --method exact only "
+                                   f"(got --method {method})")
+            opts["certify"] = True
         res = critical_stiffness(loop, method=method, **opts)
         if cert_path is not None:
             write_certificate(res, cert_path)
@@ -119,14 +128,17 @@ def _check_command(kind: str) -> None:
                        "(about 100 certified verdicts), else said how to ask for them.")
     @click.option("--plot", "plot_path", type=click.Path(dir_okay=False), default=None,
                   help="Write the Nyquist and Bode views of the exact sampled loop at K.")
-    def _cmd(stiffness: float, margins: bool | None, plot_path: str | None, as_json: bool,
-             **kw: Any) -> None:
+    @click.option("--certify", is_flag=True,
+                  help="Count the poles outside in ball arithmetic (python-flint Arb) "
+                       "instead of the float enclosures (docs/guide/certificate.md).")
+    def _cmd(stiffness: float, margins: bool | None, plot_path: str | None, certify: bool,
+             as_json: bool, **kw: Any) -> None:
         from hapstab.analysis.exact.core import stability
         from hapstab.cli.files import check_files
 
         check_files(None, plot_path, as_json)
         loop = make(kw, stiffness)
-        res = stability(loop)
+        res = stability(loop, certify=certify)
         d = res.to_dict()
         d["stiffness"] = stiffness
         rows = [("verdict", res.verdict), ("spectral radius", f"{res.spectral_radius:.12g}"),

@@ -38,7 +38,7 @@ MARGINAL_TOL = POLE_ON_CIRCLE
 
 def exact_kmax_batch(loop: HapticLoop | TeleoperationLoop,
                      periods: Sequence[float] | np.ndarray | None = None,
-                     intervals: bool = True) -> list[StableSet]:
+                     intervals: bool = True, certify: bool = False) -> list[StableSet]:
     """Exact K_max (and the stable set in K) of ``loop`` at each sampling period.
 
     Parameters
@@ -49,6 +49,8 @@ def exact_kmax_batch(loop: HapticLoop | TeleoperationLoop,
         Sampling periods (s); default the loop's own.
     intervals : bool
         Every stable interval (True) or only K_max (False, faster).
+    certify : bool
+        Re-prove each answer in ball arithmetic (see :func:`exact_critical_stiffness`).
 
     Returns
     -------
@@ -57,7 +59,7 @@ def exact_kmax_batch(loop: HapticLoop | TeleoperationLoop,
     """
     resp = loop_response(loop, periods)
     try:
-        return analyse(resp, full=intervals)
+        return analyse(resp, full=intervals, proof=certify)
     except AnalysisError as e:       # the core gave up: say for which loop
         raise AnalysisError(f"{e}; the loop: {describe(loop)}") from None
 
@@ -95,7 +97,7 @@ def _polish_pole(resp: LoopResponse, u: float, z0: complex) -> complex:
 
 
 def stability(loop: HapticLoop | TeleoperationLoop, *, max_memory: float | None = None,
-              max_seconds: float | None = None) -> StabilityResult:
+              max_seconds: float | None = None, certify: bool = False) -> StabilityResult:
     """Exact stability of the sampled-data loop at its own parameters.
 
     Parameters
@@ -106,6 +108,12 @@ def stability(loop: HapticLoop | TeleoperationLoop, *, max_memory: float | None 
         Budget in bytes and seconds (default :mod:`hapstab.budget`'s): the dense
         eigenvalue problem of the closed loop (N states, N^3 operations) is
         estimated first and refused above it.
+    certify : bool
+        Count the poles outside by the argument principle in ball arithmetic
+        (python-flint Arb; :func:`~hapstab.analysis.exact.proof.count`) where the loop is
+        covered, instead of the float enclosures (default False: faster, but their
+        rounding allowances are not proved and are known to be short for stiff walls on
+        light devices, k T^2 / m >> 1).
 
     Returns
     -------
@@ -135,7 +143,7 @@ def stability(loop: HapticLoop | TeleoperationLoop, *, max_memory: float | None 
         resp = loop_response(loop)
         m = resp.rigid
         u = float(sysm.stiffness[0] / resp.scale[0])
-        count = _proved_count(loop, float(sysm.stiffness[0]))
+        count = _proved_count(loop, float(sysm.stiffness[0])) if certify else None
         if count is None:       # not covered by the ball-arithmetic core
             count = int(winding(resp, np.zeros(1, int), np.array([u]))[0])
     else:
@@ -208,7 +216,8 @@ def _describe(z: complex, T: float) -> str:
     return f"complex pair, oscillation at {th / (2 * math.pi * T):.6g} Hz"
 
 
-def exact_critical_stiffness(loop: HapticLoop | TeleoperationLoop) -> CriticalStiffnessResult:
+def exact_critical_stiffness(loop: HapticLoop | TeleoperationLoop, *,
+                             certify: bool = False) -> CriticalStiffnessResult:
     """Exact K_max of the sampled-data loop (see the module docstring).
 
     Parameters
@@ -216,6 +225,14 @@ def exact_critical_stiffness(loop: HapticLoop | TeleoperationLoop) -> CriticalSt
     loop : HapticLoop or TeleoperationLoop
         Spring-damper controller(s); B, T, n and impedances fixed. For
         teleoperation, K is the master's stiffness and K_s/K_m is kept.
+    certify : bool
+        Re-prove the stable set in ball arithmetic (python-flint Arb;
+        :mod:`~hapstab.analysis.exact.proved`): K_max is then the safe end of a proved
+        enclosure, never above the truth, and ``certificate`` holds the proof
+        (:func:`~hapstab.analysis.verify.verify_certificate`). Default False: the float
+        search alone, faster (10-100x), whose rounding allowances are not proved (known to
+        put K_max up to ~2e-5 relative too high for stiff walls on light devices,
+        k T^2 / m >> 1; issue 26).
 
     Returns
     -------
@@ -227,7 +244,7 @@ def exact_critical_stiffness(loop: HapticLoop | TeleoperationLoop) -> CriticalSt
     AnalysisError
         If the controller is not a spring-damper.
     """
-    res = exact_kmax_batch(loop)[0]
+    res = exact_kmax_batch(loop, certify=certify)[0]
     return _to_result(res, loop.period, loop.delay_in_samples)
 
 

@@ -314,7 +314,7 @@ def _winding_cells(resp: LoopResponse, c: Cells, leaves: np.ndarray, u: np.ndarr
 
 
 # ------------------------------------------------------------------ the analysis
-def analyse(resp: LoopResponse, full: bool = True, proof: bool = True) -> list[StableSet]:
+def analyse(resp: LoopResponse, full: bool = True, proof: bool = False) -> list[StableSet]:
     """Exact K_max and stable set in K for every item of ``resp``.
 
     Parameters
@@ -325,13 +325,18 @@ def analyse(resp: LoopResponse, full: bool = True, proof: bool = True) -> list[S
         ``intervals`` is then ``((0, K_max),)`` when K_max > 0).
     proof : bool
         Re-prove each covered item's answer in ball arithmetic
-        (:mod:`~hapstab.analysis.exact.proved`; False: the float search's answer).
+        (:mod:`~hapstab.analysis.exact.proved`; False, the default: the float search's
+        answer, whose rounding allowances are not proved).
 
     Returns
     -------
     list of StableSet
         One per item.
     """
+    from hapstab.analysis.exact.proved import refuse_heavy
+    for params in resp.params:      # beyond both the float search's and the balls' reach
+        if params is not None:
+            refuse_heavy(params)
     L = resp.size
     items = np.arange(L)
     c = Cells()

@@ -18,7 +18,7 @@ from hapstab.engine.arb_loop import base_point
 from hapstab.engine.frequency import LoopResponse
 from hapstab.engine.port_poly import PortPoly
 
-__all__ = ["prove_sets", "item_response"]
+__all__ = ["prove_sets", "item_response", "refuse_heavy"]
 
 
 def item_response(resp: LoopResponse, i: int) -> LoopResponse:
@@ -66,7 +66,7 @@ def _prove_one(resp: LoopResponse, i: int, ss: StableSet, params: dict, full: bo
                search: Any) -> StableSet:
     """One item (see :func:`prove_sets`)."""
     from hapstab.analysis.exact.proof import prove_base
-    _refuse_heavy(params)
+    refuse_heavy(params)
     s = float(resp.scale[i])
     # K_0 from the loop's numbers alone (a certificate's is re-derived the same way)
     k0, k_top = base_point(params), U_HI * s
@@ -103,7 +103,7 @@ def _reaches_top(pr: Any) -> bool:
 HEAVY = 1e-12
 
 
-def _refuse_heavy(params: dict) -> None:
+def refuse_heavy(params: dict) -> None:
     """Refuse a loop whose poles all crowd z = 1 beyond the proof's reach (a heavy
     device: 1e12 kg at T = 1 ms with b = 0.1 N*s/m has b T / m = 1e-16)."""
     from hapstab.errors import AnalysisError
