@@ -91,11 +91,7 @@ def _kmax_command(kind: str) -> None:
             raise HapstabError(f"--approximation = {approximation!r}: applies to --method circle "
                                f"or llewellyn only (got --method {method})")
         opts = {"approximation": approximation, **bounds} if approximation else dict(bounds)
-        if certify or cert_path is not None:
-            if method != "exact":
-                raise HapstabError(f"--certify / --certificate: apply to --method exact only "
-                                   f"(got --method {method})")
-            opts["certify"] = True
+        opts.update(_certify_option(certify or cert_path is not None, method))
         res = critical_stiffness(loop, method=method, **opts)
         if cert_path is not None:
             write_certificate(res, cert_path)
@@ -322,6 +318,14 @@ def demo(as_json: bool) -> None:
             t.add_row(f"{r['period_s'] * 1e3:.0f}", str(r["delay_samples"]), f"{r['theory']:.6g}",
                       r["equation"], f"{r['exact']:.6g}", f"{r['exact'] / r['theory']:.5f}")
         con.print(t)
+
+
+def _certify_option(certify: bool, method: str) -> dict[str, bool]:
+    """The exact method's ``certify`` option from --certify / --certificate."""
+    if certify and method != "exact":
+        raise HapstabError(f"--certify / --certificate: apply to --method exact only "
+                           f"(got --method {method})")
+    return {"certify": True} if certify else {}
 
 
 def write_certificate(res: Any, path: str) -> None:

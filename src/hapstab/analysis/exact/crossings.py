@@ -333,10 +333,6 @@ def analyse(resp: LoopResponse, full: bool = True, proof: bool = False) -> list[
     list of StableSet
         One per item.
     """
-    from hapstab.analysis.exact.proved import refuse_heavy
-    for params in resp.params:      # beyond both the float search's and the balls' reach
-        if params is not None:
-            refuse_heavy(params)
     L = resp.size
     items = np.arange(L)
     c = Cells()

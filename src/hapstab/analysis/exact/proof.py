@@ -39,6 +39,7 @@ import math
 from dataclasses import dataclass, field
 from typing import Any
 
+from hapstab.analysis.exact.polish import polish
 from hapstab.engine.arb_loop import ArbLoop, poly_k, working_precision
 
 __all__ = ["Proof", "prove", "prove_base", "count", "exclude", "theta_ball", "DELTA"]
@@ -275,37 +276,6 @@ def count(al: ArbLoop, K: float, max_pieces: int = MAX_PIECES) -> Count:
 
 
 # ----------------------------------------------------------------- polishing
-def polish(al: ArbLoop, theta: float, K: float, real: bool) -> tuple[float, float] | None:
-    """Newton's method on det M(e^{j theta}, K) = 0 from a float guess (theta, K);
-    ``real``: theta stays 0 or pi (a real pole through z = +-1). Not a proof (it
-    places the windows). None if it does not converge."""
-    from flint import arb
-    with working_precision(al.prec):
-        th, k = arb(theta), arb(K)
-        h = arb(2.0 ** -90)
-        for _ in range(60):
-            F = al.value(th, k).mid()
-            Fk = al.dvalue_dk(th, k).mid()
-            if real:
-                dk = -(F.real / Fk.real)
-                dth = arb(0)
-            else:
-                Ft = ((al.value(th + h, k) - al.value(th - h, k)) / (2 * h)).mid()
-                det = Ft.real * Fk.imag - Ft.imag * Fk.real
-                if det == 0:
-                    return None
-                dth = -(F.real * Fk.imag - F.imag * Fk.real) / det
-                dk = -(Ft.real * F.imag - Ft.imag * F.real) / det
-            th, k = (th + dth).mid(), (k + dk).mid()
-            if abs(float(dk)) <= 1e-40 * abs(float(k)) and abs(float(dth)) <= 1e-40:
-                t, kk = float(th), float(k)
-                if not (math.isfinite(t) and math.isfinite(kk)) or kk <= 0:
-                    return None
-                return t % (2 * math.pi) if not real else t, kk
-    return None
-
-
-# ----------------------------------------------------------------- the proof
 @dataclass
 class Gap:
     """A K-range proved free of poles on the circle (or not: ``proved`` False), with
@@ -377,6 +347,7 @@ def _windows(al: ArbLoop, events: tuple, k0: float, k_top: float) -> list[tuple[
             real = t == 0.0 or t == math.pi
             got = polish(al, t, ka, real)
             if got is None:
+                # unpolished: a 1e-9 window (the float search's accuracy) bounds nothing claimed
                 lo, hi, th = ka * (1 - 1e-9), ka * (1 + 1e-9), t
             else:
                 th, k = got

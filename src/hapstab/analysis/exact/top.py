@@ -64,6 +64,7 @@ def _events_above(al: ArbLoop, ex: Exclusion, lo: float, hi: float) -> list[tupl
             tries.append((math.pi, True))
         for th, real in tries:
             got = polish(al, th, km, real)
+            # 1e-6: Newton may land just outside its segment's float ends; the window proves it
             if got is not None and lo * (1 - 1e-6) <= got[1] <= hi * (1 + 1e-6):
                 found.add((got[1], got[0]))
     return [(k, k, t, 0, 1) for k, t in sorted(found)]
