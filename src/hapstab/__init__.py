@@ -39,6 +39,7 @@ if TYPE_CHECKING:   # for type checkers and readers; at run time a name loads on
     from hapstab.analysis.robust_damping import RobustDampingResult, robust_best_damping
     from hapstab.analysis.transparency import TransparencyResult, transparency
     from hapstab.analysis.twoport import TwoPortResult, llewellyn_test
+    from hapstab.analysis.verify import CertificateCheck, verify_certificate
     from hapstab.budget import BudgetError
     from hapstab.engine.system import SampledSystem, build
     from hapstab.errors import AnalysisError, ArgumentTypeError, HapstabError, ModelError
@@ -94,6 +95,7 @@ _LAZY = {
     "hapstab.analysis.robust_damping": ("RobustDampingResult", "robust_best_damping"),
     "hapstab.analysis.transparency": ("TransparencyResult", "transparency"),
     "hapstab.analysis.twoport": ("TwoPortResult", "llewellyn_test"),
+    "hapstab.analysis.verify": ("CertificateCheck", "verify_certificate"),
     "hapstab.budget": ("BudgetError",),
     "hapstab.engine.system": ("SampledSystem", "build"),
     "hapstab.errors": ("AnalysisError", "ArgumentTypeError", "HapstabError", "ModelError"),
@@ -141,6 +143,7 @@ __all__ = [
     "critical_stiffness_many",
     "to_control", "margins", "frequency_view", "MarginResult", "FrequencyView",
     "identify", "IdentificationResult",
+    "verify_certificate", "CertificateCheck",
 ]
 
 

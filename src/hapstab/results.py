@@ -311,6 +311,11 @@ class CriticalStiffnessResult(Result):
     note : str
         What applies to the whole analysis, said once, not in ``reason`` (the
         friction-free model); JSON ``friction_note``, absent when empty.
+    certificate : dict or None
+        The exact core's ball-arithmetic proof as a JSON-ready certificate of the
+        range [K_0, K_max] it proved (K_0 the base point standing for K -> 0+; (0, K_0)
+        is not proved); ``hapstab.verify_certificate`` re-checks it. None when not
+        proved in ball arithmetic or when the proof has nothing to certify.
     """
 
     critical_stiffness: float
@@ -322,6 +327,9 @@ class CriticalStiffnessResult(Result):
     crossing_frequency_hz: float = float("nan")
     details: dict[str, Any] = field(default_factory=dict, compare=False)
     note: str = field(default="", compare=False)
+    #: the exact core's proof as a checkable certificate (JSON-ready dict; None when
+    #: not proved in ball arithmetic): ``hapstab.verify_certificate`` re-checks it
+    certificate: dict[str, Any] | None = field(default=None, compare=False, repr=False)
 
     def to_dict(self) -> dict[str, Any]:
         return jsonable(merged({

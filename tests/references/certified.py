@@ -275,7 +275,7 @@ def check(s: Scenario, long: bool = False) -> Outcome:
 
 def _check(s: Scenario, long: bool, out: Outcome) -> None:
     try:
-        res = h.critical_stiffness(s.hapstab_loop())
+        res = h.critical_stiffness(s.hapstab_loop(), certify=True)
     except h.HapstabError as e:
         heavy = max(s.m, s.ms) > DOCUMENTED_MASS
         if not heavy:
@@ -350,7 +350,7 @@ def _verdicts(s: Scenario, ref: _Referee, K_t: float, K_h: float, out: Outcome) 
     else:
         probes = [s.m / s.T ** 2 * f for f in (1e-6, 1e-2, 1.0)]
     for K in probes:
-        got = h.stability(s.hapstab_loop(K)).verdict
+        got = h.stability(s.hapstab_loop(K), certify=True).verdict
         if got not in ("stable", "unstable", "marginal"):
             continue                     # not confident (uncertain): never wrong
         v = ref.stable(K)

@@ -58,7 +58,15 @@ def _kmax_command(kind: str) -> None:
                   help="For --method circle: forward | backward | tustin; for llewellyn "
                        "(peb, 4ch): forward | backward | tustin.")
     @network_options
-    def _cmd(method: str, approximation: str | None, as_json: bool, **kw: Any) -> None:
+    @click.option("--certify", is_flag=True,
+                  help="Prove the exact K_max in ball arithmetic (python-flint Arb): the safe "
+                       "end of a proved enclosure, never above the truth; 10-100x slower "
+                       "than the float search (docs/guide/certificate.md).")
+    @click.option("--certificate", "cert_path", type=click.Path(dir_okay=False), default=None,
+                  help="Write the exact method's proof as a JSON certificate to this file "
+                       "(implies --certify; re-check it with `hapstab verify FILE`).")
+    def _cmd(method: str, approximation: str | None, as_json: bool, certify: bool,
+             cert_path: str | None, **kw: Any) -> None:
         from hapstab.analysis.methods import critical_stiffness
 
         net = {k: kw.pop(k) for k in ("loss", "burst", "delay_range")}
@@ -83,7 +91,10 @@ def _kmax_command(kind: str) -> None:
             raise HapstabError(f"--approximation = {approximation!r}: applies to --method circle "
                                f"or llewellyn only (got --method {method})")
         opts = {"approximation": approximation, **bounds} if approximation else dict(bounds)
+        opts.update(_certify_option(certify or cert_path is not None, method))
         res = critical_stiffness(loop, method=method, **opts)
+        if cert_path is not None:
+            write_certificate(res, cert_path)
         rows = [("critical stiffness", f"{fmt(res.critical_stiffness)} N/m"),
                 ("method", res.method),
                 ("stable intervals", ", ".join(f"({fmt(a)}, {fmt(b)}]" for a, b in res.stable_intervals)
@@ -113,14 +124,17 @@ def _check_command(kind: str) -> None:
                        "(about 100 certified verdicts), else said how to ask for them.")
     @click.option("--plot", "plot_path", type=click.Path(dir_okay=False), default=None,
                   help="Write the Nyquist and Bode views of the exact sampled loop at K.")
-    def _cmd(stiffness: float, margins: bool | None, plot_path: str | None, as_json: bool,
-             **kw: Any) -> None:
+    @click.option("--certify", is_flag=True,
+                  help="Count the poles outside in ball arithmetic (python-flint Arb) "
+                       "instead of the float enclosures (docs/guide/certificate.md).")
+    def _cmd(stiffness: float, margins: bool | None, plot_path: str | None, certify: bool,
+             as_json: bool, **kw: Any) -> None:
         from hapstab.analysis.exact.core import stability
         from hapstab.cli.files import check_files
 
         check_files(None, plot_path, as_json)
         loop = make(kw, stiffness)
-        res = stability(loop)
+        res = stability(loop, certify=certify)
         d = res.to_dict()
         d["stiffness"] = stiffness
         rows = [("verdict", res.verdict), ("spectral radius", f"{res.spectral_radius:.12g}"),
@@ -304,3 +318,50 @@ def demo(as_json: bool) -> None:
             t.add_row(f"{r['period_s'] * 1e3:.0f}", str(r["delay_samples"]), f"{r['theory']:.6g}",
                       r["equation"], f"{r['exact']:.6g}", f"{r['exact'] / r['theory']:.5f}")
         con.print(t)
+
+
+def _certify_option(certify: bool, method: str) -> dict[str, bool]:
+    """The exact method's ``certify`` option from --certify / --certificate."""
+    if certify and method != "exact":
+        raise HapstabError(f"--certify / --certificate: apply to --method exact only "
+                           f"(got --method {method})")
+    return {"certify": True} if certify else {}
+
+
+def write_certificate(res: Any, path: str) -> None:
+    """Write a K_max result's certificate as JSON (refused if it has none)."""
+    import json
+    if res.certificate is None and str(res.details.get("proof", "")).startswith("ball"):
+        raise HapstabError(f"--certificate = {path!r}: the proof has nothing to certify "
+                           f"(K_max = {res.critical_stiffness:g} N/m: {res.reason})")
+    if res.certificate is None:
+        raise HapstabError(f"--certificate = {path!r}: this K_max has no ball-arithmetic "
+                           f"certificate (method {res.method!r}; only --method exact on loops "
+                           "the certified core covers: one or two ports, spring-damper "
+                           "controllers, whole delays, mass-spring-damper terminations)")
+    with open(path, "w", encoding="utf-8") as fh:
+        json.dump(res.certificate, fh)
+
+
+@click.command("verify", short_help="Re-check a K_max certificate in ball arithmetic.")
+@click.argument("path", type=click.Path(exists=True, dir_okay=False))
+@click.option("--json", "as_json", is_flag=True)
+def verify_cmd(path: str, as_json: bool) -> None:
+    """Re-check the certificate in PATH (from `hapstab kmax ... --certificate PATH`) from
+    the loop's numbers alone, in ball arithmetic, independently of the search that wrote
+    it. Exits 0 if valid, 1 if invalid (the reason says which check failed)."""
+    import json
+
+    from hapstab.analysis.verify import verify_certificate
+    try:
+        with open(path, encoding="utf-8") as fh:
+            cert = json.load(fh)
+    except (OSError, ValueError) as e:
+        raise HapstabError(f"certificate = {path!r}: cannot read it as JSON ({e})") from None
+    chk = verify_certificate(cert)
+    if as_json:
+        click.echo(json.dumps(chk.to_dict()))
+    else:
+        click.echo(("VALID: " if chk.valid else "INVALID: ") + chk.reason)
+    if not chk.valid:
+        raise SystemExit(1)

@@ -43,13 +43,8 @@ from typing import Any
 
 import numpy as np
 
-from hapstab.engine.discs import (
-    Jet,
-    base_jets,
-    delay_jet,
-    poly_jet,
-    zero,
-)
+from hapstab.engine.arb_loop import arb_parameters
+from hapstab.engine.discs import Jet, base_jets, delay_jet, poly_jet, zero
 from hapstab.engine.expansion import generic_coefficients
 from hapstab.engine.port_poly import COEF_REL, PortPoly, _port_poly
 from hapstab.engine.structure import (
@@ -112,6 +107,7 @@ class LoopResponse:
     gain: np.ndarray | None = None
     free: tuple[bool, ...] = ()
     filters: tuple = ()
+    params: tuple = ()      # per item: arb_loop.arb_parameters (None: no ball proof)
 
     @property
     def size(self) -> int:
@@ -350,6 +346,7 @@ def build_responses(plans: Sequence[ResponsePlan]) -> LoopResponse:
     if p != len(st.ports) or (p > 2 and not resp.simple):
         raise AnalysisError("loop: the exact analysis takes one or two ports")
     _check_finite(resp, [c for pl in plans for c in pl.ctrls])
+    resp.params = tuple(arb_parameters(pl.loop, float(t)) for pl in plans for t in pl.T)
     return resp
 
 
@@ -506,4 +503,5 @@ def stack_responses(resps: Sequence[LoopResponse]) -> LoopResponse:
                         cat([r.scale for r in resps]), r0.q, r0.rigid,
                         cat([r.periods for r in resps]), r0.channel_ports, r0.kinds,
                         cat([r.gain for r in resps]), r0.free,
-                        stack_filters([r.filters for r in resps]) if r0.filters else ())
+                        stack_filters([r.filters for r in resps]) if r0.filters else (),
+                        tuple(x for r in resps for x in (r.params or (None,) * r.size)))

@@ -38,7 +38,7 @@ MARGINAL_TOL = POLE_ON_CIRCLE
 
 def exact_kmax_batch(loop: HapticLoop | TeleoperationLoop,
                      periods: Sequence[float] | np.ndarray | None = None,
-                     intervals: bool = True) -> list[StableSet]:
+                     intervals: bool = True, certify: bool = False) -> list[StableSet]:
     """Exact K_max (and the stable set in K) of ``loop`` at each sampling period.
 
     Parameters
@@ -49,6 +49,8 @@ def exact_kmax_batch(loop: HapticLoop | TeleoperationLoop,
         Sampling periods (s); default the loop's own.
     intervals : bool
         Every stable interval (True) or only K_max (False, faster).
+    certify : bool
+        Re-prove each answer in ball arithmetic (see :func:`exact_critical_stiffness`).
 
     Returns
     -------
@@ -57,7 +59,7 @@ def exact_kmax_batch(loop: HapticLoop | TeleoperationLoop,
     """
     resp = loop_response(loop, periods)
     try:
-        return analyse(resp, full=intervals)
+        return analyse(resp, full=intervals, proof=certify)
     except AnalysisError as e:       # the core gave up: say for which loop
         raise AnalysisError(f"{e}; the loop: {describe(loop)}") from None
 
@@ -95,7 +97,7 @@ def _polish_pole(resp: LoopResponse, u: float, z0: complex) -> complex:
 
 
 def stability(loop: HapticLoop | TeleoperationLoop, *, max_memory: float | None = None,
-              max_seconds: float | None = None) -> StabilityResult:
+              max_seconds: float | None = None, certify: bool = False) -> StabilityResult:
     """Exact stability of the sampled-data loop at its own parameters.
 
     Parameters
@@ -106,6 +108,12 @@ def stability(loop: HapticLoop | TeleoperationLoop, *, max_memory: float | None 
         Budget in bytes and seconds (default :mod:`hapstab.budget`'s): the dense
         eigenvalue problem of the closed loop (N states, N^3 operations) is
         estimated first and refused above it.
+    certify : bool
+        Count the poles outside by the argument principle in ball arithmetic
+        (python-flint Arb; :func:`~hapstab.analysis.exact.proof.count`) where the loop is
+        covered, instead of the float enclosures (default False: faster, but their
+        rounding allowances are not proved and are known to be short for stiff walls on
+        light devices, k T^2 / m >> 1).
 
     Returns
     -------
@@ -135,7 +143,9 @@ def stability(loop: HapticLoop | TeleoperationLoop, *, max_memory: float | None 
         resp = loop_response(loop)
         m = resp.rigid
         u = float(sysm.stiffness[0] / resp.scale[0])
-        count = int(winding(resp, np.zeros(1, int), np.array([u]))[0])
+        count = _proved_count(loop, float(sysm.stiffness[0])) if certify else None
+        if count is None:       # not covered by the ball-arithmetic core
+            count = int(winding(resp, np.zeros(1, int), np.array([u]))[0])
     else:
         m = sysm.rigid_modes
         count = -2
@@ -155,6 +165,19 @@ def stability(loop: HapticLoop | TeleoperationLoop, *, max_memory: float | None 
     note = friction_note(loop)          # the linear loop: friction-free (said once)
     return StabilityResult(verdict, rho, dom, freq, reason, T, tuple(complex(e) for e in eigs), m,
                            note)
+
+
+def _proved_count(loop: HapticLoop | TeleoperationLoop, K: float) -> int | None:
+    """Poles outside at K by the argument principle in ball arithmetic
+    (:func:`~hapstab.analysis.exact.proof.count`): -1 if the balls cannot decide
+    (a pole on or within their width of the circle); None if the loop is not covered."""
+    from hapstab.engine.arb_loop import ArbLoop, arb_parameters
+    params = arb_parameters(loop)
+    if params is None:
+        return None
+    from hapstab.analysis.exact.proof import count
+    got = count(ArbLoop(params), K).outside
+    return -1 if got is None else int(got)
 
 
 def _verdict(count: int, rho: float, dom: complex, T: float, m: int) -> tuple[str, str]:
@@ -193,7 +216,8 @@ def _describe(z: complex, T: float) -> str:
     return f"complex pair, oscillation at {th / (2 * math.pi * T):.6g} Hz"
 
 
-def exact_critical_stiffness(loop: HapticLoop | TeleoperationLoop) -> CriticalStiffnessResult:
+def exact_critical_stiffness(loop: HapticLoop | TeleoperationLoop, *,
+                             certify: bool = False) -> CriticalStiffnessResult:
     """Exact K_max of the sampled-data loop (see the module docstring).
 
     Parameters
@@ -201,6 +225,14 @@ def exact_critical_stiffness(loop: HapticLoop | TeleoperationLoop) -> CriticalSt
     loop : HapticLoop or TeleoperationLoop
         Spring-damper controller(s); B, T, n and impedances fixed. For
         teleoperation, K is the master's stiffness and K_s/K_m is kept.
+    certify : bool
+        Re-prove the stable set in ball arithmetic (python-flint Arb;
+        :mod:`~hapstab.analysis.exact.proved`): K_max is then the safe end of a proved
+        enclosure, never above the truth, and ``certificate`` holds the proof
+        (:func:`~hapstab.analysis.verify.verify_certificate`). Default False: the float
+        search alone, faster (10-100x), whose rounding allowances are not proved (known to
+        put K_max up to ~2e-5 relative too high for stiff walls on light devices,
+        k T^2 / m >> 1; issue 26).
 
     Returns
     -------
@@ -212,7 +244,7 @@ def exact_critical_stiffness(loop: HapticLoop | TeleoperationLoop) -> CriticalSt
     AnalysisError
         If the controller is not a spring-damper.
     """
-    res = exact_kmax_batch(loop)[0]
+    res = exact_kmax_batch(loop, certify=certify)[0]
     return _to_result(res, loop.period, loop.delay_in_samples)
 
 
@@ -228,6 +260,8 @@ def _to_result(res: StableSet, T: float, n: int | float) -> CriticalStiffnessRes
                   "and terminations alone destabilise the loop)")
     elif math.isinf(kmax):
         reason = "stable for every K > 0 (no closed-loop pole reaches the unit circle)"
+    elif not np.isfinite(th):
+        reason = "no closed-loop pole reaches the unit circle up to K_max"
     elif th == 0.0:
         reason = "a real closed-loop pole crosses z = +1 at K_max (static divergence)"
     elif th == math.pi:
@@ -239,12 +273,39 @@ def _to_result(res: StableSet, T: float, n: int | float) -> CriticalStiffnessRes
         reason += f"; the stable set in K is not one interval ({len(res.intervals)} intervals)"
     if res.rigid:
         reason += f"; {res.rigid} rigid-body mode(s) at z = 1 (marginal, K-independent) divided out"
-    if res.uncertain:
-        spans = ", ".join(f"[{a:.8g}, {b:.8g}]" for a, b in res.uncertain)
-        at = any(a == kmax for a, _ in res.uncertain)
+    near = [iv for iv in res.uncertain if math.isfinite(iv[1])]
+    above = [a for a, b in res.uncertain if not math.isfinite(b)]
+    if above:
+        reason += (f"; not proved above K = {above[0]:.8g} N/m (the top of the range examined "
+                   "in ball arithmetic; no pole on the unit circle up to there)"
+                   + (": K_max is that top, the safe side" if kmax == above[0] else ""))
+    if near:
+        spans = ", ".join(f"[{a:.8g}, {b:.8g}]" for a, b in near)
+        at = any(a == kmax for a, _ in near)
         reason += (f"; marginal within K in {spans}: a pole is within rounding of the unit "
                    "circle there, so the numerics cannot decide"
                    + (" (K_max is its lower end, the safe side)" if at else ""))
-    return CriticalStiffnessResult(kmax, "exact", res.intervals, reason, T, n, freq,
-                                   {"rigid_body_modes": res.rigid,
-                                    "uncertain_intervals": [list(iv) for iv in res.uncertain]})
+    details: dict = {"rigid_body_modes": res.rigid,
+                     "uncertain_intervals": [list(iv) for iv in res.uncertain]}
+    pr = res.proof
+    if pr is not None:
+        details["proof"] = "ball arithmetic (python-flint Arb)"
+        details["kmax_enclosure"] = [kmax, pr.kmax_hi if kmax > 0 or pr.kmax_hi < math.inf
+                                     else math.inf]
+        details["base_point_N_per_m"] = pr.k0
+        # what the balls proved: [K_0, K_max], K_0 standing for K -> 0+ (upper end
+        # inf only when the tail above the examined range is proved, top.py)
+        details["proved_range_N_per_m"] = [pr.k0, kmax]
+        if kmax > 0:
+            reason += (f"; proved stable for K in [K_0, K_max] = [{pr.k0:.6g}, {kmax:.10g}] N/m in "
+                       "ball arithmetic, K_0 standing for K -> 0+ ((0, K_0) is not proved)")
+    else:
+        details["proof"] = "float enclosures (not re-proved in ball arithmetic)"
+    cert = None
+    # a certificate of something: a stable range, or poles outside at K_0 (not of a
+    # K_max = 0 the balls could not decide, e.g. an undamped loop, marginal at K -> 0+)
+    if pr is not None and (kmax > 0 or (pr.base_outside or 0) > 0):
+        from hapstab.analysis.exact.certificate import certificate
+        cert = certificate(pr)
+    return CriticalStiffnessResult(kmax, "exact", res.intervals, reason, T, n, freq, details,
+                                   certificate=cert)

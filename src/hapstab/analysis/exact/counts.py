@@ -184,11 +184,12 @@ def _classify(resp: LoopResponse, i: int, anchor: int, cross, unsure, full: bool
     not certified), its crossings and its unresolved zones; ``known``: counts
     already computed (:func:`gap_counts`)."""
     s = float(resp.scale[i])
-    base: dict[str, Any] = {"rigid": resp.rigid, "outside_small_K": anchor}
+    _unc, events = _events(cross, unsure)
+    base: dict[str, Any] = {"rigid": resp.rigid, "outside_small_K": anchor,
+                            "events": tuple((a * s, b * s, t, d, m) for a, b, t, d, m in events)}
     if anchor < 0:
         return StableSet(**base, kmax=0.0, intervals=(), theta=math.nan,
                          uncertain=((0.0, U_LO * s),))
-    _unc, events = _events(cross, unsure)
     if not full:
         return StableSet(**base, **first_only(events, anchor, s))
     counts = _counts(resp, i, events, anchor, known)

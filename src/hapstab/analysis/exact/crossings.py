@@ -314,7 +314,7 @@ def _winding_cells(resp: LoopResponse, c: Cells, leaves: np.ndarray, u: np.ndarr
 
 
 # ------------------------------------------------------------------ the analysis
-def analyse(resp: LoopResponse, full: bool = True) -> list[StableSet]:
+def analyse(resp: LoopResponse, full: bool = True, proof: bool = False) -> list[StableSet]:
     """Exact K_max and stable set in K for every item of ``resp``.
 
     Parameters
@@ -323,6 +323,10 @@ def analyse(resp: LoopResponse, full: bool = True) -> list[StableSet]:
     full : bool
         All crossings and every stable interval (True), or only K_max (False:
         ``intervals`` is then ``((0, K_max),)`` when K_max > 0).
+    proof : bool
+        Re-prove each covered item's answer in ball arithmetic
+        (:mod:`~hapstab.analysis.exact.proved`; False, the default: the float search's
+        answer, whose rounding allowances are not proved).
 
     Returns
     -------
@@ -343,7 +347,11 @@ def analyse(resp: LoopResponse, full: bool = True) -> list[StableSet]:
     # the counts the stable sets need, for every item in a few batched calls
     known = gap_counts(resp, anchor, [_events(cross[i], found.unsure[i])[1] for i in range(L)]) \
         if full else None
-    return [_classify(resp, i, int(anchor[i]), cross[i], found.unsure[i], full, known)
+    sets = [_classify(resp, i, int(anchor[i]), cross[i], found.unsure[i], full, known)
             for i in range(L)]
+    if not proof or not any(p is not None for p in resp.params):
+        return sets
+    from hapstab.analysis.exact.proved import prove_sets
+    return prove_sets(resp, sets, full, lambda one: analyse(one, True, False)[0])
 
 

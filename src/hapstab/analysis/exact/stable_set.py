@@ -37,6 +37,13 @@ class StableSet:
         Poles outside the unit circle as K -> 0+ (-1: not certifiable).
     uncertain : tuple of (float, float)
         K-intervals (N/m) the numerics could not resolve.
+    events : tuple of (float, float, float, int, int)
+        What the float search found, in N/m: ``(K_a, K_b, theta, direction,
+        multiplicity)``, a crossing (K_a = K_b) or an unresolved zone (multiplicity 0):
+        the candidates the ball-arithmetic proof (:mod:`~hapstab.analysis.exact.proof`)
+        starts from.
+    proof : object, optional
+        The ball-arithmetic proof of this stable set (None: the float enclosures alone).
     """
 
     kmax: float
@@ -45,6 +52,8 @@ class StableSet:
     rigid: int
     outside_small_K: int
     uncertain: tuple[tuple[float, float], ...]
+    events: tuple[tuple[float, float, float, int, int], ...] = ()
+    proof: Any = None
 
 
 def first_only(events: list[Any], anchor: int, s: float) -> dict[str, Any]:

@@ -1,0 +1,494 @@
+"""The proof of a stable set in ball arithmetic: what "certified" means in hapstab.
+
+The float search (:mod:`~hapstab.analysis.exact.crossings`) proposes the K at which a
+pole crosses the unit circle. This module proves, on :class:`~hapstab.engine.arb_loop.ArbLoop`
+(Arb balls from the loop's numbers alone), a stable set around them:
+
+1. each proposed crossing is polished by Newton's method on det M(e^{j theta}, K) = 0
+   at the working precision (not a proof: it only places the windows), and gets a
+   *window* [K (1 - DELTA), K (1 + DELTA)];
+2. between windows, a *gap* [K_a, K_b] is proved free of poles on the circle: the
+   rectangle theta in [0, pi] x K in [K_a, K_b] is cut into pieces, each excluded by
+   a ball that does not contain 0 -- either ``|P| > |Q|`` or ``|Q| > |P|`` over the
+   piece (det M = P + w Q with |w| = 1: the delay's phase plays no part) or the ball of
+   det M itself (:func:`exclude`). theta in [pi, 2 pi] is the mirror image (det M is
+   real on real K and conj-symmetric in theta);
+3. in each proved gap the number of poles outside is constant and is counted by the
+   argument principle at one point, Z_out = q - wind(det M) (:func:`count`), the
+   winding summed over pieces whose balls exclude 0 (each increment is then a
+   principal argument);
+4. the stable set is the union of the proved gaps with count 0; K_max is the upper
+   end of the one that starts at the base point K_0 (the safe end of the window of the
+   first crossing). The window is an *enclosure* of the true K_max when the count
+   after it is proved > 0. A gap that cannot be proved is reported *uncertain* with
+   its extent, never as stable.
+
+The base point K_0 (:func:`~hapstab.engine.arb_loop.base_point`: 1e-14 times the
+smaller of the loop's K scale m/T^2 and its damping scale b/T) stands for K -> 0+:
+what is proved is [K_0, K_max]; what holds for (0, K_0) is not proved (a pole could
+only cross the circle there at a stiffness 1e-14 of the device's own scale). Above
+the top of the examined range nothing is claimed unless the tail is proved
+(:mod:`~hapstab.analysis.exact.top`). The certificate
+(:func:`~hapstab.analysis.exact.certificate.certificate`) lists every piece, so anyone
+can re-check it (:mod:`hapstab.analysis.verify`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+from hapstab.analysis.exact.polish import polish
+from hapstab.engine.arb_loop import ArbLoop, poly_k, working_precision
+
+__all__ = ["Proof", "prove", "prove_base", "count", "exclude", "theta_ball", "DELTA"]
+
+#: Half-width of a crossing's window, relative: far inside the 1e-9 the reported
+#: K_max may lie below the truth, and far above the working precision's reach
+#: (Newton places the crossing to ~1e-60 at 320 bits), so a window always holds it.
+DELTA = 2.0 ** -40
+#: Pieces of [0, pi] a search starts from.
+START_PIECES = 32
+#: A piece narrower than this relative to its upper end (theta or K) is not split again:
+#: the proof gives up there (double-precision ends cannot be halved much further).
+FLOOR = 4e-16
+#: Most pieces one exclusion or count may try (a valve on time: beyond it, uncertain).
+MAX_PIECES = 4000
+
+
+def theta_ball(a: float, b: float) -> Any:
+    """The ball holding [a, b]; an end equal to ``math.pi`` stands for pi itself."""
+    from flint import arb
+    lo = arb.pi() if a == math.pi else arb(a)
+    hi = arb.pi() if b == math.pi else arb(b)
+    return lo.union(hi)
+
+
+def k_ball(a: float, b: float) -> Any:
+    """The ball holding [a, b] (N/m)."""
+    from flint import arb
+    return arb(a).union(arb(b))
+
+
+# ----------------------------------------------------------------- exclusion
+def _start(n: int = START_PIECES) -> list[tuple[float, float]]:
+    """The n equal pieces of [0, pi] (the last ends at pi itself), the first cut again
+    at pi/n 2^-k, k = 1..40 (the poles of a fast-sampled loop crowd z = 1, theta = 0)."""
+    step = math.pi / n
+    near = [(0.0, step * 2.0 ** -40)] + [(step * 2.0 ** -k, step * 2.0 ** (1 - k))
+                                          for k in range(40, 0, -1)]
+    return near + [(i * step, math.pi if i == n - 1 else (i + 1) * step) for i in range(1, n)]
+
+
+def box_status(al: ArbLoop, a: float, b: float, ka: float, kb: float) -> tuple[str | None, float]:
+    """Whether det M has no zero on [a, b] x [ka, kb]; the reason, and the share of
+    the ball's width due to theta (to choose the split).
+
+    Returns
+    -------
+    status : {"P", "Q", "F"} or None
+        ``"P"``: |P| > |Q| on the box; ``"Q"``: |Q| > |P|; ``"F"``: 0 not in the ball
+        of P + w Q; None: not excluded.
+    theta_share : float
+        In [0, 1]: how much of the width comes from theta rather than K.
+    """
+    Pv, Qv, F = al.box(theta_ball(a, b), k_ball(ka, kb))
+    with working_precision(al.prec):
+        if Pv.abs_lower() > Qv.abs_upper():
+            return "P", 0.0
+        if Qv.abs_lower() > Pv.abs_upper():
+            return "Q", 0.0
+        if not F.contains(0):
+            return "F", 0.0
+        share = _theta_share(al, a, b, ka, kb)
+    return None, share
+
+
+def _radius(al: ArbLoop, th: Any, K: Any) -> float:
+    """Radius of the ball of det M on (th, K) (inf if not finite)."""
+    r = float(al.value(th, K).rad())
+    return r if math.isfinite(r) else math.inf
+
+
+def _theta_share(al: ArbLoop, a: float, b: float, ka: float, kb: float) -> float:
+    """How much of the ball's width the angle causes: the radius with theta at its
+    midpoint against the radius with K at its midpoint (chooses the split only)."""
+    from flint import arb
+    m, km = 0.5 * (a + b), 0.5 * (ka + kb)
+    r_k = _radius(al, arb(m), k_ball(ka, kb))
+    r_t = _radius(al, theta_ball(a, b), arb(km))
+    return 1.0 if r_t >= r_k else 0.0
+
+
+@dataclass
+class Exclusion:
+    """Pieces (a, b, K_a, K_b, how) proved free of zeros, and the boxes that were not."""
+    pieces: list[tuple[float, float, float, float, str]] = field(default_factory=list)
+    failed: list[tuple[float, float, float, float]] = field(default_factory=list)
+    #: per box taken from the stack, in order: "x" excluded (the next piece), "t" halved
+    #: in theta, "k" split in K, "f" failed (a certificate has none)
+    splits: list[str] = field(default_factory=list)
+
+
+def exclude(al: ArbLoop, ka: float, kb: float, max_pieces: int = MAX_PIECES) -> Exclusion:
+    """Prove det M(e^{j theta}, K) != 0 on [0, pi] x [ka, kb] by pieces (module doc, 2).
+
+    Parameters
+    ----------
+    al : ArbLoop
+    ka, kb : float
+        The gap in N/m (0 < ka < kb).
+    max_pieces : int
+        Safety valve on the number of boxes tried.
+
+    Returns
+    -------
+    Exclusion
+        ``failed`` empty: proved. Otherwise the boxes left (at the floor, or when the
+        valve closed).
+    """
+    import heapq
+    out = Exclusion()
+    # boxes by their lowest K first: when the valve closes, what is left lies above
+    # everything proved, so the proved part of the gap is [ka, lowest K left]
+    heap = [(ka, a, b, kb) for a, b in _start()]
+    heapq.heapify(heap)
+    tried = 0
+    while heap:
+        k0, a, b, k1 = heapq.heappop(heap)
+        tried += 1
+        if tried > max_pieces:
+            out.failed.append((a, b, k0, k1))
+            out.failed.extend((x[1], x[2], x[0], x[3]) for x in heap)
+            break
+        how, share = box_status(al, a, b, k0, k1)
+        if how is not None:
+            out.pieces.append((a, b, k0, k1, how))
+            out.splits.append("x")
+            continue
+        th_ok = (b - a) > FLOOR * b
+        k_ok = (k1 - k0) > FLOOR * k1
+        if th_ok and (share >= 0.5 or not k_ok):
+            m = 0.5 * (a + b)
+            heapq.heappush(heap, (k0, a, m, k1))
+            heapq.heappush(heap, (k0, m, b, k1))
+            out.splits.append("t")
+        elif k_ok:
+            m = math.sqrt(k0 * k1) if k1 > 4 * k0 else 0.5 * (k0 + k1)
+            heapq.heappush(heap, (k0, a, b, m))
+            heapq.heappush(heap, (m, a, b, k1))
+            out.splits.append("k")
+        else:
+            out.failed.append((a, b, k0, k1))
+            out.splits.append("f")
+    return out
+
+
+# ----------------------------------------------------------------- counting
+def _point(al: ArbLoop, t: float, K: Any, cache: dict) -> tuple[Any, Any, Any]:
+    """P, Q (at K) and w at the exact angle t (cached)."""
+    if t not in cache:
+        P, Q, w = al.parts(theta_ball(t, t))
+        with working_precision(al.prec):
+            cache[t] = (poly_k(P, K), poly_k(Q, K), w)
+    return cache[t]
+
+
+def piece_increment(al: ArbLoop, a: float, b: float, K: Any, cache: dict) -> tuple[str | None, Any]:
+    """The increment of arg det M over [a, b] at K, and how it is proved.
+
+    ``"P"``: |P| > |Q| on the piece, arg det M = arg P + arg(1 + w Q / P) with the
+    second term in (-pi/2, pi/2); ``"Q"``: |Q| > |P|, arg det M = arg Q - n theta +
+    arg(1 + P / (w Q)); ``"F"``: the ball of det M excludes 0. Each principal value is
+    the true increment because the function stays in a convex ball excluding 0 (or in
+    the right half-plane). None: no proof on this piece.
+    """
+    Pv, Qv, Fv = al.box(theta_ball(a, b), K)
+    with working_precision(al.prec):
+        Pa, Qa, wa = _point(al, a, K, cache)
+        Pb, Qb, wb = _point(al, b, K, cache)
+        if Pv.abs_lower() > Qv.abs_upper():
+            return "P", ((Pb / Pa).arg() + (1 + wb * Qb / Pb).arg() - (1 + wa * Qa / Pa).arg())
+        if Qv.abs_lower() > Pv.abs_upper():
+            dth = theta_ball(b, b) - theta_ball(a, a)
+            return "Q", ((Qb / Qa).arg() - al.n_phase * dth
+                         + (1 + Pb / (wb * Qb)).arg() - (1 + Pa / (wa * Qa)).arg())
+        if not Fv.contains(0):
+            Fa, Fb = Pa + wa * Qa, Pb + wb * Qb
+            return "F", (Fb / Fa).arg()
+    return None, None
+
+
+@dataclass
+class Count:
+    """Poles outside at K (None: not proved), with the pieces of [0, pi] used."""
+    K: float
+    outside: int | None
+    pieces: list[tuple[float, float, str]] = field(default_factory=list)
+
+
+def count(al: ArbLoop, K: float, max_pieces: int = MAX_PIECES) -> Count:
+    """Poles of the closed loop outside the unit circle at stiffness K, by the
+    argument principle in balls (module doc, 3).
+
+    Parameters
+    ----------
+    al : ArbLoop
+    K : float
+        Stiffness (N/m).
+    max_pieces : int
+        Safety valve on the number of pieces tried.
+
+    Returns
+    -------
+    Count
+        ``outside`` None when a piece at the floor keeps 0 in its ball (a pole on
+        or within the balls' width of the circle) or the valve closed.
+    """
+    from flint import arb
+    Kb = arb(K)
+    cache: dict = {}
+    res = Count(K, None)
+    stack = _start()[::-1]
+    total = arb(0)
+    tried = 0
+    while stack:
+        a, b = stack.pop()
+        tried += 1
+        if tried > max_pieces:
+            return res
+        how, inc = piece_increment(al, a, b, Kb, cache)
+        if how is not None:
+            res.pieces.append((a, b, how))
+            with working_precision(al.prec):
+                total = total + inc
+            continue
+        if (b - a) <= FLOOR * b:
+            return res
+        m = 0.5 * (a + b)
+        stack += [(m, b), (a, m)]
+    with working_precision(al.prec):
+        turns = (total / arb.pi()).unique_fmpz()
+    if turns is not None:
+        res.outside = al.q - int(turns)
+    return res
+
+
+# ----------------------------------------------------------------- polishing
+@dataclass
+class Gap:
+    """A K-range proved free of poles on the circle (or not: ``proved`` False), with
+    its count of poles outside."""
+    lo: float
+    hi: float
+    proved: bool
+    outside: int | None
+    exclusion: Exclusion
+    counted: Count | None
+    #: True: only counted at one point (poles outside there), not excluded: an
+    #: unstable gap of the full set, where the float search found no crossing
+    sampled: bool = False
+
+
+@dataclass
+class Proof:
+    """The proof of one loop's stable set (module doc).
+
+    Attributes
+    ----------
+    params : dict
+        The loop's numbers (:func:`~hapstab.engine.arb_loop.arb_parameters`).
+    k0 : float
+        The base point standing for K -> 0+.
+    windows : list of (float, float, float)
+        The crossings' windows (K_lo, K_hi) and angles theta.
+    gaps : list of Gap
+        Between and around the windows, in increasing K.
+    intervals : list of (float, float)
+        The proved stable intervals of K.
+    kmax : float
+        Upper end of the proved stable interval from K_0 (0 if none).
+    kmax_hi : float
+        Proved upper bound of the true K_max (inf if not proved).
+    uncertain : list of (float, float)
+        K-ranges not proved either way that border a stable interval.
+    theta : float
+        Angle of the crossing at K_max (nan if none).
+    """
+
+    params: dict[str, Any]
+    k0: float
+    windows: list[tuple[float, float, float]]
+    gaps: list[Gap]
+    intervals: list[tuple[float, float]]
+    kmax: float
+    kmax_hi: float
+    uncertain: list[tuple[float, float]]
+    theta: float
+    prec: int = 0
+    k_top: float = math.inf
+    #: poles outside at K_0, proved (None: the balls could not decide)
+    base_outside: int | None = None
+    #: no pole on the circle for any K >= k_top, proved
+    #: (:func:`~hapstab.analysis.exact.top.prove_tail`): only then does a stable
+    #: interval reaching k_top stand for [.., inf)
+    tail_proved: bool = False
+
+
+def _windows(al: ArbLoop, events: tuple, k0: float, k_top: float) -> list[tuple[float, float, float]]:
+    """Windows around the polished candidates (merged where they overlap); the zones
+    the float search left unresolved are not windows (the exclusion examines them)."""
+    wins = []
+    for ka, _kb, t, _d, m in events:
+        if m == 0 or not math.isfinite(t):
+            continue        # a zone the float search left: the exclusion decides it
+        else:
+            real = t == 0.0 or t == math.pi
+            got = polish(al, t, ka, real)
+            if got is None:
+                # unpolished: a 1e-9 window (the float search's accuracy) bounds nothing claimed
+                lo, hi, th = ka * (1 - 1e-9), ka * (1 + 1e-9), t
+            else:
+                th, k = got
+                lo, hi = k * (1 - DELTA), k * (1 + DELTA)
+        if hi > k0 and lo < k_top:
+            wins.append((max(lo, k0), hi, th))
+    wins.sort()
+    merged: list[tuple[float, float, float]] = []
+    for w in wins:
+        if merged and w[0] <= merged[-1][1]:
+            merged[-1] = (merged[-1][0], max(merged[-1][1], w[1]), merged[-1][2])
+        else:
+            merged.append(w)
+    return merged
+
+
+def _inside(lo: float, hi: float) -> float:
+    """A point inside [lo, hi] (geometric mean of a wide range, else the midpoint)."""
+    return math.sqrt(lo * hi) if hi > 4 * lo else 0.5 * (lo + hi)
+
+
+def _prove_gap(al: ArbLoop, lo: float, hi: float, base: Count | None,
+               above: int = 0) -> list[Gap]:
+    """Exclusion over [lo, hi]; if it fails, the part below the lowest box left is
+    proved again on its own, the zone from there is not proved, and (``above`` > 0
+    more times) the part above it is examined. Each proved part is counted (``base``
+    when it lies inside)."""
+    ex = exclude(al, lo, hi)
+    if not ex.failed:
+        c = base if base is not None and lo <= base.K <= hi else count(al, _inside(lo, hi))
+        return [Gap(lo, hi, True, c.outside, ex, c)]
+    first = min(f[2] for f in ex.failed)
+    top = min(min((f[3] for f in ex.failed if f[2] == first), default=hi), hi)
+    gaps: list[Gap] = []
+    if first > lo:
+        gaps += _prove_gap(al, lo, first, base)
+    gaps.append(Gap(first, top, False, None, Exclusion(), None))
+    if above > 0 and top < hi:
+        gaps += _prove_gap(al, top, hi, base, above - 1)
+    return gaps
+
+
+def prove(params: dict[str, Any], events: tuple, k0: float, k_top: float,
+          full: bool, hint: tuple = ((0.0, math.inf),)) -> Proof:
+    """Prove the stable set around the float search's candidates (module doc).
+
+    Parameters
+    ----------
+    params : dict
+        The loop (:func:`~hapstab.engine.arb_loop.arb_parameters`).
+    events : tuple
+        The float search's crossings and zones in N/m (``StableSet.events``).
+    k0, k_top : float
+        The base point (K -> 0+) and the top of the K range examined (N/m).
+    full : bool
+        Every stable interval up to ``k_top`` (True) or K_max alone.
+    hint : tuple of (float, float)
+        The float search's stable intervals: a gap above the first window that meets
+        none of them is not examined (it is not claimed stable; the float search
+        counted poles outside there), which saves the counts of the unstable gaps.
+
+    Returns
+    -------
+    Proof
+    """
+    al = ArbLoop(params)
+    base = count(al, k0)
+    wins = _windows(al, events, k0, k_top)
+    if not full and base.outside != 0:       # K_max is 0 (or not proved): nothing to exclude
+        return _assemble(al, params, k0, k_top, wins,
+                         [Gap(k0, k0, True, base.outside, Exclusion(), base)], base)
+    if not full:
+        gaps = _prove_gap(al, k0, wins[0][0] if wins else k_top, base)
+        if wins and all(g.proved and g.outside == 0 for g in gaps):
+            after = count(al, wins[0][1])         # instability just above the window
+            gaps.append(Gap(wins[0][1], wins[0][1], True, after.outside, Exclusion(), after))
+        return _assemble(al, params, k0, k_top, wins, gaps, base)
+    edges = [k0] + [w[1] for w in wins]
+    tops = [w[0] for w in wins] + [k_top]
+    gaps = []
+    for g, (lo, hi) in enumerate(zip(edges, tops, strict=True)):
+        if hi <= lo:
+            continue
+        if g > 1 and not any(a <= hi and lo <= b for a, b in hint):
+            gaps.append(Gap(lo, hi, False, None, Exclusion(), None, True))
+            continue
+        c = base if g == 0 else count(al, lo)
+        if c.outside:       # unstable there: counted, not excluded (see Gap.sampled)
+            gaps.append(Gap(lo, hi, False, c.outside, Exclusion(), c, True))
+        else:
+            gaps += _prove_gap(al, lo, hi, c, 1)
+    return _assemble(al, params, k0, k_top, wins, gaps, base)
+
+
+def _assemble(al: ArbLoop, params: dict[str, Any], k0: float, k_top: float,
+              wins: list[tuple[float, float, float]], gaps: list[Gap], base: Count) -> Proof:
+    """Stable intervals, K_max and its enclosure from the proved gaps. A stable
+    interval reaching ``k_top`` stands for [.., inf) only when the tail above it is
+    proved (:func:`~hapstab.analysis.exact.top.prove_tail`); otherwise it ends at
+    ``k_top`` and (k_top, inf) is uncertain."""
+    from hapstab.analysis.exact.top import prove_tail
+    tail = any(g.proved and g.outside == 0 and g.hi == k_top for g in gaps) and \
+        prove_tail(al, k_top)
+    intervals: list[tuple[float, float]] = []
+    uncertain: list[tuple[float, float]] = []
+    for g in gaps:
+        if g.proved and g.outside == 0 and g.hi > g.lo:
+            if intervals and intervals[-1][1] == g.lo:
+                intervals[-1] = (intervals[-1][0], g.hi)
+            else:
+                intervals.append((g.lo, g.hi))
+        elif not g.sampled and (not g.proved or g.outside is None):
+            uncertain.append((g.lo, g.hi))
+    kmax, kmax_hi, theta = 0.0, math.inf, math.nan
+    if intervals and intervals[0][0] == k0:
+        kmax = intervals[0][1]
+        win = next((w for w in wins if w[0] == kmax), None)
+        if win is not None:
+            theta = win[2]
+            after = next((g for g in gaps if g.lo == win[1]), None)
+            if after is not None and after.counted is not None and \
+                    after.counted.K == win[1] and after.outside:
+                kmax_hi = win[1]
+            else:
+                uncertain.append((win[0], win[1]))
+        elif kmax == k_top:
+            kmax = math.inf if tail else kmax
+    if not tail and any(g.proved and g.outside == 0 and g.hi == k_top for g in gaps):
+        uncertain.append((k_top, math.inf))    # not examined above the top: not claimed
+    # a window between two stable gaps: what happens inside is not proved
+    for lo, hi, _t in wins:
+        below = any(g.hi == lo and g.proved and g.outside == 0 for g in gaps)
+        above = any(g.lo == hi and g.proved and g.outside == 0 and g.hi > g.lo for g in gaps)
+        if below and above:
+            uncertain.append((lo, hi))
+    return Proof(params, k0, wins, gaps, intervals, kmax, kmax_hi, sorted(set(uncertain)),
+                 theta, al.prec, k_top, base.outside, tail)
+
+
+def prove_base(params: dict[str, Any], k0: float) -> tuple[ArbLoop, Count]:
+    """The loop in balls and its proved count of poles outside at K_0."""
+    al = ArbLoop(params)
+    return al, count(al, k0)
+

@@ -1,0 +1,383 @@
+"""The loop's characteristic function in ball arithmetic (python-flint's Arb): the
+rigorous half of the one engine, on which every certified verdict rests.
+
+The loop is given by plain numbers (:func:`arb_parameters`): per port the device's
+mass and damping and its termination's mass, damping and spring; per channel the
+controller's stiffness per unit K, its virtual damping B and the measured ports
+(sign, whole delay in samples); the sampling period. Each number is a double and is
+taken as exact. From them, in balls of ``prec`` bits:
+
+* the ZOH of each port, ``[Phi, Gamma; 0, 1] = exp([A, B; 0, 0] T)`` by Arb's
+  matrix exponential (``arb_mat.exp``, rigorous error bounds), ``E = Phi - I``;
+* the port polynomials in ``y = z - 1``: ``d(y) = det(yI - E)`` (``charpoly``) and
+  ``N(y) = C adj(yI - E) Gamma = det(yI - E + Gamma C) - d(y)`` (C reads the
+  position; the identity is the matrix determinant lemma);
+* with ``H_j = K k_j + h_j``, ``h_j = beta_j (1 - z^-1)``, ``beta_j = B_j / T`` and
+  ``S_ij = s_ij z^-n_ij`` the measurement matrix, the characteristic function
+
+      det M(z, K) = det(diag(d_j) + S diag(N_j H_j)) = P(z, K) + w(z) Q(z, K),
+
+  where ``w = z^-n`` is the whole delay as an exact phase and P, Q are delay-free
+  polynomials of degree <= 2 in K. One port (HVE): ``P = d_0``, ``Q = s N_0 H_0``,
+  ``w = z^-n``. Two ports whose own positions are read undelayed (PEB, eq. 20):
+  ``P = (d_0 + s_00 N_0 H_0)(d_1 + s_11 N_1 H_1)``, ``Q = -s_01 s_10 N_0 N_1 H_0 H_1``,
+  ``w = z^-(n_01 + n_10)`` (the round trip).
+
+For real K the closed loop has ``Z_out(K) = q - wind(det M(e^{j theta}, K))`` poles
+outside the unit circle (``q`` = the ports' total order; see
+:mod:`hapstab.engine.frequency` for the determinant identity). Every value is a ball
+that contains the exact value of the function of the given doubles, for every
+theta and K in the argument balls, so an exclusion (0 not in the ball) is a proof.
+
+References
+----------
+F. Johansson, "Arb: efficient arbitrary-precision midpoint-radius interval
+arithmetic", IEEE Trans. Computers 66 (2017) 1281-1292. The paper, Fig. 2a / Fig. 3,
+eq. (20) and (23); K. J. Astrom and B. Wittenmark, *Computer-Controlled Systems*,
+3rd ed., sec. 2.3 (ZOH sampling).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+from typing import Any
+
+__all__ = ["ArbLoop", "arb_parameters", "working_precision", "PREC", "poly_k", "dpoly_k", "Dual",
+           "base_point", "k_scale", "damping_scale", "BASE_RATIO"]
+
+#: Working precision in bits. The port polynomials cancel: with E ~ T^2/m the
+#: coefficients are 1e-35 of the unit terms for a 1e29 kg device at T = 1 ms
+#: (116 bits); 320 bits keep more than 150 bits after that. :class:`ArbLoop` checks
+#: the relative accuracy it got and raises the precision if needed.
+PREC = 320
+#: Bits of relative accuracy the port polynomials must keep (else the precision is
+#: doubled): far more than any exclusion needs, so the balls are never the bottleneck.
+MIN_BITS = 80
+
+
+#: The base point K_0 standing for K -> 0+, relative to the loop's K scale (the
+#: smaller of m/T^2 and b/T): the float search's lower end U_LO
+#: (:mod:`hapstab.analysis.exact.boxes`, the same number; a test pins it). What holds
+#: for K in (0, K_0) is not proved.
+BASE_RATIO = 1e-14
+
+
+def k_scale(params: dict[str, Any]) -> float:
+    """The loop's K scale (N/m): the power of two nearest min M / T^2 over the ports
+    (M = device + termination mass), as :mod:`hapstab.engine.frequency` takes it."""
+    import numpy as np
+    T = params["period_s"]
+    masses = [p["mass_kg"] + p["termination_mass_kg"] for p in params["ports"]]
+    with np.errstate(all="ignore"):     # a scale beyond doubles is inf: no K_0 matches it
+        return float(2.0 ** np.round(np.log2(np.float64(min(masses)) / np.float64(T) ** 2)))
+
+
+def damping_scale(params: dict[str, Any]) -> float:
+    """The smallest positive b/T or |B|/T of the loop (N/m; inf if none): with m/T^2
+    it sets the base point K_0 standing for K -> 0+, so that a heavy device (m/T^2
+    far above the stiffness its damping allows, K_max ~ 2 b/T) is not examined
+    from a K_0 above its K_max."""
+    T = params["period_s"]
+    vals = [p["damping_N_s_per_m"] + p["termination_damping_N_s_per_m"] for p in params["ports"]]
+    vals += [abs(c["damping_N_s_per_m"]) for c in params["channels"]]
+    pos = [v / T for v in vals if v > 0]
+    return min(pos) if pos else math.inf
+
+
+def base_point(params: dict[str, Any]) -> float:
+    """The base point K_0 (N/m) standing for K -> 0+, from the loop's numbers alone:
+    :data:`BASE_RATIO` times the smaller of :func:`k_scale` and :func:`damping_scale`.
+    The proof counts the poles there and proves stability on [K_0, K_max]; a
+    certificate's K_0 is re-derived with this (:mod:`hapstab.analysis.verify`)."""
+    return BASE_RATIO * min(k_scale(params), damping_scale(params))
+
+
+@contextmanager
+def working_precision(prec: int) -> Iterator[None]:
+    """Run with Arb's (global) precision at ``prec`` bits, restored afterwards."""
+    from flint import ctx
+    old = ctx.prec
+    ctx.prec = prec
+    try:
+        yield
+    finally:
+        ctx.prec = old
+
+
+def arb_parameters(loop: Any, period_s: float | None = None) -> dict[str, Any] | None:
+    """The plain numbers :class:`ArbLoop` needs, or None if the loop's structure is
+    outside what the ball-arithmetic core covers (then the float-enclosure core of
+    :mod:`hapstab.analysis.exact.crossings` answers alone, and says so).
+
+    Covered: one or two ports whose terminations are mass-spring-dampers (no internal
+    states), one spring-damper position controller per port (no velocity filter),
+    whole delays, the own position read undelayed on two ports, no rigid-body mode.
+
+    Parameters
+    ----------
+    loop : HapticLoop or TeleoperationLoop
+        The loop.
+    period_s : float, optional
+        The sampling period (default the loop's).
+
+    Returns
+    -------
+    dict or None
+        ``period_s``, ``ports`` (``mass_kg``, ``damping_N_s_per_m``,
+        ``termination_mass_kg``, ``termination_damping_N_s_per_m``,
+        ``termination_stiffness_N_per_m``), ``channels`` (``stiffness_ratio``,
+        ``damping_N_s_per_m``, ``terms`` as ``[port, sign, delay_samples]``).
+    """
+    from hapstab.engine.structure import channel_ratios, rigid_modes, structure_of
+    from hapstab.models.controllers import SpringDamper
+    from hapstab.models.loops import split_delay
+    try:
+        st = structure_of(loop)
+    except Exception:       # not a loop the exact core takes at all
+        return None
+    T = float(loop.period if period_s is None else period_s)
+    ratios = channel_ratios(st)
+    if ratios is None or not st.simple or len(st.ports) not in (1, 2) or \
+            rigid_modes(st, T) or ratios[0] != 1.0:
+        return None
+    ports = []
+    for pt in st.ports:
+        z = pt.termination
+        if z.state_space()[0].shape[0]:
+            return None
+        ports.append({"mass_kg": float(pt.device.mass),
+                      "damping_N_s_per_m": float(pt.device.damping),
+                      "termination_mass_kg": float(z.mass),
+                      "termination_damping_N_s_per_m": float(z.damping),
+                      "termination_stiffness_N_per_m": float(z.stiffness)})
+    chans: list[dict[str, Any]] = []
+    for i, ch in enumerate(st.channels):
+        if type(ch.controller) is not SpringDamper:
+            return None
+        terms = []
+        for j, s, dly in ch.terms:
+            n, f = split_delay(dly)
+            if f or (len(st.ports) == 2 and j == i and n):
+                return None
+            terms.append([int(j), float(s), int(n)])
+        chans.append({"stiffness_ratio": float(ratios[i]),
+                      "damping_N_s_per_m": float(ch.controller.damping), "terms": terms})
+    if len(ports) == 1 and len(chans[0]["terms"]) != 1:
+        return None
+    if len(ports) == 2 and any(len(c["terms"]) != 2 for c in chans):
+        return None
+    return {"period_s": T, "ports": ports, "channels": chans}
+
+
+@dataclass
+class _Port:
+    d: Any          # acb_poly in y
+    N: Any          # acb_poly in y
+    order: int
+
+
+class ArbLoop:
+    """det M(e^{j theta}, K) = P + w Q of a loop in ball arithmetic (module doc).
+
+    Parameters
+    ----------
+    params : dict
+        From :func:`arb_parameters` (or a certificate's ``loop`` entry).
+    prec : int
+        Starting precision in bits (raised until the port polynomials keep
+        :data:`MIN_BITS` bits).
+
+    Attributes
+    ----------
+    q : int
+        The ports' total order.
+    n_phase : int
+        The whole delay carried by the phase w = z^-n_phase.
+    prec : int
+        The precision used.
+    """
+
+    def __init__(self, params: dict[str, Any], prec: int = PREC) -> None:
+        self.params = params
+        while True:
+            with working_precision(prec):
+                ok = self._build(params)
+            if ok or prec >= 4096:
+                break
+            prec *= 2
+        self.prec = prec
+        self.accurate = ok
+
+    # -------------------------------------------------------------- building
+    def _build(self, params: dict[str, Any]) -> bool:
+        from flint import acb, arb
+        T = arb(params["period_s"])
+        self.ports = [self._port(p, T) for p in params["ports"]]
+        self.q = sum(p.order for p in self.ports)
+        ch = params["channels"]
+        self.k = [arb(c["stiffness_ratio"]) for c in ch]
+        self.beta = [arb(c["damping_N_s_per_m"]) / T for c in ch]
+        if len(self.ports) == 1:
+            (_j, s, n), = ch[0]["terms"]
+            self.n_phase, self.s = int(n), [acb(s)]
+        else:
+            own = [next(t for t in c["terms"] if t[0] == i) for i, c in enumerate(ch)]
+            cross = [next(t for t in c["terms"] if t[0] != i) for i, c in enumerate(ch)]
+            self.n_phase = int(cross[0][2] + cross[1][2])
+            self.s = [acb(own[0][1]), acb(own[1][1]), acb(-cross[0][1] * cross[1][1])]
+        return all(_bits(p.d) >= MIN_BITS and _bits(p.N) >= MIN_BITS for p in self.ports)
+
+    @staticmethod
+    def _port(p: dict[str, Any], T: Any) -> _Port:
+        from flint import acb_poly, arb, arb_mat
+        M = arb(p["mass_kg"]) + arb(p["termination_mass_kg"])
+        b = arb(p["damping_N_s_per_m"]) + arb(p["termination_damping_N_s_per_m"])
+        k = arb(p["termination_stiffness_N_per_m"])
+        aug = arb_mat([[0, T, 0], [-k / M * T, -b / M * T, T / M], [0, 0, 0]])
+        X = aug.exp()
+        E = arb_mat([[X[0, 0] - 1, X[0, 1]], [X[1, 0], X[1, 1] - 1]])
+        G = (X[0, 2], X[1, 2])
+        EG = arb_mat([[E[0, 0] - G[0], E[0, 1]], [E[1, 0] - G[1], E[1, 1]]])
+        d = E.charpoly()
+        N = EG.charpoly() - d
+        return _Port(acb_poly(d), acb_poly(N), 2)
+
+    # -------------------------------------------------------------- evaluation
+    def parts(self, theta: Any, deriv: bool = False) -> tuple[list[Any], list[Any], Any]:
+        """Coefficients in K of P and Q, and the phase w, on the ball ``theta``.
+
+        Parameters
+        ----------
+        theta : arb
+            An angle or a ball of angles (rad/sample).
+        deriv : bool
+            Return :class:`Dual` numbers (value, d/dtheta) instead of acb.
+
+        Returns
+        -------
+        P, Q : list of 3 acb (or Dual)
+            ``P = P[0] + K P[1] + K^2 P[2]`` (K in N/m), the same for Q.
+        w : acb (or Dual)
+            ``z^-n_phase`` on the ball.
+        """
+        from flint import acb
+        with working_precision(self.prec):
+            jt = acb(0, theta)
+            y = jt.expm1()
+            omz = -(-jt).expm1()                 # 1 - z^-1
+            w = (-jt * self.n_phase).exp() if self.n_phase else acb(1)
+            if deriv:
+                j = acb(0, 1)
+                yd = Dual(y, j * (1 + y))
+                omzd = Dual(omz, j * (1 - omz))
+                wd = Dual(w, -j * self.n_phase * w)
+                dN = [(Dual(p.d(y), p.d.derivative()(y) * yd.d),
+                       Dual(p.N(y), p.N.derivative()(y) * yd.d)) for p in self.ports]
+                return self._combine(dN, [omzd * b for b in self.beta], wd)
+            dN = [(p.d(y), p.N(y)) for p in self.ports]
+            return self._combine(dN, [omz * b for b in self.beta], w)
+
+    def _combine(self, dN: list, h: list, w: Any) -> tuple[list[Any], list[Any], Any]:
+        """P, Q from the port polynomials' values and h_j (acb or Dual alike)."""
+        zero = 0 * h[0]
+        if len(self.ports) == 1:
+            (d, N), = dN
+            sN = N * self.s[0]
+            return [d, zero, zero], [sN * h[0], sN * self.k[0], zero], w
+        (d0, N0), (d1, N1) = dN
+        a0, b0 = d0 + N0 * h[0] * self.s[0], N0 * (self.s[0] * self.k[0])
+        a1, b1 = d1 + N1 * h[1] * self.s[1], N1 * (self.s[1] * self.k[1])
+        c = N0 * N1 * self.s[2]
+        P = [a0 * a1, a0 * b1 + a1 * b0, b0 * b1]
+        Q = [c * h[0] * h[1], c * (h[0] * self.k[1] + h[1] * self.k[0]),
+             c * (self.k[0] * self.k[1])]
+        return P, Q, w
+
+    def box(self, theta: Any, K: Any) -> tuple[Any, Any, Any]:
+        """Balls of P, Q and det M = P + w Q over the balls ``theta`` x ``K``, in the
+        centred (mean-value) form: the value at the centre plus the radii times the
+        derivatives over the box, so the overestimation is of second order.
+
+        Parameters
+        ----------
+        theta, K : arb
+            Balls of angles and of stiffnesses (N/m).
+
+        Returns
+        -------
+        P, Q, F : acb
+        """
+        from flint import arb
+        with working_precision(self.prec):
+            tm, km = arb(theta.mid()), arb(K.mid())
+            hh, kk = arb(0, theta.rad()), arb(0, K.rad())
+        Pm, Qm, wm = self.parts(tm)
+        Pd, Qd, wd = self.parts(theta, deriv=True)
+        with working_precision(self.prec):
+            Qb = poly_k([q.v for q in Qd], K)
+            dP = poly_k([p.d for p in Pd], K)
+            dQ = poly_k([q.d for q in Qd], K)
+            P = poly_k(Pm, km) + hh * dP + kk * dpoly_k(Pm, K)
+            Q = poly_k(Qm, km) + hh * dQ + kk * dpoly_k(Qm, K)
+            F = (poly_k(Pm, km) + wm * poly_k(Qm, km)
+                 + hh * (dP + wd.d * Qb + wd.v * dQ)
+                 + kk * (dpoly_k(Pm, K) + wm * dpoly_k(Qm, K)))
+            return P, Q, F
+
+    def value(self, theta: Any, K: Any) -> Any:
+        """det M on the balls ``theta`` (arb) and ``K`` (arb, N/m): an acb ball."""
+        P, Q, w = self.parts(theta)
+        with working_precision(self.prec):
+            return poly_k(P, K) + w * poly_k(Q, K)
+
+    def dvalue_dk(self, theta: Any, K: Any) -> Any:
+        """d det M / dK on the balls (for Newton's method and the crossing's direction)."""
+        P, Q, w = self.parts(theta)
+        with working_precision(self.prec):
+            return P[1] + 2 * K * P[2] + w * (Q[1] + 2 * K * Q[2])
+
+
+class Dual:
+    """A value and its derivative (forward mode), over acb balls."""
+
+    __slots__ = ("d", "v")
+
+    def __init__(self, v: Any, d: Any) -> None:
+        self.v, self.d = v, d
+
+    def __add__(self, o: Any) -> Dual:
+        if isinstance(o, Dual):
+            return Dual(self.v + o.v, self.d + o.d)
+        return Dual(self.v + o, self.d)
+
+    __radd__ = __add__
+
+    def __mul__(self, o: Any) -> Dual:
+        if isinstance(o, Dual):
+            return Dual(self.v * o.v, self.v * o.d + self.d * o.v)
+        return Dual(self.v * o, self.d * o)
+
+    __rmul__ = __mul__
+
+
+def dpoly_k(c: list[Any], K: Any) -> Any:
+    """``c[1] + 2 K c[2]``: the derivative in K of :func:`poly_k`."""
+    return c[1] + 2 * K * c[2]
+
+
+def poly_k(c: list[Any], K: Any) -> Any:
+    """``c[0] + K c[1] + K^2 c[2]`` (Horner) on a ball K."""
+    return c[0] + K * (c[1] + K * c[2])
+
+
+def _bits(poly: Any) -> float:
+    """Relative accuracy (bits) of the worst nonzero coefficient of a polynomial."""
+    worst = math.inf
+    for c in poly.coeffs():
+        if c.is_zero():
+            continue
+        worst = min(worst, c.rel_accuracy_bits())
+    return worst
