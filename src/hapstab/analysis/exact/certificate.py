@@ -10,7 +10,11 @@ from typing import Any
 
 from hapstab.analysis.exact.proof import START_PIECES, Count, Proof
 
-__all__ = ["certificate"]
+__all__ = ["certificate", "VERSION"]
+
+#: 2: gap pieces may be excluded by ``N`` (the preconditioned mean-value form); a
+#: version-1 certificate (``P``, ``Q``, ``F`` only) is still verified.
+VERSION = 2
 
 def _count_json(c: Count) -> dict[str, Any]:
     return {"K_N_per_m": c.K, "outside": c.outside, "pieces": [list(p) for p in c.pieces]}
@@ -62,7 +66,7 @@ def certificate(pr: Proof) -> dict[str, Any]:
                           "poles_outside_below": below, "poles_outside_above": above,
                           "direction": d})
     upper = pr.kmax_hi if math.isfinite(pr.kmax_hi) else None
-    return {"format": "hapstab-certificate", "version": 1, "loop": pr.params,
+    return {"format": "hapstab-certificate", "version": VERSION, "loop": pr.params,
             "precision_bits": pr.prec, "start_pieces": START_PIECES,
             "base_point_N_per_m": pr.k0, "top_N_per_m": pr.k_top,
             "claim": {"kmax_N_per_m": pr.kmax if math.isfinite(pr.kmax) else None,
