@@ -92,7 +92,7 @@ def _ball(a: float, b: float) -> Any:
 def _excludes(al: ArbLoop, a: float, b: float, ka: float, kb: float, how: str) -> bool:
     """Whether the box [a, b] x [ka, kb] has no zero of det M, for the reason ``how``."""
     from flint import arb
-    P, Q, F = al.box(_ball(a, b), arb(ka).union(arb(kb)))
+    P, Q, F = al.box(_ball(a, b), arb(ka).union(arb(kb)), key=(a, b))
     with working_precision(al.prec):
         if how == "P":
             return bool(P.abs_lower() > Q.abs_upper())
@@ -103,7 +103,7 @@ def _excludes(al: ArbLoop, a: float, b: float, ka: float, kb: float, how: str) -
 
 def _increment(al: ArbLoop, a: float, b: float, K: Any, how: str) -> Any:
     """The proved increment of arg det M over [a, b] at K (raises _Invalid)."""
-    P, Q, F = al.box(_ball(a, b), K)
+    P, Q, F = al.box(_ball(a, b), K, key=(a, b))
     pa, qa, wa = al.parts(_ball(a, a))
     pb, qb, wb = al.parts(_ball(b, b))
     with working_precision(al.prec):

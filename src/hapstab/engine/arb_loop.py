@@ -56,6 +56,9 @@ PREC = 320
 #: Bits of relative accuracy the port polynomials must keep (else the precision is
 #: doubled): far more than any exclusion needs, so the balls are never the bottleneck.
 MIN_BITS = 80
+#: Most angle kernels (:meth:`ArbLoop.kernel`) kept at once (memory; a proof of a
+#: long delay visits a few thousand pieces of [0, pi]).
+KERNEL_CACHE = 20000
 
 
 #: The base point K_0 standing for K -> 0+, relative to the loop's K scale (the
@@ -177,6 +180,11 @@ class _Port:
     d: Any          # acb_poly in y
     N: Any          # acb_poly in y
     order: int
+    dd: Any = None  # d'(y), N'(y): the derivatives, formed once
+    dN: Any = None
+
+    def __post_init__(self) -> None:
+        self.dd, self.dN = self.d.derivative(), self.N.derivative()
 
 
 class ArbLoop:
@@ -202,6 +210,7 @@ class ArbLoop:
 
     def __init__(self, params: dict[str, Any], prec: int = PREC) -> None:
         self.params = params
+        self._kernels: dict[Any, tuple] = {}
         while True:
             with working_precision(prec):
                 ok = self._build(params)
@@ -263,22 +272,26 @@ class ArbLoop:
         w : acb (or Dual)
             ``z^-n_phase`` on the ball.
         """
-        from flint import acb
         with working_precision(self.prec):
-            jt = acb(0, theta)
-            y = jt.expm1()
-            omz = -(-jt).expm1()                 # 1 - z^-1
-            w = (-jt * self.n_phase).exp() if self.n_phase else acb(1)
-            if deriv:
-                j = acb(0, 1)
-                yd = Dual(y, j * (1 + y))
-                omzd = Dual(omz, j * (1 - omz))
-                wd = Dual(w, -j * self.n_phase * w)
-                dN = [(Dual(p.d(y), p.d.derivative()(y) * yd.d),
-                       Dual(p.N(y), p.N.derivative()(y) * yd.d)) for p in self.ports]
-                return self._combine(dN, [omzd * b for b in self.beta], wd)
-            dN = [(p.d(y), p.N(y)) for p in self.ports]
-            return self._combine(dN, [omz * b for b in self.beta], w)
+            return self._parts(theta, deriv)
+
+    def _parts(self, theta: Any, deriv: bool) -> tuple[list[Any], list[Any], Any]:
+        """:meth:`parts` at the precision already set."""
+        from flint import acb
+        jt = acb(0, theta)
+        y = jt.expm1()
+        omz = -(-jt).expm1()                 # 1 - z^-1
+        w = (-jt * self.n_phase).exp() if self.n_phase else acb(1)
+        if deriv:
+            j = acb(0, 1)
+            yd = Dual(y, j * (1 + y))
+            omzd = Dual(omz, j * (1 - omz))
+            wd = Dual(w, -j * self.n_phase * w)
+            dN = [(Dual(p.d(y), p.dd(y) * yd.d), Dual(p.N(y), p.dN(y) * yd.d))
+                  for p in self.ports]
+            return self._combine(dN, [omzd * b for b in self.beta], wd)
+        dN = [(p.d(y), p.N(y)) for p in self.ports]
+        return self._combine(dN, [omz * b for b in self.beta], w)
 
     def _combine(self, dN: list, h: list, w: Any) -> tuple[list[Any], list[Any], Any]:
         """P, Q from the port polynomials' values and h_j (acb or Dual alike)."""
@@ -296,7 +309,42 @@ class ArbLoop:
              c * (self.k[0] * self.k[1])]
         return P, Q, w
 
-    def box(self, theta: Any, K: Any) -> tuple[Any, Any, Any]:
+    def kernel(self, theta: Any, key: Any = None) -> tuple:
+        """What :meth:`box` needs of the angle alone: P, Q, w at the ball's centre and
+        the values and d/dtheta of P, Q, w over the ball. None of it depends on K, so
+        the boxes of one theta piece at many K-ranges share it (cached by ``key``, the
+        piece's ends as the caller names them; None: not cached).
+
+        Parameters
+        ----------
+        theta : arb
+            A ball of angles (rad/sample).
+        key : hashable, optional
+            The cache key of this ball (e.g. the piece's ends (a, b)).
+
+        Returns
+        -------
+        tuple
+            ``(Pm, Qm, wm, Pv, Qv, Pd, Qd, wv, wd)``: lists of 3 acb in K (centre;
+            value and derivative over the ball) and the phase's.
+        """
+        if key is not None:
+            got = self._kernels.get(key)
+            if got is not None:
+                return got
+        from flint import arb
+        with working_precision(self.prec):
+            Pm, Qm, wm = self._parts(arb(theta.mid()), False)
+            Pd, Qd, wd = self._parts(theta, True)
+        kern = (Pm, Qm, wm, [p.v for p in Pd], [q.v for q in Qd], [p.d for p in Pd],
+                [q.d for q in Qd], wd.v, wd.d)
+        if key is not None:
+            if len(self._kernels) >= KERNEL_CACHE:
+                self._kernels.clear()
+            self._kernels[key] = kern
+        return kern
+
+    def box(self, theta: Any, K: Any, key: Any = None, spreads: bool = False) -> tuple:
         """Balls of P, Q and det M = P + w Q over the balls ``theta`` x ``K``, in the
         centred (mean-value) form: the value at the centre plus the radii times the
         derivatives over the box, so the overestimation is of second order.
@@ -305,38 +353,49 @@ class ArbLoop:
         ----------
         theta, K : arb
             Balls of angles and of stiffnesses (N/m).
+        key : hashable, optional
+            Cache key of the angle's :meth:`kernel` (the same ball every time).
+        spreads : bool
+            Also return the widths of det M's ball due to theta and to K.
 
         Returns
         -------
         P, Q, F : acb
+        spread_theta, spread_K : float
+            Only with ``spreads``: upper bounds of |d det M/d theta| rad(theta) and
+            |d det M/dK| rad(K) over the box (to choose a split).
         """
         from flint import arb
+        Pm, Qm, wm, _Pv, Qv, Pd, Qd, wv, wdd = self.kernel(theta, key)
         with working_precision(self.prec):
-            tm, km = arb(theta.mid()), arb(K.mid())
+            km = arb(K.mid())
             hh, kk = arb(0, theta.rad()), arb(0, K.rad())
-        Pm, Qm, wm = self.parts(tm)
-        Pd, Qd, wd = self.parts(theta, deriv=True)
-        with working_precision(self.prec):
-            Qb = poly_k([q.v for q in Qd], K)
-            dP = poly_k([p.d for p in Pd], K)
-            dQ = poly_k([q.d for q in Qd], K)
-            P = poly_k(Pm, km) + hh * dP + kk * dpoly_k(Pm, K)
-            Q = poly_k(Qm, km) + hh * dQ + kk * dpoly_k(Qm, K)
-            F = (poly_k(Pm, km) + wm * poly_k(Qm, km)
-                 + hh * (dP + wd.d * Qb + wd.v * dQ)
-                 + kk * (dpoly_k(Pm, K) + wm * dpoly_k(Qm, K)))
-            return P, Q, F
+            Qb = poly_k(Qv, K)
+            dP = poly_k(Pd, K)
+            dQ = poly_k(Qd, K)
+            Pc, Qc = poly_k(Pm, km), poly_k(Qm, km)
+            dPk, dQk = dpoly_k(Pm, K), dpoly_k(Qm, K)
+            P = Pc + hh * dP + kk * dPk
+            Q = Qc + hh * dQ + kk * dQk
+            Ft = dP + wdd * Qb + wv * dQ
+            Fk = dPk + wm * dQk
+            F = Pc + wm * Qc + hh * Ft + kk * Fk
+            if not spreads:
+                return P, Q, F
+            s_t = float(Ft.abs_upper() * theta.rad())
+            s_k = float(Fk.abs_upper() * K.rad())
+            return P, Q, F, s_t, s_k
 
     def value(self, theta: Any, K: Any) -> Any:
         """det M on the balls ``theta`` (arb) and ``K`` (arb, N/m): an acb ball."""
-        P, Q, w = self.parts(theta)
         with working_precision(self.prec):
+            P, Q, w = self._parts(theta, False)
             return poly_k(P, K) + w * poly_k(Q, K)
 
     def dvalue_dk(self, theta: Any, K: Any) -> Any:
         """d det M / dK on the balls (for Newton's method and the crossing's direction)."""
-        P, Q, w = self.parts(theta)
         with working_precision(self.prec):
+            P, Q, w = self._parts(theta, False)
             return P[1] + 2 * K * P[2] + w * (Q[1] + 2 * K * Q[2])
 
 

@@ -48,11 +48,15 @@ def certificate(pr: Proof) -> dict[str, Any]:
                      "splits": "".join(g.exclusion.splits) if excluded else "",
                      "count": None if counted is None else _count_json(counted)})
     crossings = []
+    below_of: dict[float, Any] = {}       # the first gap ending / starting at each K
+    above_of: dict[float, Any] = {}
+    for g in pr.gaps:
+        if g.counted and g.proved and g.hi > g.lo:
+            below_of.setdefault(g.hi, g.outside)
+        if g.counted and (g.proved or g.counted.K == g.lo):
+            above_of.setdefault(g.lo, g.outside)
     for lo, hi, th in pr.windows:
-        below = next((g.outside for g in pr.gaps if g.hi == lo and g.counted and g.proved
-                      and g.hi > g.lo), None)
-        above = next((g.outside for g in pr.gaps if g.lo == hi and g.counted and
-                      (g.proved or g.counted.K == hi)), None)
+        below, above = below_of.get(lo), above_of.get(hi)
         if below is None or above is None:
             continue
         d = "outwards" if above > below else "inwards" if above < below else "touching"
