@@ -227,8 +227,10 @@ class ArbLoop:
         self.ports = [self._port(p, T) for p in params["ports"]]
         self.q = sum(p.order for p in self.ports)
         ch = params["channels"]
-        self.k = [arb(c["stiffness_ratio"]) for c in ch]
-        self.beta = [arb(c["damping_N_s_per_m"]) / T for c in ch]
+        # complex balls throughout: python-flint multiplies acb by acb several times
+        # faster than acb by arb (the same product)
+        self.k = [acb(arb(c["stiffness_ratio"])) for c in ch]
+        self.beta = [acb(arb(c["damping_N_s_per_m"]) / T) for c in ch]
         if len(self.ports) == 1:
             (_j, s, n), = ch[0]["terms"]
             self.n_phase, self.s = int(n), [acb(s)]
@@ -310,10 +312,13 @@ class ArbLoop:
         return P, Q, w
 
     def kernel(self, theta: Any, key: Any = None) -> tuple:
-        """What :meth:`box` needs of the angle alone: P, Q, w at the ball's centre and
-        the values and d/dtheta of P, Q, w over the ball. None of it depends on K, so
-        the boxes of one theta piece at many K-ranges share it (cached by ``key``, the
-        piece's ends as the caller names them; None: not cached).
+        """What :meth:`box` needs of the angle alone, as coefficients in K: P, Q and
+        det M = P + w Q at the ball's centre, and the values and d/dtheta over the ball
+        (det M's combined before any K enters, so that terms of P and w Q that cancel
+        -- the K^2 terms of a two-port loop without delay -- cancel in the
+        coefficients, not in the balls). None of it depends on K, so the boxes of one
+        theta piece at many K-ranges share it (cached by ``key``, the piece's ends as
+        the caller names them; None: not cached).
 
         Parameters
         ----------
@@ -325,8 +330,8 @@ class ArbLoop:
         Returns
         -------
         tuple
-            ``(Pm, Qm, wm, Pv, Qv, Pd, Qd, wv, wd)``: lists of 3 acb in K (centre;
-            value and derivative over the ball) and the phase's.
+            ``(Pm, Qm, Fm, Pd, Qd, Fd)``: lists of 3 acb, the coefficients of K^0..K^2
+            of P, Q, det M at the centre and of their d/dtheta over the ball.
         """
         if key is not None:
             got = self._kernels.get(key)
@@ -335,19 +340,22 @@ class ArbLoop:
         from flint import arb
         with working_precision(self.prec):
             Pm, Qm, wm = self._parts(arb(theta.mid()), False)
-            Pd, Qd, wd = self._parts(theta, True)
-        kern = (Pm, Qm, wm, [p.v for p in Pd], [q.v for q in Qd], [p.d for p in Pd],
-                [q.d for q in Qd], wd.v, wd.d)
+            Pt, Qt, wt = self._parts(theta, True)
+            Fm = [p + wm * q for p, q in zip(Pm, Qm, strict=True)]
+            Pd, Qd = [p.d for p in Pt], [q.d for q in Qt]
+            Fd = [p + wt.d * q.v + wt.v * dq for p, q, dq in zip(Pd, Qt, Qd, strict=True)]
+        kern = (Pm, Qm, Fm, Pd, Qd, Fd)
         if key is not None:
             if len(self._kernels) >= KERNEL_CACHE:
                 self._kernels.clear()
             self._kernels[key] = kern
         return kern
 
-    def box(self, theta: Any, K: Any, key: Any = None, spreads: bool = False) -> tuple:
+    def box(self, theta: Any, K: Any, key: Any = None) -> tuple[Any, Any, Any]:
         """Balls of P, Q and det M = P + w Q over the balls ``theta`` x ``K``, in the
         centred (mean-value) form: the value at the centre plus the radii times the
-        derivatives over the box, so the overestimation is of second order.
+        derivatives over the box, so the overestimation is of second order. Each is a
+        polynomial in K with coefficients from :meth:`kernel`.
 
         Parameters
         ----------
@@ -355,48 +363,77 @@ class ArbLoop:
             Balls of angles and of stiffnesses (N/m).
         key : hashable, optional
             Cache key of the angle's :meth:`kernel` (the same ball every time).
-        spreads : bool
-            Also return the widths of det M's ball due to theta and to K.
 
         Returns
         -------
         P, Q, F : acb
-        spread_theta, spread_K : float
-            Only with ``spreads``: upper bounds of |d det M/d theta| rad(theta) and
-            |d det M/dK| rad(K) over the box (to choose a split).
         """
-        from flint import arb
-        Pm, Qm, wm, _Pv, Qv, Pd, Qd, wv, wdd = self.kernel(theta, key)
+        from flint import acb, arb
+        Pm, Qm, Fm, Pd, Qd, Fd = self.kernel(theta, key)
         with working_precision(self.prec):
-            km = arb(K.mid())
-            hh, kk = arb(0, theta.rad()), arb(0, K.rad())
-            Qb = poly_k(Qv, K)
-            dP = poly_k(Pd, K)
-            dQ = poly_k(Qd, K)
-            Pc, Qc = poly_k(Pm, km), poly_k(Qm, km)
-            dPk, dQk = dpoly_k(Pm, K), dpoly_k(Qm, K)
-            P = Pc + hh * dP + kk * dPk
-            Q = Qc + hh * dQ + kk * dQk
-            Ft = dP + wdd * Qb + wv * dQ
-            Fk = dPk + wm * dQk
-            F = Pc + wm * Qc + hh * Ft + kk * Fk
-            if not spreads:
-                return P, Q, F
-            s_t = float(Ft.abs_upper() * theta.rad())
-            s_k = float(Fk.abs_upper() * K.rad())
-            return P, Q, F, s_t, s_k
+            Kc, km = acb(K), acb(K.mid())         # acb: see _build
+            hh, kk = acb(arb(0, theta.rad())), acb(arb(0, K.rad()))
+            P = poly_k(Pm, km) + hh * poly_k(Pd, Kc) + kk * dpoly_k(Pm, Kc)
+            Q = poly_k(Qm, km) + hh * poly_k(Qd, Kc) + kk * dpoly_k(Qm, Kc)
+            Ft, Fk = poly_k(Fd, Kc), dpoly_k(Fm, Kc)
+            F = poly_k(Fm, km) + hh * Ft + kk * Fk
+            return P, Q, F
+
+    def exclusion(self, theta: Any, K: Any, key: Any = None) -> tuple[str | None, float, float]:
+        """Whether det M has no zero on the box ``theta`` x ``K``, by the tests a
+        certificate names, in order: ``"P"`` (|P| > |Q|: then |det M| >= |P| - |Q| > 0
+        whatever the delay's phase), ``"Q"`` (|Q| > |P|), ``"F"`` (0 not in det M's
+        ball); the balls are :meth:`box`'s, each formed only when the test before it
+        fails.
+
+        Parameters
+        ----------
+        theta, K : arb
+            Balls of angles and of stiffnesses (N/m).
+        key : hashable, optional
+            Cache key of the angle's :meth:`kernel`.
+
+        Returns
+        -------
+        how : {"P", "Q", "F"} or None
+            The test that excludes the box (None: none does).
+        spread_theta, spread_K : float
+            With ``how`` None: upper bounds of |d det M/d theta| rad(theta) and
+            |d det M/dK| rad(K) over the box, the widths of det M's ball due to each
+            (to choose a split); else 0.
+        """
+        from flint import acb, arb
+        Pm, Qm, Fm, Pd, Qd, Fd = self.kernel(theta, key)
+        with working_precision(self.prec):
+            Kc, km = acb(K), acb(K.mid())         # the same balls as box()
+            hh, kk = acb(arb(0, theta.rad())), acb(arb(0, K.rad()))
+            P = poly_k(Pm, km) + hh * poly_k(Pd, Kc) + kk * dpoly_k(Pm, Kc)
+            Q = poly_k(Qm, km) + hh * poly_k(Qd, Kc) + kk * dpoly_k(Qm, Kc)
+            if P.abs_lower() > Q.abs_upper():
+                return "P", 0.0, 0.0
+            if Q.abs_lower() > P.abs_upper():
+                return "Q", 0.0, 0.0
+            Ft, Fk = poly_k(Fd, Kc), dpoly_k(Fm, Kc)
+            F = poly_k(Fm, km) + hh * Ft + kk * Fk
+            if not F.contains(0):
+                return "F", 0.0, 0.0
+            return None, float(Ft.abs_upper() * theta.rad()), float(Fk.abs_upper() * K.rad())
 
     def value(self, theta: Any, K: Any) -> Any:
         """det M on the balls ``theta`` (arb) and ``K`` (arb, N/m): an acb ball."""
+        from flint import acb
         with working_precision(self.prec):
             P, Q, w = self._parts(theta, False)
-            return poly_k(P, K) + w * poly_k(Q, K)
+            Kc = acb(K)
+            return poly_k(P, Kc) + w * poly_k(Q, Kc)
 
     def dvalue_dk(self, theta: Any, K: Any) -> Any:
         """d det M / dK on the balls (for Newton's method and the crossing's direction)."""
+        from flint import acb
         with working_precision(self.prec):
             P, Q, w = self._parts(theta, False)
-            return P[1] + 2 * K * P[2] + w * (Q[1] + 2 * K * Q[2])
+            Kc = acb(K)
+            return P[1] + 2 * Kc * P[2] + w * (Q[1] + 2 * Kc * Q[2])
 
 
 class Dual:

@@ -49,7 +49,7 @@ __all__ = ["Proof", "prove", "prove_base", "count", "exclude", "theta_ball", "DE
 #: (Newton places the crossing to ~1e-60 at 320 bits), so a window always holds it.
 DELTA = 2.0 ** -40
 #: Pieces of [0, pi] a search starts from.
-START_PIECES = 32
+START_PIECES = 8
 #: A piece narrower than this relative to its upper end (theta or K) is not split again:
 #: the proof gives up there (double-precision ends cannot be halved much further).
 FLOOR = 4e-16
@@ -104,16 +104,12 @@ def box_status(al: ArbLoop, a: float, b: float, ka: float, kb: float) -> tuple[s
         of P + w Q; None: not excluded.
     theta_share : float
         In [0, 1]: how much of the ball's width comes from theta rather than K (the
-        spreads :meth:`~hapstab.engine.arb_loop.ArbLoop.box` returns; 0 when excluded).
+        spreads :meth:`~hapstab.engine.arb_loop.ArbLoop.exclusion` returns; 0 when
+        excluded).
     """
-    Pv, Qv, F, s_t, s_k = al.box(theta_ball(a, b), k_ball(ka, kb), key=(a, b), spreads=True)
-    with working_precision(al.prec):
-        if Pv.abs_lower() > Qv.abs_upper():
-            return "P", 0.0
-        if Qv.abs_lower() > Pv.abs_upper():
-            return "Q", 0.0
-        if not F.contains(0):
-            return "F", 0.0
+    how, s_t, s_k = al.exclusion(theta_ball(a, b), k_ball(ka, kb), key=(a, b))
+    if how is not None:
+        return how, 0.0
     if not (math.isfinite(s_t) and math.isfinite(s_k)):
         return None, 1.0 if not math.isfinite(s_t) else 0.0
     return None, s_t / (s_t + s_k) if s_t + s_k > 0 else 0.5
