@@ -46,7 +46,7 @@ from dataclasses import dataclass
 from typing import Any
 
 __all__ = ["ArbLoop", "arb_parameters", "working_precision", "PREC", "poly_k", "dpoly_k", "Dual",
-           "base_point", "k_scale", "damping_scale", "BASE_RATIO"]
+           "base_point", "k_scale", "damping_scale", "BASE_RATIO", "preconditioned_excludes"]
 
 #: Working precision in bits. The port polynomials cancel: with E ~ T^2/m the
 #: coefficients are 1e-35 of the unit terms for a 1e29 kg device at T = 1 ms
@@ -383,8 +383,8 @@ class ArbLoop:
         """Whether det M has no zero on the box ``theta`` x ``K``, by the tests a
         certificate names, in order: ``"P"`` (|P| > |Q|: then |det M| >= |P| - |Q| > 0
         whatever the delay's phase), ``"Q"`` (|Q| > |P|), ``"F"`` (0 not in det M's
-        ball); the balls are :meth:`box`'s, each formed only when the test before it
-        fails.
+        ball), ``"N"`` (0 not in the preconditioned ball); the balls are :meth:`box`'s,
+        each formed only when the test before it fails.
 
         Parameters
         ----------
@@ -395,8 +395,9 @@ class ArbLoop:
 
         Returns
         -------
-        how : {"P", "Q", "F"} or None
-            The test that excludes the box (None: none does).
+        how : {"P", "Q", "F", "N"} or None
+            The test that excludes the box (None: none does); ``"N"``: the
+            preconditioned mean-value form (:func:`preconditioned_excludes`).
         spread_theta, spread_K : float
             With ``how`` None: upper bounds of |d det M/d theta| rad(theta) and
             |d det M/dK| rad(K) over the box, the widths of det M's ball due to each
@@ -414,10 +415,23 @@ class ArbLoop:
             if Q.abs_lower() > P.abs_upper():
                 return "Q", 0.0, 0.0
             Ft, Fk = poly_k(Fd, Kc), dpoly_k(Fm, Kc)
-            F = poly_k(Fm, km) + hh * Ft + kk * Fk
+            Fc = poly_k(Fm, km)
+            F = Fc + hh * Ft + kk * Fk
             if not F.contains(0):
                 return "F", 0.0, 0.0
+            if preconditioned_excludes(Fc, Ft, Fk, theta.rad(), K.rad()):
+                return "N", 0.0, 0.0
             return None, float(Ft.abs_upper() * theta.rad()), float(Fk.abs_upper() * K.rad())
+
+    def box_derivatives(self, theta: Any, K: Any, key: Any = None) -> tuple[Any, Any, Any]:
+        """det M at the box's centre and its derivatives over the box, as :meth:`box`
+        forms them: ``(F_c, dF/dtheta, dF/dK)`` (acb), for the preconditioned test
+        (:func:`preconditioned_excludes`)."""
+        from flint import acb
+        _Pm, _Qm, Fm, _Pd, _Qd, Fd = self.kernel(theta, key)
+        with working_precision(self.prec):
+            Kc, km = acb(K), acb(K.mid())
+            return poly_k(Fm, km), poly_k(Fd, Kc), dpoly_k(Fm, Kc)
 
     def value(self, theta: Any, K: Any) -> Any:
         """det M on the balls ``theta`` (arb) and ``K`` (arb, N/m): an acb ball."""
@@ -457,6 +471,48 @@ class Dual:
         return Dual(self.v * o, self.d * o)
 
     __rmul__ = __mul__
+
+
+def preconditioned_excludes(Fc: Any, Ft: Any, Fk: Any, r_theta: Any, r_K: Any) -> bool:
+    """Whether 0 is outside the preconditioned mean-value form of det M on a box.
+
+    As a map of (theta, K) to R^2, det M over the box lies in
+    ``f + A (dtheta, dK)`` with ``f = (Re Fc, Im Fc)``, ``A`` the 2x2 matrix of the
+    real and imaginary parts of the derivative balls ``Ft``, ``Fk`` and
+    ``|dtheta| <= r_theta``, ``|dK| <= r_K``. For any real 2x2 matrix Y, det M = 0
+    at a point implies Y det M = 0 there, so 0 outside either component of
+    ``Y f + (Y A)(dtheta, dK)`` excludes every zero from the box, whatever Y is;
+    Y = mid(A)^-1 (in doubles) makes the form nearly the identity near a simple zero,
+    where the plain ball of det M (an axis-aligned rectangle around an elongated
+    image) needs boxes far smaller than their distance to the zero.
+
+    Parameters
+    ----------
+    Fc, Ft, Fk : acb
+        det M at the centre, d/dtheta and d/dK over the box.
+    r_theta, r_K : arb
+        The box's radii in theta (rad) and K (N/m).
+
+    Returns
+    -------
+    bool
+    """
+    from flint import arb
+    a, b = float(Ft.real.mid()), float(Fk.real.mid())
+    c, d = float(Ft.imag.mid()), float(Fk.imag.mid())
+    det = a * d - b * c
+    if not (math.isfinite(det) and det != 0.0):
+        return False
+    Y = ((d / det, -b / det), (-c / det, a / det))
+    ht, hk = arb(0, r_theta), arb(0, r_K)
+    for y1, y2 in Y:
+        if not (math.isfinite(y1) and math.isfinite(y2)):
+            return False
+        comp = (y1 * Fc.real + y2 * Fc.imag + (y1 * Ft.real + y2 * Ft.imag) * ht
+                + (y1 * Fk.real + y2 * Fk.imag) * hk)
+        if not comp.contains(0):
+            return True
+    return False
 
 
 def dpoly_k(c: list[Any], K: Any) -> Any:

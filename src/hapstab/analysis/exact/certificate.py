@@ -10,7 +10,11 @@ from typing import Any
 
 from hapstab.analysis.exact.proof import START_PIECES, Count, Proof
 
-__all__ = ["certificate"]
+__all__ = ["certificate", "VERSION"]
+
+#: 2: gap pieces may be excluded by ``N`` (the preconditioned mean-value form); a
+#: version-1 certificate (``P``, ``Q``, ``F`` only) is still verified.
+VERSION = 2
 
 def _count_json(c: Count) -> dict[str, Any]:
     return {"K_N_per_m": c.K, "outside": c.outside, "pieces": [list(p) for p in c.pieces]}
@@ -69,7 +73,7 @@ def certificate(pr: Proof) -> dict[str, Any]:
     # when the tail above the top is proved too, the certificate still covers only
     # [K_0, top], which is what its pieces show)
     kmax = next((b for a, b in pr.intervals if a == pr.k0), 0.0)
-    return {"format": "hapstab-certificate", "version": 1, "loop": pr.params,
+    return {"format": "hapstab-certificate", "version": VERSION, "loop": pr.params,
             "precision_bits": pr.prec, "start_pieces": START_PIECES,
             "base_point_N_per_m": pr.k0, "top_N_per_m": pr.k_top,
             "proved_range_N_per_m": [pr.k0, kmax] if kmax > 0 else None,
