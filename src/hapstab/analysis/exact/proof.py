@@ -376,13 +376,14 @@ def _first_only(events: tuple, k0: float) -> tuple:
     return tuple(e for e in events if e[0] <= top)
 
 
-def _needs_polish(events: tuple, hint: tuple) -> Any:
+def _needs_polish(events: tuple, hint: tuple, k0: float) -> Any:
     """For the full set: a candidate is polished when a gap beside it may be examined:
     the two lowest (K_max's window, and the gap above it is counted), and those whose
     neighbouring gap meets the float search's stable set or unresolved zones
     (``hint``, widened by HINT_MARGIN so that the windows' final ends, within ROUGH of
     the float ones, cannot bring in a gap that was not foreseen)."""
-    ks = sorted(e[0] for e in events if e[4] != 0 and math.isfinite(e[2]))
+    ks = sorted(e[0] for e in events if e[4] != 0 and math.isfinite(e[2])
+                and e[0] * (1 + ROUGH) > k0)      # those _windows keeps
     need = set(ks[:2])
     wide = [(a * (1 - HINT_MARGIN), b * (1 + HINT_MARGIN)) for a, b in hint]
     edges = [0.0, *ks, math.inf]
@@ -460,7 +461,7 @@ def prove(params: dict[str, Any], events: tuple, k0: float, k_top: float,
             after = count(al, wins[0][1])         # instability just above the window
             gaps.append(Gap(wins[0][1], wins[0][1], True, after.outside, Exclusion(), after))
         return _assemble(al, params, k0, k_top, wins, gaps, base)
-    wins = _windows(al, events, k0, k_top, _needs_polish(events, hint + unsure))
+    wins = _windows(al, events, k0, k_top, _needs_polish(events, hint + unsure, k0))
     edges = [k0] + [w[1] for w in wins]
     tops = [w[0] for w in wins] + [k_top]
     gaps = []
