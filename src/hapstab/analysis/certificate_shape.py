@@ -120,13 +120,16 @@ def _check_loop_shape(loop: Any) -> None:
                            "undelayed own reading is covered")
 
 
-def _check_pieces(ps: Any, what: str, width: int, hows: tuple[str, ...] = ("P", "Q", "F")) -> None:
-    """Pieces ``[theta_a, theta_b, (K_a, K_b,) how]`` with finite numbers that advance,
-    ``how`` one of ``hows``."""
+def _check_pieces(ps: Any, what: str, width: int, version: int | None = None) -> None:
+    """Pieces ``[theta_a, theta_b, (K_a, K_b,) how]`` with finite numbers that advance;
+    ``how`` one of the gap reasons of ``version`` (:data:`REASONS`), or of a count piece
+    (``P``, ``Q``, ``F``) when ``version`` is None."""
+    hows = REASONS[version] if version is not None else REASONS[1]
+    where = f" (certificate version {version})" if version is not None else ""
     for j, p in enumerate(_list(ps, what, nonempty=True)):
         if not isinstance(p, list) or len(p) != width or p[-1] not in hows:
             raise _Invalid(f"{what}[{j}] = {p!r}: not {width - 1} numbers and one of "
-                           f"{', '.join(map(repr, hows))}")
+                           f"{', '.join(map(repr, hows))}{where}")
         nums = [_num(v, f"{what}[{j}]") for v in p[:-1]]
         if not (0.0 <= nums[0] < nums[1] <= math.pi):
             raise _Invalid(f"{what}[{j}]: theta in [{nums[0]!r}, {nums[1]!r}] does not advance "
@@ -152,7 +155,7 @@ def _check_gap_shape(g: Any, i: int, version: int) -> None:
     if g["excluded"]:
         if not hi > lo:
             raise _Invalid(f"{what}: excluded but [{lo!r}, {hi!r}] is empty")
-        _check_pieces(g["pieces"], f"{what}.pieces", 5, REASONS[version])
+        _check_pieces(g["pieces"], f"{what}.pieces", 5, version)
     elif _list(g["pieces"], f"{what}.pieces") or g["splits"]:
         raise _Invalid(f"{what}: pieces given for a gap not excluded")
     c = g["count"]

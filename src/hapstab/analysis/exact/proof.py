@@ -403,7 +403,8 @@ def _prove_gap(al: ArbLoop, lo: float, hi: float, base: Count | None,
                above: int = 0, valve: int = MAX_PIECES) -> list[Gap]:
     """Exclusion over [lo, hi]; if it fails, the part below the lowest box left is
     proved again on its own, the zone from there is not proved, and (``above`` > 0
-    more times) the part above it is examined. Each proved part is counted (``base``
+    more times) the part above it is examined; with ``above`` spent, everything from
+    the lowest box left up to ``hi`` is the unproved zone. Each proved part is counted (``base``
     when it lies inside). ``valve``: the most pieces of each exclusion and count."""
     ex = exclude(al, lo, hi, valve)
     if not ex.failed:
@@ -415,9 +416,13 @@ def _prove_gap(al: ArbLoop, lo: float, hi: float, base: Count | None,
     gaps: list[Gap] = []
     if first > lo:
         gaps += _prove_gap(al, lo, first, base, 0, valve)
-    gaps.append(Gap(first, top, False, None, Exclusion(), None))
     if above > 0 and top < hi:
+        gaps.append(Gap(first, top, False, None, Exclusion(), None))
         gaps += _prove_gap(al, top, hi, base, above - 1, valve)
+    else:
+        # not examined further: the whole rest of the gap is not proved (and so reported
+        # uncertain), not only the zone of the failed box
+        gaps.append(Gap(first, hi, False, None, Exclusion(), None))
     return gaps
 
 
