@@ -45,6 +45,8 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Any
 
+from hapstab.engine.arb_forms import Dual, accuracy_bits, dpoly_k, poly_k, preconditioned_excludes
+
 __all__ = ["ArbLoop", "arb_parameters", "working_precision", "PREC", "poly_k", "dpoly_k", "Dual",
            "base_point", "k_scale", "damping_scale", "BASE_RATIO", "preconditioned_excludes"]
 
@@ -239,7 +241,7 @@ class ArbLoop:
             cross = [next(t for t in c["terms"] if t[0] != i) for i, c in enumerate(ch)]
             self.n_phase = int(cross[0][2] + cross[1][2])
             self.s = [acb(own[0][1]), acb(own[1][1]), acb(-cross[0][1] * cross[1][1])]
-        return all(_bits(p.d) >= MIN_BITS and _bits(p.N) >= MIN_BITS for p in self.ports)
+        return all(accuracy_bits(p.d) >= MIN_BITS and accuracy_bits(p.N) >= MIN_BITS for p in self.ports)
 
     @staticmethod
     def _port(p: dict[str, Any], T: Any) -> _Port:
@@ -448,88 +450,3 @@ class ArbLoop:
             P, Q, w = self._parts(theta, False)
             Kc = acb(K)
             return P[1] + 2 * Kc * P[2] + w * (Q[1] + 2 * Kc * Q[2])
-
-
-class Dual:
-    """A value and its derivative (forward mode), over acb balls."""
-
-    __slots__ = ("d", "v")
-
-    def __init__(self, v: Any, d: Any) -> None:
-        self.v, self.d = v, d
-
-    def __add__(self, o: Any) -> Dual:
-        if isinstance(o, Dual):
-            return Dual(self.v + o.v, self.d + o.d)
-        return Dual(self.v + o, self.d)
-
-    __radd__ = __add__
-
-    def __mul__(self, o: Any) -> Dual:
-        if isinstance(o, Dual):
-            return Dual(self.v * o.v, self.v * o.d + self.d * o.v)
-        return Dual(self.v * o, self.d * o)
-
-    __rmul__ = __mul__
-
-
-def preconditioned_excludes(Fc: Any, Ft: Any, Fk: Any, r_theta: Any, r_K: Any) -> bool:
-    """Whether 0 is outside the preconditioned mean-value form of det M on a box.
-
-    As a map of (theta, K) to R^2, det M over the box lies in
-    ``f + A (dtheta, dK)`` with ``f = (Re Fc, Im Fc)``, ``A`` the 2x2 matrix of the
-    real and imaginary parts of the derivative balls ``Ft``, ``Fk`` and
-    ``|dtheta| <= r_theta``, ``|dK| <= r_K``. For any real 2x2 matrix Y, det M = 0
-    at a point implies Y det M = 0 there, so 0 outside either component of
-    ``Y f + (Y A)(dtheta, dK)`` excludes every zero from the box, whatever Y is;
-    Y = mid(A)^-1 (in doubles) makes the form nearly the identity near a simple zero,
-    where the plain ball of det M (an axis-aligned rectangle around an elongated
-    image) needs boxes far smaller than their distance to the zero.
-
-    Parameters
-    ----------
-    Fc, Ft, Fk : acb
-        det M at the centre, d/dtheta and d/dK over the box.
-    r_theta, r_K : arb
-        The box's radii in theta (rad) and K (N/m).
-
-    Returns
-    -------
-    bool
-    """
-    from flint import arb
-    a, b = float(Ft.real.mid()), float(Fk.real.mid())
-    c, d = float(Ft.imag.mid()), float(Fk.imag.mid())
-    det = a * d - b * c
-    if not (math.isfinite(det) and det != 0.0):
-        return False
-    Y = ((d / det, -b / det), (-c / det, a / det))
-    ht, hk = arb(0, r_theta), arb(0, r_K)
-    for y1, y2 in Y:
-        if not (math.isfinite(y1) and math.isfinite(y2)):
-            return False
-        comp = (y1 * Fc.real + y2 * Fc.imag + (y1 * Ft.real + y2 * Ft.imag) * ht
-                + (y1 * Fk.real + y2 * Fk.imag) * hk)
-        if not comp.contains(0):
-            return True
-    return False
-
-
-def dpoly_k(c: list[Any], K: Any) -> Any:
-    """``c[1] + 2 K c[2]``: the derivative in K of :func:`poly_k`."""
-    return c[1] + 2 * K * c[2]
-
-
-def poly_k(c: list[Any], K: Any) -> Any:
-    """``c[0] + K c[1] + K^2 c[2]`` (Horner) on a ball K."""
-    return c[0] + K * (c[1] + K * c[2])
-
-
-def _bits(poly: Any) -> float:
-    """Relative accuracy (bits) of the worst nonzero coefficient of a polynomial."""
-    worst = math.inf
-    for c in poly.coeffs():
-        if c.is_zero():
-            continue
-        worst = min(worst, c.rel_accuracy_bits())
-    return worst

@@ -8,7 +8,8 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from hapstab.analysis.exact.proof import START_PIECES, Count, Proof
+from hapstab.analysis.exact.proof import Proof
+from hapstab.analysis.exact.winding import START_PIECES, Count
 
 __all__ = ["certificate", "VERSION"]
 

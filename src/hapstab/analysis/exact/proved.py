@@ -81,6 +81,7 @@ def _prove_one(resp: LoopResponse, i: int, ss: StableSet, params: dict, full: bo
     # its own) tell which gaps to examine; when it could not count at K -> 0+ it has
     # none: examine them all
     def widen(ivs: tuple) -> tuple:
+        # 1e-6: far above the float search's ~1e-13 placement of its own ends
         return tuple((a * (1 - 1e-6), b * (1 + 1e-6)) for a, b in ivs)
     if ss.outside_small_K >= 0:
         hint, unsure = widen(ss.intervals), widen(ss.uncertain)
