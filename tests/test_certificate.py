@@ -239,3 +239,72 @@ def test_cli_certify_applies_to_the_exact_method_only():
 
     r = CliRunner().invoke(cli, ["kmax", "hve", "--method", "circle", "--certify"])
     assert r.exit_code == 2 and "--method exact only" in r.output
+
+
+# -------------------------------------------------- the preconditioned test ("N")
+def _crossing_reference(loop):
+    """(theta, K) of the first crossing from the referee alone: bisection of the
+    closed-loop matrix's spectral radius (numpy), the angle of its eigenvalue on the
+    circle there."""
+    import numpy as np
+    ref = _brute_hve(loop)
+    A0, A1 = brute.matrices(ref)
+    lo, hi = 1.0, 1e3            # the paper's HVE at n = 4: stable at 1, unstable at 1e3
+    rho = lambda K: np.abs(np.linalg.eigvals(A0 + K * A1)).max()  # noqa: E731
+    assert rho(lo) < 1 < rho(hi)
+    for _ in range(80):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if rho(mid) < 1 else (lo, mid)
+    z = np.linalg.eigvals(A0 + hi * A1)
+    top = z[np.argmax(np.abs(z))]
+    return abs(float(np.angle(top))), hi
+
+
+def test_preconditioned_test_keeps_the_crossing_and_excludes_close_to_it():
+    from flint import arb
+
+    from hapstab.engine.arb_loop import ArbLoop, arb_parameters
+    loop = h.paper_hve(delay_samples=4)
+    th, K = _crossing_reference(loop)
+    al = ArbLoop(arb_parameters(loop))
+    ball = lambda a, b: arb(a).union(arb(b))  # noqa: E731
+    # a box around the referee's crossing (theta to ~1e-8, K to ~1e-12 relative in
+    # doubles: the box is 1e-5 / 1e-7 wide, far more) is excluded by no test at all
+    how, *_ = al.exclusion(ball(th - 1e-5, th + 1e-5), ball(K * (1 - 1e-7), K * (1 + 1e-7)))
+    assert how is None
+    # a box 1e-6 below it in K, 2e-6 rad wide around its angle: the plain ball of
+    # det M holds 0 there (a rectangle around the elongated image), the
+    # preconditioned one not
+    box = ball(th - 1e-6, th + 1e-6), ball(K * (1 - 2e-6), K * (1 - 1e-6))
+    how, *_ = al.exclusion(*box)
+    assert how == "N"
+    _P, _Q, F = al.box(*box)
+    assert F.contains(0)
+
+
+def test_certificate_with_preconditioned_pieces_verifies_and_catches_a_false_one(paper_cert):
+    loop, _, cert = paper_cert
+    assert cert["version"] == 2
+    gap = _first_gap(cert)
+    n_pieces = [i for i, p in enumerate(gap["pieces"]) if p[4] == "N"]
+    assert n_pieces, "the fast path's test is not used"
+    assert h.verify_certificate(cert, loop).valid
+    # a piece excluded by P, Q or F relabelled N where N does not hold is refused;
+    # find one (the far pieces, where det M's image is not a small ellipse)
+    from flint import arb
+
+    from hapstab.engine.arb_loop import ArbLoop, preconditioned_excludes
+    al = ArbLoop(cert["loop"], cert["precision_bits"])
+    for i, p in enumerate(gap["pieces"]):
+        if p[4] == "N":
+            continue
+        a, b, ka, kb, _ = p
+        Fc, Ft, Fk = al.box_derivatives(arb(a).union(arb(b)), arb(ka).union(arb(kb)))
+        th, K = arb(a).union(arb(b)), arb(ka).union(arb(kb))
+        if not preconditioned_excludes(Fc, Ft, Fk, th.rad(), K.rad()):
+            t = copy.deepcopy(cert)
+            _first_gap(t)["pieces"][i][4] = "N"
+            chk = h.verify_certificate(t)
+            assert not chk.valid and "'N'" in chk.reason
+            return
+    pytest.skip("every piece also holds by N")

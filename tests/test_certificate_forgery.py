@@ -171,7 +171,7 @@ FORGERIES = {
     "proved_range_wrong": (lambda t: t.update(proved_range_N_per_m=[1e-30, 1e9]),
                            "proved_range_N_per_m"),
     # 7: versions and shapes
-    "version_2": (lambda t: t.update(version=2), "unknown format version"),
+    "version_3": (lambda t: t.update(version=3), "unknown format version"),
     "version_string": (lambda t: t.update(version="1"), "unknown format version"),
     "version_float": (lambda t: t.update(version=1.0), "unknown format version"),
     "version_missing": (lambda t: t.pop("version"), "unknown format version"),
@@ -183,7 +183,11 @@ FORGERIES = {
                             "excluded = 'yes': not true/false"),
     "piece_short": (lambda t: _first_gap(t)["pieces"][0].pop(), "not 4 numbers"),
     "piece_how_other": (lambda t: _first_gap(t)["pieces"][0].__setitem__(4, "Z"),
-                        "not 4 numbers and 'P', 'Q' or 'F'"),
+                        "not 4 numbers and one of 'P', 'Q', 'F', 'N' (certificate version 2)"),
+    # an N piece (the preconditioned test) exists from version 2 only
+    "version_1_with_N": (lambda t: (t.update(version=1),
+                                    _first_gap(t)["pieces"][0].__setitem__(4, "N")),
+                         "not 4 numbers and one of 'P', 'Q', 'F' (certificate version 1)"),
     "mass_string": (lambda t: t["loop"]["ports"][0].update(mass_kg="1"), "mass_kg = '1'"),
     "mass_zero": (lambda t: t["loop"]["ports"][0].update(mass_kg=0.0), "must be > 0"),
     "period_negative": (lambda t: t["loop"].update(period_s=-1e-3), "period_s = -0.001"),

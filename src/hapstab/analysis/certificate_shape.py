@@ -11,7 +11,10 @@ from hapstab.engine.arb_loop import base_point
 
 #: The certificate's ``format`` and the ``version`` numbers this checker reads.
 FORMAT = "hapstab-certificate"
-VERSIONS = (1,)
+VERSIONS = (1, 2)
+#: The reasons a piece may give for excluding 0, by version: ``N`` (the preconditioned
+#: mean-value test) from version 2, for gap pieces only (a count piece has one K).
+REASONS = {1: ("P", "Q", "F"), 2: ("P", "Q", "F", "N")}
 #: Most start pieces a certificate may ask for: the proof uses 32; a higher number
 #: only makes the replay slower, so beyond this it is refused (a valve on time).
 MAX_START_PIECES = 4096
@@ -117,11 +120,16 @@ def _check_loop_shape(loop: Any) -> None:
                            "undelayed own reading is covered")
 
 
-def _check_pieces(ps: Any, what: str, width: int) -> None:
-    """Pieces ``[theta_a, theta_b, (K_a, K_b,) how]`` with finite numbers that advance."""
+def _check_pieces(ps: Any, what: str, width: int, version: int | None = None) -> None:
+    """Pieces ``[theta_a, theta_b, (K_a, K_b,) how]`` with finite numbers that advance;
+    ``how`` one of the gap reasons of ``version`` (:data:`REASONS`), or of a count piece
+    (``P``, ``Q``, ``F``) when ``version`` is None."""
+    hows = REASONS[version] if version is not None else REASONS[1]
+    where = f" (certificate version {version})" if version is not None else ""
     for j, p in enumerate(_list(ps, what, nonempty=True)):
-        if not isinstance(p, list) or len(p) != width or p[-1] not in ("P", "Q", "F"):
-            raise _Invalid(f"{what}[{j}] = {p!r}: not {width - 1} numbers and 'P', 'Q' or 'F'")
+        if not isinstance(p, list) or len(p) != width or p[-1] not in hows:
+            raise _Invalid(f"{what}[{j}] = {p!r}: not {width - 1} numbers and one of "
+                           f"{', '.join(map(repr, hows))}{where}")
         nums = [_num(v, f"{what}[{j}]") for v in p[:-1]]
         if not (0.0 <= nums[0] < nums[1] <= math.pi):
             raise _Invalid(f"{what}[{j}]: theta in [{nums[0]!r}, {nums[1]!r}] does not advance "
@@ -131,7 +139,7 @@ def _check_pieces(ps: Any, what: str, width: int) -> None:
                            "inside (0, inf)")
 
 
-def _check_gap_shape(g: Any, i: int) -> None:
+def _check_gap_shape(g: Any, i: int, version: int) -> None:
     """One gap's fields and their agreement: an excluded gap has lo < hi and pieces; a
     count lies inside its gap."""
     what = f"gaps[{i}]"
@@ -147,7 +155,7 @@ def _check_gap_shape(g: Any, i: int) -> None:
     if g["excluded"]:
         if not hi > lo:
             raise _Invalid(f"{what}: excluded but [{lo!r}, {hi!r}] is empty")
-        _check_pieces(g["pieces"], f"{what}.pieces", 5)
+        _check_pieces(g["pieces"], f"{what}.pieces", 5, version)
     elif _list(g["pieces"], f"{what}.pieces") or g["splits"]:
         raise _Invalid(f"{what}: pieces given for a gap not excluded")
     c = g["count"]
@@ -209,7 +217,7 @@ def _check_shape(cert: Any) -> None:
                        f"K_0 = {base_point(cert['loop'])!r} (1e-14 times the smaller of m/T^2 "
                        "and b/T)")
     for i, g in enumerate(_list(cert["gaps"], "gaps", nonempty=True)):
-        _check_gap_shape(g, i)
+        _check_gap_shape(g, i, cert["version"])
     _check_claim_shape(cert, k0)
     for i, cr in enumerate(_list(cert["crossings"], "crossings")):
         what = f"crossings[{i}]"

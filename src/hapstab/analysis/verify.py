@@ -19,7 +19,8 @@ that produced it: it rebuilds the characteristic function from the certificate's
    which must equal the count claimed;
 2. **gaps** -- each excluded gap's pieces, replayed from ``start_pieces`` x [lo, hi]
    (halving theta at the midpoint, or K at the geometric mean of a wide range, else
-   the midpoint), each excluding 0 for the reason given;
+   the midpoint), each excluding 0 for the reason given (``P``, ``Q``, ``F`` or, from
+   version 2, ``N``: :func:`~hapstab.engine.arb_loop.preconditioned_excludes`);
 3. **the claim** -- every stable interval is a chain of excluded gaps with a verified
    count 0 inside, starting and ending where the interval does; K_max is the upper
    end of the one from K_0; ``kmax_upper`` has a verified count > 0 at it; each
@@ -47,7 +48,13 @@ from hapstab.analysis.certificate_shape import (
     _check_shape,
     _Invalid,
 )
-from hapstab.engine.arb_loop import ArbLoop, base_point, poly_k, working_precision
+from hapstab.engine.arb_loop import (
+    ArbLoop,
+    base_point,
+    poly_k,
+    preconditioned_excludes,
+    working_precision,
+)
 
 __all__ = ["verify_certificate", "CertificateCheck", "FORMAT", "VERSIONS"]
 
@@ -90,9 +97,15 @@ def _ball(a: float, b: float) -> Any:
 
 
 def _excludes(al: ArbLoop, a: float, b: float, ka: float, kb: float, how: str) -> bool:
-    """Whether the box [a, b] x [ka, kb] has no zero of det M, for the reason ``how``."""
+    """Whether the box [a, b] x [ka, kb] has no zero of det M, for the reason ``how``
+    (``N``: the preconditioned mean-value form, certificate version 2)."""
     from flint import arb
-    P, Q, F = al.box(_ball(a, b), arb(ka).union(arb(kb)))
+    th, K = _ball(a, b), arb(ka).union(arb(kb))
+    if how == "N":
+        Fc, Ft, Fk = al.box_derivatives(th, K, key=(a, b))
+        with working_precision(al.prec):
+            return preconditioned_excludes(Fc, Ft, Fk, th.rad(), K.rad())
+    P, Q, F = al.box(th, K, key=(a, b))
     with working_precision(al.prec):
         if how == "P":
             return bool(P.abs_lower() > Q.abs_upper())
@@ -103,7 +116,7 @@ def _excludes(al: ArbLoop, a: float, b: float, ka: float, kb: float, how: str) -
 
 def _increment(al: ArbLoop, a: float, b: float, K: Any, how: str) -> Any:
     """The proved increment of arg det M over [a, b] at K (raises _Invalid)."""
-    P, Q, F = al.box(_ball(a, b), K)
+    P, Q, F = al.box(_ball(a, b), K, key=(a, b))
     pa, qa, wa = al.parts(_ball(a, a))
     pb, qb, wb = al.parts(_ball(b, b))
     with working_precision(al.prec):

@@ -45,8 +45,10 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Any
 
+from hapstab.engine.arb_forms import Dual, accuracy_bits, dpoly_k, poly_k, preconditioned_excludes
+
 __all__ = ["ArbLoop", "arb_parameters", "working_precision", "PREC", "poly_k", "dpoly_k", "Dual",
-           "base_point", "k_scale", "damping_scale", "BASE_RATIO"]
+           "base_point", "k_scale", "damping_scale", "BASE_RATIO", "preconditioned_excludes"]
 
 #: Working precision in bits. The port polynomials cancel: with E ~ T^2/m the
 #: coefficients are 1e-35 of the unit terms for a 1e29 kg device at T = 1 ms
@@ -56,6 +58,9 @@ PREC = 320
 #: Bits of relative accuracy the port polynomials must keep (else the precision is
 #: doubled): far more than any exclusion needs, so the balls are never the bottleneck.
 MIN_BITS = 80
+#: Most angle kernels (:meth:`ArbLoop.kernel`) kept at once (memory; a proof of a
+#: long delay visits a few thousand pieces of [0, pi]).
+KERNEL_CACHE = 20000
 
 
 #: The base point K_0 standing for K -> 0+, relative to the loop's K scale (the
@@ -177,6 +182,11 @@ class _Port:
     d: Any          # acb_poly in y
     N: Any          # acb_poly in y
     order: int
+    dd: Any = None  # d'(y), N'(y): the derivatives, formed once
+    dN: Any = None
+
+    def __post_init__(self) -> None:
+        self.dd, self.dN = self.d.derivative(), self.N.derivative()
 
 
 class ArbLoop:
@@ -202,6 +212,7 @@ class ArbLoop:
 
     def __init__(self, params: dict[str, Any], prec: int = PREC) -> None:
         self.params = params
+        self._kernels: dict[Any, tuple] = {}
         while True:
             with working_precision(prec):
                 ok = self._build(params)
@@ -218,8 +229,10 @@ class ArbLoop:
         self.ports = [self._port(p, T) for p in params["ports"]]
         self.q = sum(p.order for p in self.ports)
         ch = params["channels"]
-        self.k = [arb(c["stiffness_ratio"]) for c in ch]
-        self.beta = [arb(c["damping_N_s_per_m"]) / T for c in ch]
+        # complex balls throughout: python-flint multiplies acb by acb several times
+        # faster than acb by arb (the same product)
+        self.k = [acb(arb(c["stiffness_ratio"])) for c in ch]
+        self.beta = [acb(arb(c["damping_N_s_per_m"]) / T) for c in ch]
         if len(self.ports) == 1:
             (_j, s, n), = ch[0]["terms"]
             self.n_phase, self.s = int(n), [acb(s)]
@@ -228,7 +241,7 @@ class ArbLoop:
             cross = [next(t for t in c["terms"] if t[0] != i) for i, c in enumerate(ch)]
             self.n_phase = int(cross[0][2] + cross[1][2])
             self.s = [acb(own[0][1]), acb(own[1][1]), acb(-cross[0][1] * cross[1][1])]
-        return all(_bits(p.d) >= MIN_BITS and _bits(p.N) >= MIN_BITS for p in self.ports)
+        return all(accuracy_bits(p.d) >= MIN_BITS and accuracy_bits(p.N) >= MIN_BITS for p in self.ports)
 
     @staticmethod
     def _port(p: dict[str, Any], T: Any) -> _Port:
@@ -263,22 +276,26 @@ class ArbLoop:
         w : acb (or Dual)
             ``z^-n_phase`` on the ball.
         """
-        from flint import acb
         with working_precision(self.prec):
-            jt = acb(0, theta)
-            y = jt.expm1()
-            omz = -(-jt).expm1()                 # 1 - z^-1
-            w = (-jt * self.n_phase).exp() if self.n_phase else acb(1)
-            if deriv:
-                j = acb(0, 1)
-                yd = Dual(y, j * (1 + y))
-                omzd = Dual(omz, j * (1 - omz))
-                wd = Dual(w, -j * self.n_phase * w)
-                dN = [(Dual(p.d(y), p.d.derivative()(y) * yd.d),
-                       Dual(p.N(y), p.N.derivative()(y) * yd.d)) for p in self.ports]
-                return self._combine(dN, [omzd * b for b in self.beta], wd)
-            dN = [(p.d(y), p.N(y)) for p in self.ports]
-            return self._combine(dN, [omz * b for b in self.beta], w)
+            return self._parts(theta, deriv)
+
+    def _parts(self, theta: Any, deriv: bool) -> tuple[list[Any], list[Any], Any]:
+        """:meth:`parts` at the precision already set."""
+        from flint import acb
+        jt = acb(0, theta)
+        y = jt.expm1()
+        omz = -(-jt).expm1()                 # 1 - z^-1
+        w = (-jt * self.n_phase).exp() if self.n_phase else acb(1)
+        if deriv:
+            j = acb(0, 1)
+            yd = Dual(y, j * (1 + y))
+            omzd = Dual(omz, j * (1 - omz))
+            wd = Dual(w, -j * self.n_phase * w)
+            dN = [(Dual(p.d(y), p.dd(y) * yd.d), Dual(p.N(y), p.dN(y) * yd.d))
+                  for p in self.ports]
+            return self._combine(dN, [omzd * b for b in self.beta], wd)
+        dN = [(p.d(y), p.N(y)) for p in self.ports]
+        return self._combine(dN, [omz * b for b in self.beta], w)
 
     def _combine(self, dN: list, h: list, w: Any) -> tuple[list[Any], list[Any], Any]:
         """P, Q from the port polynomials' values and h_j (acb or Dual alike)."""
@@ -296,88 +313,140 @@ class ArbLoop:
              c * (self.k[0] * self.k[1])]
         return P, Q, w
 
-    def box(self, theta: Any, K: Any) -> tuple[Any, Any, Any]:
+    def kernel(self, theta: Any, key: Any = None) -> tuple:
+        """What :meth:`box` needs of the angle alone, as coefficients in K: P, Q and
+        det M = P + w Q at the ball's centre, and the values and d/dtheta over the ball
+        (det M's combined before any K enters, so that terms of P and w Q that cancel
+        -- the K^2 terms of a two-port loop without delay -- cancel in the
+        coefficients, not in the balls). None of it depends on K, so the boxes of one
+        theta piece at many K-ranges share it (cached by ``key``, the piece's ends as
+        the caller names them; None: not cached).
+
+        Parameters
+        ----------
+        theta : arb
+            A ball of angles (rad/sample).
+        key : hashable, optional
+            The cache key of this ball (e.g. the piece's ends (a, b)).
+
+        Returns
+        -------
+        tuple
+            ``(Pm, Qm, Fm, Pd, Qd, Fd)``: lists of 3 acb, the coefficients of K^0..K^2
+            of P, Q, det M at the centre and of their d/dtheta over the ball.
+        """
+        if key is not None:
+            got = self._kernels.get(key)
+            if got is not None:
+                return got
+        from flint import arb
+        with working_precision(self.prec):
+            Pm, Qm, wm = self._parts(arb(theta.mid()), False)
+            Pt, Qt, wt = self._parts(theta, True)
+            Fm = [p + wm * q for p, q in zip(Pm, Qm, strict=True)]
+            Pd, Qd = [p.d for p in Pt], [q.d for q in Qt]
+            Fd = [p + wt.d * q.v + wt.v * dq for p, q, dq in zip(Pd, Qt, Qd, strict=True)]
+        kern = (Pm, Qm, Fm, Pd, Qd, Fd)
+        if key is not None:
+            if len(self._kernels) >= KERNEL_CACHE:
+                self._kernels.clear()
+            self._kernels[key] = kern
+        return kern
+
+    def box(self, theta: Any, K: Any, key: Any = None) -> tuple[Any, Any, Any]:
         """Balls of P, Q and det M = P + w Q over the balls ``theta`` x ``K``, in the
         centred (mean-value) form: the value at the centre plus the radii times the
-        derivatives over the box, so the overestimation is of second order.
+        derivatives over the box, so the overestimation is of second order. Each is a
+        polynomial in K with coefficients from :meth:`kernel`.
 
         Parameters
         ----------
         theta, K : arb
             Balls of angles and of stiffnesses (N/m).
+        key : hashable, optional
+            Cache key of the angle's :meth:`kernel` (the same ball every time).
 
         Returns
         -------
         P, Q, F : acb
         """
-        from flint import arb
+        from flint import acb, arb
+        Pm, Qm, Fm, Pd, Qd, Fd = self.kernel(theta, key)
         with working_precision(self.prec):
-            tm, km = arb(theta.mid()), arb(K.mid())
-            hh, kk = arb(0, theta.rad()), arb(0, K.rad())
-        Pm, Qm, wm = self.parts(tm)
-        Pd, Qd, wd = self.parts(theta, deriv=True)
-        with working_precision(self.prec):
-            Qb = poly_k([q.v for q in Qd], K)
-            dP = poly_k([p.d for p in Pd], K)
-            dQ = poly_k([q.d for q in Qd], K)
-            P = poly_k(Pm, km) + hh * dP + kk * dpoly_k(Pm, K)
-            Q = poly_k(Qm, km) + hh * dQ + kk * dpoly_k(Qm, K)
-            F = (poly_k(Pm, km) + wm * poly_k(Qm, km)
-                 + hh * (dP + wd.d * Qb + wd.v * dQ)
-                 + kk * (dpoly_k(Pm, K) + wm * dpoly_k(Qm, K)))
+            Kc, km = acb(K), acb(K.mid())         # acb: see _build
+            hh, kk = acb(arb(0, theta.rad())), acb(arb(0, K.rad()))
+            P = poly_k(Pm, km) + hh * poly_k(Pd, Kc) + kk * dpoly_k(Pm, Kc)
+            Q = poly_k(Qm, km) + hh * poly_k(Qd, Kc) + kk * dpoly_k(Qm, Kc)
+            Ft, Fk = poly_k(Fd, Kc), dpoly_k(Fm, Kc)
+            F = poly_k(Fm, km) + hh * Ft + kk * Fk
             return P, Q, F
+
+    def exclusion(self, theta: Any, K: Any, key: Any = None) -> tuple[str | None, float, float]:
+        """Whether det M has no zero on the box ``theta`` x ``K``, by the tests a
+        certificate names, in order: ``"P"`` (|P| > |Q|: then |det M| >= |P| - |Q| > 0
+        whatever the delay's phase), ``"Q"`` (|Q| > |P|), ``"F"`` (0 not in det M's
+        ball), ``"N"`` (0 not in the preconditioned ball); the balls are :meth:`box`'s,
+        each formed only when the test before it fails.
+
+        Parameters
+        ----------
+        theta, K : arb
+            Balls of angles and of stiffnesses (N/m).
+        key : hashable, optional
+            Cache key of the angle's :meth:`kernel`.
+
+        Returns
+        -------
+        how : {"P", "Q", "F", "N"} or None
+            The test that excludes the box (None: none does); ``"N"``: the
+            preconditioned mean-value form (:func:`preconditioned_excludes`).
+        spread_theta, spread_K : float
+            With ``how`` None: upper bounds of |d det M/d theta| rad(theta) and
+            |d det M/dK| rad(K) over the box, the widths of det M's ball due to each
+            (to choose a split); else 0.
+        """
+        from flint import acb, arb
+        Pm, Qm, Fm, Pd, Qd, Fd = self.kernel(theta, key)
+        with working_precision(self.prec):
+            Kc, km = acb(K), acb(K.mid())         # the same balls as box()
+            hh, kk = acb(arb(0, theta.rad())), acb(arb(0, K.rad()))
+            P = poly_k(Pm, km) + hh * poly_k(Pd, Kc) + kk * dpoly_k(Pm, Kc)
+            Q = poly_k(Qm, km) + hh * poly_k(Qd, Kc) + kk * dpoly_k(Qm, Kc)
+            if P.abs_lower() > Q.abs_upper():
+                return "P", 0.0, 0.0
+            if Q.abs_lower() > P.abs_upper():
+                return "Q", 0.0, 0.0
+            Ft, Fk = poly_k(Fd, Kc), dpoly_k(Fm, Kc)
+            Fc = poly_k(Fm, km)
+            F = Fc + hh * Ft + kk * Fk
+            if not F.contains(0):
+                return "F", 0.0, 0.0
+            if preconditioned_excludes(Fc, Ft, Fk, theta.rad(), K.rad()):
+                return "N", 0.0, 0.0
+            return None, float(Ft.abs_upper() * theta.rad()), float(Fk.abs_upper() * K.rad())
+
+    def box_derivatives(self, theta: Any, K: Any, key: Any = None) -> tuple[Any, Any, Any]:
+        """det M at the box's centre and its derivatives over the box, as :meth:`box`
+        forms them: ``(F_c, dF/dtheta, dF/dK)`` (acb), for the preconditioned test
+        (:func:`preconditioned_excludes`)."""
+        from flint import acb
+        _Pm, _Qm, Fm, _Pd, _Qd, Fd = self.kernel(theta, key)
+        with working_precision(self.prec):
+            Kc, km = acb(K), acb(K.mid())
+            return poly_k(Fm, km), poly_k(Fd, Kc), dpoly_k(Fm, Kc)
 
     def value(self, theta: Any, K: Any) -> Any:
         """det M on the balls ``theta`` (arb) and ``K`` (arb, N/m): an acb ball."""
-        P, Q, w = self.parts(theta)
+        from flint import acb
         with working_precision(self.prec):
-            return poly_k(P, K) + w * poly_k(Q, K)
+            P, Q, w = self._parts(theta, False)
+            Kc = acb(K)
+            return poly_k(P, Kc) + w * poly_k(Q, Kc)
 
     def dvalue_dk(self, theta: Any, K: Any) -> Any:
         """d det M / dK on the balls (for Newton's method and the crossing's direction)."""
-        P, Q, w = self.parts(theta)
+        from flint import acb
         with working_precision(self.prec):
-            return P[1] + 2 * K * P[2] + w * (Q[1] + 2 * K * Q[2])
-
-
-class Dual:
-    """A value and its derivative (forward mode), over acb balls."""
-
-    __slots__ = ("d", "v")
-
-    def __init__(self, v: Any, d: Any) -> None:
-        self.v, self.d = v, d
-
-    def __add__(self, o: Any) -> Dual:
-        if isinstance(o, Dual):
-            return Dual(self.v + o.v, self.d + o.d)
-        return Dual(self.v + o, self.d)
-
-    __radd__ = __add__
-
-    def __mul__(self, o: Any) -> Dual:
-        if isinstance(o, Dual):
-            return Dual(self.v * o.v, self.v * o.d + self.d * o.v)
-        return Dual(self.v * o, self.d * o)
-
-    __rmul__ = __mul__
-
-
-def dpoly_k(c: list[Any], K: Any) -> Any:
-    """``c[1] + 2 K c[2]``: the derivative in K of :func:`poly_k`."""
-    return c[1] + 2 * K * c[2]
-
-
-def poly_k(c: list[Any], K: Any) -> Any:
-    """``c[0] + K c[1] + K^2 c[2]`` (Horner) on a ball K."""
-    return c[0] + K * (c[1] + K * c[2])
-
-
-def _bits(poly: Any) -> float:
-    """Relative accuracy (bits) of the worst nonzero coefficient of a polynomial."""
-    worst = math.inf
-    for c in poly.coeffs():
-        if c.is_zero():
-            continue
-        worst = min(worst, c.rel_accuracy_bits())
-    return worst
+            P, Q, w = self._parts(theta, False)
+            Kc = acb(K)
+            return P[1] + 2 * Kc * P[2] + w * (Q[1] + 2 * Kc * Q[2])

@@ -8,9 +8,14 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from hapstab.analysis.exact.proof import START_PIECES, Count, Proof
+from hapstab.analysis.exact.proof import Proof
+from hapstab.analysis.exact.winding import START_PIECES, Count
 
-__all__ = ["certificate"]
+__all__ = ["certificate", "VERSION"]
+
+#: 2: gap pieces may be excluded by ``N`` (the preconditioned mean-value form); a
+#: version-1 certificate (``P``, ``Q``, ``F`` only) is still verified.
+VERSION = 2
 
 def _count_json(c: Count) -> dict[str, Any]:
     return {"K_N_per_m": c.K, "outside": c.outside, "pieces": [list(p) for p in c.pieces]}
@@ -48,11 +53,15 @@ def certificate(pr: Proof) -> dict[str, Any]:
                      "splits": "".join(g.exclusion.splits) if excluded else "",
                      "count": None if counted is None else _count_json(counted)})
     crossings = []
+    below_of: dict[float, Any] = {}       # the first gap ending / starting at each K
+    above_of: dict[float, Any] = {}
+    for g in pr.gaps:
+        if g.counted and g.proved and g.hi > g.lo:
+            below_of.setdefault(g.hi, g.outside)
+        if g.counted and (g.proved or g.counted.K == g.lo):
+            above_of.setdefault(g.lo, g.outside)
     for lo, hi, th in pr.windows:
-        below = next((g.outside for g in pr.gaps if g.hi == lo and g.counted and g.proved
-                      and g.hi > g.lo), None)
-        above = next((g.outside for g in pr.gaps if g.lo == hi and g.counted and
-                      (g.proved or g.counted.K == hi)), None)
+        below, above = below_of.get(lo), above_of.get(hi)
         if below is None or above is None:
             continue
         d = "outwards" if above > below else "inwards" if above < below else "touching"
@@ -65,7 +74,7 @@ def certificate(pr: Proof) -> dict[str, Any]:
     # when the tail above the top is proved too, the certificate still covers only
     # [K_0, top], which is what its pieces show)
     kmax = next((b for a, b in pr.intervals if a == pr.k0), 0.0)
-    return {"format": "hapstab-certificate", "version": 1, "loop": pr.params,
+    return {"format": "hapstab-certificate", "version": VERSION, "loop": pr.params,
             "precision_bits": pr.prec, "start_pieces": START_PIECES,
             "base_point_N_per_m": pr.k0, "top_N_per_m": pr.k_top,
             "proved_range_N_per_m": [pr.k0, kmax] if kmax > 0 else None,

@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from hapstab.analysis.exact.boxes import THETA_FLOOR, U_LO, _dpoly
+from hapstab.analysis.exact.boxes import THETA_FLOOR, U_HI, U_LO, _dpoly
 from hapstab.analysis.exact.stable_set import StableSet, first_only, stable_set
 from hapstab.engine.frequency import LoopResponse
 from hapstab.errors import AnalysisError
@@ -104,7 +104,8 @@ def _coefficients(resp: LoopResponse, it: np.ndarray, th: np.ndarray, rho: np.nd
     return [type(j)(j.vc[inv], j.vr[inv], j.dc[inv], j.dr[inv]) for j in F]
 
 
-def gap_counts(resp: LoopResponse, anchor: np.ndarray, events: Sequence[list[Any]]) -> Known:
+def gap_counts(resp: LoopResponse, anchor: np.ndarray, events: Sequence[list[Any]],
+               check: np.ndarray | None = None) -> Known:
     """Every count the full stable sets of ``resp``'s items ask for that is known in
     advance (after each unresolved zone, and :func:`_verify`'s gaps), computed in
     batched calls of :func:`winding` of at most :data:`WIND_ROWS` rows.
@@ -116,6 +117,8 @@ def gap_counts(resp: LoopResponse, anchor: np.ndarray, events: Sequence[list[Any
         Poles outside at U_LO per item (-1: not certified; such an item needs none).
     events : list of list
         Each item's events (:func:`_events`).
+    check : (L,) array of bool, optional
+        Items whose counts :func:`_verify` cross-checks (default all).
 
     Returns
     -------
@@ -125,7 +128,9 @@ def gap_counts(resp: LoopResponse, anchor: np.ndarray, events: Sequence[list[Any
     reqs: list[tuple[int, float]] = []
     for i, ev in enumerate(events):
         if anchor[i] >= 0 and ev:
-            reqs += [(i, u) for u in _zone_points(ev)] + [(i, u) for u in _verify_points(ev)[1]]
+            reqs += [(i, u) for u in _zone_points(ev, check is None or bool(check[i]))]
+            if check is None or check[i]:
+                reqs += [(i, u) for u in _verify_points(ev)[1]]
     reqs = list(dict.fromkeys(reqs))
     per = max(1, WIND_ROWS // max(8, int(np.ceil(np.pi * resp.phase_rate / 1.2))))
     known: Known = {}
@@ -150,9 +155,11 @@ def _gap_point(events: list[Any], g: int) -> float:
     return math.sqrt(b * hi) if hi > b else b
 
 
-def _zone_points(events: list[Any]) -> list[float]:
-    """The gap points after each unresolved zone (multiplicity 0)."""
-    return [_gap_point(events, g) for g, ev in enumerate(events) if ev[4] == 0]
+def _zone_points(events: list[Any], top: bool = True) -> list[float]:
+    """The gap points after each unresolved zone (multiplicity 0); ``top`` False: not
+    after a zone that reaches U_HI (see :func:`_counts`)."""
+    return [_gap_point(events, g) for g, ev in enumerate(events)
+            if ev[4] == 0 and (top or ev[1] < U_HI)]
 
 
 def _verify_points(events: list[Any]) -> tuple[list[int], list[float]]:
@@ -179,10 +186,11 @@ def _events(cross, unsure) -> tuple[list[tuple[float, float]], list[Any]]:
 
 
 def _classify(resp: LoopResponse, i: int, anchor: int, cross, unsure, full: bool,
-              known: Known | None = None) -> StableSet:
+              known: Known | None = None, check: bool = True) -> StableSet:
     """Item i's stable set from the count of poles outside at U_LO (``anchor``, -1:
     not certified), its crossings and its unresolved zones; ``known``: counts
-    already computed (:func:`gap_counts`)."""
+    already computed (:func:`gap_counts`); ``check``: cross-check the counts from
+    the crossings' directions by the argument principle (:func:`_verify`)."""
     s = float(resp.scale[i])
     _unc, events = _events(cross, unsure)
     base: dict[str, Any] = {"rigid": resp.rigid, "outside_small_K": anchor,
@@ -192,21 +200,26 @@ def _classify(resp: LoopResponse, i: int, anchor: int, cross, unsure, full: bool
                          uncertain=((0.0, U_LO * s),))
     if not full:
         return StableSet(**base, **first_only(events, anchor, s))
-    counts = _counts(resp, i, events, anchor, known)
-    _verify(resp, i, events, counts, known)
+    counts = _counts(resp, i, events, anchor, known, check)
+    if check:
+        _verify(resp, i, events, counts, known)
     return StableSet(**base, **stable_set(events, counts, s))
 
 
 def _counts(resp: LoopResponse, i: int, events: list[Any], anchor: int,
-            known: Known | None = None) -> list[int | None]:
+            known: Known | None = None, top: bool = True) -> list[int | None]:
     """The number of poles outside in each gap between events: each crossing changes
     it by its direction times its multiplicity; after an unresolved zone it is
     counted anew by the argument principle (None: not certifiable either, so that
-    gap is not claimed stable)."""
+    gap is not claimed stable). ``top`` False (a ball proof follows, which examines
+    nothing above U_HI): the gap above a zone that reaches U_HI is not counted (None)
+    -- at such K the count costs the most and decides nothing the proof uses."""
     counts: list[int | None] = [anchor]
-    for g, (_a, _b, _t, d, m) in enumerate(events):
+    for g, (_a, b, _t, d, m) in enumerate(events):
         prev = counts[-1]
-        if m == 0 or prev is None:
+        if m == 0 and not top and b >= U_HI:
+            counts.append(None)
+        elif m == 0 or prev is None:
             nxt = _wind(resp, i, [_gap_point(events, g)], known)[0]
             counts.append(nxt if nxt >= 0 else None)
         else:

@@ -344,11 +344,16 @@ def analyse(resp: LoopResponse, full: bool = True, proof: bool = False) -> list[
                    start=(c, first)) if need.size else \
         Found([[] for _ in range(L)], [[] for _ in range(L)])
     cross = [_dedupe(found.cross[i]) for i in range(L)]
+    # the float cross-check of the counts from the crossings' directions (a safety net
+    # of this search: the directions are certified by the isolating boxes) is left to
+    # the ball proof where one follows: it counts, in balls, every gap it claims
+    check = np.array([not (proof and resp.params and resp.params[i] is not None)
+                      for i in range(L)])
     # the counts the stable sets need, for every item in a few batched calls
-    known = gap_counts(resp, anchor, [_events(cross[i], found.unsure[i])[1] for i in range(L)]) \
-        if full else None
-    sets = [_classify(resp, i, int(anchor[i]), cross[i], found.unsure[i], full, known)
-            for i in range(L)]
+    known = gap_counts(resp, anchor, [_events(cross[i], found.unsure[i])[1] for i in range(L)],
+                       check) if full else None
+    sets = [_classify(resp, i, int(anchor[i]), cross[i], found.unsure[i], full, known,
+                      bool(check[i])) for i in range(L)]
     if not proof or not any(p is not None for p in resp.params):
         return sets
     from hapstab.analysis.exact.proved import prove_sets

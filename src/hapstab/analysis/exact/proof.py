@@ -40,7 +40,16 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from hapstab.analysis.exact.polish import polish
-from hapstab.engine.arb_loop import ArbLoop, poly_k, working_precision
+from hapstab.analysis.exact.winding import (
+    FLOOR,
+    MAX_PIECES,
+    Count,
+    count,
+    k_ball,
+    start_pieces,
+    theta_ball,
+)
+from hapstab.engine.arb_loop import ArbLoop
 
 __all__ = ["Proof", "prove", "prove_base", "count", "exclude", "theta_ball", "DELTA"]
 
@@ -48,37 +57,18 @@ __all__ = ["Proof", "prove", "prove_base", "count", "exclude", "theta_ball", "DE
 #: K_max may lie below the truth, and far above the working precision's reach
 #: (Newton places the crossing to ~1e-60 at 320 bits), so a window always holds it.
 DELTA = 2.0 ** -40
-#: Pieces of [0, pi] a search starts from.
-START_PIECES = 32
-#: A piece narrower than this relative to its upper end (theta or K) is not split again:
-#: the proof gives up there (double-precision ends cannot be halved much further).
-FLOOR = 4e-16
-#: Most pieces one exclusion or count may try (a valve on time: beyond it, uncertain).
-MAX_PIECES = 4000
-
-
-def theta_ball(a: float, b: float) -> Any:
-    """The ball holding [a, b]; an end equal to ``math.pi`` stands for pi itself."""
-    from flint import arb
-    lo = arb.pi() if a == math.pi else arb(a)
-    hi = arb.pi() if b == math.pi else arb(b)
-    return lo.union(hi)
-
-
-def k_ball(a: float, b: float) -> Any:
-    """The ball holding [a, b] (N/m)."""
-    from flint import arb
-    return arb(a).union(arb(b))
-
-
-# ----------------------------------------------------------------- exclusion
-def _start(n: int = START_PIECES) -> list[tuple[float, float]]:
-    """The n equal pieces of [0, pi] (the last ends at pi itself), the first cut again
-    at pi/n 2^-k, k = 1..40 (the poles of a fast-sampled loop crowd z = 1, theta = 0)."""
-    step = math.pi / n
-    near = [(0.0, step * 2.0 ** -40)] + [(step * 2.0 ** -k, step * 2.0 ** (1 - k))
-                                          for k in range(40, 0, -1)]
-    return near + [(i * step, math.pi if i == n - 1 else (i + 1) * step) for i in range(1, n)]
+#: The valve for a gap above K_max's window that meets only a zone the float search
+#: left unresolved (not its stable set): such zones lie where |P| ~ |Q| over all of
+#: [0, pi] (high K on a long delay), where no piece budget short of ~n settles them,
+#: and they are reported uncertain either way; a valve on time, not a tolerance.
+MAX_PIECES_UNSURE = 400
+#: Half-width of the window of a candidate that is not polished (relative): the float
+#: search places its crossings to ~1e-13, so the window holds the crossing; a gap
+#: beside it that is examined then proves up to 1e-9 below the truth (the safe side).
+ROUGH = 1e-9
+#: Widening of the float search's intervals when choosing which candidates to polish
+#: (relative, far above ROUGH: see :func:`_needs_polish`).
+HINT_MARGIN = 1e-6
 
 
 def box_status(al: ArbLoop, a: float, b: float, ka: float, kb: float) -> tuple[str | None, float]:
@@ -91,34 +81,16 @@ def box_status(al: ArbLoop, a: float, b: float, ka: float, kb: float) -> tuple[s
         ``"P"``: |P| > |Q| on the box; ``"Q"``: |Q| > |P|; ``"F"``: 0 not in the ball
         of P + w Q; None: not excluded.
     theta_share : float
-        In [0, 1]: how much of the width comes from theta rather than K.
+        In [0, 1]: how much of the ball's width comes from theta rather than K (the
+        spreads :meth:`~hapstab.engine.arb_loop.ArbLoop.exclusion` returns; 0 when
+        excluded).
     """
-    Pv, Qv, F = al.box(theta_ball(a, b), k_ball(ka, kb))
-    with working_precision(al.prec):
-        if Pv.abs_lower() > Qv.abs_upper():
-            return "P", 0.0
-        if Qv.abs_lower() > Pv.abs_upper():
-            return "Q", 0.0
-        if not F.contains(0):
-            return "F", 0.0
-        share = _theta_share(al, a, b, ka, kb)
-    return None, share
-
-
-def _radius(al: ArbLoop, th: Any, K: Any) -> float:
-    """Radius of the ball of det M on (th, K) (inf if not finite)."""
-    r = float(al.value(th, K).rad())
-    return r if math.isfinite(r) else math.inf
-
-
-def _theta_share(al: ArbLoop, a: float, b: float, ka: float, kb: float) -> float:
-    """How much of the ball's width the angle causes: the radius with theta at its
-    midpoint against the radius with K at its midpoint (chooses the split only)."""
-    from flint import arb
-    m, km = 0.5 * (a + b), 0.5 * (ka + kb)
-    r_k = _radius(al, arb(m), k_ball(ka, kb))
-    r_t = _radius(al, theta_ball(a, b), arb(km))
-    return 1.0 if r_t >= r_k else 0.0
+    how, s_t, s_k = al.exclusion(theta_ball(a, b), k_ball(ka, kb), key=(a, b))
+    if how is not None:
+        return how, 0.0
+    if not (math.isfinite(s_t) and math.isfinite(s_k)):
+        return None, 1.0 if not math.isfinite(s_t) else 0.0
+    return None, s_t / (s_t + s_k) if s_t + s_k > 0 else 0.5
 
 
 @dataclass
@@ -152,7 +124,7 @@ def exclude(al: ArbLoop, ka: float, kb: float, max_pieces: int = MAX_PIECES) -> 
     out = Exclusion()
     # boxes by their lowest K first: when the valve closes, what is left lies above
     # everything proved, so the proved part of the gap is [ka, lowest K left]
-    heap = [(ka, a, b, kb) for a, b in _start()]
+    heap = [(ka, a, b, kb) for a, b in start_pieces()]
     heapq.heapify(heap)
     tried = 0
     while heap:
@@ -186,95 +158,6 @@ def exclude(al: ArbLoop, ka: float, kb: float, max_pieces: int = MAX_PIECES) -> 
 
 
 # ----------------------------------------------------------------- counting
-def _point(al: ArbLoop, t: float, K: Any, cache: dict) -> tuple[Any, Any, Any]:
-    """P, Q (at K) and w at the exact angle t (cached)."""
-    if t not in cache:
-        P, Q, w = al.parts(theta_ball(t, t))
-        with working_precision(al.prec):
-            cache[t] = (poly_k(P, K), poly_k(Q, K), w)
-    return cache[t]
-
-
-def piece_increment(al: ArbLoop, a: float, b: float, K: Any, cache: dict) -> tuple[str | None, Any]:
-    """The increment of arg det M over [a, b] at K, and how it is proved.
-
-    ``"P"``: |P| > |Q| on the piece, arg det M = arg P + arg(1 + w Q / P) with the
-    second term in (-pi/2, pi/2); ``"Q"``: |Q| > |P|, arg det M = arg Q - n theta +
-    arg(1 + P / (w Q)); ``"F"``: the ball of det M excludes 0. Each principal value is
-    the true increment because the function stays in a convex ball excluding 0 (or in
-    the right half-plane). None: no proof on this piece.
-    """
-    Pv, Qv, Fv = al.box(theta_ball(a, b), K)
-    with working_precision(al.prec):
-        Pa, Qa, wa = _point(al, a, K, cache)
-        Pb, Qb, wb = _point(al, b, K, cache)
-        if Pv.abs_lower() > Qv.abs_upper():
-            return "P", ((Pb / Pa).arg() + (1 + wb * Qb / Pb).arg() - (1 + wa * Qa / Pa).arg())
-        if Qv.abs_lower() > Pv.abs_upper():
-            dth = theta_ball(b, b) - theta_ball(a, a)
-            return "Q", ((Qb / Qa).arg() - al.n_phase * dth
-                         + (1 + Pb / (wb * Qb)).arg() - (1 + Pa / (wa * Qa)).arg())
-        if not Fv.contains(0):
-            Fa, Fb = Pa + wa * Qa, Pb + wb * Qb
-            return "F", (Fb / Fa).arg()
-    return None, None
-
-
-@dataclass
-class Count:
-    """Poles outside at K (None: not proved), with the pieces of [0, pi] used."""
-    K: float
-    outside: int | None
-    pieces: list[tuple[float, float, str]] = field(default_factory=list)
-
-
-def count(al: ArbLoop, K: float, max_pieces: int = MAX_PIECES) -> Count:
-    """Poles of the closed loop outside the unit circle at stiffness K, by the
-    argument principle in balls (module doc, 3).
-
-    Parameters
-    ----------
-    al : ArbLoop
-    K : float
-        Stiffness (N/m).
-    max_pieces : int
-        Safety valve on the number of pieces tried.
-
-    Returns
-    -------
-    Count
-        ``outside`` None when a piece at the floor keeps 0 in its ball (a pole on
-        or within the balls' width of the circle) or the valve closed.
-    """
-    from flint import arb
-    Kb = arb(K)
-    cache: dict = {}
-    res = Count(K, None)
-    stack = _start()[::-1]
-    total = arb(0)
-    tried = 0
-    while stack:
-        a, b = stack.pop()
-        tried += 1
-        if tried > max_pieces:
-            return res
-        how, inc = piece_increment(al, a, b, Kb, cache)
-        if how is not None:
-            res.pieces.append((a, b, how))
-            with working_precision(al.prec):
-                total = total + inc
-            continue
-        if (b - a) <= FLOOR * b:
-            return res
-        m = 0.5 * (a + b)
-        stack += [(m, b), (a, m)]
-    with working_precision(al.prec):
-        turns = (total / arb.pi()).unique_fmpz()
-    if turns is not None:
-        res.outside = al.q - int(turns)
-    return res
-
-
 # ----------------------------------------------------------------- polishing
 @dataclass
 class Gap:
@@ -336,22 +219,29 @@ class Proof:
     tail_proved: bool = False
 
 
-def _windows(al: ArbLoop, events: tuple, k0: float, k_top: float) -> list[tuple[float, float, float]]:
-    """Windows around the polished candidates (merged where they overlap); the zones
-    the float search left unresolved are not windows (the exclusion examines them)."""
+def _windows(al: ArbLoop, events: tuple, k0: float, k_top: float,
+             polish_if: Any = None) -> list[tuple[float, float, float]]:
+    """Windows around the candidates (merged where they overlap); the zones the float
+    search left unresolved are not windows (the exclusion examines them).
+
+    ``polish_if(ka)``: whether the candidate at ``ka`` (N/m, the float search's) is
+    polished (default all); the others get the rough window ``ka (1 +- ROUGH)``, as a
+    candidate Newton's method does not settle does. A window only bounds the gaps
+    either side, so one whose gaps are not examined need not be polished."""
     wins = []
     for ka, _kb, t, _d, m in events:
         if m == 0 or not math.isfinite(t):
             continue        # a zone the float search left: the exclusion decides it
+        if ka * (1 + ROUGH) <= k0 or ka * (1 - ROUGH) >= k_top:
+            continue
+        got = None
+        if polish_if is None or polish_if(ka):
+            got = polish(al, t, ka, t == 0.0 or t == math.pi)
+        if got is None:
+            lo, hi, th = ka * (1 - ROUGH), ka * (1 + ROUGH), t
         else:
-            real = t == 0.0 or t == math.pi
-            got = polish(al, t, ka, real)
-            if got is None:
-                # unpolished: a 1e-9 window (the float search's accuracy) bounds nothing claimed
-                lo, hi, th = ka * (1 - 1e-9), ka * (1 + 1e-9), t
-            else:
-                th, k = got
-                lo, hi = k * (1 - DELTA), k * (1 + DELTA)
+            th, k = got
+            lo, hi = k * (1 - DELTA), k * (1 + DELTA)
         if hi > k0 and lo < k_top:
             wins.append((max(lo, k0), hi, th))
     wins.sort()
@@ -364,34 +254,69 @@ def _windows(al: ArbLoop, events: tuple, k0: float, k_top: float) -> list[tuple[
     return merged
 
 
+def _first_only(events: tuple, k0: float) -> tuple:
+    """The candidates K_max alone needs: those up to the first one above K_0 (and any
+    within ROUGH of it, which may merge into its window), and every zone below it."""
+    cands = sorted(e for e in events if e[4] != 0 and math.isfinite(e[2])
+                   and e[0] * (1 + ROUGH) > k0)
+    if not cands:
+        return events
+    top = cands[0][0] * (1 + 4 * ROUGH)
+    return tuple(e for e in events if e[0] <= top)
+
+
+def _needs_polish(events: tuple, hint: tuple, k0: float) -> Any:
+    """For the full set: a candidate is polished when a gap beside it may be examined:
+    the two lowest (K_max's window, and the gap above it is counted), and those whose
+    neighbouring gap meets the float search's stable set or unresolved zones
+    (``hint``, widened by HINT_MARGIN so that the windows' final ends, within ROUGH of
+    the float ones, cannot bring in a gap that was not foreseen)."""
+    ks = sorted(e[0] for e in events if e[4] != 0 and math.isfinite(e[2])
+                and e[0] * (1 + ROUGH) > k0)      # those _windows keeps
+    need = set(ks[:2])
+    wide = [(a * (1 - HINT_MARGIN), b * (1 + HINT_MARGIN)) for a, b in hint]
+    edges = [0.0, *ks, math.inf]
+    for g in range(1, len(edges) - 1):
+        lo, hi = edges[g], edges[g + 1]
+        if any(a <= hi and lo <= b for a, b in wide):
+            need.update(k for k in (lo, hi) if math.isfinite(k))
+    return lambda ka: ka in need
+
+
 def _inside(lo: float, hi: float) -> float:
     """A point inside [lo, hi] (geometric mean of a wide range, else the midpoint)."""
     return math.sqrt(lo * hi) if hi > 4 * lo else 0.5 * (lo + hi)
 
 
 def _prove_gap(al: ArbLoop, lo: float, hi: float, base: Count | None,
-               above: int = 0) -> list[Gap]:
+               above: int = 0, valve: int = MAX_PIECES) -> list[Gap]:
     """Exclusion over [lo, hi]; if it fails, the part below the lowest box left is
     proved again on its own, the zone from there is not proved, and (``above`` > 0
-    more times) the part above it is examined. Each proved part is counted (``base``
-    when it lies inside)."""
-    ex = exclude(al, lo, hi)
+    more times) the part above it is examined; with ``above`` spent, everything from
+    the lowest box left up to ``hi`` is the unproved zone. Each proved part is counted (``base``
+    when it lies inside). ``valve``: the most pieces of each exclusion and count."""
+    ex = exclude(al, lo, hi, valve)
     if not ex.failed:
-        c = base if base is not None and lo <= base.K <= hi else count(al, _inside(lo, hi))
+        c = base if base is not None and lo <= base.K <= hi else \
+            count(al, _inside(lo, hi), valve)
         return [Gap(lo, hi, True, c.outside, ex, c)]
     first = min(f[2] for f in ex.failed)
     top = min(min((f[3] for f in ex.failed if f[2] == first), default=hi), hi)
     gaps: list[Gap] = []
     if first > lo:
-        gaps += _prove_gap(al, lo, first, base)
-    gaps.append(Gap(first, top, False, None, Exclusion(), None))
+        gaps += _prove_gap(al, lo, first, base, 0, valve)
     if above > 0 and top < hi:
-        gaps += _prove_gap(al, top, hi, base, above - 1)
+        gaps.append(Gap(first, top, False, None, Exclusion(), None))
+        gaps += _prove_gap(al, top, hi, base, above - 1, valve)
+    else:
+        # not examined further: the whole rest of the gap is not proved (and so reported
+        # uncertain), not only the zone of the failed box
+        gaps.append(Gap(first, hi, False, None, Exclusion(), None))
     return gaps
 
 
 def prove(params: dict[str, Any], events: tuple, k0: float, k_top: float,
-          full: bool, hint: tuple = ((0.0, math.inf),)) -> Proof:
+          full: bool, hint: tuple = ((0.0, math.inf),), unsure: tuple = ()) -> Proof:
     """Prove the stable set around the float search's candidates (module doc).
 
     Parameters
@@ -403,11 +328,16 @@ def prove(params: dict[str, Any], events: tuple, k0: float, k_top: float,
     k0, k_top : float
         The base point (K -> 0+) and the top of the K range examined (N/m).
     full : bool
-        Every stable interval up to ``k_top`` (True) or K_max alone.
+        Every stable interval up to ``k_top`` (True) or K_max alone (then only the
+        first candidate is polished and its window proved).
     hint : tuple of (float, float)
         The float search's stable intervals: a gap above the first window that meets
-        none of them is not examined (it is not claimed stable; the float search
-        counted poles outside there), which saves the counts of the unstable gaps.
+        none of them (nor ``unsure``) is not examined (it is not claimed stable; the
+        float search counted poles outside there), which saves the counts of the
+        unstable gaps; its candidates are not polished either.
+    unsure : tuple of (float, float)
+        The zones the float search left unresolved: a gap above the first window that
+        meets only these is examined with the smaller valve MAX_PIECES_UNSURE.
 
     Returns
     -------
@@ -415,30 +345,46 @@ def prove(params: dict[str, Any], events: tuple, k0: float, k_top: float,
     """
     al = ArbLoop(params)
     base = count(al, k0)
-    wins = _windows(al, events, k0, k_top)
-    if not full and base.outside != 0:       # K_max is 0 (or not proved): nothing to exclude
-        return _assemble(al, params, k0, k_top, wins,
-                         [Gap(k0, k0, True, base.outside, Exclusion(), base)], base)
     if not full:
+        wins = _windows(al, _first_only(events, k0), k0, k_top)
+        if base.outside != 0:       # K_max is 0 (or not proved): nothing to exclude
+            return _assemble(al, params, k0, k_top, wins,
+                             [Gap(k0, k0, True, base.outside, Exclusion(), base)], base)
         gaps = _prove_gap(al, k0, wins[0][0] if wins else k_top, base)
         if wins and all(g.proved and g.outside == 0 for g in gaps):
             after = count(al, wins[0][1])         # instability just above the window
             gaps.append(Gap(wins[0][1], wins[0][1], True, after.outside, Exclusion(), after))
         return _assemble(al, params, k0, k_top, wins, gaps, base)
+    wins = _windows(al, events, k0, k_top, _needs_polish(events, hint + unsure, k0))
     edges = [k0] + [w[1] for w in wins]
     tops = [w[0] for w in wins] + [k_top]
     gaps = []
     for g, (lo, hi) in enumerate(zip(edges, tops, strict=True)):
         if hi <= lo:
             continue
+        valve = MAX_PIECES
         if g > 1 and not any(a <= hi and lo <= b for a, b in hint):
-            gaps.append(Gap(lo, hi, False, None, Exclusion(), None, True))
-            continue
-        c = base if g == 0 else count(al, lo)
+            zones = [(a, b) for a, b in unsure if a <= hi and lo <= b]
+            if not zones:
+                gaps.append(Gap(lo, hi, False, None, Exclusion(), None, True))
+                continue
+            # only the part the float search left unresolved is examined (it counted
+            # poles outside in the rest), with the smaller valve
+            valve = MAX_PIECES_UNSURE
+            a, b = max(lo, min(z[0] for z in zones)), min(hi, max(z[1] for z in zones))
+            if a > lo:
+                gaps.append(Gap(lo, a, False, None, Exclusion(), None, True))
+            lo, tail = a, (b, hi) if b < hi else None
+            hi = b
+        else:
+            tail = None
+        c = base if g == 0 else count(al, lo, valve)
         if c.outside:       # unstable there: counted, not excluded (see Gap.sampled)
             gaps.append(Gap(lo, hi, False, c.outside, Exclusion(), c, True))
         else:
-            gaps += _prove_gap(al, lo, hi, c, 1)
+            gaps += _prove_gap(al, lo, hi, c, 1, valve)
+        if tail is not None:
+            gaps.append(Gap(*tail, False, None, Exclusion(), None, True))
     return _assemble(al, params, k0, k_top, wins, gaps, base)
 
 
@@ -478,11 +424,10 @@ def _assemble(al: ArbLoop, params: dict[str, Any], k0: float, k_top: float,
     if not tail and any(g.proved and g.outside == 0 and g.hi == k_top for g in gaps):
         uncertain.append((k_top, math.inf))    # not examined above the top: not claimed
     # a window between two stable gaps: what happens inside is not proved
-    for lo, hi, _t in wins:
-        below = any(g.hi == lo and g.proved and g.outside == 0 for g in gaps)
-        above = any(g.lo == hi and g.proved and g.outside == 0 and g.hi > g.lo for g in gaps)
-        if below and above:
-            uncertain.append((lo, hi))
+    stable = [g for g in gaps if g.proved and g.outside == 0]
+    tops = {g.hi for g in stable}
+    bottoms = {g.lo for g in stable if g.hi > g.lo}
+    uncertain += [(lo, hi) for lo, hi, _t in wins if lo in tops and hi in bottoms]
     return Proof(params, k0, wins, gaps, intervals, kmax, kmax_hi, sorted(set(uncertain)),
                  theta, al.prec, k_top, base.outside, tail)
 

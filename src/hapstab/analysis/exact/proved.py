@@ -77,17 +77,23 @@ def _prove_one(resp: LoopResponse, i: int, ss: StableSet, params: dict, full: bo
             return _from_proof(ss, _unstable(al, params, k0, k_top, base))
         events = search(item_response(resp, i)).events
     from hapstab.analysis.exact.proof import prove
-    # the float search's stable set (widened by 1e-6: its ends are its own) tells which
-    # gaps to examine; when it could not count at K -> 0+ it has none: examine them all
-    hint = tuple((a * (1 - 1e-6), b * (1 + 1e-6)) for a, b in ss.intervals + ss.uncertain) \
-        if ss.outside_small_K >= 0 else ((0.0, math.inf),)
-    pr = prove(params, events, k0, k_top, full, hint)
+    # the float search's stable set and unresolved zones (widened by 1e-6: their ends are
+    # its own) tell which gaps to examine; when it could not count at K -> 0+ it has
+    # none: examine them all
+    def widen(ivs: tuple) -> tuple:
+        # 1e-6: far above the float search's ~1e-13 placement of its own ends
+        return tuple((a * (1 - 1e-6), b * (1 + 1e-6)) for a, b in ivs)
+    if ss.outside_small_K >= 0:
+        hint, unsure = widen(ss.intervals), widen(ss.uncertain)
+    else:
+        hint, unsure = ((0.0, math.inf),), ()
+    pr = prove(params, events, k0, k_top, full, hint, unsure)
     if _reaches_top(pr):
         # stable up to the float search's top: look above it (analysis/exact/top.py)
         from hapstab.analysis.exact.top import raise_top
         from hapstab.engine.arb_loop import ArbLoop
         top, extra = raise_top(ArbLoop(params), events, k_top)
-        pr = prove(params, tuple(sorted(events + extra)), k0, top, full, hint)
+        pr = prove(params, tuple(sorted(events + extra)), k0, top, full, hint, unsure)
     return _from_proof(ss, pr)
 
 

@@ -24,14 +24,9 @@ from __future__ import annotations
 import heapq
 import math
 
-from hapstab.analysis.exact.proof import (
-    FLOOR,
-    Exclusion,
-    _start,
-    exclude,
-    polish,
-    theta_ball,
-)
+from hapstab.analysis.exact.polish import polish
+from hapstab.analysis.exact.proof import Exclusion, exclude
+from hapstab.analysis.exact.winding import FLOOR, start_pieces, theta_ball
 from hapstab.engine.arb_loop import ArbLoop, working_precision
 
 __all__ = ["raise_top", "prove_tail", "RAISE_STEP", "RAISE_STEPS", "TAIL_PIECES"]
@@ -146,7 +141,7 @@ def prove_tail(al: ArbLoop, k_from: float, max_pieces: int = TAIL_PIECES) -> boo
         True: proved; False: not proved (the tail is then uncertain).
     """
     deg = _degree(al)
-    heap = [(0.0, a, b, 1.0) for a, b in _start()]
+    heap = [(0.0, a, b, 1.0) for a, b in start_pieces()]
     heapq.heapify(heap)
     tried = 0
     while heap:

@@ -1,0 +1,142 @@
+"""The argument principle in ball arithmetic: the number of closed-loop poles outside
+the unit circle at one K, proved piece by piece over [0, pi]
+(:mod:`~hapstab.analysis.exact.proof`'s step 3), and the pieces every subdivision of
+the proof starts from.
+
+References
+----------
+.. [1] Miandashti, N. and Tavakoli, M., "Stability of sampled-data, delayed haptic
+   interaction under passive or active operator", IEEE Haptics Symposium, 2014
+   (the loop; the characteristic function of eq. 8 with the delay's phase).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+from hapstab.engine.arb_loop import ArbLoop, poly_k, working_precision
+
+__all__ = ["Count", "count", "piece_increment", "start_pieces", "theta_ball", "k_ball",
+           "START_PIECES", "FLOOR", "MAX_PIECES"]
+
+#: Pieces of [0, pi] a search starts from.
+START_PIECES = 8
+#: A piece narrower than this relative to its upper end (theta or K) is not split again:
+#: the proof gives up there (double-precision ends cannot be halved much further).
+FLOOR = 4e-16
+#: Most pieces one exclusion or count may try (a valve on time: beyond it, uncertain).
+MAX_PIECES = 4000
+
+
+def theta_ball(a: float, b: float) -> Any:
+    """The ball holding [a, b]; an end equal to ``math.pi`` stands for pi itself."""
+    from flint import arb
+    lo = arb.pi() if a == math.pi else arb(a)
+    hi = arb.pi() if b == math.pi else arb(b)
+    return lo.union(hi)
+
+
+def k_ball(a: float, b: float) -> Any:
+    """The ball holding [a, b] (N/m)."""
+    from flint import arb
+    return arb(a).union(arb(b))
+
+
+def start_pieces(n: int = START_PIECES) -> list[tuple[float, float]]:
+    """The n equal pieces of [0, pi] (the last ends at pi itself), the first cut again
+    at pi/n 2^-k, k = 1..40 (the poles of a fast-sampled loop crowd z = 1, theta = 0)."""
+    step = math.pi / n
+    near = [(0.0, step * 2.0 ** -40)] + [(step * 2.0 ** -k, step * 2.0 ** (1 - k))
+                                          for k in range(40, 0, -1)]
+    return near + [(i * step, math.pi if i == n - 1 else (i + 1) * step) for i in range(1, n)]
+
+
+def _point(al: ArbLoop, t: float, K: Any, cache: dict) -> tuple[Any, Any, Any]:
+    """P, Q (at K) and w at the exact angle t (cached)."""
+    if t not in cache:
+        P, Q, w = al.parts(theta_ball(t, t))
+        with working_precision(al.prec):
+            cache[t] = (poly_k(P, K), poly_k(Q, K), w)
+    return cache[t]
+
+
+def piece_increment(al: ArbLoop, a: float, b: float, K: Any, cache: dict) -> tuple[str | None, Any]:
+    """The increment of arg det M over [a, b] at K, and how it is proved.
+
+    ``"P"``: |P| > |Q| on the piece, arg det M = arg P + arg(1 + w Q / P) with the
+    second term in (-pi/2, pi/2); ``"Q"``: |Q| > |P|, arg det M = arg Q - n theta +
+    arg(1 + P / (w Q)); ``"F"``: the ball of det M excludes 0. Each principal value is
+    the true increment because the function stays in a convex ball excluding 0 (or in
+    the right half-plane). None: no proof on this piece.
+    """
+    Pv, Qv, Fv = al.box(theta_ball(a, b), K, key=(a, b))
+    with working_precision(al.prec):
+        Pa, Qa, wa = _point(al, a, K, cache)
+        Pb, Qb, wb = _point(al, b, K, cache)
+        if Pv.abs_lower() > Qv.abs_upper():
+            return "P", ((Pb / Pa).arg() + (1 + wb * Qb / Pb).arg() - (1 + wa * Qa / Pa).arg())
+        if Qv.abs_lower() > Pv.abs_upper():
+            dth = theta_ball(b, b) - theta_ball(a, a)
+            return "Q", ((Qb / Qa).arg() - al.n_phase * dth
+                         + (1 + Pb / (wb * Qb)).arg() - (1 + Pa / (wa * Qa)).arg())
+        if not Fv.contains(0):
+            Fa, Fb = Pa + wa * Qa, Pb + wb * Qb
+            return "F", (Fb / Fa).arg()
+    return None, None
+
+
+@dataclass
+class Count:
+    """Poles outside at K (None: not proved), with the pieces of [0, pi] used."""
+    K: float
+    outside: int | None
+    pieces: list[tuple[float, float, str]] = field(default_factory=list)
+
+
+def count(al: ArbLoop, K: float, max_pieces: int = MAX_PIECES) -> Count:
+    """Poles of the closed loop outside the unit circle at stiffness K, by the
+    argument principle in balls (module doc, 3).
+
+    Parameters
+    ----------
+    al : ArbLoop
+    K : float
+        Stiffness (N/m).
+    max_pieces : int
+        Safety valve on the number of pieces tried.
+
+    Returns
+    -------
+    Count
+        ``outside`` None when a piece at the floor keeps 0 in its ball (a pole on
+        or within the balls' width of the circle) or the valve closed.
+    """
+    from flint import arb
+    Kb = arb(K)
+    cache: dict = {}
+    res = Count(K, None)
+    stack = start_pieces()[::-1]
+    total = arb(0)
+    tried = 0
+    while stack:
+        a, b = stack.pop()
+        tried += 1
+        if tried > max_pieces:
+            return res
+        how, inc = piece_increment(al, a, b, Kb, cache)
+        if how is not None:
+            res.pieces.append((a, b, how))
+            with working_precision(al.prec):
+                total = total + inc
+            continue
+        if (b - a) <= FLOOR * b:
+            return res
+        m = 0.5 * (a + b)
+        stack += [(m, b), (a, m)]
+    with working_precision(al.prec):
+        turns = (total / arb.pi()).unique_fmpz()
+    if turns is not None:
+        res.outside = al.q - int(turns)
+    return res

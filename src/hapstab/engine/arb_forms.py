@@ -1,0 +1,97 @@
+"""Ball forms the proof's characteristic function is evaluated with
+(:class:`~hapstab.engine.arb_loop.ArbLoop`): forward-mode derivatives over acb balls,
+the quadratic in K and its derivative, the preconditioned mean-value exclusion test,
+and the accuracy of a ball polynomial. Everything here is rigorous given rigorous
+(python-flint Arb) inputs; see each docstring."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+__all__ = ["Dual", "preconditioned_excludes", "poly_k", "dpoly_k", "accuracy_bits"]
+
+
+class Dual:
+    """A value and its derivative (forward mode), over acb balls."""
+
+    __slots__ = ("d", "v")
+
+    def __init__(self, v: Any, d: Any) -> None:
+        self.v, self.d = v, d
+
+    def __add__(self, o: Any) -> Dual:
+        if isinstance(o, Dual):
+            return Dual(self.v + o.v, self.d + o.d)
+        return Dual(self.v + o, self.d)
+
+    __radd__ = __add__
+
+    def __mul__(self, o: Any) -> Dual:
+        if isinstance(o, Dual):
+            return Dual(self.v * o.v, self.v * o.d + self.d * o.v)
+        return Dual(self.v * o, self.d * o)
+
+    __rmul__ = __mul__
+
+
+def preconditioned_excludes(Fc: Any, Ft: Any, Fk: Any, r_theta: Any, r_K: Any) -> bool:
+    """Whether 0 is outside the preconditioned mean-value form of det M on a box.
+
+    As a map of (theta, K) to R^2, det M over the box lies in
+    ``f + A (dtheta, dK)`` with ``f = (Re Fc, Im Fc)``, ``A`` the 2x2 matrix of the
+    real and imaginary parts of the derivative balls ``Ft``, ``Fk`` and
+    ``|dtheta| <= r_theta``, ``|dK| <= r_K``. For any real 2x2 matrix Y, det M = 0
+    at a point implies Y det M = 0 there, so 0 outside either component of
+    ``Y f + (Y A)(dtheta, dK)`` excludes every zero from the box, whatever Y is;
+    Y = mid(A)^-1 (in doubles) makes the form nearly the identity near a simple zero,
+    where the plain ball of det M (an axis-aligned rectangle around an elongated
+    image) needs boxes far smaller than their distance to the zero.
+
+    Parameters
+    ----------
+    Fc, Ft, Fk : acb
+        det M at the centre, d/dtheta and d/dK over the box.
+    r_theta, r_K : arb
+        The box's radii in theta (rad) and K (N/m).
+
+    Returns
+    -------
+    bool
+    """
+    from flint import arb
+    a, b = float(Ft.real.mid()), float(Fk.real.mid())
+    c, d = float(Ft.imag.mid()), float(Fk.imag.mid())
+    det = a * d - b * c
+    if not (math.isfinite(det) and det != 0.0):
+        return False
+    Y = ((d / det, -b / det), (-c / det, a / det))
+    ht, hk = arb(0, r_theta), arb(0, r_K)
+    for y1, y2 in Y:
+        if not (math.isfinite(y1) and math.isfinite(y2)):
+            return False
+        comp = (y1 * Fc.real + y2 * Fc.imag + (y1 * Ft.real + y2 * Ft.imag) * ht
+                + (y1 * Fk.real + y2 * Fk.imag) * hk)
+        if not comp.contains(0):
+            return True
+    return False
+
+
+def dpoly_k(c: list[Any], K: Any) -> Any:
+    """``c[1] + 2 K c[2]``: the derivative in K of :func:`poly_k`."""
+    return c[1] + 2 * K * c[2]
+
+
+def poly_k(c: list[Any], K: Any) -> Any:
+    """``c[0] + K c[1] + K^2 c[2]`` (Horner) on a ball K."""
+    return c[0] + K * (c[1] + K * c[2])
+
+
+def accuracy_bits(poly: Any) -> float:
+    """Relative accuracy (bits) of the worst nonzero coefficient of a polynomial."""
+    worst = math.inf
+    for c in poly.coeffs():
+        if c.is_zero():
+            continue
+        worst = min(worst, c.rel_accuracy_bits())
+    return worst
