@@ -1,11 +1,12 @@
-"""The sweep's heat map (issue 29 item 6): not only the minimum over the axes it does not
-show (with the virtual damping B as such an axis the minimum is always B = 0's K_max) but
-their maximum, their median or a slice at one value, in the API (``SweepResult.heat_map``
-and ``.plot``), the study file (``[sweep.plot] reduce / at``) and the command line
-(``--reduce``, ``--at``), each cell checked against the rows."""
+"""The sweep's summary and heat map (issue 29 item 6). The heat map: not only the minimum
+over the axes it does not show (with the virtual damping B as such an axis the minimum is
+always B = 0's K_max) but their maximum, their median or a slice at one value, in the API
+(``SweepResult.heat_map`` and ``.plot``), the study file (``[sweep.plot] reduce / at``)
+and the command line (``--reduce``, ``--at``), each cell checked against the rows."""
 
 import json
 import os
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -180,3 +181,32 @@ def test_hapstab_sweep_is_callable_after_a_submodule_import():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          env={**os.environ, "PYTHONPATH": src}, check=True)
     assert out.stdout.strip() == "SweepResult"
+
+
+def test_points_where_a_quantity_does_not_apply_are_not_called_errors(tmp_path):
+    """Item 6: the sampled-data passivity at a fractional delay does not apply; the table
+    said "N points carry a message in the error column" although K_max was fine."""
+    (tmp_path / "s.toml").write_text('kind = "hve"\n[sweep]\nquantities = ["kmax", '
+                                     '"passivity"]\n[sweep.axes]\ndelay-s = [0.002, 0.0025, '
+                                     '0.0035]\n')
+    r = CliRunner().invoke(cli, ["sweep", str(tmp_path / "s.toml"), "--out", str(tmp_path / "o"),
+                                 "--workers", "1"])
+    assert r.exit_code == 0, r.stderr
+    text = " ".join(r.stdout.split())
+    assert "error column" not in text
+    assert "2 points have a quantity that does not apply there (the not_applicable column; " \
+        "not errors)" in text
+
+
+def test_the_rows_read_as_the_docs_say(swept):
+    """Item 6: the README said the results read with pandas, which hapstab does not
+    install; the docs name pyarrow (the sweep extra) and its one call for the folder."""
+    _res, K, out = swept
+    docs = (Path(__file__).resolve().parent.parent / "docs" / "guide" / "sweeps.md").read_text()
+    assert '`pyarrow.parquet.read_table("DIR/chunks")`' in docs
+    assert "pandas is not installed by hapstab" in " ".join(docs.split())
+    readme = (Path(__file__).resolve().parent.parent / "README.md").read_text()
+    assert "pandas" not in readme
+    t = pq.read_table(str(out / "chunks")).sort_by("point_id")
+    assert t.num_rows == K.size
+    assert np.array_equal(t.column("critical_stiffness_N_per_m").to_numpy(), K.reshape(-1))
