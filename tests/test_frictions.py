@@ -55,6 +55,12 @@ def test_pebs_delay_is_one_way_in_the_help():
         text = " ".join(_run("kmax", kind, "--help").stdout.split())
         assert "one- way, in each direction" in text or "one-way, in each direction" in text
     assert "one-way" not in " ".join(_run("kmax", "hve", "--help").stdout.split())
+    import pathlib
+
+    readme = " ".join((pathlib.Path(__file__).resolve().parent.parent / "README.md")
+                      .read_text().split())
+    assert "(`hapstab kmax peb`, `4ch`) `--delay` / `--delay-s` is the one-way delay, in " \
+        "each direction" in readme
 
 
 def test_a_run_table_does_not_silently_replace_the_variants_delay(tmp_path):

@@ -53,3 +53,21 @@ def test_the_quantisation_condition_says_what_the_gain_margin_means():
     assert "must be below that" not in text
     assert "a cycle is possible only where the loop's gain margin" in text
     assert "below it, so quantisation can sustain a cycle there" in text
+
+
+def test_a_short_runs_figure_title_is_a_sentence():
+    """The simulation figure's title is the verdict's words: a run too short to tell is
+    not titled "undecided: undecided"."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    import hapstab as h
+
+    r = h.simulate(h.paper_hve(1e-3, 10).with_stiffness(9.0), 0.008, initial_position=0.01)
+    assert r.verdict.verdict == "undecided" and r.verdict.behaviour == "undecided"
+    title = np.ravel(r.plot())[0].get_title()
+    assert "undecided: the run is too short to tell (low confidence" in title
+    assert "undecided: undecided" not in title
+    plt.close("all")

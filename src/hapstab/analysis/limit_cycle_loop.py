@@ -150,10 +150,17 @@ def curves(bal: Balance, amps: np.ndarray, N: np.ndarray, theta: np.ndarray
     Returns
     -------
     dict of arrays
+        ``theta``, ``loop``, ``amplitude_m``, ``minus_inverse``; with quantisation and
+        friction also the balance's terms ``gain`` (N), ``relay`` (4 f_c/(pi A)) and
+        ``plant`` (P), from which the figure draws F = 1 + N C + j (4 f_c/(pi A)) P.
     """
     if bal.resolution_m:
-        return {"theta": theta, "loop": bal.controller(theta), "amplitude_m": amps,
-                "minus_inverse": -1 / np.where(N > 0, N, np.nan)}
+        out = {"theta": theta, "loop": bal.controller(theta), "amplitude_m": amps,
+               "minus_inverse": -1 / np.where(N > 0, N, np.nan)}
+        if bal.friction_N:      # both: the balance itself (F over amplitude and angle)
+            out.update(gain=N, relay=4 * bal.friction_N / (math.pi * amps),
+                       plant=bal.plant(theta))
+        return out
     # friction alone: the loop seen by the relay, j P/(1 + C), against -pi A/(4 f_c)
     return {"theta": theta, "loop": 1j * bal.plant(theta) / (1 + bal.controller(theta)),
             "amplitude_m": amps, "minus_inverse": -math.pi * amps / (4 * bal.friction_N)}

@@ -180,6 +180,13 @@ class LimitCycleResult(Result):
             verdict = ("below it, so quantisation can sustain a cycle there"
                        if gm < self.max_gain else
                        "not below it, so quantisation alone cannot sustain one")
+            if gm < self.max_gain and self.coulomb_friction_N:
+                verdict = ("below it, so quantisation alone could sustain a cycle there; with "
+                           "the friction's equivalent damper 4 f_c/(pi A w) in the same "
+                           "first-harmonic balance " + (
+                               "it has no root (the figure's curves Re F = 0 and Im F = 0 do "
+                               "not cross)" if not self.cycles else
+                               "the cycles listed solve it"))
             out.append(f"quantisation: a cycle needs the quantiser's gain N(A) = 1/|C| at a phase "
                        f"crossover of the loop it sees; N is at most {self.max_gain:.4g} (4/pi = "
                        f"1.273 for a centred quantiser), so a cycle is possible only where the "
@@ -253,8 +260,12 @@ class LimitCycleResult(Result):
                     (getattr(c, k) for k in _COLUMNS)] for c in self.cycles))
 
     def plot(self, ax: Any = None) -> Any:
-        """The describing-function plot: the loop the nonlinearity sees, against -1/N(A)
-        on the negative real axis, with the predicted cycles marked (filled: stable).
+        """The figure of what the verdict solves: with one nonlinearity the
+        describing-function plot (the loop the nonlinearity sees against -1/N(A) on the
+        negative real axis), with quantisation and friction the first-harmonic balance's
+        curves Re F = 0 and Im F = 0 over amplitude and frequency (friction's equivalent
+        damper depends on A, so C against -1/N(A) alone is not the balance); the predicted
+        cycles marked (filled: stable). See :mod:`hapstab.plotting.limit_cycles`.
 
         Parameters
         ----------
@@ -265,29 +276,6 @@ class LimitCycleResult(Result):
         -------
         matplotlib Axes
         """
-        from hapstab.plotting import _axes
+        from hapstab.plotting.limit_cycles import plot_limit_cycles
 
-        ax = _axes(ax)
-        g, inv = self.curves["loop"], self.curves["minus_inverse"]
-        fin = np.isfinite(inv)
-        quant = bool(self.resolution_m)
-        ax.plot(g.real, g.imag, "-", color="tab:blue",
-                label="C(e^jwT), the loop the quantiser sees" if quant else "j P/(1 + C)")
-        ax.plot(inv[fin], np.zeros(int(fin.sum())), "-", lw=3, color="tab:red", alpha=0.6,
-                label="-1/N(A)" if quant else "-pi A/(4 f_c)")
-        marks = []
-        for c in self.cycles:
-            x = float(np.interp(c.describing_function_amplitude_m, self.curves["amplitude_m"],
-                                inv.real))
-            marks.append(abs(x))
-            ax.plot([x], [0.0], "o", ms=8, color="k", mfc="k" if c.stable else "w")
-        # the view: around the first phase crossover and the cycles (1e-300: never a 0 scale)
-        R = 2 * max([1 / g for _, g in self.crossovers[:1] if quant] + marks + [1e-300])
-        ax.set_xlim(-R, R / 2)
-        ax.set_ylim(-R, R)
-        ax.axhline(0, color="0.8", lw=0.5)
-        ax.set_xlabel("real")
-        ax.set_ylabel("imaginary")
-        ax.set_title(f"describing function, K = {self.stiffness:g} N/m: {self.verdict}")
-        ax.legend(loc="best", fontsize=8)
-        return ax
+        return plot_limit_cycles(self, ax)

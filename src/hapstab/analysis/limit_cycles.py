@@ -91,6 +91,7 @@ from hapstab.analysis.limit_cycle_results import LimitCycleResult, PredictedCycl
 from hapstab.analysis.nonlinear_passivity import coulomb_friction_of, resolution_of
 from hapstab.errors import ModelError
 from hapstab.models.loops import HapticLoop
+from hapstab.plotting.limit_cycles import NEAR_MISS_NOTE
 
 __all__ = ["limit_cycles", "SAMPLES_MIN"]
 
@@ -331,7 +332,7 @@ def _cycle(bal: Balance, loop: HapticLoop, mass: float, A: float, theta: float,
     else:                                # on the balance (no first-harmonic root)
         stable = loeb_stable(bal, float(X[0].real), th, m, X, T)
     if not root:
-        notes_df = "the describing function has no root here (its closest approach), harmonics do"
+        notes_df = f"{NEAR_MISS_NOTE} (its closest approach), harmonics do"
     wave = waveform(m, X, np.linspace(0, 2 * math.pi, 4096, endpoint=False))
     if bal.friction_N:
         least = _stick(bal, mass, X, th, T)

@@ -17,9 +17,11 @@ line's option names) with a ``[sweep]`` table::
     samples = 100000                     # (each axis then "lo:hi" or "lo:hi:log")
     seed = 1
 
-    [sweep.plot]                         # the heat map of K_max (others: their minimum)
+    [sweep.plot]                         # the heat map of K_max
     x = "rate"
     y = "delay"
+    reduce = "min"                       # the other axes: "min" (default), "max", "median"
+    at = { mass = 0.3 }                  # or a slice: only the points at these values
 
     [sweep.check]
     stiffness = 250                      # N/m, for the "check" quantity
@@ -65,7 +67,8 @@ __all__ = ["sweep_cmd", "build_loop", "column_of", "plan"]
 
 #: The [sweep] table's keys, and its sub-tables' keys.
 KEYS = {"quantities", "chunk", "axes", "random", "plot", "check", "best-damping"}
-SUB = {"random": {"samples", "seed"}, "plot": {"x", "y"}, "check": {"stiffness"},
+SUB = {"random": {"samples", "seed"}, "plot": {"x", "y", "reduce", "at"},
+       "check": {"stiffness"},
        "best-damping": {"min-damping", "max-damping", "resolution"}}
 #: Options of ``kmax`` that are not the loop's: neither an axis nor a [loop] key here.
 NOT_LOOP = {"method", "approximation", "operator_damping_min", "environment_damping_min",
@@ -111,7 +114,8 @@ def build_loop(kind: str, options: dict[str, Any]) -> Any:
     return LOOP_KINDS[kind](dict(options), 1.0)
 
 
-def plan(study: Study, root: click.Group, yes: bool) -> dict[str, Any]:
+def plan(study: Study, root: click.Group, yes: bool, reduce: str | None = None,
+         at: tuple[str, ...] = ()) -> dict[str, Any]:
     """The arguments of :func:`hapstab.sweep.run.sweep` from a study, every key checked.
 
     Parameters
@@ -121,6 +125,10 @@ def plan(study: Study, root: click.Group, yes: bool) -> dict[str, Any]:
         The ``hapstab`` group (the loop options are ``kmax <kind>``'s).
     yes : bool
         No budget of points.
+    reduce : str, optional
+        ``--reduce``: the heat map's reduction (instead of ``[sweep.plot] reduce``).
+    at : tuple of str
+        ``--at NAME=VALUE``: the heat map's slice (instead of ``[sweep.plot] at``).
 
     Returns
     -------
@@ -168,8 +176,67 @@ def plan(study: Study, root: click.Group, yes: bool) -> dict[str, Any]:
                                      f"{x.replace('_', '-')} and {y.replace('_', '-')}: give one")
                 if other in ("rate", "delay_s"):      # (the builder prefers them when set)
                     fixed[other] = None
+    settings = _settings(study, table, random, axes)
+    settings.update(_heat(study, table.get("plot"), axes, params, reduce, at,
+                          settings.get("plot")))
     return {"build": functools.partial(build_loop, study.kind), "axes": axes, "fixed": fixed,
-            **_settings(study, table, random, axes), "max_points": math.inf if yes else None}
+            **settings, "max_points": math.inf if yes else None}
+
+
+def _heat(study: Study, plot: Any, axes: list[Any], params: dict[str, click.Option],
+          reduce: str | None, at: tuple[str, ...], shown: Any) -> dict[str, Any]:
+    """The heat map's reduction and slice: [sweep.plot] reduce / at, or --reduce / --at
+    (which redraw a finished sweep without changing its study); values with units."""
+    from hapstab.sweep.result import REDUCTIONS
+
+    plot = plot or {}
+    out: dict[str, Any] = {}
+    if reduce is None and "reduce" in plot:
+        reduce = plot["reduce"]
+        if not isinstance(reduce, str) or reduce not in REDUCTIONS:
+            raise StudyError(f"{study.where('reduce', 'sweep.plot')}sweep.plot.reduce = "
+                             f"{reduce!r:.40}: allowed: {', '.join(REDUCTIONS)}")
+    if reduce is not None:
+        out["plot_reduce"] = reduce
+    given: dict[str, tuple[Any, str]] = {}
+    if at:
+        for item in at:
+            key, eq, value = item.partition("=")
+            if not eq or not key.strip() or not value.strip():
+                raise StudyError(f"--at {item!r:.40}: give NAME=VALUE, e.g. --at damping=0.5")
+            given[key.strip()] = (value.strip(), f"--at {key.strip()}")
+    elif "at" in plot:
+        if not isinstance(plot["at"], dict) or not plot["at"]:
+            raise StudyError(f"{study.where('at', 'sweep.plot')}sweep.plot.at = "
+                             f"{plot['at']!r:.40}: a table axis = value, e.g. at = "
+                             "{ mass = 0.3 }")
+        for key, value in plot["at"].items():
+            given[key] = (value, f"{study.where('at', 'sweep.plot')}sweep.plot.at.{key}")
+    by = {a.name.replace("_", "-"): a for a in axes} | {a.name: a for a in axes}
+    values = {}
+    for key, (value, where) in given.items():
+        a = by.get(key)
+        if a is None:
+            raise StudyError(f"{where}: not an axis of the sweep; axes: "
+                             f"{', '.join(b.name.replace('_', '-') for b in axes)}")
+        p = params[a.name]
+        try:
+            values[key] = value if a.dtype == "string" else p.type.convert(value, p, None)
+        except click.BadParameter as e:
+            raise StudyError(f"{where} = {value!r:.40}: {e.message}") from None
+    if values:
+        from hapstab.sweep.axes import Points, SweepError
+        from hapstab.sweep.result import check_at
+
+        where = "--at" if at else f"{study.where('at', 'sweep.plot')}sweep.plot.at"
+        if shown is None and len(axes) < 2:
+            raise StudyError(f"{where}: no heat map to slice (it needs two axes)")
+        try:
+            check_at(Points(tuple(axes)), shown or (axes[0].name, axes[1].name), values)
+        except SweepError as e:
+            raise StudyError(f"{where}: {str(e).removeprefix('at: ')}") from None
+        out["plot_at"] = values
+    return out
 
 
 def _known(study: Study, table: dict[str, Any], keys: set[str], where: str) -> None:
@@ -294,9 +361,17 @@ def _number(study: Study, table: dict[str, Any], key: str, where: str, low: floa
 @click.option("--scheduler", default=None, metavar="ADDRESS",
               help="Run on an existing Dask cluster (tcp://host:8786) instead.")
 @click.option("--force", is_flag=True, help="Start over in a folder holding another sweep.")
+@click.option("--reduce", type=click.Choice(["min", "max", "median"]), default=None,
+              help="The heat map's cells: the least (default), largest or median K_max over "
+                   "the axes it does not show (max: e.g. at the best damping). Rerun a "
+                   "finished sweep with it to redraw kmax.png; nothing is recomputed.")
+@click.option("--at", "at", multiple=True, metavar="NAME=VALUE",
+              help="The heat map of one slice: only the points at this value of an axis "
+                   "(one of its values, units as in the study), e.g. --at damping=0.5; "
+                   "repeatable.")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object (manifest, summary).")
 def sweep_cmd(study_path: str, out_dir: str, workers: int | None, scheduler: str | None,
-              force: bool, as_json: bool) -> None:
+              force: bool, reduce: str | None, at: tuple[str, ...], as_json: bool) -> None:
     """Evaluate a study file's [sweep] quantities (K_max and its reason, the passivity
     limit, the paper's closed form, the verdict at K, the best damping) at every point of
     its axes, into Parquet chunks written as they finish; rerun to resume."""
@@ -306,7 +381,7 @@ def sweep_cmd(study_path: str, out_dir: str, workers: int | None, scheduler: str
     study = load_study(study_path, "STUDY.toml")
     root = click.get_current_context().find_root().command
     assert isinstance(root, click.Group)
-    args = plan(study, root, "--yes" in ARGV.get())
+    args = plan(study, root, "--yes" in ARGV.get(), reduce, at)
     if args["max_points"] is None:
         del args["max_points"]
     if scheduler is not None:

@@ -1,7 +1,8 @@
 """What a finished sweep says: ``summary.json`` (the least and largest value of every
 quantity and the point where it is, how often and where the paper's closed form
 over-promises against the exact K_max) and ``kmax.png`` (K_max over two axes, the
-others reduced by their minimum), read back from the chunks."""
+others reduced by their minimum, maximum or median, or fixed at one of their values),
+read back from the chunks."""
 
 from __future__ import annotations
 
@@ -13,10 +14,17 @@ from typing import Any
 import numpy as np
 
 from hapstab.results import Result, jsonable
-from hapstab.sweep.axes import Axis, Points
+from hapstab.sweep.axes import Axis, Points, SweepError
+from hapstab.sweep.heat_figure import axis_label, draw_heat_map, heat_title
 from hapstab.sweep.store import read_chunk
 
-__all__ = ["SweepResult", "summarise", "heat_map"]
+__all__ = ["SweepResult", "summarise", "heat_map", "REDUCTIONS", "check_at", "draw_heat_map",
+           "axis_label", "heat_title"]
+
+#: How the heat map reduces, in each cell, the K_max over the axes it does not show (and
+#: does not fix with ``at``): the least (the design that holds for every value of them), the
+#: largest (the best value of them, e.g. the best damping), or the median.
+REDUCTIONS = ("min", "max", "median")
 
 #: Cells of the heat map along an axis at most (a longer grid axis is binned).
 HEAT_CELLS = 200
@@ -42,6 +50,8 @@ class SweepResult(Result):
         Chunks this call computed (the others were finished before: a resumed sweep).
     files : tuple of str
         The files of the summary (``summary.json``, ``kmax.png`` if drawn).
+    points : Points, optional
+        The sweep's points (for heat maps of other axes or reductions than the summary's).
     """
 
     out_dir: str
@@ -49,6 +59,7 @@ class SweepResult(Result):
     summary: dict[str, Any] = field(repr=False)
     computed_chunks: int = 0
     files: tuple[str, ...] = ()
+    points: Points | None = field(default=None, repr=False, compare=False)
 
     def to_dict(self) -> dict[str, Any]:
         """The manifest (without the chunk list) and the summary, strict JSON.
@@ -80,22 +91,80 @@ class SweepResult(Result):
                  for e in self.manifest.get("finished", [])]
         return pa.concat_tables([read_chunk(p, columns) for p in paths])
 
-    def plot(self, ax: Any = None) -> Any:
-        """K_max over the plot's two axes (the others reduced by the minimum).
+    def heat_map(self, x: str | None = None, y: str | None = None, reduce: str = "min",
+                 at: dict[str, Any] | None = None) -> dict[str, Any] | None:
+        """K_max over two axes, the others reduced cell by cell or fixed at a value.
+
+        Parameters
+        ----------
+        x, y : str, optional
+            The axes (names as in the sweep's ``axes``; default: the summary's heat map's).
+        reduce : {"min", "max", "median"}
+            How the K_max of a cell's points (over the axes not shown and not in ``at``)
+            become one: ``"min"`` (the summary's), ``"max"`` (e.g. at the best damping of a
+            damping axis, which ``"min"`` always shows at B = 0), ``"median"``.
+        at : dict, optional
+            Axis name -> one of its grid values: only the points there (a slice).
+
+        Returns
+        -------
+        dict or None
+            As the summary's ``heat_map`` (None: no K_max or fewer than two axes).
+
+        Raises
+        ------
+        SweepError
+            An unknown axis or reduction; an ``at`` value not on its axis's grid, of a
+            random axis or of a shown axis.
+        """
+        stored = self.summary.get("heat_map")
+        if stored is not None and x in (None, stored.get("x_name")) \
+                and y in (None, stored.get("y_name")) and reduce == stored.get("reduce", "min") \
+                and not at and not stored.get("at"):
+            return stored
+        if self.points is None:
+            raise SweepError("heat_map: this result has no points (a SweepResult made by "
+                             "hand); run hapstab.sweep on its folder again (nothing is "
+                             "recomputed)")
+        names = [a.name for a in self.points.axes]
+        x = x or (stored.get("x_name") if stored else None) or names[0]
+        y = y or (stored.get("y_name") if stored else None) or names[-1]
+        for k, v in (("x", x), ("y", y)):
+            if v not in names:
+                raise SweepError(f"heat_map: {k} = {v!r:.40} is not an axis; axes: "
+                                 f"{', '.join(names)}")
+        if x == y:
+            raise SweepError(f"heat_map: x = y = {x!r:.40}: two different axes")
+        heat = _Heat(self.points, (x, y), reduce, at)
+        paths = [os.path.join(self.out_dir, "chunks", f"chunk-{int(e['chunk']):06d}.parquet")
+                 for e in self.manifest.get("finished", [])]
+        for path in paths:
+            heat.add(read_chunk(path, heat.columns))
+        return heat.result()
+
+    def plot(self, ax: Any = None, reduce: str = "min", at: dict[str, Any] | None = None,
+             x: str | None = None, y: str | None = None) -> Any:
+        """K_max over the plot's two axes (see :meth:`heat_map`: the others reduced by
+        ``reduce`` or fixed by ``at``).
 
         Parameters
         ----------
         ax : matplotlib Axes, optional
+        reduce : {"min", "max", "median"}
+        at : dict, optional
+            Axis name -> grid value.
+        x, y : str, optional
 
         Returns
         -------
         matplotlib Axes
         """
-        return draw_heat_map(self.summary.get("heat_map"), ax)
+        return draw_heat_map(self.heat_map(x, y, reduce, at), ax)
 
 
 def summarise(paths: list[str], points: Points, quantities: tuple[str, ...],
-              plot: tuple[str, str] | None) -> dict[str, Any]:
+              plot: tuple[str, str] | None, reduce: str = "min",
+              at: dict[str, Any] | None = None) -> dict[str, Any]:
     """The summary of the finished chunks ``paths``, read one at a time.
 
     Parameters
@@ -108,6 +177,10 @@ def summarise(paths: list[str], points: Points, quantities: tuple[str, ...],
         What was computed.
     plot : (str, str) or None
         The heat map's axes (axis names), or None for none.
+    reduce : {"min", "max", "median"}
+        The heat map's reduction of the other axes.
+    at : dict, optional
+        The heat map's slice: axis name -> grid value.
 
     Returns
     -------
@@ -123,7 +196,7 @@ def summarise(paths: list[str], points: Points, quantities: tuple[str, ...],
     verdicts: dict[str, int] = {}
     worst: list[tuple[float, dict[str, Any]]] = []
     n = errors = inapplicable = compared = over = 0
-    heat = _Heat(points, plot) if plot else None
+    heat = _Heat(points, plot, reduce, at) if plot else None
     axes = [a.column for a in points.axes]
     for path in paths:
         t = read_chunk(path)
@@ -194,15 +267,25 @@ def _extremes(stats: dict[str, dict[str, Any]], col: str, t: Any, axes: list[str
 
 
 class _Heat:
-    """The minimum of K_max in each cell of two axes, accumulated chunk by chunk."""
+    """K_max in each cell of two axes, the points of a cell reduced (min, max, median) over
+    the other axes, or only those at fixed values of some; accumulated chunk by chunk."""
 
-    def __init__(self, points: Points, plot: tuple[str, str]) -> None:
+    def __init__(self, points: Points, plot: tuple[str, str], reduce: str = "min",
+                 at: dict[str, Any] | None = None) -> None:
+        if reduce not in REDUCTIONS:
+            raise SweepError(f"reduce = {reduce!r:.40}: allowed: {', '.join(REDUCTIONS)}")
         by = {a.name: a for a in points.axes}
         self.x, self.y = by[plot[0]], by[plot[1]]
+        self.at = check_at(points, plot, at)
+        self.reduce = reduce
         self.edges = [_edges(a) for a in (self.x, self.y)]
         self.grid = np.full((len(self.edges[1]), len(self.edges[0])), np.nan)
-        self.others = [a.name for a in points.axes if a.name not in plot]
+        self.others = [a.name for a in points.axes if a.name not in plot and a.name not in
+                       self.at]
         self.points = points
+        self.seen: list[tuple[np.ndarray, np.ndarray]] = []     # median: (cell, K) of each chunk
+        extra = {a.column for a in (self.x, self.y) if a.random} | {by[n].column for n in self.at}
+        self.columns = ["point_id", "critical_stiffness_N_per_m", *sorted(extra)]
 
     def add(self, t: Any) -> None:
         K = _float(t, "critical_stiffness_N_per_m")
@@ -210,8 +293,17 @@ class _Heat:
         ix = self._cells(0, t, ids)
         iy = self._cells(1, t, ids)
         ok = ~np.isnan(K)
+        for name, value in self.at.items():     # (the grid's own value: equal, not close)
+            col = t.column(next(a.column for a in self.points.axes if a.name == name))
+            ok &= np.asarray(col.to_numpy(zero_copy_only=False)) == value
+        cell = iy[ok] * self.grid.shape[1] + ix[ok]
         flat = self.grid.reshape(-1)          # (a view: fmin.at writes into the grid)
-        np.fmin.at(flat, iy[ok] * self.grid.shape[1] + ix[ok], K[ok])   # NaN: no value yet
+        if self.reduce == "min":
+            np.fmin.at(flat, cell, K[ok])     # NaN: no value yet
+        elif self.reduce == "max":
+            np.fmax.at(flat, cell, K[ok])
+        else:
+            self.seen.append((cell, K[ok]))
 
     def _cells(self, k: int, t: Any, ids: np.ndarray) -> np.ndarray:
         a, cells = (self.x, self.y)[k], len(self.edges[k])
@@ -221,11 +313,90 @@ class _Heat:
             return index if len(a.values) <= HEAT_CELLS else index * cells // len(a.values)
         return _cell(a, _float(t, a.column), cells)
 
+    def _median(self) -> None:
+        if not self.seen:
+            return
+        cell = np.concatenate([c for c, _ in self.seen])
+        K = np.concatenate([v for _, v in self.seen])
+        order = np.lexsort((K, cell))            # by cell, then by K within a cell
+        cell, K = cell[order], K[order]
+        first, start, count = np.unique(cell, return_index=True, return_counts=True)
+        mid = (K[start + (count - 1) // 2] + K[start + count // 2]) / 2   # an even count: both
+        self.grid.reshape(-1)[first] = mid
+
     def result(self) -> dict[str, Any]:
-        return {"x": self.x.column, "y": self.y.column, "x_values": self.edges[0],
-                "y_values": self.edges[1], "min_over": self.others,
+        if self.reduce == "median":
+            self._median()
+        by = {a.name: a for a in self.points.axes}
+        return {"x": self.x.column, "y": self.y.column, "x_name": self.x.name,
+                "y_name": self.y.name, "x_values": self.edges[0], "y_values": self.edges[1],
+                "reduce": self.reduce, "over": self.others,
+                "min_over": self.others if self.reduce == "min" else [],
+                "at": {by[n].column: v for n, v in self.at.items()}, "at_names": list(self.at),
                 "x_log": _is_log(self.x), "y_log": _is_log(self.y),
                 "critical_stiffness_N_per_m": self.grid.tolist()}
+
+
+def check_at(points: Points, plot: tuple[str, str], at: dict[str, Any] | None
+             ) -> dict[str, Any]:
+    """A heat map's slice checked: axis name -> the grid value it names.
+
+    Parameters
+    ----------
+    points : Points
+    plot : (str, str)
+        The shown axes (not to be fixed).
+    at : dict or None
+        Axis name (or its column, or the command line's name with ``-``) -> a value.
+
+    Returns
+    -------
+    dict
+        Axis name -> the grid's own value (a float given within a relative 1e-9 of a grid
+        value is that value: a value typed as 0.65 and one made by ``"0:1.3:3"`` differ in
+        the last bits; grid values closer than that are not distinguished).
+
+    Raises
+    ------
+    SweepError
+        An unknown, shown or random axis; a value not on the axis's grid (the message lists
+        the grid).
+    """
+    out: dict[str, Any] = {}
+    if at is None:
+        return out
+    if not isinstance(at, dict):
+        raise SweepError(f"at = {at!r:.60}: a mapping axis name -> one of its values")
+    by = {a.name: a for a in points.axes} | {a.column: a for a in points.axes} \
+        | {a.name.replace("_", "-"): a for a in points.axes}
+    for key, value in at.items():
+        a = by.get(key)
+        if a is None:
+            raise SweepError(f"at: {key!r:.40} is not an axis; axes: "
+                             f"{', '.join(b.name.replace('_', '-') for b in points.axes)}")
+        if a.name in plot:
+            raise SweepError(f"at: {key!r:.40} is an axis of the heat map; fix another one")
+        if a.random:
+            raise SweepError(f"at: {key!r:.40} is a random axis (no grid value to fix); "
+                             f"reduce it instead (reduce = {', '.join(REDUCTIONS)})")
+        out[a.name] = _grid_value(a, key, value)
+    return out
+
+
+def _grid_value(a: Axis, key: str, value: Any) -> Any:
+    listed = ", ".join(f"{v:g}" if isinstance(v, float) else str(v) for v in a.values[:12])
+    listed += ", ..." if len(a.values) > 12 else ""
+    if a.dtype == "string":
+        if value in a.values:
+            return value
+    elif not isinstance(value, bool) and isinstance(value, (int, float)) \
+            and math.isfinite(value):
+        vals = np.asarray(a.values, dtype=float)
+        j = int(np.argmin(np.abs(vals - value)))
+        if abs(vals[j] - value) <= 1e-9 * max(abs(vals[j]), abs(value)):   # see check_at
+            return a.values[j]
+    raise SweepError(f"at: {key} = {value!r:.40}: not a value of the axis; its values: "
+                     f"{listed}")
 
 
 def _is_log(a: Axis) -> bool:
@@ -253,84 +424,6 @@ def _cell(a: Axis, v: np.ndarray, cells: int) -> np.ndarray:
         v, lo, hi = np.log(v), math.log(lo), math.log(hi)
     u = (v - lo) / (hi - lo) if hi > lo else np.zeros_like(v)
     return np.clip(np.rint(u * (cells - 1)).astype(np.int64), 0, cells - 1)
-
-
-def draw_heat_map(h: dict[str, Any] | None, ax: Any = None) -> Any:
-    """Draw a summary's heat map (K_max over two axes).
-
-    Parameters
-    ----------
-    h : dict or None
-        The summary's ``heat_map``.
-    ax : matplotlib Axes, optional
-
-    Returns
-    -------
-    matplotlib Axes
-    """
-    import matplotlib.pyplot as plt
-    from matplotlib.colors import LogNorm
-
-    if ax is None:
-        _, ax = plt.subplots(figsize=(7, 5))
-    if not h:
-        ax.set_title("no heat map: the sweep has no [sweep.plot] axes or no K_max")
-        return ax
-    Z = np.array(h["critical_stiffness_N_per_m"], dtype=float)
-    Z = np.where(np.isfinite(Z), Z, np.nan)
-    pos = Z[np.isfinite(Z) & (Z > 0)]
-    norm = LogNorm(pos.min(), pos.max()) if pos.size and pos.max() > pos.min() else None
-    xs, ys = h["x_values"], h["y_values"]
-    text = isinstance(xs[0], str) or isinstance(ys[0], str)
-    if text:
-        mesh = ax.imshow(Z, origin="lower", aspect="auto", norm=norm, cmap="viridis")
-        ax.set_xticks(range(len(xs)), [str(x) for x in xs], rotation=30)
-        ax.set_yticks(range(len(ys)), [str(y) for y in ys])
-    else:
-        mesh = ax.pcolormesh(np.asarray(xs, float), np.asarray(ys, float), Z, shading="nearest",
-                             norm=norm, cmap="viridis")
-        from matplotlib.ticker import NullFormatter
-
-        ax.set_xscale("log" if h["x_log"] else "linear")
-        ax.set_yscale("log" if h["y_log"] else "linear")
-        for axis in (ax.xaxis, ax.yaxis):
-            axis.set_minor_formatter(NullFormatter())     # (the decades' labels only)
-        for set_ticks, vals in ((ax.set_xticks, xs), (ax.set_yticks, ys)):
-            if len(vals) <= 12:                           # each value the sweep took
-                set_ticks([float(v) for v in vals], [f"{float(v):g}" for v in vals])
-    ax.figure.colorbar(mesh, ax=ax, label="K_max (N/m)")
-    ax.set_xlabel(axis_label(h["x"]))
-    ax.set_ylabel(axis_label(h["y"]))
-    over = f", minimum over {', '.join(h['min_over'])}" if h["min_over"] else ""
-    ax.set_title(f"exact K_max (N/m){over}; blank: no stable K or refused")
-    return ax
-
-
-#: A column's unit suffix -> the unit as a reader writes it.
-_UNIT_SUFFIXES = (("_N_s_per_m", "N·s/m"), ("_N_per_m", "N/m"), ("_hz", "Hz"), ("_Hz", "Hz"),
-                  ("_kg", "kg"), ("_samples", "samples"), ("_N", "N"), ("_s", "s"), ("_m", "m"))
-#: Names that read better spelled out.
-_NAMES = {"rate": "sampling rate", "period": "sampling period", "delay": "delay",
-          "virtual_damping": "virtual damping B", "mass": "mass", "damping": "damping"}
-
-
-def axis_label(column: str) -> str:
-    """A sweep column as an axis label, name and unit: ``rate_hz`` -> ``sampling rate
-    (Hz)``, ``virtual_damping_N_s_per_m`` -> ``virtual damping B (N·s/m)``.
-
-    Parameters
-    ----------
-    column : str
-
-    Returns
-    -------
-    str
-    """
-    for suffix, unit in _UNIT_SUFFIXES:
-        if column.endswith(suffix) and len(column) > len(suffix):
-            name = column[:-len(suffix)]
-            return f"{_NAMES.get(name, name.replace('_', ' '))} ({unit})"
-    return _NAMES.get(column, column.replace("_", " "))
 
 
 heat_map = draw_heat_map

@@ -25,7 +25,7 @@ from hapstab.budget import BudgetError
 from hapstab.errors import HapstabError
 from hapstab.sweep.axes import Axis, Points, SweepError, parse_axis
 from hapstab.sweep.evaluate import QUANTITIES, Spec, columns, evaluate_chunk
-from hapstab.sweep.result import SweepResult, draw_heat_map, summarise
+from hapstab.sweep.result import REDUCTIONS, SweepResult, check_at, draw_heat_map, summarise
 from hapstab.sweep.store import Store
 
 __all__ = ["sweep", "MAX_POINTS", "INSTALL", "default_chunk", "POINT_SECONDS"]
@@ -71,6 +71,7 @@ def sweep(build: Callable[[dict[str, Any]], Any], axes: Sequence[Axis] | Mapping
           quantities: Sequence[str] = ("kmax",), samples: int | None = None, seed: int = 0,
           chunk: int | None = None, check_stiffness: float | None = None,
           damping: Mapping[str, Any] | None = None, plot: Sequence[str] | None = None,
+          plot_reduce: str = "min", plot_at: Mapping[str, Any] | None = None,
           workers: int | None = None, scheduler: str | None = None, force: bool = False,
           max_points: float = MAX_POINTS, study: str | None = None) -> SweepResult:
     """Evaluate ``quantities`` at every point of a space of loops, into a folder of
@@ -105,6 +106,14 @@ def sweep(build: Callable[[dict[str, Any]], Any], axes: Sequence[Axis] | Mapping
         ``resolution`` for ``best-damping``.
     plot : (str, str), optional
         The heat map's x and y axes (default: the first two axes; none with one axis).
+    plot_reduce : {"min", "max", "median"}
+        How the heat map's cells reduce the K_max over the other axes (``"min"``: the design
+        that holds for all of them; ``"max"``: their best value, e.g. of a damping axis).
+        Not part of the sweep's identity: a finished sweep run again with another reduction
+        recomputes nothing and redraws ``kmax.png``.
+    plot_at : mapping, optional
+        Axis name -> one of its grid values: the heat map of that slice only (the other
+        axes not shown are reduced by ``plot_reduce``).
     workers : int, optional
         Local processes (default: every core); 1: in this process, without Dask. Not with
         ``scheduler``.
@@ -132,6 +141,7 @@ def sweep(build: Callable[[dict[str, Any]], Any], axes: Sequence[Axis] | Mapping
     """
     spec, plot_axes = _spec(build, axes, fixed, quantities, samples, seed, chunk,
                             check_stiffness, damping, plot, max_points)
+    heat = _heat_options(spec.points, plot_axes, plot_reduce, plot_at)
     workers = _workers(workers, scheduler)
     _first_point(spec)
     _need("pyarrow")
@@ -154,7 +164,22 @@ def sweep(build: Callable[[dict[str, Any]], Any], axes: Sequence[Axis] | Mapping
             for index, cols in _run(spec, todo, workers, scheduler):
                 store.write_chunk(index, cols)
                 advance(len(cols["point_id"]))
-    return _finish(store, spec, plot_axes, len(todo))
+    return _finish(store, spec, plot_axes, len(todo), heat)
+
+
+def _heat_options(points: Points, plot: tuple[str, str] | None, reduce: Any, at: Any
+                  ) -> dict[str, Any]:
+    """The heat map's reduction and slice, checked before any work."""
+    if not isinstance(reduce, str) or reduce not in REDUCTIONS:
+        raise SweepError(f"plot_reduce = {reduce!r:.40}: allowed: {', '.join(REDUCTIONS)}")
+    if at is not None and not isinstance(at, Mapping):
+        raise SweepError(f"plot_at = {at!r:.60}: a mapping axis name -> one of its values")
+    if plot is None:
+        if at or reduce != "min":
+            raise SweepError("plot_reduce / plot_at: there is no heat map (give plot = "
+                             "(x, y), two axes, and the kmax quantity)")
+        return {"reduce": reduce, "at": None}
+    return {"reduce": reduce, "at": check_at(points, plot, dict(at or {}))}
 
 
 def _spec(build: Any, axes: Any, fixed: Any, quantities: Any, samples: Any, seed: Any,
@@ -297,13 +322,14 @@ def _run(spec: Spec, todo: list[int], workers: int, scheduler: str | None
     yield from on_dask(spec, todo, workers, scheduler)
 
 
-def _finish(store: Store, spec: Spec, plot: tuple[str, str] | None, computed: int
-            ) -> SweepResult:
+def _finish(store: Store, spec: Spec, plot: tuple[str, str] | None, computed: int,
+            heat: dict[str, Any]) -> SweepResult:
     """The summary and the heat map, then the final manifest."""
     from hapstab.outputs import Outputs, figure_to
     from hapstab.results import dumps
 
-    summary = summarise(store.chunk_paths(), spec.points, spec.quantities, plot)
+    summary = summarise(store.chunk_paths(), spec.points, spec.quantities, plot,
+                        heat["reduce"], heat["at"])
     files = ["summary.json"] + (["kmax.png"] if plot else [])
     with Outputs() as out:
         with out.open(os.path.join(store.folder, "summary.json"), "--out") as fh:
@@ -311,7 +337,7 @@ def _finish(store: Store, spec: Spec, plot: tuple[str, str] | None, computed: in
         if plot:
             figure_to(out, _Drawn(summary), os.path.join(store.folder, "kmax.png"), "--out")
     manifest = store.write_manifest(now=True, files=files)
-    return SweepResult(store.folder, manifest, summary, computed, tuple(files))
+    return SweepResult(store.folder, manifest, summary, computed, tuple(files), spec.points)
 
 
 class _Drawn:

@@ -381,14 +381,22 @@
     const simP = run("simulate", "simulate", simExtra(), (a) => HapstabPlots.simulate(a), "simulate");
     const pasP = run("passivity", "passivity", has("passivity", "curve") ? { curve: CURVE_POINTS } : {},
                      (a) => { drawPassivity(a); HapstabPlots.passivity(a); }, "passivity");
+    // the best damping, for the K-B window only (its refusal refuses nothing the page shows)
+    const bestP = unavailable("best-damping") ? Promise.resolve(null)
+      : call("best-damping", "best-damping", optionsFor("best-damping", {}), seq).then((r) => {
+        if (r.ok) shown["best-damping"] = r.ok; else if (!r.superseded) delete shown["best-damping"];
+        return r.ok || null;
+      });
     const km = await kmaxP;
     const check = await checkP;
     cur.kmax = km ? km.critical_stiffness : null;
     cur.verdict = check ? check.verdict : null;
     if (km) {    // the plots around the current T: the T the CLI read (a unit, a rate...)
       cur.period_s = km.period_s;
+      const best = await bestP;
+      if (seq !== SEQ) return;
       await Promise.all([
-        run("region", "region", regionExtra(km, cur), (a) => HapstabPlots.region(a, cur), "region"),
+        run("region", "region", regionExtra(km, cur, best), (a) => HapstabPlots.region(a, cur), "region"),
         run("boundary", "boundary", boundaryExtra(km.period_s),
             (a) => HapstabPlots.boundary(a, cur), "boundary"),
       ]);
@@ -438,19 +446,15 @@
     return extra;
   }
 
-  function regionExtra(km, cur) {
+  // the K-B window (window.js): around the device's damping b (PEB: the smaller of the
+  // two) and, when the best damping is known, following it (B* and every stable B inside)
+  function regionExtra(km, cur, best) {
     const kw = (state.values._kwin || "").trim(), bw = (state.values._bwin || "").trim();
-    const K = cur.stiffness || 0, B = cur.B || 0, kmax = km.critical_stiffness || 0;
-    // B up to four times the device's own damping b (PEB: the smaller of the two), or 2|B|;
-    // K up to where the closed forms' K_max (b + B)/(T/2 + t_d) would be at the top B
-    let b = state.kind === "hve" ? num(value("damping"))
+    const b = state.kind === "hve" ? num(value("damping"))
       : Math.min(num(value("master-damping")) ?? Infinity, num(value("slave-damping")) ?? Infinity);
-    if (!(b > 0 && isFinite(b))) b = 0.1;
-    const bHi = Math.max(2 * Math.abs(B), 4 * b);
-    const bLo = Math.min(-0.25 * b, 2 * B);
-    const kHi = Math.max(1.2 * kmax * (b + bHi) / b, 1.5 * K, 1);
-    const out = { K: kw || `0:${+kHi.toPrecision(4)}`, B: bw || `${+bLo.toPrecision(4)}:${+bHi.toPrecision(4)}`,
-                  resolution: REGION_RESOLUTION };
+    const win = HapstabWindow.kbWindow({ kmax: km.critical_stiffness, K: cur.stiffness, B: cur.B, b,
+                                         best: best || null });
+    const out = { K: kw || win.K, B: bw || win.B, resolution: REGION_RESOLUTION };
     if (has("region", "overlay")) out.overlay = "none";     // drawn by the CLI's --plot only
     return out;
   }
@@ -523,7 +527,7 @@
   }
   function extraFor(command) {
     if (command === "boundary") return shown.kmax ? boundaryExtra(shown.kmax.period_s) : {};
-    if (command === "region" && shown.kmax) return regionExtra(shown.kmax, current());
+    if (command === "region" && shown.kmax) return regionExtra(shown.kmax, current(), shown["best-damping"]);
     if (command === "passivity") return {};
     return {};
   }
