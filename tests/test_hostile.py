@@ -369,3 +369,36 @@ def test_a_whole_study_run_is_charged_before_any_work(tmp_path):
     with budget.limits(seconds=1.0):
         r = run("--yes", "run", str(p), "--out", str(tmp_path / "o"), "--only", "v1")
     assert r.exit_code == 0, r.stderr
+
+
+# ------------------------------------------------------------ 5. robust's progress when piped
+def test_robust_says_its_progress_when_piped_and_stops_at_the_budget(monkeypatch):
+    """stderr not a terminal (CliRunner's): plain progress lines at the piped rate (here
+    quiet 0 s, one every 0.5 s, standing for 10 s and 10 s), then the budgeted stop's
+    answer with its gap; the 3 s budget stands for the default 5 min."""
+    import json
+
+    from hapstab import budget
+    from hapstab.cli import output
+
+    monkeypatch.setattr(output, "PIPED_QUIET_S", 0.0)
+    monkeypatch.setattr(output, "PIPED_EVERY_S", 0.5)
+    args = ["robust", "hve", "--mass", "0.25", "--damping", "0.8", "--rate", "2kHz",
+            "--delay-s", "10ms", "--operator-mass", "0.2:1", "--operator-damping", "1:10",
+            "--operator-stiffness", "100:1000"]
+    with budget.limits(seconds=3.0):
+        r = run(*args)
+    assert r.exit_code == 0, r.stderr
+    lines = r.stderr.strip().splitlines()
+    assert lines and all(ln.startswith("hapstab: progress: robust K_max: ") for ln in lines), lines
+    assert "time budget" in r.stdout and "NOT converged" in r.stdout
+    with budget.limits(seconds=3.0):
+        r = run(*args, "--json")                   # --json: no progress, the stop in the JSON
+    assert r.exit_code == 0 and r.stderr == "", r.stderr
+    d = json.loads(r.stdout)
+    assert d["stopped"] == "time" and d["critical_stiffness"] <= d["operator_critical_stiffness"]
+
+
+def test_a_quick_piped_command_prints_no_progress():
+    r = run("boundary", "hve", "-T", "1ms:2ms:3", "-n", "0,1,2")
+    assert r.exit_code == 0 and r.stderr == "", r.stderr

@@ -140,3 +140,44 @@ def test_a_stopped_sweep_resumes_with_every_row_once(reference, tmp_path, sig, w
     assert got.column("point_id").to_pylist() == list(range(80))          # each point once
     assert got.equals(ref)
     assert not [f for f in os.listdir(out) if f.endswith(".part")]
+
+
+def _workers_spawning(pid):
+    """True once the process has a multiprocessing child (a Dask worker being started)."""
+    if not os.path.exists(f"/proc/{pid}/task"):
+        return False
+    kids = []
+    for tid in os.listdir(f"/proc/{pid}/task"):      # (a child is listed by the thread that
+        try:                                          # made it: the cluster's loop thread)
+            with open(f"/proc/{pid}/task/{tid}/children") as fh:
+                kids += fh.read().split()
+        except OSError:
+            continue
+    for k in kids:
+        try:
+            with open(f"/proc/{k}/cmdline", "rb") as fh:
+                if b"spawn_main" in fh.read():
+                    return True
+        except OSError:
+            continue
+    return False
+
+
+@pytest.mark.skipif(not os.path.exists("/proc/self/task"), reason="needs Linux's /proc")
+@pytest.mark.parametrize("after_s", [0.0, 0.4, 0.8])      # spawning, registering, scattering
+def test_a_ctrl_c_while_the_local_cluster_starts_is_one_line(reference, tmp_path, after_s):
+    """Issue 27, 11: a SIGINT while the workers are being spawned printed Dask's "Nanny
+    failed to start", an atexit traceback of the half-started cluster or an asyncio
+    "Task exception was never retrieved"; now it is held until the cluster is whole, which
+    is then closed: one line, exit 130 (as the CLI's Ctrl-C elsewhere)."""
+    study, _ = reference
+    proc = _start(study, str(tmp_path / "out"), 2)
+    t0 = time.monotonic()
+    while not _workers_spawning(proc.pid):
+        assert proc.poll() is None and time.monotonic() - t0 < 60, proc.communicate()
+        time.sleep(0.01)
+    time.sleep(after_s)
+    os.kill(proc.pid, signal.SIGINT)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, err
+    assert err.strip() == "hapstab: interrupted", err

@@ -92,12 +92,17 @@ class HapstabGroup(click.Group):
 
 def _bars(argv: list[str]) -> Any:
     """Progress bars on stderr for the library's long computations, on a terminal and
-    without --json (see :mod:`hapstab.progress`)."""
+    without --json (see :mod:`hapstab.progress`); piped, a plain line at a modest rate
+    (:func:`hapstab.cli.output.progress_lines`)."""
     from hapstab import progress
     from hapstab.cli.options import progress as bar
+    from hapstab.cli.output import progress_lines
 
-    quiet = "--json" in argv or not sys.stderr.isatty()
-    return progress.listening(None if quiet else lambda what, total: bar(total, what))
+    if "--json" in argv:
+        return progress.listening(None)
+    if not sys.stderr.isatty():        # piped: a line now and then (issue 27, 5)
+        return progress.listening(progress_lines)
+    return progress.listening(lambda what, total: bar(total, what))
 
 
 def _stopped(e: BaseException) -> None:
