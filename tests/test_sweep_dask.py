@@ -85,11 +85,13 @@ def test_a_local_cluster_of_two_processes_gets_exactly_the_single_process_rows(r
     assert json.loads(r.stdout)["manifest"]["finished_points"] == 80
 
 
-def _start(study, out, workers):
+def _start(study, out, workers, group=False):
+    """``hapstab sweep`` in a subprocess; ``group``: in a process group of its own (a
+    terminal's foreground job), which its Dask workers join."""
     env = {**os.environ, "PYTHONPATH": SRC}
     return subprocess.Popen([sys.executable, "-m", "hapstab", "sweep", str(study), "--out", out,
                              "--workers", str(workers)], env=env, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)
+                            stderr=subprocess.PIPE, text=True, start_new_session=group)
 
 
 def _wait_midway(proc, out, timeout=60.0):
@@ -181,3 +183,53 @@ def test_a_ctrl_c_while_the_local_cluster_starts_is_one_line(reference, tmp_path
     _, err = proc.communicate(timeout=60)
     assert proc.returncode == 130, err
     assert err.strip() == "hapstab: interrupted", err
+
+
+def _group_of(pid):
+    """The process ids in the process group ``pid`` leads (from /proc)."""
+    out = []
+    for d in os.listdir("/proc"):
+        if d.isdigit():
+            try:
+                with open(f"/proc/{d}/stat") as fh:
+                    fields = fh.read().rsplit(")", 1)[1].split()
+            except OSError:
+                continue
+            if int(fields[2]) == pid:                   # (pgrp, after state and ppid)
+                out.append(int(d))
+    return out
+
+
+@pytest.mark.skipif(not os.path.exists("/proc/self/task"), reason="needs Linux's /proc")
+@pytest.mark.parametrize("when", ["loading", "spawning", "registering", "midway"])
+def test_a_ctrl_c_to_the_whole_process_group_is_one_line(reference, tmp_path, when):
+    """Issue 27: a terminal's Ctrl-C goes to the whole foreground process group, the Dask
+    workers too, which each printed a KeyboardInterrupt traceback (multiprocessing's
+    resource tracker had unblocked SIGINT in the thread that spawns them). Now only the
+    sweep takes it: one line, exit 130, no worker left behind, and the run resumes."""
+    study, ref = reference
+    out = str(tmp_path / "out")
+    proc = _start(study, out, 2, group=True)
+    t0 = time.monotonic()
+    if when == "loading":                      # the CLI still importing numpy and scipy
+        time.sleep(0.5)
+    elif when == "midway":
+        _wait_midway(proc, out)
+    else:
+        while not _workers_spawning(proc.pid):
+            assert proc.poll() is None and time.monotonic() - t0 < 60, proc.communicate()
+            time.sleep(0.01)
+        time.sleep({"spawning": 0.0, "registering": 0.8}[when])
+    os.killpg(proc.pid, signal.SIGINT)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, err
+    assert err.strip() == "hapstab: interrupted", err
+    t1 = time.monotonic()
+    while _group_of(proc.pid) and time.monotonic() - t1 < 10:    # workers end with the run
+        time.sleep(0.05)
+    assert not _group_of(proc.pid)
+    if when == "midway":
+        r = CliRunner().invoke(cli, ["sweep", str(study), "--out", out, "--workers", "1",
+                                     "--json"])
+        assert r.exit_code == 0, r.stderr
+        assert rows(out).equals(ref)

@@ -130,6 +130,12 @@ def _ctrl_c_after_start() -> Iterator[None]:
     terminal's Ctrl-C (the cluster ends them). Here a Ctrl-C during the start is held
     (pending) until the cluster is whole, then raised, so the caller closes a whole
     cluster and the CLI says one line (exit 130).
+
+    The first process spawned starts multiprocessing's resource tracker, which blocks
+    SIGINT around its own spawn and then *unblocks* it (not restores it) in the spawning
+    thread: Dask's event-loop thread, whose Ctrl-C mask every worker then lost, so a
+    Ctrl-C to the process group (a terminal's) printed each worker's KeyboardInterrupt
+    traceback (issue 27). The tracker is started here, before the mask.
     """
     import signal
     import threading
@@ -138,6 +144,9 @@ def _ctrl_c_after_start() -> Iterator[None]:
     if block is None or threading.current_thread() is not threading.main_thread():
         yield                          # (no POSIX masks; or SIGINT is not ours to handle)
         return
+    from multiprocessing import resource_tracker
+
+    resource_tracker.ensure_running()  # (running already: nothing; it touches no mask then)
     old = block(signal.SIG_BLOCK, {signal.SIGINT})
     try:
         yield
