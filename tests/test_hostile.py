@@ -189,6 +189,21 @@ def test_a_sweep_refuses_a_linked_file_of_its_own(tmp_path, name):
     assert victim.read_text() == "keep me"
 
 
+def test_a_run_never_writes_through_a_linked_variant_folder(tmp_path):
+    """The class of item 9 in ``hapstab run``: a variant's folder linked elsewhere got the
+    run's kmax.json written into its target (found by tests/test_fuzz.py's links)."""
+    (tmp_path / "s.toml").write_text('kind = "hve"\n[loop]\ndelay = 2\n[[variant]]\n'
+                                     'name = "b"\nvirtual-damping = 1\n[run.kmax]\n')
+    victim, out = tmp_path / "victim", tmp_path / "out"
+    victim.mkdir()
+    out.mkdir()
+    (victim / "kmax.json").write_text("keep me")
+    (out / "b").symlink_to(victim)
+    refused(run("run", str(tmp_path / "s.toml"), "--out", str(out)), "b is a symbolic link")
+    assert os.listdir(victim) == ["kmax.json"] and (victim / "kmax.json").read_text() == "keep me"
+    assert sorted(os.listdir(out)) == ["b"]             # refused before any work or folder
+
+
 # ------------------------------------------------------------ 5. robust stops at its budget
 def test_robust_stops_at_the_time_budget_with_a_sound_gap():
     """The issue's box ran 478 s; with a 3 s budget it stops after about 3 s (plus one
