@@ -355,11 +355,71 @@ def _api_combinations(rng):
     return out
 
 
-@pytest.mark.parametrize("name,call", API_CALLS + _api_combinations(random.Random(SEED)),
+def _exotic_values():
+    """Issue 27's kinds of values: numbers of every numeric type at the edges of their
+    range, unicode digits and separators, and containers where numbers belong."""
+    from fractions import Fraction
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        ld = [np.longdouble("1e-4940"), np.longdouble("1e4931"), np.longdouble("-1e-4940")]
+    return [*ld, np.float16(65504), np.float32(1e-45), np.float32(math.nan), np.int64(-1),
+            np.int8(127), np.uint64(2 ** 64 - 1), 2 ** 70, -0.0, 5e-324, 1e-320, 1e308, 1j,
+            complex(math.nan, 0), Fraction(1, 3), Fraction(10 ** 400, 3), True, b"1",
+            "\U0001d7d0", "\uff11", "1_000", "0x10", " 2 ", [[1.0]], [], (), {}, set(),
+            np.array([]), np.array([1e-3] * 3), np.array([[1e-3]]), np.array(["x"]),
+            np.array([1e-3, math.nan]), range(0), object(), None]
+
+
+def _exotic_call(field, v):
+    """A call of the library that puts ``v`` where ``field`` goes."""
+    calls = {
+        "cutoff": lambda: h.stability(LOOP.replace(controller=h.FilteredSpringDamper(
+            5.0, 0.1, velocity_filter=h.VelocityFilter("lowpass", cutoff_hz=v)))),
+        "rest": lambda: h.limit_cycles(LOOP, resolution_m=1e-4, rest_position_m=v),
+        "resolution": lambda: h.limit_cycles(LOOP, resolution_m=v),
+        "friction": lambda: h.nonlinear_passivity(LOOP, coulomb_friction_N=v),
+        "duration": lambda: h.simulate(LOOP, v),
+        "frequencies": lambda: h.transparency(PEB, frequencies_hz=v),
+        "impedance": lambda: h.NO_IMPEDANCE(v),
+        "periods": lambda: h.build(LOOP, periods=v),
+        "delays": lambda: h.boundary(LOOP, [1e-3], v),
+        "region K": lambda: h.stability_region(LOOP, (0, v), (0, 1), 5),
+        "resolution of a region": lambda: h.stability_region(LOOP, (0, 10), (0, 1), v),
+        "paper delay": lambda: h.paper_hve(delay_samples=v),
+        "paper period": lambda: h.paper_hve(period=v),
+        "with_stiffness": lambda: h.stability(LOOP.with_stiffness(v)),
+        "with_delay_s": lambda: h.critical_stiffness(LOOP.with_delay_s(v)),
+        "max_seconds": lambda: h.critical_stiffness(LOOP, max_seconds=v),
+        "max_memory": lambda: h.stability(LOOP, max_memory=v),
+    }
+    return calls[field]
+
+
+#: The fields of the issue-27 draw, in a fixed order (the draw is by index).
+EXOTIC_FIELDS = ["cutoff", "rest", "resolution", "friction", "duration", "frequencies",
+                 "impedance", "periods", "delays", "region K", "resolution of a region",
+                 "paper delay", "paper period", "with_stiffness", "with_delay_s",
+                 "max_seconds", "max_memory"]
+
+
+def _api_combinations_27(rng):
+    """Seeded draws of issue 27's values into the library's numeric arguments (their own
+    generator: the draws of :func:`_api_combinations` stay the ones they were)."""
+    vals = _exotic_values()
+    out = []
+    for _ in range(160):
+        field, i = rng.choice(EXOTIC_FIELDS), rng.randrange(len(vals))
+        out.append((f"{field} = {vals[i]!r:.40}", _exotic_call(field, vals[i])))
+    return out
+
+
+@pytest.mark.parametrize("name,call", API_CALLS + _api_combinations(random.Random(SEED))
+                         + _api_combinations_27(random.Random(SEED + 27)),
                          ids=lambda x: x if isinstance(x, str) else "")
 def test_hostile_api_calls(name, call):
-    with contextlib.suppress(HapstabError):   # a ValueError (or TypeError) naming the argument
-        call()
+    with budget.limits(seconds=10.0), contextlib.suppress(HapstabError):
+        call()                                # a ValueError (or TypeError) naming the argument
 
 
 # ----------------------------------------------------------- issue 27: linked output folders
