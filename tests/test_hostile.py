@@ -6,6 +6,7 @@ that passes validation and then runs away, or an error outside the HapstabError 
 import math
 import os
 import warnings
+from fractions import Fraction
 
 import numpy as np
 import pytest
@@ -116,6 +117,26 @@ with warnings.catch_warnings():
 def test_errors_stay_in_the_family(call):
     with pytest.raises(HapstabError):
         call()
+
+
+@pytest.mark.parametrize("call,what", [
+    (lambda: h.build(h.paper_hve(1e-3, 2), periods=[HUGE]), "period"),
+    (lambda: h.build(h.paper_hve(1e-3, 2), periods=Fraction(10 ** 400, 3)), "periods"),
+    (lambda: h.stability_region(h.paper_hve(1e-3, 2), (0, 5e-324), (0, 1), 5), "too narrow"),
+    (lambda: h.stability_region(h.paper_hve(1e-3, 2), (0, 1), (1e300, 1e300 * (1 + 1e-15)),
+                                5), "B = ")])
+def test_values_found_by_the_api_fuzz_are_refused(call, what):
+    """tests/test_fuzz.py's draw of issue 27's kinds of values found these: an overflow
+    warning or an OverflowError (numbers beyond a double), a divide overflow (a window
+    narrower than its grid's steps)."""
+    with pytest.raises(HapstabError, match=what):
+        call()
+
+
+def test_far_boundary_points_of_a_tiny_window_are_quietly_outside():
+    r = h.stability_region(h.paper_hve(1e-3, 2), (0, 1e-300), (0, 1), 5)   # warnings: errors
+    assert r.stable_exact.shape == (5, 5) and r.stable_exact.all()     # (K < 1e-300 N/m)
+    assert np.isnan(h.NO_IMPEDANCE(complex(math.nan, 0)))
 
 
 def test_whole_delays_of_any_real_type_still_work():
