@@ -212,7 +212,8 @@ def test_a_sweep_refuses_a_linked_file_of_its_own(tmp_path, name):
 
 def test_a_run_never_writes_through_a_linked_variant_folder(tmp_path):
     """The class of item 9 in ``hapstab run``: a variant's folder linked elsewhere got the
-    run's kmax.json written into its target (found by tests/test_fuzz.py's links)."""
+    run's kmax.json written into its target (tests/test_fuzz.py's linked-folder draw
+    catches it too)."""
     (tmp_path / "s.toml").write_text('kind = "hve"\n[loop]\ndelay = 2\n[[variant]]\n'
                                      'name = "b"\nvirtual-damping = 1\n[run.kmax]\n')
     victim, out = tmp_path / "victim", tmp_path / "out"
