@@ -355,8 +355,267 @@ def _api_combinations(rng):
     return out
 
 
-@pytest.mark.parametrize("name,call", API_CALLS + _api_combinations(random.Random(SEED)),
+def _exotic_values():
+    """Issue 27's kinds of values: numbers of every numeric type at the edges of their
+    range, unicode digits and separators, and containers where numbers belong."""
+    from fractions import Fraction
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        ld = [np.longdouble("1e-4940"), np.longdouble("1e4931"), np.longdouble("-1e-4940")]
+    return [*ld, np.float16(65504), np.float32(1e-45), np.float32(math.nan), np.int64(-1),
+            np.int8(127), np.uint64(2 ** 64 - 1), 2 ** 70, -0.0, 5e-324, 1e-320, 1e308, 1j,
+            complex(math.nan, 0), Fraction(1, 3), Fraction(10 ** 400, 3), True, b"1",
+            "\U0001d7d0", "\uff11", "1_000", "0x10", " 2 ", [[1.0]], [], (), {}, set(),
+            np.array([]), np.array([1e-3] * 3), np.array([[1e-3]]), np.array(["x"]),
+            np.array([1e-3, math.nan]), range(0), object(), None]
+
+
+def _exotic_call(field, v):
+    """A call of the library that puts ``v`` where ``field`` goes."""
+    calls = {
+        "cutoff": lambda: h.stability(LOOP.replace(controller=h.FilteredSpringDamper(
+            5.0, 0.1, velocity_filter=h.VelocityFilter("lowpass", cutoff_hz=v)))),
+        "rest": lambda: h.limit_cycles(LOOP, resolution_m=1e-4, rest_position_m=v),
+        "resolution": lambda: h.limit_cycles(LOOP, resolution_m=v),
+        "friction": lambda: h.nonlinear_passivity(LOOP, coulomb_friction_N=v),
+        "duration": lambda: h.simulate(LOOP, v),
+        "frequencies": lambda: h.transparency(PEB, frequencies_hz=v),
+        "impedance": lambda: h.NO_IMPEDANCE(v),
+        "periods": lambda: h.build(LOOP, periods=v),
+        "delays": lambda: h.boundary(LOOP, [1e-3], v),
+        "region K": lambda: h.stability_region(LOOP, (0, v), (0, 1), 5),
+        "resolution of a region": lambda: h.stability_region(LOOP, (0, 10), (0, 1), v),
+        "paper delay": lambda: h.paper_hve(delay_samples=v),
+        "paper period": lambda: h.paper_hve(period=v),
+        "with_stiffness": lambda: h.stability(LOOP.with_stiffness(v)),
+        "with_delay_s": lambda: h.critical_stiffness(LOOP.with_delay_s(v)),
+        "max_seconds": lambda: h.critical_stiffness(LOOP, max_seconds=v),
+        "max_memory": lambda: h.stability(LOOP, max_memory=v),
+    }
+    return calls[field]
+
+
+#: The fields of the issue-27 draw, in a fixed order (the draw is by index).
+EXOTIC_FIELDS = ["cutoff", "rest", "resolution", "friction", "duration", "frequencies",
+                 "impedance", "periods", "delays", "region K", "resolution of a region",
+                 "paper delay", "paper period", "with_stiffness", "with_delay_s",
+                 "max_seconds", "max_memory"]
+
+
+def _api_combinations_27(rng):
+    """Seeded draws of issue 27's values into the library's numeric arguments (their own
+    generator: the draws of :func:`_api_combinations` stay the ones they were)."""
+    vals = _exotic_values()
+    out = []
+    for _ in range(160):
+        field, i = rng.choice(EXOTIC_FIELDS), rng.randrange(len(vals))
+        out.append((f"{field} = {vals[i]!r:.40}", _exotic_call(field, vals[i])))
+    return out
+
+
+@pytest.mark.parametrize("name,call", API_CALLS + _api_combinations(random.Random(SEED))
+                         + _api_combinations_27(random.Random(SEED + 27)),
                          ids=lambda x: x if isinstance(x, str) else "")
 def test_hostile_api_calls(name, call):
-    with contextlib.suppress(HapstabError):   # a ValueError (or TypeError) naming the argument
-        call()
+    with budget.limits(seconds=10.0), contextlib.suppress(HapstabError):
+        call()                                # a ValueError (or TypeError) naming the argument
+
+
+# ----------------------------------------------------------- issue 27: linked output folders
+#: Where a sweep or a run writes or deletes in its folder, and the links the fuzz plants
+#: there: a symbolic link to someone else's folder or file (relative or absolute), a
+#: dangling one, or a hard link to someone else's file. The rule for each: nothing of
+#: theirs is written, deleted or created through it (the folder itself, --out, may be a
+#: link: the user named it, and that is drawn too).
+SWEEP_SPOTS = ["chunks", "manifest.json", "summary.json", "kmax.png",
+               "chunks/chunk-000000.parquet", "chunks/chunk-000001.parquet",
+               "chunks/.chunk-000000.parquet.part", ".manifest.json.part", "."]
+RUN_SPOTS = ["base", "b", "base/kmax.json", "b/kmax.json", "study.toml", "manifest.json", "."]
+LINKS = ["dir", "file", "dangling", "hard", "dir-absolute"]
+
+
+def _link_cases(n, seed):
+    rng = random.Random(seed)
+    out = []
+    for _ in range(n):
+        command = rng.choice(["sweep", "run"])
+        spot = rng.choice(SWEEP_SPOTS if command == "sweep" else RUN_SPOTS)
+        link = "dir" if spot == "." else rng.choice(LINKS)
+        out.append((command, spot, link, rng.random() < 0.5, rng.random() < 0.5))
+    return out
+
+
+def _snapshot(root):
+    """Every path under ``root`` (links not followed) and each file's bytes."""
+    seen = {}
+    for d, dirs, files in os.walk(root):
+        for f in dirs + files:
+            p = os.path.join(d, f)
+            if os.path.isdir(p) or os.path.islink(p):
+                seen[os.path.relpath(p, root)] = None
+            else:
+                with open(p, "rb") as fh:
+                    seen[os.path.relpath(p, root)] = fh.read()
+    return seen
+
+
+def _plant(out, spot, link, theirs):
+    """Make ``out/spot`` a link into ``theirs`` (someone else's folder, with files named as
+    the run's own)."""
+    path = os.path.normpath(os.path.join(out, spot))
+    if spot != ".":
+        os.makedirs(os.path.dirname(path), exist_ok=True)
+    if os.path.isdir(path) and not os.path.islink(path):
+        import shutil
+
+        shutil.rmtree(path)
+    elif os.path.lexists(path):
+        os.remove(path)
+    folder, file = os.path.join(theirs, "folder"), os.path.join(theirs, "file")
+    if link == "hard":
+        if spot in ("chunks", "base", "b"):          # (no hard links to folders)
+            link = "dir"
+        else:
+            os.link(file, path)
+            return
+    target = {"dir": folder, "dir-absolute": os.path.abspath(folder), "file": file,
+              "dangling": os.path.join(theirs, "nothing-here")}[link]
+    os.symlink(target if link == "dir-absolute" else os.path.relpath(target, os.path.dirname(
+        os.path.abspath(path))), path)
+
+
+@pytest.mark.parametrize("command,spot,link,force,prior",
+                         draw(_link_cases(60, SEED + 27), 16, ids=lambda c: "-".join(map(str, c))))
+def test_linked_output_folders(command, spot, link, force, prior, tmp_path):
+    """Issue 27 (9): a sweep's linked chunks/ was written through and --force deleted
+    chunk files in its target; the same class: any link in a sweep's or a run's folder
+    that the run did not make, with or without --force, in a fresh or a finished folder."""
+    case = (command, spot, link, force, prior)
+    (tmp_path / "study.toml").write_text(STUDY)
+    (tmp_path / "sweep.toml").write_text(SWEEP_STUDY)
+    theirs = tmp_path / "theirs"
+    (theirs / "folder").mkdir(parents=True)
+    for name in ("chunk-000000.parquet", "chunk-000001.parquet", "kmax.json",
+                 "manifest.json", "summary.json", "study.toml"):
+        (theirs / "folder" / name).write_bytes(b"someone else's " + name.encode())
+    (theirs / "file").write_bytes(b"someone else's file")
+    out = tmp_path / "out"
+    args = (["sweep", str(tmp_path / "sweep.toml"), "--out", str(out), "--workers", "1",
+             *(["--force"] if force else [])] if command == "sweep"
+            else ["run", str(tmp_path / "study.toml"), "--out", str(out)])
+    runner = CliRunner()
+    if prior:                                       # a finished folder, then the link
+        assert runner.invoke(cli, args).exit_code == 0
+    else:
+        out.mkdir()
+    if spot == ".":
+        import shutil
+
+        shutil.rmtree(out)
+    _plant(str(out), spot, link, str(theirs))
+    before = _snapshot(theirs)
+    with budget.limits(seconds=5.0):
+        r = runner.invoke(cli, args)
+    err = r.stderr
+    assert r.exit_code in (0, 2), (case, r.exit_code, err, r.exception)
+    assert "Traceback" not in err and "internal error" not in err, (case, err)
+    if spot == ".":                                  # --out itself: the user's link
+        assert r.exit_code == 0, (case, err)
+        return
+    assert _snapshot(theirs) == before, case        # nothing of theirs touched or made
+    if link != "hard":
+        assert r.exit_code == 2 and "symbolic link" in err.splitlines()[-1], (case, err)
+        assert len(err.strip().splitlines()) == 1, (case, err)
+
+
+# ------------------------------------------------- issue 27: the explorer's client hangs up
+#: Requests whose client goes away: mid-body (at a drawn byte, the declared length the
+#: body's or more), before any body, after the body while the answer is computed, or on a
+#: GET. The rule: never an internal error or a traceback on the server's stderr, never a
+#: 5xx, and a hung-up computation stops (the slow region: in about a second, not its 8 s).
+HANGUP_BODIES = {
+    "kmax": {"kind": "hve", "options": {"delay": 2}},
+    "boundary": {"kind": "hve", "options": {"period": "1ms:2ms:3", "delay": "0,1"}},
+    "region": {"kind": "hve", "options": {"K": "0:100", "B": "0:5", "delay": 40,
+                                          "resolution": 600}},
+    "simulate": {"kind": "hve", "options": {"stiffness": 5, "duration": 0.2, "series": 30}},
+    "code": {"command": "kmax", "kind": "hve", "options": {"delay": 2}},
+    "nonsense": {"kind": "hve"},
+}
+HANGUPS = ["mid-body", "before-body", "after-body", "get"]
+
+
+def _hangup_cases(n, seed):
+    rng = random.Random(seed)
+    return [(rng.choice(list(HANGUP_BODIES)), rng.choice(HANGUPS), rng.random(),
+             rng.choice(["exact", "more", "none"]), rng.choice([0.0, 0.3, 1.0]))
+            for _ in range(n)]
+
+
+def _hang_up(app, command, shape, cut, length, after_s):
+    """One request to ``app`` whose client hangs up as drawn: (response statuses, s)."""
+    import json as _json
+    import time
+
+    import anyio
+
+    body = _json.dumps(HANGUP_BODIES[command]).encode()
+    sent = []
+    path = "/" if shape == "get" else f"/api/v1/{command}"
+    headers = [(b"host", b"127.0.0.1"), (b"content-type", b"application/json")]
+    if length != "none" and shape != "get":
+        headers.append((b"content-length", str(len(body) + (40 if length == "more" else 0))
+                        .encode()))
+    if shape == "mid-body":
+        msgs = [{"type": "http.request", "body": body[:int(cut * len(body))], "more_body": True}]
+    elif shape == "after-body":
+        msgs = [{"type": "http.request", "body": body, "more_body": False}]
+    else:
+        msgs = []
+
+    async def main():
+        t0 = time.monotonic()
+
+        async def receive():
+            if msgs:
+                return msgs.pop(0)
+            if shape == "after-body" and time.monotonic() - t0 < after_s:
+                await anyio.sleep(after_s)          # (is_disconnected cancels this at once)
+            return {"type": "http.disconnect"}
+
+        async def send(m):
+            sent.append(m)
+
+        scope = {"type": "http", "asgi": {"version": "3.0"}, "http_version": "1.1",
+                 "method": "GET" if shape == "get" else "POST", "scheme": "http",
+                 "path": path, "raw_path": path.encode(), "query_string": b"", "root_path": "",
+                 "headers": headers, "client": ("127.0.0.1", 5555),
+                 "server": ("127.0.0.1", 8765)}
+        with anyio.fail_after(60):
+            await app(scope, receive, send)
+        return time.monotonic() - t0
+
+    took = anyio.run(main)
+    return [m["status"] for m in sent if m["type"] == "http.response.start"], took
+
+
+@pytest.fixture(scope="module")
+def explorer_app():
+    pytest.importorskip("starlette")
+    from hapstab.explorer.app import create_app
+
+    return create_app()
+
+
+@pytest.mark.parametrize("command,shape,cut,length,after_s", draw(
+    _hangup_cases(40, SEED + 10), 12, ids=lambda c: f"{c[0]}-{c[1]}-{c[2]:.2f}-{c[3]}-{c[4]}"))
+def test_the_explorer_client_hangs_up(command, shape, cut, length, after_s, explorer_app,
+                                      capfd):
+    case = (command, shape, cut, length, after_s)
+    statuses, took = _hang_up(explorer_app, command, shape, cut, length, after_s)
+    err = capfd.readouterr().err
+    assert "internal error" not in err and "Traceback" not in err, (case, err)
+    assert all(s < 500 for s in statuses), (case, statuses)
+    if shape == "after-body" and command == "region":    # ~8 s of work, abandoned
+        assert took < after_s + 3, (case, took)

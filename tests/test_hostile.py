@@ -6,6 +6,7 @@ that passes validation and then runs away, or an error outside the HapstabError 
 import math
 import os
 import warnings
+from fractions import Fraction
 
 import numpy as np
 import pytest
@@ -118,6 +119,26 @@ def test_errors_stay_in_the_family(call):
         call()
 
 
+@pytest.mark.parametrize("call,what", [
+    (lambda: h.build(h.paper_hve(1e-3, 2), periods=[HUGE]), "period"),
+    (lambda: h.build(h.paper_hve(1e-3, 2), periods=Fraction(10 ** 400, 3)), "periods"),
+    (lambda: h.stability_region(h.paper_hve(1e-3, 2), (0, 5e-324), (0, 1), 5), "too narrow"),
+    (lambda: h.stability_region(h.paper_hve(1e-3, 2), (0, 1), (1e300, 1e300 * (1 + 1e-15)),
+                                5), "B = ")])
+def test_values_found_by_the_api_fuzz_are_refused(call, what):
+    """tests/test_fuzz.py's draw of issue 27's kinds of values found these: an overflow
+    warning or an OverflowError (numbers beyond a double), a divide overflow (a window
+    narrower than its grid's steps)."""
+    with pytest.raises(HapstabError, match=what):
+        call()
+
+
+def test_far_boundary_points_of_a_tiny_window_are_quietly_outside():
+    r = h.stability_region(h.paper_hve(1e-3, 2), (0, 1e-300), (0, 1), 5)   # warnings: errors
+    assert r.stable_exact.shape == (5, 5) and r.stable_exact.all()     # (K < 1e-300 N/m)
+    assert np.isnan(h.NO_IMPEDANCE(complex(math.nan, 0)))
+
+
 def test_whole_delays_of_any_real_type_still_work():
     from fractions import Fraction
 
@@ -187,6 +208,22 @@ def test_a_sweep_refuses_a_linked_file_of_its_own(tmp_path, name):
     refused(run("sweep", str(tmp_path / "s.toml"), "--out", str(out), "--workers", "1",
                 "--force"), "symbolic link")
     assert victim.read_text() == "keep me"
+
+
+def test_a_run_never_writes_through_a_linked_variant_folder(tmp_path):
+    """The class of item 9 in ``hapstab run``: a variant's folder linked elsewhere got the
+    run's kmax.json written into its target (tests/test_fuzz.py's linked-folder draw
+    catches it too)."""
+    (tmp_path / "s.toml").write_text('kind = "hve"\n[loop]\ndelay = 2\n[[variant]]\n'
+                                     'name = "b"\nvirtual-damping = 1\n[run.kmax]\n')
+    victim, out = tmp_path / "victim", tmp_path / "out"
+    victim.mkdir()
+    out.mkdir()
+    (victim / "kmax.json").write_text("keep me")
+    (out / "b").symlink_to(victim)
+    refused(run("run", str(tmp_path / "s.toml"), "--out", str(out)), "b is a symbolic link")
+    assert os.listdir(victim) == ["kmax.json"] and (victim / "kmax.json").read_text() == "keep me"
+    assert sorted(os.listdir(out)) == ["b"]             # refused before any work or folder
 
 
 # ------------------------------------------------------------ 5. robust stops at its budget
@@ -369,3 +406,36 @@ def test_a_whole_study_run_is_charged_before_any_work(tmp_path):
     with budget.limits(seconds=1.0):
         r = run("--yes", "run", str(p), "--out", str(tmp_path / "o"), "--only", "v1")
     assert r.exit_code == 0, r.stderr
+
+
+# ------------------------------------------------------------ 5. robust's progress when piped
+def test_robust_says_its_progress_when_piped_and_stops_at_the_budget(monkeypatch):
+    """stderr not a terminal (CliRunner's): plain progress lines at the piped rate (here
+    quiet 0 s, one every 0.5 s, standing for 10 s and 10 s), then the budgeted stop's
+    answer with its gap; the 3 s budget stands for the default 5 min."""
+    import json
+
+    from hapstab import budget
+    from hapstab.cli import output
+
+    monkeypatch.setattr(output, "PIPED_QUIET_S", 0.0)
+    monkeypatch.setattr(output, "PIPED_EVERY_S", 0.5)
+    args = ["robust", "hve", "--mass", "0.25", "--damping", "0.8", "--rate", "2kHz",
+            "--delay-s", "10ms", "--operator-mass", "0.2:1", "--operator-damping", "1:10",
+            "--operator-stiffness", "100:1000"]
+    with budget.limits(seconds=3.0):
+        r = run(*args)
+    assert r.exit_code == 0, r.stderr
+    lines = r.stderr.strip().splitlines()
+    assert lines and all(ln.startswith("hapstab: progress: robust K_max: ") for ln in lines), lines
+    assert "time budget" in r.stdout and "NOT converged" in r.stdout
+    with budget.limits(seconds=3.0):
+        r = run(*args, "--json")                   # --json: no progress, the stop in the JSON
+    assert r.exit_code == 0 and r.stderr == "", r.stderr
+    d = json.loads(r.stdout)
+    assert d["stopped"] == "time" and d["critical_stiffness"] <= d["operator_critical_stiffness"]
+
+
+def test_a_quick_piped_command_prints_no_progress():
+    r = run("boundary", "hve", "-T", "1ms:2ms:3", "-n", "0,1,2")
+    assert r.exit_code == 0 and r.stderr == "", r.stderr

@@ -85,11 +85,13 @@ def test_a_local_cluster_of_two_processes_gets_exactly_the_single_process_rows(r
     assert json.loads(r.stdout)["manifest"]["finished_points"] == 80
 
 
-def _start(study, out, workers):
+def _start(study, out, workers, group=False):
+    """``hapstab sweep`` in a subprocess; ``group``: in a process group of its own (a
+    terminal's foreground job), which its Dask workers join."""
     env = {**os.environ, "PYTHONPATH": SRC}
     return subprocess.Popen([sys.executable, "-m", "hapstab", "sweep", str(study), "--out", out,
                              "--workers", str(workers)], env=env, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)
+                            stderr=subprocess.PIPE, text=True, start_new_session=group)
 
 
 def _wait_midway(proc, out, timeout=60.0):
@@ -140,3 +142,94 @@ def test_a_stopped_sweep_resumes_with_every_row_once(reference, tmp_path, sig, w
     assert got.column("point_id").to_pylist() == list(range(80))          # each point once
     assert got.equals(ref)
     assert not [f for f in os.listdir(out) if f.endswith(".part")]
+
+
+def _workers_spawning(pid):
+    """True once the process has a multiprocessing child (a Dask worker being started)."""
+    if not os.path.exists(f"/proc/{pid}/task"):
+        return False
+    kids = []
+    for tid in os.listdir(f"/proc/{pid}/task"):      # (a child is listed by the thread that
+        try:                                          # made it: the cluster's loop thread)
+            with open(f"/proc/{pid}/task/{tid}/children") as fh:
+                kids += fh.read().split()
+        except OSError:
+            continue
+    for k in kids:
+        try:
+            with open(f"/proc/{k}/cmdline", "rb") as fh:
+                if b"spawn_main" in fh.read():
+                    return True
+        except OSError:
+            continue
+    return False
+
+
+@pytest.mark.skipif(not os.path.exists("/proc/self/task"), reason="needs Linux's /proc")
+@pytest.mark.parametrize("after_s", [0.0, 0.4, 0.8])      # spawning, registering, scattering
+def test_a_ctrl_c_while_the_local_cluster_starts_is_one_line(reference, tmp_path, after_s):
+    """Issue 27, 11: a SIGINT while the workers are being spawned printed Dask's "Nanny
+    failed to start", an atexit traceback of the half-started cluster or an asyncio
+    "Task exception was never retrieved"; now it is held until the cluster is whole, which
+    is then closed: one line, exit 130 (as the CLI's Ctrl-C elsewhere)."""
+    study, _ = reference
+    proc = _start(study, str(tmp_path / "out"), 2)
+    t0 = time.monotonic()
+    while not _workers_spawning(proc.pid):
+        assert proc.poll() is None and time.monotonic() - t0 < 60, proc.communicate()
+        time.sleep(0.01)
+    time.sleep(after_s)
+    os.kill(proc.pid, signal.SIGINT)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, err
+    assert err.strip() == "hapstab: interrupted", err
+
+
+def _group_of(pid):
+    """The process ids in the process group ``pid`` leads (from /proc)."""
+    out = []
+    for d in os.listdir("/proc"):
+        if d.isdigit():
+            try:
+                with open(f"/proc/{d}/stat") as fh:
+                    fields = fh.read().rsplit(")", 1)[1].split()
+            except OSError:
+                continue
+            if int(fields[2]) == pid:                   # (pgrp, after state and ppid)
+                out.append(int(d))
+    return out
+
+
+@pytest.mark.skipif(not os.path.exists("/proc/self/task"), reason="needs Linux's /proc")
+@pytest.mark.parametrize("when", ["loading", "spawning", "registering", "midway"])
+def test_a_ctrl_c_to_the_whole_process_group_is_one_line(reference, tmp_path, when):
+    """Issue 27: a terminal's Ctrl-C goes to the whole foreground process group, the Dask
+    workers too, which each printed a KeyboardInterrupt traceback (multiprocessing's
+    resource tracker had unblocked SIGINT in the thread that spawns them). Now only the
+    sweep takes it: one line, exit 130, no worker left behind, and the run resumes."""
+    study, ref = reference
+    out = str(tmp_path / "out")
+    proc = _start(study, out, 2, group=True)
+    t0 = time.monotonic()
+    if when == "loading":                      # the CLI still importing numpy and scipy
+        time.sleep(0.5)
+    elif when == "midway":
+        _wait_midway(proc, out)
+    else:
+        while not _workers_spawning(proc.pid):
+            assert proc.poll() is None and time.monotonic() - t0 < 60, proc.communicate()
+            time.sleep(0.01)
+        time.sleep({"spawning": 0.0, "registering": 0.8}[when])
+    os.killpg(proc.pid, signal.SIGINT)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, err
+    assert err.strip() == "hapstab: interrupted", err
+    t1 = time.monotonic()
+    while _group_of(proc.pid) and time.monotonic() - t1 < 10:    # workers end with the run
+        time.sleep(0.05)
+    assert not _group_of(proc.pid)
+    if when == "midway":
+        r = CliRunner().invoke(cli, ["sweep", str(study), "--out", out, "--workers", "1",
+                                     "--json"])
+        assert r.exit_code == 0, r.stderr
+        assert rows(out).equals(ref)

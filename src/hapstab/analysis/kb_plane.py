@@ -142,9 +142,14 @@ def _refine(A0: np.ndarray, B1: np.ndarray, C1: np.ndarray, kb: Any, th: np.ndar
     added = 0
     for _ in range(12):                       # each round halves the worst steps
         K, B = kb(mu, th)
-        u, v = (K - K0) / max(K1 - K0, DIVISOR_FLOOR), (B - Bl) / max(Bh - Bl, DIVISOR_FLOOR)
+        with np.errstate(over="ignore", invalid="ignore"):
+            # (a point more than ~1e308 window widths away -- a window of 1e-300 N/m and a
+            # boundary K of 1e9 -- overflows to inf: outside the window, as it is; and
+            # inf - inf, a step between two such points, is NaN, taken as a gap below)
+            u = (K - K0) / max(K1 - K0, DIVISOR_FLOOR)
+            v = (B - Bl) / max(Bh - Bl, DIVISOR_FLOOR)
+            step = np.hypot(np.diff(u, axis=0), np.diff(v, axis=0))
         inside = (u >= -0.1) & (u <= 1.1) & (v >= -0.1) & (v <= 1.1)
-        step = np.hypot(np.diff(u, axis=0), np.diff(v, axis=0))
         step = np.where(np.isnan(step), np.inf, step)       # a gap next to a point inside
         want = ((inside[1:] | inside[:-1]) & (step > REFINE_STEP)).any(axis=1)
         idx = np.flatnonzero(want & (np.diff(th) > 1e-12))   # (angles 1e-12 apart: a jump)

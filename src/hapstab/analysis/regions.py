@@ -285,6 +285,13 @@ def stability_region(loop: Loop, K: tuple[float, float], B: tuple[float, float],
             or resolution < 2:
         raise AnalysisError(f"resolution = {resolution!r}: must be a whole number >= 2")
     n = int(resolution)
+    for name, lo, hi in (("K", K_lo, K_hi), ("B", B_lo, B_hi)):
+        # n values from lo to hi must be n different doubles (a few ulps apart, so that
+        # each grid step is a number, not rounding): a window of 5e-324 N/m is not a plane
+        if hi > lo and (hi - lo) / (n - 1) < 4 * np.spacing(max(abs(lo), abs(hi))):
+            raise AnalysisError(f"{name} = ({lo!r}, {hi!r}): too narrow for {n} values "
+                                f"(resolution = {n}): neighbouring values would coincide; "
+                                "widen the window or lower the resolution")
     budget.check(_region_cost(loop, n), max_memory, max_seconds)
     with progress.steps(4, f"region: {n} x {n}") as advance:
         return _region(loop, (K_lo, K_hi), (B_lo, B_hi), n, _overlays(overlays), advance)

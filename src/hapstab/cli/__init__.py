@@ -28,8 +28,16 @@ def main(argv: list[str] | None = None) -> None:
         # click's version_option prints "%(prog)s, version %(version)s" (tests compare)
         print(f"hapstab, version {__version__}")
         sys.exit(0)
-    from hapstab.cli.main import main as run
+    try:
+        from hapstab.cli.main import main as run
+    except KeyboardInterrupt:          # a Ctrl-C while the commands load (numpy, scipy)
+        import os
 
+        print("hapstab: interrupted", file=sys.stderr, flush=True)
+        # os._exit, not sys.exit: nothing is started or written yet, and a Ctrl-C that
+        # unwound through an exec() of a string (scipy's imports do that) makes
+        # ``python -m hapstab`` end by SIGINT (-2) whatever sys.exit says
+        os._exit(130)
     run(argv)
 
 

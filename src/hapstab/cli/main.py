@@ -74,7 +74,7 @@ class HapstabGroup(click.Group):
                   else f"cannot write the output: {e.strerror or e}")
         except MemoryError:
             _fail(argv, "out of memory: the model is too large for this machine")
-        except (_Terminated, click.exceptions.Abort) as e:
+        except (_Terminated, _Interrupted, click.exceptions.Abort) as e:
             _stopped(e)
         except Exception as e:   # everything else is a bug, said as one
             _bug(e, argv)
@@ -83,21 +83,29 @@ class HapstabGroup(click.Group):
 
     def invoke(self, ctx: click.Context) -> Any:
         """Run the command; a reader that closed stdout early is reported (click would
-        exit 1 silently)."""
+        exit 1 silently); a Ctrl-C passes click by (which would echo an empty line to
+        stderr before the CLI's one)."""
         try:
             return super().invoke(ctx)
         except BrokenPipeError:
             raise _BrokenPipe() from None
+        except KeyboardInterrupt:
+            raise _Interrupted() from None
 
 
 def _bars(argv: list[str]) -> Any:
     """Progress bars on stderr for the library's long computations, on a terminal and
-    without --json (see :mod:`hapstab.progress`)."""
+    without --json (see :mod:`hapstab.progress`); piped, a plain line at a modest rate
+    (:func:`hapstab.cli.output.progress_lines`)."""
     from hapstab import progress
     from hapstab.cli.options import progress as bar
+    from hapstab.cli.output import progress_lines
 
-    quiet = "--json" in argv or not sys.stderr.isatty()
-    return progress.listening(None if quiet else lambda what, total: bar(total, what))
+    if "--json" in argv:
+        return progress.listening(None)
+    if not sys.stderr.isatty():        # piped: a line now and then (issue 27, 5)
+        return progress.listening(progress_lines)
+    return progress.listening(lambda what, total: bar(total, what))
 
 
 def _stopped(e: BaseException) -> None:
@@ -105,7 +113,7 @@ def _stopped(e: BaseException) -> None:
     if isinstance(e, _Terminated):
         click.echo("hapstab: terminated", err=True)
         sys.exit(143)
-    if isinstance(e.__cause__, KeyboardInterrupt):
+    if isinstance(e, _Interrupted) or isinstance(e.__cause__, KeyboardInterrupt):
         click.echo("hapstab: interrupted", err=True)
         sys.exit(130)
     click.echo("hapstab: aborted", err=True)
@@ -140,6 +148,10 @@ SIGNALLED: list[int] = []
 
 class _Terminated(BaseException):
     """Raised by the SIGTERM / SIGHUP handler, so that open outputs are cleaned up."""
+
+
+class _Interrupted(BaseException):
+    """A Ctrl-C (KeyboardInterrupt) out of a command, its outputs cleaned up already."""
 
 
 def _on_termination() -> None:

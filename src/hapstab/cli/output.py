@@ -74,3 +74,46 @@ def progress(total: int, description: str, quiet: bool = False
                   TimeElapsedColumn(), transient=True, console=Console(stderr=True)) as prog:
         task = prog.add_task(description, total=total)
         yield lambda k: prog.advance(task, k)
+
+
+#: Piped progress (stderr not a terminal): nothing for the first PIPED_QUIET_S seconds (a
+#: quick command prints no progress, so scripts reading stderr see only its answer), then
+#: a line at most every PIPED_EVERY_S seconds: a log file of a 5-minute robust search gets
+#: about 30 lines, not a bar's thousands of redraws.
+PIPED_QUIET_S = 10.0
+PIPED_EVERY_S = 10.0
+
+
+def progress_lines(what: str, total: int) -> Callable[[int], None]:
+    """A progress listener (:mod:`hapstab.progress`) writing ``hapstab: progress: WHAT:
+    DONE of TOTAL, S s`` lines to stderr, for when it is not a terminal.
+
+    Parameters
+    ----------
+    what : str
+        What is being computed.
+    total : int
+        Steps in all (an open-ended search: its step budget; it may stop sooner).
+
+    Returns
+    -------
+    callable
+        ``advance(k)``.
+    """
+    import time
+
+    t0 = time.monotonic()
+    done = [0]
+    due = [t0 + PIPED_QUIET_S]
+
+    def advance(k: int = 1) -> None:
+        import click
+
+        done[0] += int(k)
+        now = time.monotonic()
+        if now >= due[0]:
+            due[0] = now + PIPED_EVERY_S
+            click.echo(f"hapstab: progress: {what}: {done[0]} of {total}, "
+                       f"{now - t0:.0f} s", err=True)
+
+    return advance

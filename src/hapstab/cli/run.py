@@ -57,6 +57,7 @@ def run_cmd(study_path: str, out_dir: str | None, only: tuple[str, ...], as_json
     _charge(plan)
     if out_dir is None:
         out_dir = os.path.join("out", os.path.splitext(os.path.basename(study.path))[0])
+    _refuse_links(out_dir, plan)
     stage = _stage_folder(out_dir)
     try:
         with progress(len(plan), f"study {os.path.basename(study.path)}", as_json) as tick:
@@ -114,6 +115,23 @@ def _plan(study: Study, root: click.Group, only: tuple[str, ...]
     return [(variant, command, study_defaults(study, kinds[command], command, variant, []))
             for variant in study.variants if not only or variant in only
             for command in study.run]
+
+
+def _refuse_links(out_dir: str, plan: list[tuple[str, str, dict[str, Any]]]) -> None:
+    """Refuse a symbolic link where the run writes in its folder (a variant's folder, a
+    result, study.toml, manifest.json): the run never makes one, so it is someone else's,
+    and writing through it replaced files outside the folder (a linked variant folder's
+    target got the run's kmax.json; issue 27, the class of a sweep's linked chunks/).
+    The folder itself (``--out``) may be a link: the user named it."""
+    names = ["study.toml", "manifest.json"]
+    for variant, command, _ in plan:
+        names += [variant, *(os.path.join(variant, f"{command}.{ext}")
+                             for ext in ("json", *FILES.get(command, ())))]
+    for rel in names:
+        if os.path.islink(os.path.join(out_dir, rel)):
+            raise OutputError(f"--out = {out_dir!r:.80}: {rel} is a symbolic link (a run "
+                              "never makes one, and never writes through one); remove it, "
+                              "or choose another folder")
 
 
 def _stage_folder(out_dir: str) -> str:

@@ -274,8 +274,9 @@ def periods_of(loop: HapticLoop | TeleoperationLoop, periods: object = None) -> 
     if periods is None:
         return np.array([float(loop.period)])
     try:
-        T = np.atleast_1d(np.asarray(periods, dtype=float)).ravel()
-    except (TypeError, ValueError):
+        with np.errstate(over="ignore"):     # (a longdouble beyond a double: inf, refused)
+            T = np.atleast_1d(np.asarray(periods, dtype=float)).ravel()
+    except (TypeError, ValueError, OverflowError):     # (OverflowError: Fraction(10**400))
         raise ModelError(f"periods = {periods!r}: must be numbers (s)") from None
     if T.size == 0:
         raise ModelError("periods: the list is empty; give at least one period")

@@ -179,7 +179,8 @@ class Impedance:
         if x.dtype.kind not in "biufc":
             raise ModelTypeError(f"s = {s!r:.60}: must be a (complex) number or an array of "
                                  f"numbers (got {type(s).__name__})")
-        return np.polyval(self.num, s) / np.polyval(self.den, s)
+        with np.errstate(all="ignore"):       # NaN in, NaN out; at a pole inf: values
+            return np.polyval(self.num, s) / np.polyval(self.den, s)
 
     @classmethod
     def from_any(cls, obj: Any, name: str = "impedance") -> Impedance:

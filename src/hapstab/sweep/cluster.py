@@ -6,6 +6,7 @@ finish."""
 
 from __future__ import annotations
 
+import contextlib
 import re
 from collections.abc import Iterator
 from typing import Any
@@ -65,27 +66,92 @@ def on_dask(spec: Spec, todo: list[int], workers: int, scheduler: str | None
     """
     from dask.distributed import Client, LocalCluster
 
-    cluster = None
+    cluster = client = None
     try:
-        if scheduler is None:
-            with _fast_malloc():
-                cluster = LocalCluster(n_workers=workers, processes=True, threads_per_worker=1,
-                                       **NO_DASHBOARD, silence_logs=50)
-            client = Client(cluster)
-        else:
-            client = _connect(check_address(scheduler))
-    except SweepError:
-        raise
-    except Exception as e:         # (dask's own errors: one line, the address named)
-        raise SweepError(f"{'--scheduler = ' + repr(scheduler) if scheduler else '--workers'}: "
-                         f"cannot start Dask ({type(e).__name__}: {' '.join(str(e).split())[:200]})"
-                         ) from None
-    try:
+        try:
+            if scheduler is None:
+                with _fast_malloc(), _ctrl_c_after_start():
+                    cluster = LocalCluster(n_workers=workers, processes=True,
+                                           threads_per_worker=1, **NO_DASHBOARD,
+                                           silence_logs=50)
+                client = Client(cluster)
+            else:
+                client = _connect(check_address(scheduler))
+        except (SweepError, KeyboardInterrupt):
+            raise
+        except Exception as e:         # (dask's own errors: one line, the address named)
+            raise SweepError(f"{'--scheduler = ' + repr(scheduler) if scheduler else '--workers'}"
+                             f": cannot start Dask ({type(e).__name__}: "
+                             f"{' '.join(str(e).split())[:200]})") from None
         yield from _stream(client, spec, todo)
-    finally:
+    except BaseException:              # a Ctrl-C or SIGTERM mid-start or mid-run
+        with _quiet_asyncio():
+            _close(client, cluster)
+        raise
+    _close(client, cluster)
+
+
+def _close(client: Any, cluster: Any) -> None:
+    """Close the client, then the local cluster (every process and socket)."""
+    if client is not None:
         client.close()
-        if cluster is not None:
-            cluster.close()
+    if cluster is not None:
+        cluster.close()
+
+
+@contextlib.contextmanager
+def _quiet_asyncio() -> Iterator[None]:
+    """Closing a cluster interrupted mid-request (a Ctrl-C during the spec's scatter) left
+    the scheduler's task to fail against a worker already gone, and asyncio logged it
+    ("Task exception was never retrieved", a traceback) when it was collected: the run
+    was stopped by the user, its tasks' failures are not news. Held until collected."""
+    import gc
+    import logging
+
+    log = logging.getLogger("asyncio")
+    level = log.level
+    log.setLevel(logging.CRITICAL + 1)
+    try:
+        yield
+        gc.collect()
+    finally:
+        log.setLevel(level)
+
+
+@contextlib.contextmanager
+def _ctrl_c_after_start() -> Iterator[None]:
+    """SIGINT blocked in this thread while the local cluster starts, delivered after it.
+
+    A Ctrl-C on a terminal goes to the whole process group: to the worker processes too,
+    which then died mid-import with their tracebacks, and Dask's half-started cluster
+    printed "Nanny failed to start" and its own at exit (issue 27, 11). The cluster's
+    event-loop thread is made inside ``LocalCluster()`` and inherits this thread's signal
+    mask, and the workers it spawns inherit it across ``exec``: they never take the
+    terminal's Ctrl-C (the cluster ends them). Here a Ctrl-C during the start is held
+    (pending) until the cluster is whole, then raised, so the caller closes a whole
+    cluster and the CLI says one line (exit 130).
+
+    The first process spawned starts multiprocessing's resource tracker, which blocks
+    SIGINT around its own spawn and then *unblocks* it (not restores it) in the spawning
+    thread: Dask's event-loop thread, whose Ctrl-C mask every worker then lost, so a
+    Ctrl-C to the process group (a terminal's) printed each worker's KeyboardInterrupt
+    traceback (issue 27). The tracker is started here, before the mask.
+    """
+    import signal
+    import threading
+
+    block = getattr(signal, "pthread_sigmask", None)
+    if block is None or threading.current_thread() is not threading.main_thread():
+        yield                          # (no POSIX masks; or SIGINT is not ours to handle)
+        return
+    from multiprocessing import resource_tracker
+
+    resource_tracker.ensure_running()  # (running already: nothing; it touches no mask then)
+    old = block(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        yield
+    finally:
+        block(signal.SIG_SETMASK, old)     # a pending Ctrl-C is raised here
 
 
 #: A local cluster without a dashboard and without a fixed port: Dask's scheduler starts
