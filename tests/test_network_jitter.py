@@ -177,7 +177,7 @@ def test_hve_bracket_against_the_reference(seed):
 
 @pytest.mark.parametrize("seed", draw(RESONANT, 1))
 def test_destabilising_patterns_against_the_reference(seed):
-    loop, ref, lo, hi = case = resonant_case(seed)
+    loop, _ref, lo, hi = case = resonant_case(seed)
     res = jitter(loop, (lo, hi))
     assert not res.pattern_is_constant and res.unstable_from < res.constant_worst
     _check_bracket(case, res=res)
@@ -261,6 +261,17 @@ def test_bad_ranges_are_refused(bad):
     loop = hve_case(0)[0]
     with pytest.raises(ModelError, match="delay"):
         jitter(loop, bad)
+
+
+def test_a_range_too_long_for_the_budget_is_refused_before_any_work():
+    import time
+
+    from hapstab.budget import BudgetError
+
+    t0 = time.perf_counter()
+    with pytest.raises(BudgetError, match="jitter: .* modes"):
+        jitter(hve_case(0)[0], (0, 400))
+    assert time.perf_counter() - t0 < 1.0
 
 
 def test_four_channel_is_refused():

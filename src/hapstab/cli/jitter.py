@@ -38,6 +38,7 @@ def _jitter_command(kind: str) -> None:
     def _cmd(max_length: int, csv_path: str | None, plot_path: str | None, as_json: bool,
              **kw: Any) -> None:
         from hapstab.analysis.network.jitter import jitter
+        from hapstab.analysis.network.jitter_modes import at_lo
         from hapstab.cli.files import check_files, write_files
 
         check_files(csv_path, plot_path, as_json)
@@ -47,6 +48,7 @@ def _jitter_command(kind: str) -> None:
             res = jitter(loop, delay_s=(lo, hi), max_length=max_length)
         else:
             res = jitter(loop, (lo, hi), max_length=max_length)
+        loop = at_lo(loop, res.delay_samples[0])      # the inputs name the nominal delay
         write_files(res, csv_path, plot_path)
         n_lo, n_hi = res.delay_samples
         rows = [("stable up to", f"{fmt(res.stable_up_to)} N/m (every delay sequence; "

@@ -42,10 +42,11 @@ from hapstab.analysis.network.jitter_modes import (
     patterns,
 )
 from hapstab.analysis.network.jitter_result import JitterResult
+from hapstab.budget import EIG_SECONDS_PER_N3, FLOPS, Cost, check, eig_seconds, exact_points_cost
 from hapstab.errors import MAX_DELAY_SAMPLES, AnalysisError, ModelError
 from hapstab.models.loops import require_loop
 
-__all__ = ["jitter", "RATE_MARGIN", "K_REL"]
+__all__ = ["jitter", "jitter_cost", "RATE_MARGIN", "K_REL"]
 
 #: A pattern destabilises when its growth rate per sample is at least 1 + 1e-9: far
 #: above the rounding of the eigenvalues of the products (below 1e-12 on the test
@@ -82,6 +83,37 @@ def _range(loop: Any, delay_samples: Any, delay_s: Any) -> tuple[int, int, tuple
         raise ModelError(f"delay_samples = {delay_samples!r}: whole samples with "
                          f"0 <= lo <= hi <= {MAX_DELAY_SAMPLES}")
     return int(lo), int(hi), None
+
+
+def jitter_cost(loop: Any, lo: int, hi: int, max_length: int, budget: int) -> Cost:
+    """The estimated cost of :func:`jitter` (:mod:`hapstab.budget`): about 2 x 41
+    evaluations (two scans of SCAN_POINTS and their bisections), each either every
+    pattern's product and eigenvalues or a frequency response and a 2N-state QZ; the
+    modes and one batch of products held.
+
+    Parameters
+    ----------
+    loop : HapticLoop or TeleoperationLoop
+    lo, hi : int
+        The range, samples.
+    max_length, budget : int
+        As :func:`jitter`'s.
+
+    Returns
+    -------
+    Cost
+    """
+    p = len(loop.controllers)
+    N = float(5 * p + p * hi)                  # plant (<= 4 a port), registers, errors
+    M = float(hi - lo + 1) ** p
+    P = max(float(budget), M)
+    per_pattern = max_length * 2 * N ** 3 / FLOPS + EIG_SECONDS_PER_N3 * N ** 3
+    evals = 2 * SCAN_POINTS + 17
+    seconds = evals * (P * per_pattern + 1000 * 8 * N ** 3 / FLOPS + eig_seconds(int(2 * N)))
+    const = exact_points_cost("", int(2 * (hi - lo) + 1), int(N))
+    return Cost(f"jitter: {int(M)} modes of a {int(N)}-state switched loop, up to {int(P)} "
+                "periodic patterns", 8.0 * N * N * (3 * M + 3 * P) + const.memory_bytes,
+                seconds + const.seconds)
 
 
 def _bisect(test: Any, good: float, bad: float, found: Any) -> tuple[float, float, Any]:
@@ -218,6 +250,7 @@ def jitter(loop: Any, delay_samples: Any = None, *, delay_s: Any = None, max_len
         raise ModelError(f"max_length = {max_length!r}: a whole number of samples, 1 to 12")
     t0 = time.perf_counter()
     lo, hi, range_s = _range(loop, delay_samples, delay_s)
+    check(jitter_cost(loop, lo, hi, max_length, budget))
     jm = jitter_modes(loop, lo, hi)
     const = delay_range_critical_stiffness(loop, lo, hi, seconds=False)
     if not math.isfinite(const.critical_stiffness) or const.critical_stiffness <= 0:

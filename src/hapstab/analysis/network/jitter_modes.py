@@ -59,8 +59,8 @@ from hapstab.engine.structure import structure_of
 from hapstab.engine.system import build
 from hapstab.errors import AnalysisError, ModelError
 
-__all__ = ["JitterModes", "jitter_modes", "patterns", "admissible", "pattern_rates",
-           "MAX_PATTERNS"]
+__all__ = ["JitterModes", "jitter_modes", "patterns", "pattern_rates",
+           "MAX_PATTERNS", "at_lo"]
 
 #: The most periodic patterns the lower bound enumerates (all lengths together): the
 #: longest length is the largest whose patterns still fit (a bound on the work, which
@@ -118,8 +118,19 @@ class JitterModes:
         return self.A0 + K * self.A1
 
 
-def _at_lo(loop, lo: int):
-    """The loop with every networked delay lo (whole samples, no fractional part)."""
+def at_lo(loop, lo: int):
+    """The loop with every networked delay lo (whole samples, no fractional part).
+
+    Parameters
+    ----------
+    loop : HapticLoop or TeleoperationLoop
+    lo : int
+        Samples.
+
+    Returns
+    -------
+    HapticLoop or TeleoperationLoop
+    """
     if len(loop.controllers) == 2:
         return loop.replace(delay_samples=lo, delay_backward_samples=lo, fractional_delay=0.0,
                             fractional_delay_backward=None)
@@ -145,9 +156,9 @@ def jitter_modes(loop, lo: int, hi: int) -> JitterModes:
                             "channels are not)")
     if not (isinstance(lo, int) and isinstance(hi, int) and 0 <= lo <= hi):
         raise ModelError(f"delay range = {lo!r}:{hi!r}: whole samples, 0 <= start <= end")
-    st = structure_of(_at_lo(loop, lo))
+    st = structure_of(at_lo(loop, lo))
     ratios = _check(st, "jitter")
-    sys = build(_at_lo(loop, lo))
+    sys = build(at_lo(loop, lo))
     T = float(sys.periods[0])
     n = sys.n_plant
     Ad, Bd = _zoh(sys.Ac, sys.Bc, T)
@@ -195,12 +206,6 @@ def jitter_modes(loop, lo: int, hi: int) -> JitterModes:
     return JitterModes(A0, A1, delays, B0, B1, C, 0, lo, hi, names, T, deflated)
 
 
-def admissible(a: tuple[int, ...], b: tuple[int, ...]) -> bool:
-    """Whether delays ``b`` may follow ``a`` at the next sample (each term's delay grows
-    by at most one)."""
-    return all(y <= x + 1 for x, y in zip(a, b, strict=True))
-
-
 def _walks(lo: int, hi: int, p: int) -> list[tuple[int, ...]]:
     """Every cyclically admissible sequence of length p over [lo, hi] whose first entry is
     its minimum (each closed walk has such a rotation): depth-first, entries >= the first,
@@ -240,15 +245,17 @@ def patterns(lo: int, hi: int, terms: int, max_length: int,
     max_length : int
         The longest pattern, samples (>= 1).
     budget : int
-        The most patterns.
+        The most patterns (the constant ones are always there, even beyond it).
 
     Returns
     -------
     list of tuple of tuple of int
         Each pattern: the delays of every term at each sample of a period.
     """
-    out: list[tuple[tuple[int, ...], ...]] = []
-    for p in range(1, max_length + 1):
+    # the constant delays always (the budget may stop the lengths after them)
+    out: list[tuple[tuple[int, ...], ...]] = [
+        tuple([d]) for d in itertools.product(range(lo, hi + 1), repeat=terms)]
+    for p in range(2, max_length + 1):
         walks = _walks(lo, hi, p)
         rot = sorted({w[i:] + w[:i] for w in walks for i in range(p)})
         if len(rot) ** terms > budget * p * 4:        # far beyond: do not even form them
