@@ -269,7 +269,7 @@ def test_a_range_too_long_for_the_budget_is_refused_before_any_work():
     from hapstab.budget import BudgetError
 
     t0 = time.perf_counter()
-    with pytest.raises(BudgetError, match="jitter: .* modes"):
+    with pytest.raises(BudgetError, match=r"jitter: .* modes"):
         jitter(hve_case(0)[0], (0, 400))
     assert time.perf_counter() - t0 < 1.0
 
@@ -308,3 +308,23 @@ def test_result_protocol():
     assert len(lines) == 1 + len(res.scan_K) + len(res.gain_K)
     assert res.plot().has_data()
     assert math.isfinite(res.small_gain) and res.small_gain < 1
+
+
+def test_rigid_teleoperator_is_deflated():
+    """PEB with no operator and no environment: the rigid-body mode (z = 1 in every mode,
+    for every K) is divided out; at stable_up_to every pattern's product, rebuilt by the
+    reference, has that one eigenvalue at 1 and every other inside the circle."""
+    loop = TeleoperationLoop(Device(0.015, 0.02), Device(0.015, 0.02), SpringDamper(1.0, 0.0),
+                             SpringDamper(1.0, 0.0), None, None, 1e-3, 1, 1)
+    ref = brute.peb_loop(0.015, 0.02, 0.015, 0.02, 1e-3, 1, 1)
+    res = jitter(loop, (1, 2), max_length=3)
+    assert jitter_modes(loop, 1, 2).deflated
+    assert 0 < res.stable_up_to <= res.unstable_from <= res.constant_worst
+    at = jittery.modes(ref, 1, 2, res.stable_up_to)
+    for q in patterns(1, 2, 2, 3):
+        P = np.eye(jittery.size(ref, 2))
+        for d in q:
+            P = at[d] @ P
+        mods = np.sort(np.abs(np.linalg.eigvals(P)))[::-1]
+        # the rigid mode: 1 to the rounding of a product of <= 3 matrices
+        assert abs(mods[0] - 1.0) < 1e-9 and mods[1] < 1.0, (q, mods[:3])
