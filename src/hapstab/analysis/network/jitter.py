@@ -60,6 +60,9 @@ K_REL = 1e-5
 #: The scans start at this fraction of their top (the constant-delay K_max): both ends
 #: are searched from far below, so neither end is placed by the other.
 SCAN_FLOOR = 1e-4
+#: A pattern growing already at the scan's floor is followed down by decades to 1e-10
+#: of the constant-delay worst case (below it: "unstable from at most this K").
+DEEP_FLOOR = 1e-10
 #: Points of each scan (geometric), before the bisection.
 SCAN_POINTS = 24
 
@@ -186,8 +189,14 @@ def _unstable_from(jm: JitterModes, pats: list, k_const: float,
         hit = grows(float(K))
         if hit:
             bad, (pattern, rate) = float(K), hit
+            while prev == 0.0 and bad > k_const * DEEP_FLOOR:   # unstable at the floor: lower
+                below = grows(bad / 10)
+                if not below:
+                    prev = bad / 10
+                    break
+                bad, (pattern, rate) = bad / 10, below
             if prev > 0.0:
-                _, bad, (pattern, rate) = _bisect(grows, prev, float(K), hit)
+                _, bad, (pattern, rate) = _bisect(grows, prev, bad, (pattern, rate))
             return {"K": bad, "pattern": pattern, "rate": rate, "constant": False,
                     "scan_K": scan_K, "scan_r": scan_r}
         prev = float(K)
