@@ -61,3 +61,40 @@ def test_kmax_delay_range_is_the_librarys():
                 ["--delay-range", "1:2", "--loss", "0.1"]):
         r = _run("kmax", "hve", *bad)
         assert r.exit_code == 2 and r.stderr.count("\n") == 1, r.stderr
+
+
+def test_jitter_is_the_librarys(tmp_path):
+    from hapstab import jitter
+
+    r = _run("jitter", "hve", "--delay", "1:3", "-B", "0.05", "--json",
+             "--csv", str(tmp_path / "j.csv"))
+    assert r.exit_code == 0, r.stderr
+    d = json.loads(r.stdout)
+    want = jitter(paper_hve().replace(controller=paper_hve().controller.__class__(1.0, 0.05)),
+                  (1, 3))
+    assert d["stable_up_to_N_per_m"] == want.stable_up_to
+    assert d["unstable_from_N_per_m"] == want.unstable_from
+    assert d["pattern_samples"] == [list(p) for p in want.pattern]
+    assert d["inputs"]["command_line"][1:3] == ["jitter", "hve"]
+    assert d["inputs"]["loop"]["delay_samples"] == 1.0        # the nominal delay, lo
+    assert (tmp_path / "j.csv").read_text().startswith("search,stiffness_N_per_m,value")
+    # seconds: whole samples ceil(t / T) at a receiver acting at the sampling instants
+    r = _run("jitter", "hve", "--delay", "0.5ms:3ms", "--json")
+    s = json.loads(r.stdout)
+    assert s["delay_range_samples"] == [1, 3] and s["delay_range_s"] == [5e-4, 3e-3]
+    r = _run("jitter", "peb", "--delay", "1:2", "--max-length", "2", "--json")
+    assert r.exit_code == 0, r.stderr
+    p = json.loads(r.stdout)
+    assert p["networked_terms"] == ["slave -> master", "master -> slave"]
+    assert p["stable_up_to_N_per_m"] <= p["unstable_from_N_per_m"]
+
+
+@pytest.mark.parametrize("args, words", [
+    (("--delay", "5"), "--delay = '5'"),
+    (("--delay", "3:1"), "delay"),
+    (("--delay", "a:b"), "whole samples"),
+    (("--delay", "1:2", "--max-length", "0"), "--max-length"),
+])
+def test_jitter_refusals_are_one_line(args, words):
+    r = _run("jitter", "hve", *args)
+    assert r.exit_code == 2 and words in r.stderr and r.stderr.count("\n") == 1, r.stderr

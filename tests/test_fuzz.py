@@ -60,7 +60,10 @@ def _commands():
 #: tests/test_explorer_server.py, which stops what it starts)
 # identify takes a LOG argument: its hostile inputs are in tests/test_identify.py
 COMMANDS = [c for c in _commands()
-            if c[0][0] not in ("limit-cycle", "explore", "sweep", "identify")]
+            if c[0][0] not in ("limit-cycle", "explore", "sweep", "identify", "jitter")]
+#: (jitter's invocations are drawn after every other block, so that the others' draws
+#: stay the ones they were before the command existed)
+JITTER = [c for c in _commands() if c[0][0] == "jitter"]
 LIMIT_CYCLE = [c for c in _commands() if c[0][0] == "limit-cycle"]
 SWEEP = [c for c in _commands() if c[0][0] == "sweep"]
 #: (every loop kind of a command, hve, peb and 4ch, needs the same)
@@ -71,7 +74,8 @@ NEEDS = {"region": ["--K", "0:100", "--B", "0:1", "--resolution", "12"], "reprod
          "zwidth": ["--K", "0:100", "--B", "0:1", "--rows", "4"],
          "robust": ["--operator-mass", "0.5", "--operator-damping", "5", "--operator-stiffness",
                     "500"],
-         "sweep": ["sweep.toml", "--out", "sweep-out", "--workers", "1"]}
+         "sweep": ["sweep.toml", "--out", "sweep-out", "--workers", "1"],
+         "jitter": ["--delay", "1:2", "--max-length", "3"]}
 #: 4ch loops each command takes, one option of them then hostile: force reflection (C_m
 #: a damper, C_4 = 0, C_2 = 1) for the exact K_max, a force gain for the best damping,
 #: equal position controllers for the region, unequal ones for the position-only tests.
@@ -140,6 +144,11 @@ def _invocations(n, seed):
     for f in ("/dev/zero", "/dev/urandom", "/dev/null", ".", "deep.toml", "fifo.toml"):
         calls.append((["kmax", "hve", "--study", f], ["--study"]))
         calls.append((["run", f], ["STUDY.toml"]))
+    # jitter hve / peb (after everything else), one hostile option, --delay among them
+    for _ in range(20):
+        path, opts = rng.choice(JITTER)
+        o = rng.choice(opts)
+        calls.append(([*path, *NEEDS["jitter"], o, rng.choice(HOSTILE)], [o]))
     return calls
 
 

@@ -76,6 +76,8 @@ RUNS = [
     ("kmax-loss-curve", ["kmax", "hve", "--loss", "0:0.2:3"]),
     ("kmax-delay-range", ["kmax", "hve", "--delay-range", "5ms:8ms"]),
     ("kmax-delay-range", ["kmax", "peb", "--delay-range", "1:2"]),
+    ("jitter", ["jitter", "hve", "--delay", "1:3", "-B", "0.05"]),
+    ("jitter", ["jitter", "peb", "--delay", "0.5ms:2ms", "--max-length", "2"]),
     ("identify", ["identify", "log.csv", "--resolution", "2um"]),
     ("error", ["kmax", "hve", "--delay", "x"]),
     ("error", ["simulate", "hve", "-K", "9", "--duration", "1e9"]),              # budget

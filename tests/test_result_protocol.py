@@ -36,6 +36,7 @@ def _results():
                               coulomb_friction_N=0.005, resolution_m=1e-4),
         h.limit_cycles(h.paper_hve(1e-3, 10).with_stiffness(8.0), resolution_m=1e-4,
                        quantizer="nearest"),
+        h.jitter(loop, (1, 2), max_length=3),
     ]
 
 

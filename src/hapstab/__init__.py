@@ -22,6 +22,8 @@ if TYPE_CHECKING:   # for type checkers and readers; at run time a name loads on
     from hapstab.analysis.margin_result import FrequencyView, MarginResult
     from hapstab.analysis.margins import frequency_view, margins
     from hapstab.analysis.methods import boundary, critical_stiffness, methods_for
+    from hapstab.analysis.network.jitter import jitter
+    from hapstab.analysis.network.jitter_result import JitterResult
     from hapstab.analysis.nonlinear_passivity import (
         NonlinearPassivityResult,
         abbott_okamura,
@@ -120,6 +122,8 @@ _LAZY = {
     "hapstab.analysis.margins": ("frequency_view", "margins",),
     "hapstab.analysis.identify": ("identify",),
     "hapstab.analysis.identify_result": ("IdentificationResult",),
+    "hapstab.analysis.network.jitter": ("jitter",),
+    "hapstab.analysis.network.jitter_result": ("JitterResult",),
 }
 _MODULE_OF = {name: module for module, names in _LAZY.items() for name in names}
 
@@ -144,6 +148,7 @@ __all__ = [
     "to_control", "margins", "frequency_view", "MarginResult", "FrequencyView",
     "identify", "IdentificationResult",
     "verify_certificate", "CertificateCheck",
+    "jitter", "JitterResult",
 ]
 
 

@@ -303,6 +303,7 @@ def _register() -> None:
         devices,
         explore,
         identify,
+        jitter,
         nonlinear,
         paper,
         regions,
@@ -313,7 +314,7 @@ def _register() -> None:
     )
 
     for cmd in (analysis.kmax, analysis.check, analysis.boundary_cmd, analysis.demo,
-                analysis.verify_cmd,
+                analysis.verify_cmd, jitter.jitter_cmd,
                 paper.passivity_cmd, paper.twoport_cmd, paper.transparency_cmd,
                 paper.audit_cmd, nonlinear.limit_cycle_cmd, regions.region,
                 regions.best, robust.robust, devices.zwidth_cmd, simulation.simulate_cmd,

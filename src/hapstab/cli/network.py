@@ -13,7 +13,36 @@ from hapstab.cli.options import emit, fmt, rich_table
 from hapstab.cli.ranges import parse_range
 from hapstab.errors import HapstabError
 
-__all__ = ["network_options", "network_kmax", "range_kmax"]
+__all__ = ["network_options", "network_kmax", "range_kmax", "parse_delay_range"]
+
+
+def parse_delay_range(spec: str, option: str) -> tuple[float, float, bool]:
+    """``A:B`` as (lo, hi, seconds): seconds when either end has a unit (5ms:15ms), else
+    whole samples (5:15).
+
+    Parameters
+    ----------
+    spec : str
+        The option's value.
+    option : str
+        Its name, for the messages.
+
+    Returns
+    -------
+    (float, float, bool)
+    """
+    parts = spec.split(":")
+    if len(parts) != 2:
+        raise HapstabError(f"{option} = {spec!r}: allowed: A:B, e.g. 5ms:15ms or 5:15")
+    if any(p.strip().lower().endswith("s") for p in parts):
+        vals = parse_range(spec, option, "s", values=">= 0")
+        return vals[0], vals[-1], True
+    try:
+        lo, hi = (int(p) for p in parts)
+    except ValueError:
+        raise HapstabError(f"{option} = {spec!r}: whole samples (5:15) or seconds with a unit "
+                           "(5ms:15ms)") from None
+    return lo, hi, False
 
 
 def network_options(f: Callable) -> Callable:
@@ -97,19 +126,7 @@ def range_kmax(kind: str, spec: str, loop: Any, method: str, as_json: bool) -> N
     if method != "exact":
         raise HapstabError(f"--delay-range with --method {method}: the range's minimum uses the "
                            "exact core; leave --method at exact")
-    parts = spec.split(":")
-    if len(parts) != 2:
-        raise HapstabError(f"--delay-range = {spec!r}: allowed: A:B, e.g. 5ms:15ms or 5:15")
-    seconds = any(p.strip().lower().endswith("s") for p in parts)
-    if seconds:
-        vals = parse_range(spec, "--delay-range", "s", values=">= 0")
-        lo, hi = vals[0], vals[-1]
-    else:
-        try:
-            lo, hi = (int(p) for p in parts)
-        except ValueError:
-            raise HapstabError(f"--delay-range = {spec!r}: whole samples (5:15) or seconds "
-                               "with a unit (5ms:15ms)") from None
+    lo, hi, seconds = parse_delay_range(spec, "--delay-range")
     res = delay_range_critical_stiffness(loop, lo, hi, seconds=seconds)
     rows = [("critical stiffness", f"{fmt(res.critical_stiffness)} N/m"),
             ("worst delay", f"{res.worst_delay_samples} samples"

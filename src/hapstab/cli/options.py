@@ -158,9 +158,24 @@ def _stack(*decorators: Callable) -> Callable:
     return wrap
 
 
-def _timing_options(kind: str, ranges: bool) -> list[Callable]:
+def _timing_options(kind: str, ranges: bool, jitter: bool = False) -> list[Callable]:
     """--period / --rate and the delay options; with ``ranges`` (``boundary``) ranges and
-    lists of them."""
+    lists of them; with ``jitter`` (``hapstab jitter``) one --delay LO:HI, the range each
+    networked delay varies in."""
+    if jitter:
+        return [
+            click.option("--period", "-T", type=Quantity("s", positive=True), default=1e-3,
+                         show_default=True,
+                         help="Sampling period T: seconds, or with a unit (1ms, 250us)."),
+            click.option("--rate", type=Quantity("Hz", positive=True), default=None,
+                         help="Sampling rate instead of --period: Hz, or with a unit (1kHz)."),
+            click.option("--delay", "-n", "delay", required=True, metavar="LO:HI",
+                         help="The range the delay varies in from sample to sample: whole "
+                              "samples (5:15), or seconds with a unit (5ms:15ms), converted "
+                              "to whole samples ceil(t / T) (a receiver acting at the "
+                              "sampling instants)"
+                              + ("; each direction independently." if kind == "peb" else ".")),
+        ]
     if ranges:
         timing = [
             click.option("--period", "-T", "period", default="1ms:10ms:10", show_default=True,
@@ -213,10 +228,11 @@ FRICTION_HELP = ("simulate models it exactly (stick-slip between samples); the l
                  "analyse the friction-free loop and say so.")
 
 
-def loop_options(kind: str, ranges: bool = False) -> Callable:
+def loop_options(kind: str, ranges: bool = False, jitter: bool = False) -> Callable:
     """Options of one loop kind (defaults: the paper's simulation study). With
-    ``ranges``, --period and --delay take a range / list (for ``boundary``)."""
-    timing = _timing_options(kind, ranges)
+    ``ranges``, --period and --delay take a range / list (for ``boundary``); with
+    ``jitter``, --delay is the range LO:HI of a time-varying delay (``hapstab jitter``)."""
+    timing = _timing_options(kind, ranges, jitter)
     if kind == "hve":
         devices = [
             click.option("--mass", "-m", type=POS, default=0.15, show_default=True,

@@ -218,7 +218,8 @@ def _manifest(study: Study, results: list[dict[str, Any]], files: list[str]) -> 
 #: The headline of each command's answer: (JSON key, unit).
 HEADLINE = {"kmax": ("critical_stiffness", "N/m"), "check": ("verdict", ""),
             "passivity": ("verdict", ""), "simulate": ("verdict", ""),
-            "best-damping": ("critical_stiffness", "N/m")}
+            "best-damping": ("critical_stiffness", "N/m"),
+            "jitter": ("stable_up_to_N_per_m", "N/m")}
 
 
 def _table(study: Study, results: list[dict[str, Any]], written: list[str], out_dir: str) -> None:

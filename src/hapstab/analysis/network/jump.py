@@ -132,25 +132,26 @@ def _zoh(Ac: np.ndarray, Bc: np.ndarray, T: float) -> tuple[np.ndarray, np.ndarr
     return E[:n, :n], E[:n, n:]
 
 
-def _check(st: LoopStructure) -> tuple[float, ...]:
-    """The stiffness ratio of each channel, refusing what the model does not cover."""
+def _check(st: LoopStructure, what: str = "packet loss") -> tuple[float, ...]:
+    """The stiffness ratio of each channel, refusing what the model does not cover
+    (``what`` names the analysis in the messages)."""
     for ch in st.channels:
         c = ch.controller
         if ch.measures != "position":
-            raise AnalysisError("packet loss: modelled for position channels only; this loop "
+            raise AnalysisError(f"{what}: modelled for position channels only; this loop "
                                 "has force channels (force gains C_2, C_3, C_5, C_6 must be 0)")
         if not (isinstance(c, SpringDamper)
                 or (isinstance(c, FilteredSpringDamper) and c.damping == 0)):
-            raise AnalysisError(f"packet loss: controller = {c!r}: modelled for spring-damper "
+            raise AnalysisError(f"{what}: controller = {c!r}: modelled for spring-damper "
                                 "controllers K + B (z - 1)/(T z) (the issue's u = K y + B (y[k] - "
                                 "y[k-1]) / T); not a filtered damper or a general H(z)")
         for _, _, d in ch.terms:
             if d != int(d):
-                raise AnalysisError(f"packet loss: delay = {d:g} samples: modelled for whole "
-                                    "samples of delay (a lost packet is one sample's)")
+                raise AnalysisError(f"{what}: delay = {d:g} samples: modelled for whole "
+                                    "samples of delay (a packet is one sample's)")
     ratios = channel_ratios(st)
     if ratios is None:
-        raise AnalysisError("packet loss: K cannot be varied on this loop (give the reference "
+        raise AnalysisError(f"{what}: K cannot be varied on this loop (give the reference "
                             "controller a stiffness > 0)")
     return ratios
 
@@ -232,11 +233,11 @@ def _mode(st: LoopStructure, lay: _Layout, parts: tuple, terms: list, net: list[
     return A0, A1
 
 
-def _deflate(A0: np.ndarray, A1: np.ndarray, lay: _Layout, pos: np.ndarray
-             ) -> tuple[np.ndarray, np.ndarray, bool]:
-    """Remove the rigid-body mode (every position, register and held value 1, velocities
-    and previous errors 0: an exact eigenvector at z = 1 of every mode for every K, when
-    it is one) by a Householder similarity, as the exact core divides it out."""
+def rigid_householder(A0: np.ndarray, A1: np.ndarray, lay: _Layout, pos: np.ndarray
+                      ) -> np.ndarray | None:
+    """The similarity H (H = H^T = H^-1) whose first column is the rigid-body mode (every
+    position, register and held value 1, velocities and previous errors 0), when that is
+    an exact eigenvector at z = 1 of every mode for every K; else None."""
     v = np.zeros(lay.N)
     v[:lay.n_plant] = pos.sum(axis=0)
     v[lay.n_plant:lay.off_e] = 1.0
@@ -245,13 +246,22 @@ def _deflate(A0: np.ndarray, A1: np.ndarray, lay: _Layout, pos: np.ndarray
     if not (np.abs(A0 @ v - v).max() <= 1e-12 * scale and np.abs(A1 @ v).max()
             # a floor against division by zero / rounding, far below the answer's own accuracy
             <= 1e-12 * max(1.0, float(np.abs(A1).max()))):
-        return A0, A1, False
+        return None
     u = v / np.linalg.norm(v)
     w = u.copy()
     w[0] -= 1.0
     if not np.any(w):
-        return A0[:, 1:, 1:], A1[:, 1:, 1:], True
-    H = np.eye(lay.N) - 2.0 * np.outer(w, w) / (w @ w)       # H u = e1, H = H^T = H^-1
+        return np.eye(lay.N)
+    return np.eye(lay.N) - 2.0 * np.outer(w, w) / (w @ w)       # H u = e1, H = H^T = H^-1
+
+
+def _deflate(A0: np.ndarray, A1: np.ndarray, lay: _Layout, pos: np.ndarray
+             ) -> tuple[np.ndarray, np.ndarray, bool]:
+    """Remove the rigid-body mode (:func:`rigid_householder`) by an exact similarity, as
+    the exact core divides it out."""
+    H = rigid_householder(A0, A1, lay, pos)
+    if H is None:
+        return A0, A1, False
     return (H @ A0 @ H)[:, 1:, 1:], (H @ A1 @ H)[:, 1:, 1:], True
 
 
