@@ -364,6 +364,14 @@ def _api_combinations(rng):
     return out
 
 
+class _Opaque:
+    """An arbitrary object whose repr is the same in every process: the draw's test ids
+    must not depend on an address (pytest-xdist's workers collect them separately)."""
+
+    def __repr__(self) -> str:
+        return "<opaque object>"
+
+
 def _exotic_values():
     """Issue 27's kinds of values: numbers of every numeric type at the edges of their
     range, unicode digits and separators, and containers where numbers belong."""
@@ -377,7 +385,7 @@ def _exotic_values():
             complex(math.nan, 0), Fraction(1, 3), Fraction(10 ** 400, 3), True, b"1",
             "\U0001d7d0", "\uff11", "1_000", "0x10", " 2 ", [[1.0]], [], (), {}, set(),
             np.array([]), np.array([1e-3] * 3), np.array([[1e-3]]), np.array(["x"]),
-            np.array([1e-3, math.nan]), range(0), object(), None]
+            np.array([1e-3, math.nan]), range(0), _Opaque(), None]
 
 
 def _exotic_call(field, v):
