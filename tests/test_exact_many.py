@@ -179,10 +179,10 @@ def test_a_search_refused_in_a_batch_names_its_loop(monkeypatch):
     real = many.analyse
     T_bad = 7.77e-4
 
-    def analyse(resp, full=True):
+    def analyse(resp, full=True, proof=False):
         if np.any(resp.periods == T_bad):
             raise AnalysisError("crossing analysis: refused for the test")
-        return real(resp, full)
+        return real(resp, full, proof)
 
     monkeypatch.setattr(many, "analyse", analyse)
     loops = [h.paper_hve(T, 2) for T in (5e-4, 6e-4, T_bad, 8e-4, 9e-4)]
