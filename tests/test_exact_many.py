@@ -220,7 +220,9 @@ def test_batches_are_bounded(monkeypatch):
     monkeypatch.setattr(many, "build_responses", build)
     loops = [h.paper_hve(float(T), 1) for T in np.geomspace(1e-4, 1e-2, BATCH + 40)]
     assert many.batch_size(many.plan_response(loops[0])) == BATCH
-    got = critical_stiffness_many(loops)
+    # the batching is the float search's (the proof runs per loop after it): its fast
+    # path shows the sizes as well and costs 1 s, not 5
+    got = critical_stiffness_many(loops, certify=False)
     assert sizes == [BATCH, 40] and len(got) == BATCH + 40
 
 

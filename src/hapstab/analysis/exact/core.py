@@ -249,20 +249,25 @@ def exact_critical_stiffness(loop: HapticLoop | TeleoperationLoop, *,
     return _to_result(res, loop.period, loop.delay_in_samples)
 
 
+def _zero_reason(res: StableSet) -> str:
+    """Why K_max is 0: marginal, undecided above K -> 0+, or unstable there."""
+    if res.outside_small_K < 0:
+        return ("marginal for K -> 0+: a pole is on the unit circle to the model's accuracy "
+                "(e.g. an undamped termination), so no K > 0 can be certified stable")
+    if res.outside_small_K == 0 and res.uncertain:
+        # no pole outside at K_0, but the range above it not decided: uncertain, not unstable
+        return ("not proved stable for any K > 0: no closed-loop pole lies outside the unit "
+                "circle as K -> 0+, but the range above could not be decided")
+    return (f"unstable for every K > 0: already as K -> 0+, {res.outside_small_K} "
+            "closed-loop pole(s) lie outside the unit circle (the virtual damping, delay "
+            "and terminations alone destabilise the loop)")
+
+
 def _to_result(res: StableSet, T: float, n: int | float) -> CriticalStiffnessResult:
     kmax, th = res.kmax, res.theta
     freq = th / (2 * math.pi * T) if np.isfinite(th) else math.nan
-    if kmax == 0.0 and res.outside_small_K < 0:
-        reason = ("marginal for K -> 0+: a pole is on the unit circle to the model's accuracy "
-                  "(e.g. an undamped termination), so no K > 0 can be certified stable")
-    elif kmax == 0.0 and res.outside_small_K == 0 and res.uncertain:
-        # no pole outside at K_0, but the range above it not decided: uncertain, not unstable
-        reason = ("not proved stable for any K > 0: no closed-loop pole lies outside the unit "
-                  "circle as K -> 0+, but the range above could not be decided")
-    elif kmax == 0.0:
-        reason = (f"unstable for every K > 0: already as K -> 0+, {res.outside_small_K} "
-                  "closed-loop pole(s) lie outside the unit circle (the virtual damping, delay "
-                  "and terminations alone destabilise the loop)")
+    if kmax == 0.0:
+        reason = _zero_reason(res)
     elif math.isinf(kmax):
         reason = "stable for every K > 0 (no closed-loop pole reaches the unit circle)"
     elif not np.isfinite(th):
