@@ -169,7 +169,9 @@ def boundary(loop: HapticLoop | TeleoperationLoop, periods: Sequence[float] | np
         Passed to the method at every grid point (e.g. ``approximation`` for
         ``"circle"``); ``"exact"`` takes ``certify`` (default True: every point proved
         in ball arithmetic, as :func:`critical_stiffness`; False: the float search
-        alone, faster and not proved). ``max_memory`` / ``max_seconds``: the
+        alone, not proved, and 5-25x faster over a grid: 4 delays x 60 periods take
+        0.8 s against 4.3 s for the paper's HVE, 0.4 s against 9.3 s for its PEB).
+        ``max_memory`` / ``max_seconds``: the
         budget of the whole grid (see :mod:`hapstab.budget`).
 
     Returns
