@@ -38,7 +38,8 @@ class BestDampingResult(Result):
     reason : str
         How B* was found, in words.
     B_curve, K_curve : arrays
-        K_max over the scanned dampings (N*s/m, N/m).
+        K_max over the scanned dampings (N*s/m, N/m), by the float search (not
+        re-proved in ball arithmetic: the search's curve; K* and K_max(0) are proved).
     holds_for : str
         The terminations the answer is for (the operator's, and the environment's).
     critical_stiffness_without_operator : float
@@ -145,7 +146,9 @@ def best_damping(loop: Loop, B_max: float | None = None, resolution: int = 64,
     b = check_equal_gains(loop)
 
     def kmax(Bs: np.ndarray) -> np.ndarray:
-        return np.array([r.kmax for r in kmax_over_B(loop, Bs)])
+        # the search over B runs on the float search (an optimisation of ~60 K_max's);
+        # the K* and K_max at B = 0 it reports are then proved (_proved)
+        return np.array([r.kmax for r in kmax_over_B(loop, Bs, certify=False)])
 
     def first_zero(start: float) -> float:
         """Double ``start`` until K_max there is 0 (at most 30 times)."""
@@ -179,6 +182,7 @@ def best_damping(loop: Loop, B_max: float | None = None, resolution: int = 64,
     with progress.steps(Bs.size + 60, "best damping") as advance:
         Ks, best_B, best_K = _search(kmax, Bs, B_max - B_min, advance)
     K0 = float(Ks[int(np.flatnonzero(Bs == 0.0)[0])])
+    best_K, K0 = _proved(loop, best_B, best_K), _proved(loop, 0.0, K0)
     if best_K == 0.0:
         best_B = 0.0
         reason = (f"unstable for every K > 0 at every B in [{B_min:.6g}, {B_max:.6g}] N*s/m: no "
@@ -191,6 +195,15 @@ def best_damping(loop: Loop, B_max: float | None = None, resolution: int = 64,
                    "terminations it damps at the critical frequency; it is not passive)")
     holds, bare, passive, caveat = _caveats(loop, best_B, best_K)
     return BestDampingResult(best_B, best_K, K0, reason + caveat, Bs, Ks, holds, bare, passive)
+
+
+def _proved(loop: Loop, B: float, K_float: float) -> float:
+    """K_max at virtual damping ``B`` proved in ball arithmetic (the safe end, at most
+    the float search's ``K_float``); 0 and inf as the float search found them."""
+    if not (K_float > 0 and math.isfinite(K_float)):
+        return K_float
+    from hapstab.analysis.exact.core import exact_critical_stiffness
+    return float(exact_critical_stiffness(with_gains(loop, 1.0, B)).critical_stiffness)
 
 
 def _search(kmax: Any, Bs: np.ndarray, span: float, advance: Any

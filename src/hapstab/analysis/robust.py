@@ -414,6 +414,10 @@ def _result(st: _State, box: OperatorBox, lower: float, rtol: float, verts: np.n
     if not np.isnan(named).any():
         exact = exact_critical_stiffness(st.loop.replace(
             operator=box.operator(*named))).critical_stiffness
+        # the minimum over the box is at most the named operator's K_max, proved in ball
+        # arithmetic (the safe end, never above the truth): the bound from the float
+        # enclosures of the sub-boxes can sit ~1e-12 above it (the proof's 2^-40 window)
+        lower = min(lower, exact)
     vmin = float(np.nanmin(v_hi)) if np.any(~np.isnan(v_hi)) else math.nan
     vert = verts[int(np.nanargmin(v_hi))] if np.any(~np.isnan(v_hi)) else named
     converged = _done(st.upper, lower, rtol)

@@ -80,15 +80,28 @@ def k_scale(params: dict[str, Any]) -> float:
         return float(2.0 ** np.round(np.log2(np.float64(min(masses)) / np.float64(T) ** 2)))
 
 
+#: A damping below this fraction of the total damping at its port does not set the
+#: damping scale: it is within double rounding of the sum it enters (b + B = b to the
+#: last bit; 2^-52), so it cannot move K_max's scale (2 (b + B)/T in the heavy
+#: limit), while a K_0 it set (1e-14 |B|/T, e.g. 1e-182 N/m for |B| = 1e-168) puts
+#: the poles near z = 1 closer to the circle than the proof's pieces resolve.
+NEGLIGIBLE_DAMPING = 2.0 ** -52
+
+
 def damping_scale(params: dict[str, Any]) -> float:
-    """The smallest positive b/T or |B|/T of the loop (N/m; inf if none): with m/T^2
-    it sets the base point K_0 standing for K -> 0+, so that a heavy device (m/T^2
-    far above the stiffness its damping allows, K_max ~ 2 b/T) is not examined
-    from a K_0 above its K_max."""
+    """The smallest positive b/T or |B|/T of the loop (N/m; inf if none), leaving out a
+    damping negligible at its port (:data:`NEGLIGIBLE_DAMPING`; channel i acts on port
+    i): with m/T^2 it sets the base point K_0 standing for K -> 0+, so that a heavy
+    device (m/T^2 far above the stiffness its damping allows, K_max ~ 2 b/T) is not
+    examined from a K_0 above its K_max."""
     T = params["period_s"]
-    vals = [p["damping_N_s_per_m"] + p["termination_damping_N_s_per_m"] for p in params["ports"]]
-    vals += [abs(c["damping_N_s_per_m"]) for c in params["channels"]]
-    pos = [v / T for v in vals if v > 0]
+    own = [p["damping_N_s_per_m"] + p["termination_damping_N_s_per_m"] for p in params["ports"]]
+    chan = [abs(c["damping_N_s_per_m"]) for c in params["channels"]]
+    # the total damping at each port: its device and termination, and its channel's |B|
+    total = [abs(b) + (chan[i] if i < len(chan) else 0.0) for i, b in enumerate(own)]
+    vals = [(v, total[i]) for i, v in enumerate(own)]
+    vals += [(v, total[i] if i < len(total) else v) for i, v in enumerate(chan)]
+    pos = [v / T for v, tot in vals if v > 0 and v >= NEGLIGIBLE_DAMPING * tot]
     return min(pos) if pos else math.inf
 
 

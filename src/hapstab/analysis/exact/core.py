@@ -38,7 +38,7 @@ MARGINAL_TOL = POLE_ON_CIRCLE
 
 def exact_kmax_batch(loop: HapticLoop | TeleoperationLoop,
                      periods: Sequence[float] | np.ndarray | None = None,
-                     intervals: bool = True, certify: bool = False) -> list[StableSet]:
+                     intervals: bool = True, certify: bool = True) -> list[StableSet]:
     """Exact K_max (and the stable set in K) of ``loop`` at each sampling period.
 
     Parameters
@@ -50,7 +50,8 @@ def exact_kmax_batch(loop: HapticLoop | TeleoperationLoop,
     intervals : bool
         Every stable interval (True) or only K_max (False, faster).
     certify : bool
-        Re-prove each answer in ball arithmetic (see :func:`exact_critical_stiffness`).
+        Re-prove each answer in ball arithmetic (default True; False: the float search
+        alone, see :func:`exact_critical_stiffness`).
 
     Returns
     -------
@@ -97,7 +98,7 @@ def _polish_pole(resp: LoopResponse, u: float, z0: complex) -> complex:
 
 
 def stability(loop: HapticLoop | TeleoperationLoop, *, max_memory: float | None = None,
-              max_seconds: float | None = None, certify: bool = False) -> StabilityResult:
+              max_seconds: float | None = None, certify: bool = True) -> StabilityResult:
     """Exact stability of the sampled-data loop at its own parameters.
 
     Parameters
@@ -111,9 +112,9 @@ def stability(loop: HapticLoop | TeleoperationLoop, *, max_memory: float | None 
     certify : bool
         Count the poles outside by the argument principle in ball arithmetic
         (python-flint Arb; :func:`~hapstab.analysis.exact.proof.count`) where the loop is
-        covered, instead of the float enclosures (default False: faster, but their
-        rounding allowances are not proved and are known to be short for stiff walls on
-        light devices, k T^2 / m >> 1).
+        covered (default True). False: the float enclosures alone, whose rounding
+        allowances are not proved and are known to be short for stiff walls on light
+        devices (k T^2 / m >> 1; issue 26).
 
     Returns
     -------
@@ -217,7 +218,7 @@ def _describe(z: complex, T: float) -> str:
 
 
 def exact_critical_stiffness(loop: HapticLoop | TeleoperationLoop, *,
-                             certify: bool = False) -> CriticalStiffnessResult:
+                             certify: bool = True) -> CriticalStiffnessResult:
     """Exact K_max of the sampled-data loop (see the module docstring).
 
     Parameters
@@ -229,10 +230,10 @@ def exact_critical_stiffness(loop: HapticLoop | TeleoperationLoop, *,
         Re-prove the stable set in ball arithmetic (python-flint Arb;
         :mod:`~hapstab.analysis.exact.proved`): K_max is then the safe end of a proved
         enclosure, never above the truth, and ``certificate`` holds the proof
-        (:func:`~hapstab.analysis.verify.verify_certificate`). Default False: the float
-        search alone, faster (10-100x), whose rounding allowances are not proved (known to
-        put K_max up to ~2e-5 relative too high for stiff walls on light devices,
-        k T^2 / m >> 1; issue 26).
+        (:func:`~hapstab.analysis.verify.verify_certificate`). Default True. False: the
+        float search alone (1.2-2.5x faster), whose rounding allowances are not proved
+        (known to put K_max up to ~2e-5 relative too high for stiff walls on light
+        devices, k T^2 / m >> 1; issue 26).
 
     Returns
     -------
@@ -248,16 +249,25 @@ def exact_critical_stiffness(loop: HapticLoop | TeleoperationLoop, *,
     return _to_result(res, loop.period, loop.delay_in_samples)
 
 
+def _zero_reason(res: StableSet) -> str:
+    """Why K_max is 0: marginal, undecided above K -> 0+, or unstable there."""
+    if res.outside_small_K < 0:
+        return ("marginal for K -> 0+: a pole is on the unit circle to the model's accuracy "
+                "(e.g. an undamped termination), so no K > 0 can be certified stable")
+    if res.outside_small_K == 0 and res.uncertain:
+        # no pole outside at K_0, but the range above it not decided: uncertain, not unstable
+        return ("not proved stable for any K > 0: no closed-loop pole lies outside the unit "
+                "circle as K -> 0+, but the range above could not be decided")
+    return (f"unstable for every K > 0: already as K -> 0+, {res.outside_small_K} "
+            "closed-loop pole(s) lie outside the unit circle (the virtual damping, delay "
+            "and terminations alone destabilise the loop)")
+
+
 def _to_result(res: StableSet, T: float, n: int | float) -> CriticalStiffnessResult:
     kmax, th = res.kmax, res.theta
     freq = th / (2 * math.pi * T) if np.isfinite(th) else math.nan
-    if kmax == 0.0 and res.outside_small_K < 0:
-        reason = ("marginal for K -> 0+: a pole is on the unit circle to the model's accuracy "
-                  "(e.g. an undamped termination), so no K > 0 can be certified stable")
-    elif kmax == 0.0:
-        reason = (f"unstable for every K > 0: already as K -> 0+, {res.outside_small_K} "
-                  "closed-loop pole(s) lie outside the unit circle (the virtual damping, delay "
-                  "and terminations alone destabilise the loop)")
+    if kmax == 0.0:
+        reason = _zero_reason(res)
     elif math.isinf(kmax):
         reason = "stable for every K > 0 (no closed-loop pole reaches the unit circle)"
     elif not np.isfinite(th):

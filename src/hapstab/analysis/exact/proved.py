@@ -111,7 +111,8 @@ HEAVY = 1e-12
 
 def refuse_heavy(params: dict) -> None:
     """Refuse a loop whose poles all crowd z = 1 beyond the proof's reach (a heavy
-    device: 1e12 kg at T = 1 ms with b = 0.1 N*s/m has b T / m = 1e-16)."""
+    device: 1e12 kg at T = 1 ms with b = 0.1 N*s/m has b T / m = 1e-16); a loop whose
+    groups are all zero (undamped, no termination spring) is not refused."""
     from hapstab.errors import AnalysisError
     T = params["period_s"]
     groups = []
@@ -120,7 +121,9 @@ def refuse_heavy(params: dict) -> None:
         groups += [(p["damping_N_s_per_m"] + p["termination_damping_N_s_per_m"]) * T / M,
                    p["termination_stiffness_N_per_m"] * T * T / M]
         groups += [abs(c["damping_N_s_per_m"]) * T / M for c in params["channels"]]
-    if max(groups) < HEAVY:
+    # all zero (no damping, no termination spring): no group sets a small K scale, the
+    # loop is m/T^2's alone like any undamped one (K_0 from k_scale), not a heavy device
+    if 0.0 < max(groups) < HEAVY:
         masses = ", ".join(f"{p['mass_kg']:g}" for p in params["ports"])
         raise AnalysisError(f"mass = {masses} kg at T = {T:g} s: the loop's dimensionless "
                             f"groups b T/m, |B| T/m, k T^2/m are all below {HEAVY:g} "
