@@ -33,8 +33,9 @@ __all__ = ["BudgetError", "Cost", "check", "limits", "unlimited", "MEMORY_BYTES"
 #: Default memory budget: 2 GiB, a twelfth of the project's 24 GiB machine and what
 #: any laptop spares.
 MEMORY_BYTES = 2 * 1024 ** 3
-#: Default time budget: 5 minutes.
-SECONDS = 300.0
+#: Default time budget: 1 minute -- no accepted input runs longer without a refusal
+#: or a budgeted stop (issue 27); ``--yes`` / ``max_seconds=`` ask for more.
+SECONDS = 60.0
 #: Seconds per N^3 of one dense eigenvalue problem (numpy's eigvals): 0.8e-9 to 1.1e-9
 #: measured at N = 300...600 on the project's 2-core machine, doubled for a busy machine.
 EIG_SECONDS_PER_N3 = 2e-9
