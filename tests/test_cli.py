@@ -146,7 +146,7 @@ def test_paper_methods_refuse_fractional_delay_in_one_line():
 
 @pytest.mark.parametrize("args,needle", [
     (("boundary", "hve", "--csv", "/nonexistent/dir/x.csv"), "the folder '/nonexistent/dir' does not exist"),
-    (("kmax", "hve", "--delay", "100000"), "at most 2000 samples"),
+    (("kmax", "hve", "--delay", "100001"), "at most 100000 samples"),
     (("kmax", "hve", "--mass", "1e-300"), "cannot"),
     (("kmax", "hve", "-B", "1e300"), "cannot"),
     (("kmax", "hve", "--period", "1e300"), "between 1e-07 s and 1000 s"),

@@ -33,8 +33,9 @@ __all__ = ["BudgetError", "Cost", "check", "limits", "unlimited", "MEMORY_BYTES"
 #: Default memory budget: 2 GiB, a twelfth of the project's 24 GiB machine and what
 #: any laptop spares.
 MEMORY_BYTES = 2 * 1024 ** 3
-#: Default time budget: 5 minutes.
-SECONDS = 300.0
+#: Default time budget: 1 minute -- no accepted input runs longer without a refusal
+#: or a budgeted stop (issue 27); ``--yes`` / ``max_seconds=`` ask for more.
+SECONDS = 60.0
 #: Seconds per N^3 of one dense eigenvalue problem (numpy's eigvals): 0.8e-9 to 1.1e-9
 #: measured at N = 300...600 on the project's 2-core machine, doubled for a busy machine.
 EIG_SECONDS_PER_N3 = 2e-9
@@ -85,6 +86,45 @@ def exact_points_cost(what: str, points: int, states: int) -> Cost:
     """
     return Cost(what, points * (1e5 + POINT_BYTES_PER_STATE * states),
                 points * (POINT_SECONDS + 5e-5 * states))   # 0.2 s a point at N = 4000
+
+#: The exact core's K_max of one loop at a long delay, per sample of the phase
+#: e^{-j n theta} (det M's delay power, the round trip for PEB) and per port squared:
+#: measured (peak RSS, wall time, float search and ball proof, quiet machine) HVE at
+#: n = 2e4 / 5e4: 0.22 / 0.36 GB, 1.1 / 2.7 s; PEB round trip 1e4 / 4e4: 0.61 / 1.89 GB,
+#: 3.3 / 15.4 s. Taken as 12 kB and 100 us per phase sample per port^2 plus 0.15 GB,
+#: above every measurement (1.05-2x).
+EXACT_BYTES_PER_PHASE = 12e3
+#: (the time per phase sample per port^2, from the same measurements)
+EXACT_SECONDS_PER_PHASE = 1e-4
+EXACT_BASE_BYTES = 1.5e8
+
+
+def exact_search_cost(phase_samples: int, ports: int, periods: int = 1) -> Cost:
+    """The cost of the exact core's K_max (its float search and ball proof) of a loop
+    whose characteristic function carries e^{-j n theta} with n = ``phase_samples``,
+    at ``periods`` sampling periods (see the constants above). Below a few thousand
+    samples it is well inside any budget; it grows linearly with the delay.
+
+    Parameters
+    ----------
+    phase_samples : int
+        The delay power of det M (HVE: the delay; PEB: the round trip), samples.
+    ports : int
+        Device ports (1 HVE, 2 teleoperation).
+    periods : int
+        How many sampling periods are analysed in one batch.
+
+    Returns
+    -------
+    Cost
+    """
+    per = float(phase_samples) * ports * ports
+    return Cost(f"exact K_max: a delay power of {phase_samples} samples "
+                f"({ports} port{'s' if ports > 1 else ''}) at {periods} period"
+                f"{'s' if periods > 1 else ''}",
+                EXACT_BASE_BYTES + periods * EXACT_BYTES_PER_PHASE * per,
+                periods * EXACT_SECONDS_PER_PHASE * per)
+
 
 def build_cost(periods: int, states: float) -> Cost:
     """The cost of building the exact closed loop (:func:`hapstab.build`) at ``periods``

@@ -164,7 +164,7 @@ def check_delay(name: str, value: Any) -> int:
 
 
 #: The exact model has one state per sample of delay: beyond this it is slow and large.
-MAX_DELAY_SAMPLES = 2000
+MAX_DELAY_SAMPLES = 100_000
 
 #: Sampling periods the model represents (validated down to 10 us; below 1e-7 s the
 #: dynamics between samples drown in rounding).

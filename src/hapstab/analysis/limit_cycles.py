@@ -186,10 +186,14 @@ def _scan(bal: Balance, amps: np.ndarray, theta: np.ndarray
     found: list[tuple[float, float]] = []
     for i in range(amps.size - 1):
         (j0, r0), (j1, r1) = rows[i], rows[i + 1]
-        for a, ja in enumerate(j0):
-            b = np.flatnonzero(np.abs(j1 - ja) <= 2)
-            if b.size and r0[a] * r1[b[0]] < 0:
-                found += _root(bal, math.sqrt(amps[i] * amps[i + 1]), float(theta[ja]))
+        if not (j0.size and j1.size):
+            continue
+        # each crossing's match on the next row: the first one within 2 grid points
+        # (j1 is sorted), in one pass instead of one search per crossing
+        b = np.minimum(np.searchsorted(j1, j0 - 2), j1.size - 1)
+        hit = (np.abs(j1[b] - j0) <= 2) & (r0 * r1[b] < 0)
+        for a in np.flatnonzero(hit):
+            found += _root(bal, math.sqrt(amps[i] * amps[i + 1]), float(theta[j0[a]]))
     roots = _unique(found)
     near = sorted((float(v), float(amps[i]), float(theta[k])) for i in range(amps.size)
                   for k, v in zip(*mins[i], strict=True)
@@ -436,8 +440,12 @@ def limit_cycles(loop: HapticLoop, *, resolution_m: float | None = None,
                              "line is a term of the balance")
     C, P, mass, k = loop_parts(loop)
     K = loop.controller.stiffness                       # type: ignore[union-attr]
+    from hapstab.analysis.exact.core import stability
     from hapstab.errors import check_real
 
+    # the linear loop's verdict first: its budget check refuses a long delay chain at
+    # once, before the scan's work (whose grid grows with the delay)
+    linear = stability(loop).verdict
     bal = Balance(C, P, k, K, delta, quantizer, fc, _rest(rest_position_m, delta))
     amps, theta = _grids(bal, loop.delay_samples, max_amplitude_m)
     roots, near = _scan(bal, amps, theta)
@@ -445,9 +453,6 @@ def limit_cycles(loop: HapticLoop, *, resolution_m: float | None = None,
     cycles = _distinct([_cycle(bal, loop, mass, A, th, H) for A, th in roots + _nyquist(bal, amps)]
                        + ([_cycle(bal, loop, mass, A, th, H, root=False) for A, th in near]
                           if H > 1 else []))
-    from hapstab.analysis.exact.core import stability
-
-    linear = stability(loop).verdict
     N = _gains(bal, amps)[0]
     return LimitCycleResult.build(loop, delta, quantizer, fc, int(harmonics), cycles, linear,
                                   crossovers(C, theta, loop.period), float(N.max()),

@@ -39,6 +39,7 @@ def theta_grid(oscillations: int, points_per_oscillation: int = 48, minimum: int
         Additional angles (e.g. clustered near poles and zeros close to the circle).
     """
     N = max(minimum, points_per_oscillation * (int(oscillations) + 1))
+    _check_grid_cost(N)
     th0 = 1e-7 / (int(oscillations) + 1)  # the w -> 0 limit to ~1e-14 (see above)
     th = np.linspace(0.0, np.pi, N)
     th[0] = th0
@@ -46,6 +47,23 @@ def theta_grid(oscillations: int, points_per_oscillation: int = 48, minimum: int
         e = np.asarray(extra, dtype=float)
         th = np.concatenate([th, e[(e > 0) & (e <= np.pi)]])
     return np.unique(th)
+
+
+#: Peak bytes an analysis over the grid holds per angle (its frequency responses, the
+#: margins): measured 400 (PEB passivity, 480,144 angles, 0.30 GB peak) and 125 (HVE,
+#: 2.4e6 angles, 0.40 GB); taken as 450, above both, plus 0.1 GB for the process.
+GRID_BYTES_PER_ANGLE = 450.0
+#: Seconds per angle of one pass over the grid (PEB passivity: 0.87 s at 480,144 angles,
+#: 1.8e-6), taken as 2e-6; a K scan over the grid costs far more and checks its own.
+GRID_SECONDS_PER_ANGLE = 2e-6
+
+
+def _check_grid_cost(angles: int) -> None:
+    """Refuse, before it is built, a grid (it grows with the delay) whose analysis is
+    over the budget (see the constants above)."""
+    from hapstab.budget import Cost, check
+    check(Cost(f"a frequency grid of {angles} angles", 1e8 + GRID_BYTES_PER_ANGLE * angles,
+               GRID_SECONDS_PER_ANGLE * angles))
 
 
 def refine_minimum(f: Callable[[np.ndarray], np.ndarray], theta: np.ndarray,

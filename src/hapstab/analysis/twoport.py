@@ -192,6 +192,7 @@ def critical_stiffness_llewellyn(loop: TeleoperationLoop, approximation: str = "
     side, a = _side(loop, approximation, bounds)
     T, n = side.period_s, int(loop.delay_in_samples)   # (the forward delay)
     th = theta_grid(side.oscillations)
+    _check_scan_cost(th.size)
     A, C = _parts(side, a, th)
 
     def worst(K: float) -> tuple[float, float]:
@@ -223,6 +224,21 @@ def critical_stiffness_llewellyn(loop: TeleoperationLoop, approximation: str = "
     th_w = worst(hi)[0]
     return _result(lo, a, T, n, th_w, f"Llewellyn's conditions fail beyond K_max, first at "
                                       f"w = {th_w / T:.6g} rad/s", bounds, side)
+
+
+#: Seconds per angle of the grid of one Llewellyn K_max (the K scan, its refinement and
+#: bisection): 21 s at 192,144 angles (PEB, 2000 samples) and 87 s at 960,144 (10,000),
+#: measured on a loaded 2-core machine (1.1e-4 and 0.9e-4): taken as 1.2e-4.
+SCAN_SECONDS_PER_ANGLE = 1.2e-4
+
+
+def _check_scan_cost(angles: int) -> None:
+    """Refuse, before any work, a scan whose angle grid (it grows with the delay) is
+    over the time budget (:data:`SCAN_SECONDS_PER_ANGLE`)."""
+    from hapstab.budget import Cost, check
+    # memory: the grid's parts (a few complex arrays per angle) and a 2e6-element chunk
+    check(Cost(f"Llewellyn's K_max: a scan over {angles} angles", 256.0 * angles + 1.3e8,
+               SCAN_SECONDS_PER_ANGLE * angles))
 
 
 #: Ratio of successive K of the scan: a failure window narrower than 1 % of K between two

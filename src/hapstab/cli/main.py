@@ -282,7 +282,7 @@ def _quiet_stdout() -> None:
               help="On an internal error, show the traceback.")
 @click.option("--yes", is_flag=True, expose_value=False,
               help="Run even when the estimated memory or time exceeds the budget "
-                   "(2 GiB, 5 min); may be given anywhere on the line.")
+                   "(2 GiB, 1 min); may be given anywhere on the line.")
 @click.option("--study", metavar="FILE", expose_value=False,
               help="Take a loop command's options from a TOML study file (the command line "
                    "overrides them); anywhere on the line. See hapstab run.")

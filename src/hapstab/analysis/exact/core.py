@@ -59,6 +59,10 @@ def exact_kmax_batch(loop: HapticLoop | TeleoperationLoop,
         One per period (see :func:`hapstab.analysis.exact.crossings.analyse`).
     """
     resp = loop_response(loop, periods)
+    from hapstab.budget import check, exact_search_cost
+
+    # a long delay's cost grows with the phase's power: refused up front, by name
+    check(exact_search_cost(resp.phase_rate, len(resp.ports), len(resp.scale)))
     try:
         return analyse(resp, full=intervals, proof=certify)
     except AnalysisError as e:       # the core gave up: say for which loop

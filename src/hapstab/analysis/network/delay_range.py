@@ -195,6 +195,7 @@ def delay_range_critical_stiffness(loop: Any, lo: float, hi: float, *, seconds: 
             raise ModelError(f"delay range = {lo!r}:{hi!r}: whole samples, start <= end")
     two = len(loop.controllers) == 2
     ds = list(range(2 * n_lo, 2 * n_hi + 1)) if two else list(range(n_lo, n_hi + 1))
+    _check_cost(ds, 2 if two else 1)
     ks = []
     for d in ds:
         at = (loop.replace(delay_samples=d // 2, delay_backward_samples=d - d // 2,
@@ -205,3 +206,13 @@ def delay_range_critical_stiffness(loop: Any, lo: float, hi: float, *, seconds: 
     return DelayRangeResult(ks[i], ds[i], tuple(ds), tuple(ks),
                             (float(lo), float(hi)) if seconds else None, loop.period, two,
                             loop.to_dict())
+
+
+def _check_cost(ds: list[int], ports: int) -> None:
+    """Refuse, before any work, a range whose K_max at every delay is over the budget
+    (:func:`hapstab.budget.exact_search_cost` at the longest delay, plus
+    :data:`hapstab.budget.POINT_SECONDS` per delay)."""
+    from hapstab.budget import POINT_SECONDS, Cost, check, exact_search_cost
+    one = exact_search_cost(ds[-1], ports)
+    check(Cost(f"delay range: K_max at {len(ds)} delays up to {ds[-1]} samples",
+               one.memory_bytes, len(ds) * (one.seconds + POINT_SECONDS)))
