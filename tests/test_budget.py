@@ -85,7 +85,7 @@ def test_a_refusal_says_what_and_how_much():
         budget.check(cost)
     msg = str(e.value)
     assert msg.startswith("region: a 9 x 9 grid of a 7-state loop: would need about 4.66 GiB of "
-                          "memory (budget 2 GiB) and about 2 h (budget 1 min)")
+                          "memory (budget 2 GiB) and about 2 h (budget 60 s)")
     assert budget.check(cost, max_memory=1e10, max_seconds=1e4) is cost
 
 

@@ -57,10 +57,11 @@ FLOPS = 1e10
 #: Fixed cost of one simulated run (setup, the verdict's fit): a K_max search of about
 #: 18 runs of 2000 samples of a 12-state loop takes 0.044 s.
 RUN_SECONDS = 2e-3
-#: One certified K_max (the exact core, K_max alone): 6-20 ms at every delay up to 1000
-#: samples (benchmarks/bench_delay.py), taken as 20 ms; a closed form or the circle
-#: criterion costs less.
-POINT_SECONDS = 0.02
+#: One certified K_max in a batch (the float search, then the ball proof loop by loop):
+#: 18.7 ms (100 HVE loops) and 38 ms (100 PEB loops; a PEB boundary 39 ms a point),
+#: measured on the 2-core machine with the proof the default; taken as 40 ms. A closed
+#: form or the circle criterion costs less.
+POINT_SECONDS = 0.04
 #: Bytes one item of a batched exact analysis holds per state of the loop (its
 #: polynomials and cells): about 10 MB per period at N = 4004 (a review's measurement).
 POINT_BYTES_PER_STATE = 3000.0
