@@ -8,6 +8,7 @@ import math
 
 from click.testing import CliRunner
 
+import hapstab as h
 from hapstab.cli.main import cli
 from hapstab.simulation.growth import BoundednessVerdict
 
@@ -71,3 +72,17 @@ def test_a_short_runs_figure_title_is_a_sentence():
     assert "undecided: the run is too short to tell (low confidence" in title
     assert "undecided: undecided" not in title
     plt.close("all")
+
+
+def test_kmax_zero_with_a_stable_window_higher_up_says_so():
+    # issue 26 item 2's PEB: 4 poles outside as K -> 0+, stable for K in [23.07, 142.05]:
+    # K_max is 0, but "unstable for every K > 0" would be false
+    loop = h.TeleoperationLoop(h.Device(0.13749381169616529, 0.0),
+                               h.Device(0.23273843177103054, 0.0), h.SpringDamper(1.0, 0.0),
+                               h.SpringDamper(1.0, 0.0), h.spring(459.7312419258073),
+                               h.spring(374.8968065578325), 0.000890594778822135, 34)
+    res = h.critical_stiffness(loop)
+    assert res.critical_stiffness == 0.0
+    assert res.stable_intervals and 23.07 < res.stable_intervals[0][0] < 23.08
+    assert "unstable for every K" not in res.reason
+    assert "so K_max = 0; stable for K in [23.0708" in res.reason

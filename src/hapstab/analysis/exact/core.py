@@ -255,6 +255,11 @@ def exact_critical_stiffness(loop: HapticLoop | TeleoperationLoop, *,
 
 def _zero_reason(res: StableSet) -> str:
     """Why K_max is 0: marginal, undecided above K -> 0+, or unstable there."""
+    later = [iv for iv in res.intervals if iv[1] > iv[0] > 0]
+    spans = ", ".join(f"[{a:.10g}, {b:.10g}]" for a, b in later)
+    if res.outside_small_K < 0 and later:
+        return ("marginal for K -> 0+: a pole is on the unit circle to the model's accuracy "
+                f"(e.g. an undamped termination), so K_max = 0; stable for K in {spans} N/m")
     if res.outside_small_K < 0:
         return ("marginal for K -> 0+: a pole is on the unit circle to the model's accuracy "
                 "(e.g. an undamped termination), so no K > 0 can be certified stable")
@@ -262,6 +267,10 @@ def _zero_reason(res: StableSet) -> str:
         # no pole outside at K_0, but the range above it not decided: uncertain, not unstable
         return ("not proved stable for any K > 0: no closed-loop pole lies outside the unit "
                 "circle as K -> 0+, but the range above could not be decided")
+    if later:
+        # K_max is 0 (not stable on (0, K] for any K), yet stable windows higher up
+        return (f"unstable as K -> 0+ ({res.outside_small_K} closed-loop pole(s) outside the "
+                f"unit circle), so K_max = 0; stable for K in {spans} N/m")
     return (f"unstable for every K > 0: already as K -> 0+, {res.outside_small_K} "
             "closed-loop pole(s) lie outside the unit circle (the virtual damping, delay "
             "and terminations alone destabilise the loop)")
