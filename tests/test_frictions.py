@@ -29,7 +29,15 @@ def test_resolution_takes_units(cmd):
 
 
 def test_a_delay_in_seconds_meant_in_ms_is_pointed_out():
+    # 10 s at 2 kHz (20,000 samples) is within the model since long delays are (issue 26):
+    # answered, with a note that a bare number is seconds
     r = _run("kmax", "hve", "--rate", "2kHz", "--delay-s", "10")
+    assert r.exit_code == 0 and "--delay-s 10 reads as 10 s; for milliseconds write 10ms" \
+        in r.stderr
+    r = _run("kmax", "hve", "--rate", "2kHz", "--delay-s", "10ms")     # a unit: no note
+    assert r.exit_code == 0 and "note" not in r.stderr
+    # beyond the model: refused, with the hint when milliseconds would fit
+    r = _run("kmax", "hve", "--rate", "50kHz", "--delay-s", "10")
     assert r.exit_code == 2 and "did you mean 10ms (= 0.01 s)?" in r.stderr
     r = _run("kmax", "hve", "--rate", "2kHz", "--delay-s", "1e4")   # not in ms either
     assert r.exit_code == 2 and "did you mean" not in r.stderr

@@ -107,7 +107,23 @@ class Quantity(Number):
             v = parse_quantity(value, self.unit)
         except ValueError as e:
             self.fail(str(e), param, ctx)
-        return super().convert(v, param, ctx)
+        out = super().convert(v, param, ctx)
+        if self.unit == "s" and out >= 1.0 and _plain(value):
+            # a delay of a second or more with no unit is most often milliseconds meant
+            # (--delay-s 10); it is answered as given, and said so once on stderr
+            name = param.opts[0] if param is not None and param.opts else "the delay"
+            click.echo(f"hapstab: note: {name} {value} reads as {out:g} s; for milliseconds "
+                       f"write {value}ms", err=True)
+        return out
+
+
+def _plain(value: Any) -> bool:
+    """Whether ``value`` is a number written without a unit."""
+    try:
+        float(str(value).strip())
+    except ValueError:
+        return False
+    return True
 
 
 class Delay(click.ParamType):

@@ -85,7 +85,7 @@ def delay_from_seconds(name: str, seconds: Any, period: float) -> tuple[int, flo
     if not d <= MAX_DELAY_SAMPLES:
         # a delay given in ms without its unit (--delay-s 10 for 10 ms) fits once read so
         hint = (f"; did you mean {seconds:g}ms (= {seconds / 1e3:g} s)?"
-                if d / 1e3 <= MAX_DELAY_SAMPLES else "")
+                if d / 1e3 <= MAX_DELAY_SAMPLES and seconds < 1e3 else "")
         raise ModelError(f"{name} = {seconds!r}: {d:.4g} samples at T = {period:g} s; at most "
                          f"{MAX_DELAY_SAMPLES} (the exact model carries one state per sample)"
                          f"{hint}")
