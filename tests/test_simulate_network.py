@@ -27,7 +27,8 @@ from hapstab.analysis.network.loss import loss_critical_stiffness
 from hapstab.cli.main import cli
 from hapstab.errors import HapstabError, ModelError
 from hapstab.simulation import simulate
-from hapstab.simulation.network import NetworkLine, NetworkTraceError, from_ages, read_trace
+from hapstab.simulation.network import NetworkLine, from_ages
+from hapstab.simulation.network_trace import NetworkTraceError, read_trace
 
 #: The network run is stepped sample by sample, today's linear run by a block recurrence
 #: (many samples per matrix product): they differ by rounding only, which accumulates

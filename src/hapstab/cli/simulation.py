@@ -163,7 +163,7 @@ def _network(loop: Any, trace: str | None, jitter: str | None, loss: float | Non
     from hapstab.analysis.network.delay_range import whole_delays
     from hapstab.cli.network import parse_delay_range
     from hapstab.errors import HapstabError
-    from hapstab.simulation.network import read_trace
+    from hapstab.simulation.network_trace import read_trace
 
     if trace is not None:
         if jitter is not None or loss is not None:

@@ -24,12 +24,8 @@ controller reads, the register of x[k - hi], is replaced in what the controller
 *measures* by the value the network delivers (register d_k, the position itself for
 d_k = 0, or the held value). The physical registers are untouched.
 
-A trace file (:func:`read_trace`) is CSV with one header line: ``sample`` (0, 1, 2, ...)
-or ``time_s`` (k T), ``delay_samples`` (the transport delay of the packet sent at that
-sample, a whole number >= 0) and ``arrived`` (1 or 0; also true / false); for PEB
-optionally ``delay_backward_samples`` and ``arrived_backward`` for the slave -> master
-direction (without them both directions follow the one trace). Lines starting with
-``#`` are comments.
+A trace file is read by :func:`hapstab.simulation.network_trace.read_trace` (its format
+there and in docs/guide/networks.md).
 
 References
 ----------
@@ -42,7 +38,6 @@ Mechatronics 20(7):812-823, 2010 (TDPA with the energies sent with the packets).
 
 from __future__ import annotations
 
-import csv
 import dataclasses
 import math
 from dataclasses import dataclass
@@ -52,12 +47,8 @@ import numpy as np
 
 from hapstab.errors import MAX_DELAY_SAMPLES, ModelError, check_real
 
-__all__ = ["Network", "NetworkTraceError", "read_trace", "trace", "from_ages",
-           "network_options", "NetworkLine", "tdpa_rows"]
-
-
-class NetworkTraceError(ModelError):
-    """A network trace file that cannot be read: names its row and column."""
+__all__ = ["Network", "trace", "from_ages", "network_options", "NetworkLine", "tdpa_rows",
+           "network_loop", "wire"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -109,6 +100,17 @@ class Network:
     def schedule(self, n_terms: int, M: int) -> tuple[np.ndarray, np.ndarray]:
         """Transport delays and arrivals of the packets of samples 0..M, (n_terms, M+1).
 
+        Parameters
+        ----------
+        n_terms : int
+            The networked signals of the loop.
+        M : int
+            Samples of the run.
+
+        Returns
+        -------
+        (delays, arrived) : (n_terms, M+1) int and bool arrays
+
         Raises
         ------
         ModelError
@@ -148,6 +150,15 @@ def network_options(network: Any) -> Network | None:
     """A :class:`Network` from what ``simulate(..., network=...)`` received: None, a
     Network, or a dict with ``jitter=(lo, hi)`` (whole samples), ``loss`` and ``seed``,
     or ``delay_samples`` (and ``arrived``) for a trace.
+
+    Parameters
+    ----------
+    network : None, Network or dict
+        What ``simulate`` received.
+
+    Returns
+    -------
+    Network or None
 
     Raises
     ------
@@ -202,6 +213,19 @@ def _checked(net: Network) -> bool:
 def trace(delay_samples: Any, arrived: Any = None, source: str | None = None) -> Network:
     """A trace network from arrays (one row per direction, one column per sample).
 
+    Parameters
+    ----------
+    delay_samples : array of int
+        Each packet's transport delay, samples, (n,) or (m, n).
+    arrived : array of bool or 0 / 1, optional
+        Whether it arrived (default: every one).
+    source : str, optional
+        Where it came from, for the record.
+
+    Returns
+    -------
+    Network
+
     Raises
     ------
     ModelError
@@ -233,6 +257,16 @@ def from_ages(ages: Any) -> Network:
     the first k with k - d_k >= j (:mod:`hapstab.analysis.network.jitter_modes`); a
     sample no k reaches is sent with the largest age (it arrives after the sequence).
 
+    Parameters
+    ----------
+    ages : sequence of int, or (m, n) array
+        The age d_k used at each sample, one row per direction.
+
+    Returns
+    -------
+    Network
+        A trace (every packet arrives).
+
     Raises
     ------
     ModelError
@@ -254,129 +288,6 @@ def from_ages(ages: Any) -> Network:
         first = np.searchsorted(newest, np.arange(n), side="left")   # first k with newest >= j
         out[t] = np.where(first < n, first - np.arange(n), d.max())
     return trace(out)
-
-
-def read_trace(path: str, period_s: float | None = None) -> Network:
-    """Read a network trace file (format: the module docstring).
-
-    Parameters
-    ----------
-    path : str
-        The CSV file.
-    period_s : float, optional
-        T in s; needed when the file gives times (``time_s``) instead of samples.
-
-    Returns
-    -------
-    Network
-
-    Raises
-    ------
-    NetworkTraceError
-        A row or column that breaks the format, named (rows counted from 1, the header
-        being row 1).
-    """
-    try:
-        with open(path, newline="", encoding="utf-8") as fh:
-            lines = [(i + 1, ln) for i, ln in enumerate(fh) if not ln.lstrip().startswith("#")
-                     and ln.strip()]
-    except (OSError, UnicodeDecodeError) as e:
-        raise NetworkTraceError(f"delay trace {path!r}: cannot be read ({e})") from None
-    if not lines:
-        raise NetworkTraceError(f"delay trace {path!r}: empty; need a header line "
-                                "sample,delay_samples,arrived and one row per sample")
-    rows = list(csv.reader([ln for _, ln in lines]))
-    head = [h.strip() for h in rows[0]]
-    back = _header(head, f"delay trace {path!r}, row {lines[0][0]} (header)")
-    cols = ["delay_samples", "arrived"] + (["delay_backward_samples", "arrived_backward"]
-                                          if back else [])
-    idx = {h: i for i, h in enumerate(head)}
-    n = len(rows) - 1
-    D, A = np.zeros((len(cols) // 2, n), int), np.zeros((len(cols) // 2, n), bool)
-    times = np.zeros(n)
-    for r, (line_no, _), row in zip(range(n), lines[1:], rows[1:], strict=True):
-        at = f"delay trace {path!r}, row {line_no}"
-        if len(row) != len(head):
-            raise NetworkTraceError(f"{at}: {len(row)} fields; the header has {len(head)}")
-        cell = {h: row[i].strip() for h, i in idx.items()}
-        if "sample" in cell:
-            if not (cell["sample"].isdigit() and int(cell["sample"]) == r):
-                raise NetworkTraceError(f"{at}, column 'sample': {cell['sample']!r}; the rows "
-                                        f"must be the samples 0, 1, 2, ... in order (expected {r})")
-        else:
-            times[r] = _number(cell["time_s"], at, "time_s")
-        for t in range(len(cols) // 2):
-            dname, aname = cols[2 * t], cols[2 * t + 1]
-            v = _number(cell[dname], at, dname)
-            if not (v == math.floor(v) and 0 <= v <= MAX_DELAY_SAMPLES):
-                raise NetworkTraceError(f"{at}, column {dname!r}: {cell[dname]!r}; must be a "
-                                        f"whole number of samples in [0, {MAX_DELAY_SAMPLES}]")
-            D[t, r] = int(v)
-            flag = cell[aname].lower()
-            if flag not in ("1", "0", "true", "false"):
-                raise NetworkTraceError(f"{at}, column {aname!r}: {cell[aname]!r}; must be 1 "
-                                        "or 0 (true / false)")
-            A[t, r] = flag in ("1", "true")
-    if n == 0:
-        raise NetworkTraceError(f"delay trace {path!r}: a header and no rows")
-    if "time_s" in head:
-        _check_times(times, period_s, path, [ln for ln, _ in lines[1:]])
-    return Network(delay_samples=D, arrived=A, source=str(path))
-
-
-#: A time stamp is sample k when within this fraction of T of k T: written with a few
-#: significant digits a time is off by far less than this, and a neighbour is a whole T away.
-TIME_TOL = 1e-6
-
-
-def _check_times(times: np.ndarray, period_s: float | None, path: str, line_nos: list) -> None:
-    if period_s is None:
-        raise NetworkTraceError(f"delay trace {path!r}: a time_s column needs the sampling "
-                                "period (read_trace(path, period_s=T)); or give 'sample'")
-    k = np.arange(times.size)
-    bad = np.flatnonzero(np.abs(times - k * period_s) > TIME_TOL * period_s)
-    if bad.size:
-        r = int(bad[0])
-        raise NetworkTraceError(f"delay trace {path!r}, row {line_nos[r]}, column 'time_s': "
-                                f"{times[r]!r}; the rows must be the samples k T = "
-                                f"{r * period_s:g} s in order (T = {period_s:g} s, within "
-                                f"{TIME_TOL:g} T)")
-
-
-#: The columns a trace file may have.
-TRACE_COLUMNS = ("sample", "time_s", "delay_samples", "arrived", "delay_backward_samples",
-                 "arrived_backward")
-
-
-def _header(head: list[str], where: str) -> bool:
-    """Check a trace file's header; True when it has the backward direction."""
-    allowed = set(TRACE_COLUMNS)
-    for h in head:
-        if h not in allowed:
-            raise NetworkTraceError(f"{where}: column {h!r} is unknown; allowed: "
-                                    f"{', '.join(sorted(allowed))}")
-    if len(set(head)) != len(head):
-        raise NetworkTraceError(f"{where}: a column is named twice ({', '.join(head)})")
-    if ("sample" in head) == ("time_s" in head):
-        raise NetworkTraceError(f"{where}: give one of the columns 'sample' or 'time_s'")
-    for need in ("delay_samples", "arrived"):
-        if need not in head:
-            raise NetworkTraceError(f"{where}: column {need!r} is missing")
-    back = [h in head for h in ("delay_backward_samples", "arrived_backward")]
-    if any(back) and not all(back):
-        raise NetworkTraceError(f"{where}: give both delay_backward_samples and "
-                                "arrived_backward, or neither")
-    return all(back)
-
-
-def _number(text: str, at: str, col: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        raise NetworkTraceError(f"{at}, column {col!r}: {text!r} is not a number") from None
-    if not math.isfinite(v):
-        raise NetworkTraceError(f"{at}, column {col!r}: {text!r} is not finite")
-    return v
 
 
 class NetworkLine:
@@ -421,7 +332,15 @@ class NetworkLine:
         self.held = np.zeros(self.targets.size)
 
     def __call__(self, k: int, sm: np.ndarray) -> None:
-        """Put the delivered values into the measured state ``sm`` at sample k (in place)."""
+        """Put the delivered values into the measured state ``sm`` at sample k (in place).
+
+        Parameters
+        ----------
+        k : int
+            The sample.
+        sm : (N,) array
+            What the controller measures.
+        """
         s = self.src[:, k]
         fresh = s >= 0
         self.held[fresh] = sm[s[fresh]]           # read every source before writing
@@ -438,7 +357,19 @@ class NetworkLine:
 def tdpa_rows(line: NetworkLine, port_of_term: Any, n_ports: int) -> np.ndarray | None:
     """Per port and sample, the row of the other port's input energy its PO may use:
     the newest sample of the other's position it has (the energies travel with the
-    positions, Ryu, Artigas & Preusche 2010), at least one sample old."""
+    positions, Ryu, Artigas & Preusche 2010), at least one sample old.
+
+    Parameters
+    ----------
+    line : NetworkLine
+    port_of_term : sequence of (int, int)
+        (controller port, source port) of each networked signal.
+    n_ports : int
+
+    Returns
+    -------
+    (p, M+1) int array, or None for one port
+    """
     if n_ports < 2:
         return None
     k = np.arange(line.newest.shape[1])
@@ -451,6 +382,15 @@ def tdpa_rows(line: NetworkLine, port_of_term: Any, n_ports: int) -> np.ndarray 
 def network_loop(net: Network, loop: Any) -> Any:
     """The loop to build for a run with ``net``: every networked delay ``max(hi, 1)``
     whole samples (the registers the network reads); refuses what is not modelled.
+
+    Parameters
+    ----------
+    net : Network
+    loop : HapticLoop or TeleoperationLoop
+
+    Returns
+    -------
+    HapticLoop or TeleoperationLoop
 
     Raises
     ------
@@ -474,6 +414,18 @@ def wire(net: Network, loop: Any, sysm: Any, roles: Any, M: int) -> tuple[Any, N
     ``loop`` is :func:`network_loop`'s. The controller states become controller rows
     (updated from what the controller measured, the network's values), no longer
     copies of a register; the registers of each port are x[k-1] ... x[k-n].
+
+    Parameters
+    ----------
+    net : Network
+    loop : HapticLoop or TeleoperationLoop
+        :func:`network_loop`'s.
+    sysm : SampledSystem
+        ``build(loop)``.
+    roles : Roles
+        :func:`hapstab.simulation.stepper.roles_of`'s.
+    M : int
+        Samples of the run.
 
     Returns
     -------
