@@ -225,3 +225,17 @@ def test_cli_simulate_through_a_network(tmp_path):
     bad = _write(tmp_path, "sample,delay_samples,arrived\n0,1,1\n1,1,2\n", "bad.csv")
     r = CliRunner().invoke(cli, ["simulate", "hve", "-K", "20", "--delay-trace", bad])
     assert r.exit_code == 2 and "row 3, column 'arrived'" in r.stderr
+
+
+def test_what_is_not_simulated_is_refused_and_a_long_run_is_budgeted():
+    from hapstab import Device, SpringDamper
+    from hapstab.budget import BudgetError
+    from hapstab.models.fourchannel import FourChannelLoop
+
+    four = FourChannelLoop(Device(0.015, 0.02), Device(0.015, 0.02), SpringDamper(1, 0),
+                           SpringDamper(1, 0), None, None, 1e-3, 2)
+    with pytest.raises(ModelError, match="4-channel"):
+        simulate(four, 0.1, network={"jitter": (1, 2)})
+    # stepped in Python: 3e6 samples are refused before any work (about 4 min estimated)
+    with pytest.raises(BudgetError, match="3000000 samples"):
+        simulate(paper_hve(1e-3), 3000.0, network={"jitter": (1, 3)})

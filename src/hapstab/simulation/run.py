@@ -276,6 +276,10 @@ def _admit(sysm: Any, ports: Sequence[Any], nl: dict[str, Any], M: int, dense: i
     if "coulomb_friction_N" in nl:       # the ports' stick-slip is stepped in Python
         extra = 3e-5 * M * sysm.n_ports  # ~30 us per port and sample (measured, 1 core)
         cost = dataclasses.replace(cost, seconds=cost.seconds + extra)
+    if "network" in nl:                  # stepped: the run and each free response
+        # ~25 us per sample and stepping (measured 18-23 us, HVE and PEB, 1 core)
+        extra = 2.5e-5 * M * (2 + sysm.n_ports)
+        cost = dataclasses.replace(cost, seconds=cost.seconds + extra)
     budget.check(cost, max_memory, max_seconds)
 
 
