@@ -58,6 +58,10 @@ RUNS = [
                   "--wall", "0"]),
     ("simulate", ["simulate", "hve", "-K", "1e6", "--duration", "1"]),            # overflows
     ("simulate", ["simulate", "peb", "-K", "8", "-n", "4", "--duration", "1", "--tdpa"]),
+    ("simulate", ["simulate", "peb", "-K", "8", "--duration", "0.5", "--jitter", "1:3",
+                  "--loss", "0.05", "--seed", "2", "--tdpa"]),                  # a network
+    ("simulate", ["simulate", "hve", "-K", "5", "--duration", "0.05", "--delay-trace",
+                  "trace.csv"]),
     ("simulate", ["simulate", "peb", "-K", "5", "--duration", "0.5", "--master-friction", "0.01",
                   "--slave-friction", "0.02"]),                                 # stick-slip
     ("kmax", ["kmax", "hve", "--friction", "0.1"]),             # the friction-free loop, noted
@@ -113,6 +117,9 @@ def outputs(tmp_path_factory):
         fh.write('kind = "peb"\n[loop]\ndelay = 2\n[[variant]]\nname = "stiff"\n'
                  'environment = "spring:2000"\n[run.kmax]\n[run.check]\nK = 3\n')
     _write_log("log.csv")
+    with open("trace.csv", "w") as fh:              # a network trace: delays 1-2, a loss
+        fh.write("sample,delay_samples,arrived\n" + "".join(
+            f"{k},{1 + k % 2},{int(k != 7)}\n" for k in range(51)))
     with open("sweep.toml", "w") as fh:
         fh.write('kind = "hve"\n[sweep]\nquantities = ["kmax", "closed-form", "check"]\n'
                  '[sweep.check]\nstiffness = 20\n[sweep.axes]\nperiod = "1ms:2ms:2"\n'

@@ -72,19 +72,22 @@ def _simulate_command(kind: str) -> None:
     @click.option("--plot", "plot_path", type=click.Path(dir_okay=False), default=None,
                   help="Write a plot of position, force and port energy (PNG, SVG, PDF).")
     @_tdpa_and_series
+    @_network_options
     def _cmd(stiffness: float, duration: float, force: str, x0: float, saturation: float | None,
              resolution: float | None, quantizer: str, rest: float | None, dense: int,
              csv_path: str | None, plot_path: str | None, as_json: bool, tdpa: bool,
              tdpa_observer: str | None, tdpa_velocity: str | None,
-             tdpa_max_damping: float | None, series_points: int,
+             tdpa_max_damping: float | None, series_points: int, delay_trace: str | None,
+             jitter: str | None, loss: float | None, seed: int,
              environment_force: str | None = None, wall: float | None = None,
              wall_pulls: bool = False, **kw: Any) -> None:
         check_files(csv_path, plot_path, as_json)
         loop = make(kw, stiffness)
         pc = _tdpa(tdpa, tdpa_observer, tdpa_velocity, tdpa_max_damping)
+        net = _network(loop, delay_trace, jitter, loss, seed)
         res = _run(kind, loop, duration, force, x0, rest, environment_force, wall, wall_pulls,
                    saturation=saturation, resolution=resolution, quantizer=quantizer,
-                   dense=dense, tdpa=pc)
+                   dense=dense, tdpa=pc, network=net)
         files = write_files(res, csv_path, plot_path)
         d = _summary(res, loop, files, series_points)
         emit(d, as_json, lambda: _table(kind, stiffness, loop, res, d, files), loop)
@@ -131,6 +134,56 @@ def _tdpa_and_series(f: Any) -> Any:
     return f
 
 
+_NETWORK = [
+    click.option("--delay-trace", "delay_trace", type=click.Path(dir_okay=False), default=None,
+                 help="Network trace CSV: sample (or time_s), delay_samples (each packet's "
+                      "transport delay) and arrived (1/0); PEB optionally "
+                      "delay_backward_samples, arrived_backward. Replaces the loop's delay."),
+    click.option("--jitter", default=None,
+                 help="Random network: each packet's delay uniform in LO:HI whole samples "
+                      "(or seconds with a unit, 5ms:15ms). Replaces the loop's delay."),
+    click.option("--loss", type=NONNEG, default=None,
+                 help="Random network: each packet lost with probability P (the receiver "
+                      "holds the last value it used). Without --jitter: at the loop's delay."),
+    click.option("--seed", type=IntRange(0, 2 ** 63 - 1), default=0, show_default=True,
+                 help="Seed of the random network (same seed, same run)."),
+]
+
+
+def _network_options(f: Any) -> Any:
+    """simulate's network options."""
+    for d in reversed(_NETWORK):
+        f = d(f)
+    return f
+
+
+def _network(loop: Any, trace: str | None, jitter: str | None, loss: float | None,
+             seed: int) -> Any:
+    """The network the options ask for: a trace file, random delays and losses, or None."""
+    from hapstab.analysis.network.delay_range import whole_delays
+    from hapstab.cli.network import parse_delay_range
+    from hapstab.errors import HapstabError
+    from hapstab.simulation.network_trace import read_trace
+
+    if trace is not None:
+        if jitter is not None or loss is not None:
+            raise HapstabError("--delay-trace: a trace gives every packet's delay and arrival; "
+                               "not with --jitter / --loss")
+        return read_trace(trace, loop.period)
+    if jitter is None and loss is None:
+        return None
+    if jitter is None:
+        d = float(loop.delay_in_samples)
+        if d != int(d):
+            raise HapstabError(f"--loss: the loop's delay {d:g} samples is not whole; give "
+                               "--jitter LO:HI (whole samples)")
+        lo = hi = int(d)
+    else:
+        a, b, seconds = parse_delay_range(jitter, "--jitter")
+        lo, hi = whole_delays(a, b, loop.period) if seconds else (int(a), int(b))
+    return {"jitter": (lo, hi), "loss": 0.0 if loss is None else loss, "seed": seed}
+
+
 def _tdpa(on: bool, observer: str | None, velocity: str | None,
           max_damping: float | None) -> dict[str, Any] | None:
     """The TDPA options of the command line (any --tdpa-* option turns it on)."""
@@ -164,9 +217,18 @@ def _summary(res: Any, loop: Any, files: list[str], series_points: int = 0) -> d
     saturation, quantisation or friction)."""
     from hapstab.analysis.exact.core import stability
 
+    what = LINEAR_LOOP[bool(res.nonlinear)]
+    if "network" in res.nonlinear:       # the network replaced the loop's delay
+        from hapstab.simulation.network import Network, network_loop
+
+        n = int(res.delay_samples)
+        loop = network_loop(Network(jitter=(n, n)), loop)
+        what = (f"this loop at the constant delay {n} samples (the network's largest), no "
+                "packet lost" + (", " + what.split("(", 1)[1].rstrip(")")
+                                 if set(res.nonlinear) != {"network"} else ""))
     ex = stability(loop)
     d = res.summary()
-    d.update(linear_loop=LINEAR_LOOP[bool(res.nonlinear)], linear_loop_verdict=ex.verdict,
+    d.update(linear_loop=what, linear_loop_verdict=ex.verdict,
              linear_loop_spectral_radius=ex.spectral_radius,
              linear_loop_growth_rate_per_s=(math.log(ex.spectral_radius) / loop.period
                                             if ex.spectral_radius > 0 else -math.inf),

@@ -61,6 +61,7 @@ from hapstab.simulation.behaviour import assess_nonlinear
 from hapstab.simulation.friction import LoopFriction
 from hapstab.simulation.growth import BoundednessVerdict, assess, combine
 from hapstab.simulation.inputs import ForceSpec, force_grows, force_samples
+from hapstab.simulation.network import network_loop, network_options, tdpa_rows, wire
 from hapstab.simulation.propagate import propagate_linear
 from hapstab.simulation.result import SimulationResult
 from hapstab.simulation.stepper import dense_output, roles_of, step_nonlinear
@@ -87,7 +88,8 @@ def simulate(loop: HapticLoop | TeleoperationLoop, duration: float, *,
              saturation: float | None = None,
              resolution: float | None = None, quantizer: str = "floor",
              dense: int = 0, max_memory: float | None = None,
-             max_seconds: float | None = None, tdpa: Any = None) -> SimulationResult:
+             max_seconds: float | None = None, tdpa: Any = None,
+             network: Any = None) -> SimulationResult:
     """Simulate the sampled-data loop for ``duration`` seconds.
 
     Parameters
@@ -135,6 +137,17 @@ def simulate(loop: HapticLoop | TeleoperationLoop, duration: float, *,
         (:mod:`hapstab.simulation.tdpa`): True for the papers' observer and controller,
         or a :class:`~hapstab.simulation.tdpa.TDPA` (``observer``, ``velocity``,
         ``max_damping``). It makes the run nonlinear; ``result.tdpa`` records it.
+        Through a ``network`` its PEB form is the time-varying one (each PO uses the
+        other port's input energy of the newest sample that has arrived, Ryu, Artigas
+        & Preusche 2010).
+    network : Network or dict, optional
+        A network in the position channels (:mod:`hapstab.simulation.network`): a trace
+        (:func:`~hapstab.simulation.network.read_trace`, or ``dict(delay_samples=...,
+        arrived=...)``) or random delays and losses (``dict(jitter=(lo, hi), loss=P,
+        seed=S)``). The controller uses the newest sample that has arrived and holds the
+        last value it used while nothing newer arrives; PEB: each direction on its own.
+        It replaces the loop's own delay and makes the run stepped (time-varying);
+        ``result.nonlinear["network"]`` records it. HVE and PEB only.
 
     Returns
     -------
@@ -161,15 +174,18 @@ def simulate(loop: HapticLoop | TeleoperationLoop, duration: float, *,
     haptic = loop.kind == "hve"
     nl = _nonlinear_options(haptic, environment_force, wall, wall_pulls, saturation, resolution,
                             quantizer)
+    if (net := network_options(network)) is not None:
+        loop = network_loop(net, loop)
+        nl["network"] = net.to_dict()
     sysm = build(loop)
     p = sysm.n_ports
     ports = structure_of(loop).ports
     _admit(sysm, ports, nl, M, dense, max_memory, max_seconds)
-    roles = roles_of(loop, sysm)
+    roles, line, rows = _network(net, loop, sysm, roles_of(loop, sysm), M, nl)
     t = np.arange(M + 1) * T
     F = _forces(force, environment_force, t, p)
     pos_idx = np.argmax(sysm.pos, axis=1)
-    if (pc := passivity_controller(tdpa, loop, M, pos_idx)) is not None:
+    if (pc := passivity_controller(tdpa, loop, M, pos_idx, rows)) is not None:
         nl["tdpa"] = pc.o.to_dict()
     measure = _measurement(roles, p, nl)
     s0 = make_initial_state(sysm, roles, initial_position, initial_velocity, initial_state, measure)
@@ -188,16 +204,13 @@ def simulate(loop: HapticLoop | TeleoperationLoop, duration: float, *,
     else:
         fr = LoopFriction(ports, sysm, M) if "coulomb_friction_N" in nl else None
         S, U, contact = step_nonlinear(roles, s0, Fd, M, measure, wall is not None,
-                                       nl.get("saturation"), wall_pulls, pc, between=fr)
+                                       nl.get("saturation"), wall_pulls, pc, between=fr,
+                                       network=line)
     X, V = S[:, pos_idx], S[:, pos_idx + 1]
-    with np.errstate(over="ignore", invalid="ignore"):
-        dX = np.diff(X, axis=0)
-        pe = np.vstack([np.zeros(p), np.cumsum(U[:-1] * dX, axis=0)])
-        ee = np.vstack([np.zeros(p), np.cumsum(F * dX, axis=0)])
-    Fx = np.vstack([F, F[-1:]])
+    pe, ee, Fx = _energies(X, U, F, p)
     growing = force_grows(F)
-    if not nl:
-        verdict = _linear_verdict(roles, s0, Fd, S, T, sysm.labels)
+    if not nl or set(nl) == {"network"}:
+        verdict = _linear_verdict(roles, s0, Fd, S, T, sysm.labels, _free(roles, measure, line, T, pos_idx))
     else:
         verdict = _nonlinear_verdict(loop, roles, S, X, T, nl, growing)
     if growing:
@@ -216,6 +229,28 @@ def simulate(loop: HapticLoop | TeleoperationLoop, duration: float, *,
                             loop.delay_in_samples, K, nl, contact, dt, dx, dv,
                             rest=tuple(float(r) for r in rest), model=headline(loop),
                             tdpa=None if pc is None else pc.record(), friction_energy=fe)
+
+
+def _network(net: Any, loop: Any, sysm: Any, roles: Any, M: int, nl: dict[str, Any]
+             ) -> tuple[Any, Any, np.ndarray | None]:
+    """The roles, the network line and the TDPA's energy rows of a run through ``net``
+    (the roles alone, None, None without one)."""
+    if net is None:
+        return roles, None, None
+    roles, line, terms = wire(net, loop, sysm, roles, M)
+    nl["network"].update(line.summary())
+    return roles, line, tdpa_rows(line, terms, sysm.n_ports)
+
+
+def _energies(X: np.ndarray, U: np.ndarray, F: np.ndarray, p: int
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Port energy (controller force times displacement), exogenous energy, and the
+    exogenous force with a last row (M+1, p) each."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        dX = np.diff(X, axis=0)
+        pe = np.vstack([np.zeros(p), np.cumsum(U[:-1] * dX, axis=0)])
+        ee = np.vstack([np.zeros(p), np.cumsum(F * dX, axis=0)])
+    return pe, ee, np.vstack([F, F[-1:]])
 
 
 def _forces(force: ForceSpec, environment_force: ForceSpec, t: np.ndarray, p: int) -> np.ndarray:
@@ -240,6 +275,10 @@ def _admit(sysm: Any, ports: Sequence[Any], nl: dict[str, Any], M: int, dense: i
     cost = budget.simulation_cost(M, sysm.order, sysm.n_ports, dense)
     if "coulomb_friction_N" in nl:       # the ports' stick-slip is stepped in Python
         extra = 3e-5 * M * sysm.n_ports  # ~30 us per port and sample (measured, 1 core)
+        cost = dataclasses.replace(cost, seconds=cost.seconds + extra)
+    if "network" in nl:                  # stepped: the run and each free response
+        # ~25 us per sample and stepping (measured 18-23 us, HVE and PEB, 1 core)
+        extra = 2.5e-5 * M * (2 + sysm.n_ports)
         cost = dataclasses.replace(cost, seconds=cost.seconds + extra)
     budget.check(cost, max_memory, max_seconds)
 
@@ -318,21 +357,40 @@ def _rest(rest_position: Any, initial: np.ndarray, p: int) -> np.ndarray:
     return np.broadcast_to(a, (p,)).astype(float)
 
 
+def _free(roles: Any, measure: Any, line: Any, T: float, pos_idx: np.ndarray) -> Any:
+    """How a free response is computed and judged: ``free(s0, M, differences)`` ->
+    verdict. The linear recurrence, judged on its fitted dominant mode; through a
+    network the same delays and losses stepped again (a linear *time-varying* loop),
+    judged on the fit where it is linear to a few digits (a constant delay) and else
+    on its envelope (:func:`assess_nonlinear`: no single mode describes a switching
+    loop)."""
+    if line is None:
+        return lambda s0, M, d: assess(propagate_linear(roles.A, roles.G, s0, None, M), None,
+                                       T, differences=d)
+
+    def free(s0: np.ndarray, M: int, d: bool) -> BoundednessVerdict:
+        line.reset()
+        S = step_nonlinear(roles, s0, np.zeros((M, roles.G.shape[1])), M, measure, False,
+                           None, network=line)[0]
+        v = assess(S, None, T, differences=d)
+        return v if v.confidence != "low" else assess_nonlinear(S, S[:, pos_idx], T)
+
+    return free
+
+
 def _linear_verdict(roles: Any, s0: np.ndarray, F: np.ndarray, S: np.ndarray, T: float,
-                    labels: Sequence[str]) -> BoundednessVerdict:
-    """Judge a linear run on its free responses: from the initial state (differences:
-    a resting offset is not growth) and from an impulse where each force enters
-    (states: a mode at z = 1 that a constant force would make drift is marginal)."""
+                    labels: Sequence[str], free: Any) -> BoundednessVerdict:
+    """Judge a linear run on its free responses (``free(s0, M, differences)``, see
+    :func:`_free`): from the initial state (differences: a resting offset is not growth)
+    and from an impulse where each force enters (states: a mode at z = 1 that a
+    constant force would make drift is marginal)."""
     if not np.all(np.isfinite(S)):
         return assess(S, None, T)                       # observed overflow
     M = S.shape[0] - 1
-    parts = [("free response from the initial state",
-              assess(propagate_linear(roles.A, roles.G, s0, None, M), None, T))]
+    parts = [("free response from the initial state", free(s0, M, True))]
     for j in np.flatnonzero(np.any(F != 0, axis=0)):
         g = roles.G[:, j] / np.abs(roles.G[:, j]).max()
-        imp = propagate_linear(roles.A, roles.G, g, None, M)
-        parts.append((f"response to a force impulse on the {labels[int(j)]}",
-                      assess(imp, None, T, differences=False)))
+        parts.append((f"response to a force impulse on the {labels[int(j)]}", free(g, M, False)))
     return combine(parts)
 
 
@@ -358,8 +416,9 @@ def _nonlinear_verdict(loop: HapticLoop | TeleoperationLoop, roles: Any, S: np.n
     ports = structure_of(loop).ports
     can_drift = any(pt.termination.stiffness == 0 for pt in ports)
     bound = None if growing_force else _bound(ports, nl, lin)
-    return assess_nonlinear(S, X, T, linear_rate=lin.growth_rate, bound=bound,
-                            can_drift=can_drift)
+    # through a network the loop is time-varying: no one linearisation describes it
+    rate = None if "network" in nl else lin.growth_rate
+    return assess_nonlinear(S, X, T, linear_rate=rate, bound=bound, can_drift=can_drift)
 
 
 def _bound(ports: Sequence[Any], nl: dict[str, Any], lin: BoundednessVerdict) -> str | None:

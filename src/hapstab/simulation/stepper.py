@@ -149,7 +149,8 @@ def step_nonlinear(roles: Roles, s0: np.ndarray, F: np.ndarray, M: int,
                    adjust: Callable[[int, np.ndarray, np.ndarray, np.ndarray], np.ndarray]
                    | None = None,
                    between: Callable[[int, np.ndarray, np.ndarray, np.ndarray], None] | None
-                   = None) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+                   = None, network: Callable[[int, np.ndarray], None] | None = None
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
     """Step M samples with the nonlinear elements at the sampling instants.
 
     The wall (port 0) acts only on a penetration it sees, and then only pushes
@@ -159,6 +160,8 @@ def step_nonlinear(roles: Roles, s0: np.ndarray, F: np.ndarray, M: int,
     ``between(k, s, g, nxt)``, if given, replaces what the linear step put in ``nxt``
     for the motion between samples k and k+1 under the held net force ``g = F[k] - u``
     (Coulomb friction, :class:`~hapstab.simulation.friction.LoopFriction`).
+    ``network(k, sm)``, if given, puts what the network delivers at sample k into the
+    measured state ``sm`` (in place, :class:`~hapstab.simulation.network.NetworkLine`).
 
     Returns
     -------
@@ -176,6 +179,8 @@ def step_nonlinear(roles: Roles, s0: np.ndarray, F: np.ndarray, M: int,
     for k in range(M + 1):
         S[k] = s
         sm = measure(s)
+        if network is not None:
+            network(k, sm)
         u = Fu @ sm
         if C is not None:                # has_wall
             C[k] = c = bool(E0 @ sm > 0)   # the wall pushes only on penetration it sees

@@ -264,11 +264,16 @@ class PassivityController:
         Each port's position entry in the state (its velocity follows it).
     lags : sequence of int
         Per port, the other port's energy lag in samples (ignored for one port).
+    rows : (p, M+1) int array, optional
+        Through a network with a varying delay: per port and sample, the sample of the
+        other port's input energy its PO has (it travels with the newest position that
+        has arrived, Ryu, Artigas & Preusche 2010); replaces ``lags``.
     """
 
     def __init__(self, options: TDPA, period: float, n_samples: int, pos_idx: np.ndarray,
-                 lags: Any) -> None:
+                 lags: Any, rows: np.ndarray | None = None) -> None:
         self.o, self.T = options, float(period)
+        self.rows = rows
         self.pos = np.asarray(pos_idx, dtype=int)
         p = self.pos.size
         self.lags = tuple(int(n) for n in lags) if p > 1 else ()
@@ -292,7 +297,7 @@ class PassivityController:
         if not self.lags:                       # one port: its own net energy
             return self._net[j]
         other = 1 - j
-        row = k - self.lags[j]
+        row = k - self.lags[j] if self.rows is None else int(self.rows[j, k])
         got = float(self.e_in[row, other]) if row >= 0 else 0.0
         return got - self._out[j]
 
@@ -379,8 +384,8 @@ def channel_lags(channels: Any, n_ports: int) -> tuple[int, ...]:
     return tuple(lags)
 
 
-def passivity_controller(tdpa: Any, loop: Any, n_samples: int,
-                         pos_idx: np.ndarray) -> PassivityController | None:
+def passivity_controller(tdpa: Any, loop: Any, n_samples: int, pos_idx: np.ndarray,
+                         rows: np.ndarray | None = None) -> PassivityController | None:
     """The PO/PC of a run, or None when ``tdpa`` asks for none.
 
     Parameters
@@ -393,6 +398,9 @@ def passivity_controller(tdpa: Any, loop: Any, n_samples: int,
         M.
     pos_idx : (p,) int array
         Each port's position entry in the closed-loop state.
+    rows : (p, M+1) int array, optional
+        Through a network: which sample of the other port's energy each PO has
+        (:func:`hapstab.simulation.network.tdpa_rows`).
 
     Returns
     -------
@@ -418,4 +426,4 @@ def passivity_controller(tdpa: Any, loop: Any, n_samples: int,
         raise ModelError(f"tdpa: a loop with {len(st.ports)} ports; allowed: one port (HVE) "
                          "or two (a teleoperator)")
     return PassivityController(opts, loop.period, n_samples, pos_idx,
-                               channel_lags(st.channels, len(st.ports)))
+                               channel_lags(st.channels, len(st.ports)), rows)
