@@ -13,7 +13,7 @@ MODULES = sorted(SRC.rglob("*.py"))
 
 #: modules every layer may use: they import only each other (plotting draws results
 #: duck-typed and is imported lazily, by a result's .plot())
-LEAVES = {"errors", "tolerances", "results", "plotting", "outputs", "budget"}
+LEAVES = {"errors", "tolerances", "results", "plotting", "outputs", "budget", "reading"}
 #: what each layer may import from hapstab, besides itself and the leaves
 MAY_IMPORT = {
     "models": set(),

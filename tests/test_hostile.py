@@ -67,6 +67,26 @@ def test_a_fifo_study_is_refused_without_waiting(tmp_path):
     refused(run("--study", str(fifo), "kmax", "hve"), "not a regular file")
 
 
+@pytest.mark.parametrize("args", [("simulate", "hve", "-K", "1", "--delay-trace"),
+                                  ("identify",)])
+@pytest.mark.parametrize("path", ["/dev/zero", "/dev/urandom", "fifo"])
+def test_a_trace_or_log_that_is_not_a_regular_file_is_refused(args, path, tmp_path):
+    # every reader of a user's file goes through hapstab.reading.read_bounded: /dev/zero
+    # as a delay trace or an identification log read forever before
+    if path == "fifo":
+        path = str(tmp_path / "log.csv")
+        os.mkfifo(path)
+    refused(run(*args, path), "not a regular file")
+
+
+def test_a_huge_trace_is_refused_before_it_is_read(tmp_path):
+    from hapstab.simulation.network_trace import MAX_TRACE_BYTES
+    p = tmp_path / "trace.csv"
+    with open(p, "wb") as fh:
+        fh.truncate(MAX_TRACE_BYTES + 1)        # sparse: no disk used
+    refused(run("simulate", "hve", "-K", "1", "--delay-trace", str(p)), "bytes")
+
+
 def test_a_huge_study_is_refused_before_it_is_read(tmp_path):
     from hapstab.cli.study import MAX_STUDY_BYTES
 

@@ -76,12 +76,22 @@ def read_log(log: Any, columns: tuple[str, str, str] | None = None
     return t, F, y, _period(t), source
 
 
+#: Largest log file read (bytes): ~1 million rows of ~60 bytes (time, force, position),
+#: far more than any identification needs; a larger file is refused.
+MAX_LOG_BYTES = 64 * 1024 ** 2
+
+
 def _from_csv(path: str, columns: tuple[str, str, str] | None
               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     import csv
+    import io
 
-    with open(path, newline="") as fh:
-        rows = list(csv.reader(fh))
+    from hapstab.reading import read_bounded
+    raw = read_bounded(str(path), "log", MAX_LOG_BYTES, "a log is a CSV file", ModelError)
+    try:
+        rows = list(csv.reader(io.StringIO(raw.decode("utf-8"), newline="")))
+    except UnicodeDecodeError as e:
+        raise ModelError(f"log = {path!r}: not UTF-8 text ({e})") from None
     rows = [r for r in rows if r and not r[0].lstrip().startswith("#")]
     if len(rows) < 2:
         raise ModelError(f"log = {path!r}: needs a header line and data rows")

@@ -108,22 +108,11 @@ class Quantity(Number):
         except ValueError as e:
             self.fail(str(e), param, ctx)
         out = super().convert(v, param, ctx)
-        if self.unit == "s" and out >= 1.0 and _plain(value):
-            # a delay of a second or more with no unit is most often milliseconds meant
-            # (--delay-s 10); it is answered as given, and said so once on stderr
-            name = param.opts[0] if param is not None and param.opts else "the delay"
-            click.echo(f"hapstab: note: {name} {value} reads as {out:g} s; for milliseconds "
-                       f"write {value}ms", err=True)
+        if self.unit == "s" and out >= 1.0 and re.fullmatch(r"\s*[\d.eE+-]+\s*", str(value)):
+            # a second or more with no unit is most often milliseconds meant: said once
+            click.echo(f"hapstab: note: {param.opts[0] if param else 'the delay'} {value} reads "
+                       f"as {out:g} s; for milliseconds write {value}ms", err=True)
         return out
-
-
-def _plain(value: Any) -> bool:
-    """Whether ``value`` is a number written without a unit."""
-    try:
-        float(str(value).strip())
-    except ValueError:
-        return False
-    return True
 
 
 class Delay(click.ParamType):

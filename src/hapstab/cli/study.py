@@ -32,7 +32,6 @@ from __future__ import annotations
 
 import os
 import re
-import stat
 import sys
 from dataclasses import dataclass, field
 from typing import Any
@@ -168,34 +167,12 @@ def load_study(path: Any, name: str = "--study") -> Study:
 
 
 def _read_bounded(p: str, name: str) -> bytes:
-    """The bytes of the regular file ``p``, at most :data:`MAX_STUDY_BYTES` of them.
-
-    Opened without blocking (a FIFO would wait for a writer) and checked on the open
-    descriptor (no race with a rename): a device (``/dev/zero``), FIFO, socket or folder
-    is refused, and so is a file larger than the bound (read bounded as well: a file that
-    grows while it is read is refused too).
-    """
-    try:
-        fd = os.open(p, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
-    except OSError as e:
-        raise StudyError(f"{name} = {p!r}: cannot read it ({e.strerror or e})") from None
-    st = os.fstat(fd)
-    if not stat.S_ISREG(st.st_mode):
-        os.close(fd)
-        raise StudyError(f"{name} = {p!r}: not a regular file (a device, FIFO, socket or "
-                         "folder); a study is a TOML file")
-    with os.fdopen(fd, "rb") as fh:
-        if st.st_size > MAX_STUDY_BYTES:
-            raise StudyError(f"{name} = {p!r}: {st.st_size} bytes; a study file may have at "
-                             f"most {MAX_STUDY_BYTES} bytes")
-        try:
-            raw = fh.read(MAX_STUDY_BYTES + 1)
-        except OSError as e:
-            raise StudyError(f"{name} = {p!r}: cannot read it ({e.strerror or e})") from None
-    if len(raw) > MAX_STUDY_BYTES:
-        raise StudyError(f"{name} = {p!r}: more than {MAX_STUDY_BYTES} bytes; a study file may "
-                         f"have at most {MAX_STUDY_BYTES} bytes")
-    return raw
+    """The bytes of the regular file ``p``, at most :data:`MAX_STUDY_BYTES` of them
+    (:func:`hapstab.reading.read_bounded`: a device, FIFO, socket, folder or larger
+    file is refused)."""
+    from hapstab.reading import read_bounded
+    return read_bounded(p, name, MAX_STUDY_BYTES, "a study is a TOML file of at most "
+                        f"{MAX_STUDY_BYTES} bytes", StudyError)
 
 
 def _depth(data: Any) -> int:

@@ -31,6 +31,11 @@ class NetworkTraceError(ModelError):
 
 
 
+#: Largest trace file read (bytes): ~3 million rows of ~20 bytes, more samples than the
+#: simulation's budget steps in a minute (25 us a sample); a larger file is refused.
+MAX_TRACE_BYTES = 64 * 1024 ** 2
+
+
 def read_trace(path: str, period_s: float | None = None) -> Network:
     """Read a network trace file (format: the module docstring).
 
@@ -51,12 +56,15 @@ def read_trace(path: str, period_s: float | None = None) -> Network:
         A row or column that breaks the format, named (rows counted from 1, the header
         being row 1).
     """
+    from hapstab.reading import read_bounded
+    raw = read_bounded(str(path), "delay trace", MAX_TRACE_BYTES,
+                       "a delay trace is a CSV file", NetworkTraceError)
     try:
-        with open(path, newline="", encoding="utf-8") as fh:
-            lines = [(i + 1, ln) for i, ln in enumerate(fh) if not ln.lstrip().startswith("#")
-                     and ln.strip()]
-    except (OSError, UnicodeDecodeError) as e:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as e:
         raise NetworkTraceError(f"delay trace {path!r}: cannot be read ({e})") from None
+    lines = [(i + 1, ln) for i, ln in enumerate(text.splitlines(keepends=True))
+             if not ln.lstrip().startswith("#") and ln.strip()]
     if not lines:
         raise NetworkTraceError(f"delay trace {path!r}: empty; need a header line "
                                 "sample,delay_samples,arrived and one row per sample")
