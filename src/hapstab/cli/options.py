@@ -108,10 +108,9 @@ class Quantity(Number):
         except ValueError as e:
             self.fail(str(e), param, ctx)
         out = super().convert(v, param, ctx)
-        if self.unit == "s" and out >= 1.0 and re.fullmatch(r"\s*[\d.eE+-]+\s*", str(value)):
-            # a second or more with no unit is most often milliseconds meant: said once
-            click.echo(f"hapstab: note: {param.opts[0] if param else 'the delay'} {value} reads "
-                       f"as {out:g} s; for milliseconds write {value}ms", err=True)
+        if self.unit == "s":
+            from hapstab.cli.notes import remember_plain_seconds
+            remember_plain_seconds(value, param, ctx)
         return out
 
 
@@ -384,6 +383,8 @@ def hve_loop(kw: dict[str, Any], stiffness: float = 0.0) -> HapticLoop:
         if given("delay"):
             raise HapstabError("--delay and --delay-s: give one of them, not both")
         loop = loop.with_delay_s(kw["delay_s"])
+        from hapstab.cli.notes import note_plain_seconds
+        note_plain_seconds(kw["delay_s"])
     return loop
 
 
@@ -425,6 +426,8 @@ def with_delays(loop: TeleoperationLoop, kw: dict[str, Any]) -> TeleoperationLoo
     T = loop.period
     if ds is not None:
         loop = loop.with_delays_s(ds)
+        from hapstab.cli.notes import note_plain_seconds
+        note_plain_seconds(float(ds))
     elif fwd is not None or bwd is not None:
         f = (fwd if fwd is not None else loop.delay_samples) * T
         b = (bwd if bwd is not None else loop.delay_samples) * T
