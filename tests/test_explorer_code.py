@@ -18,6 +18,10 @@ pytest.importorskip("httpx")
 
 from hapstab.cli.main import cli
 
+#: one worker builds the answers (a module fixture is built once per xdist worker that
+#: runs any of its tests: ~30 s of API calls and scripts, twice without the group)
+pytestmark = pytest.mark.xdist_group("explorer-code")
+
 SRC = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "src")
 
 CASES = [

@@ -60,6 +60,8 @@ def references(tmp_path_factory):
 
 
 
+#: the tests of `references` on one worker: it is built once per xdist worker
+@pytest.mark.xdist_group("faults-references")
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGKILL, signal.SIGTERM],
                          ids=["SIGINT", "SIGKILL", "SIGTERM"])
 @pytest.mark.parametrize("name", list(COMMANDS))
@@ -114,6 +116,7 @@ def test_a_full_disk_is_an_error_naming_the_file_and_leaves_the_old_one(tmp_path
     assert not [f for f in os.listdir(tmp_path) if f.endswith(".part")]
 
 
+@pytest.mark.xdist_group("faults-references")
 def test_four_concurrent_writers_leave_one_complete_file(references, tmp_path):
     name = "simulate-csv"
     out = str(tmp_path / "shared.csv")

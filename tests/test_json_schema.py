@@ -12,6 +12,10 @@ from jsonschema import Draft202012Validator
 
 from hapstab.cli.main import cli
 
+#: one worker runs the 52 commands (the `outputs` module fixture would be built once per
+#: xdist worker that runs any of its tests: ~20 s, twice without the group)
+pytestmark = pytest.mark.xdist_group("json-schema")
+
 SCHEMA_PATH = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
                            "schemas", "hapstab-output.schema.json")
 with open(SCHEMA_PATH) as fh:

@@ -30,19 +30,24 @@ def theory(fig, T, n):
 
 
 @pytest.fixture(scope="module")
-def full(tmp_path_factory):
-    """The whole paper grid (40 simulation stars), once: a few seconds."""
+def reports():
+    """The whole paper grid (40 simulation stars) of both figures, once: a few seconds
+    (the CSV test and the stars' 1e-4 test read the same reproductions)."""
+    return {name: reproduce_figure(name) for name in FIGURES}
+
+
+@pytest.fixture(scope="module")
+def full(reports, tmp_path_factory):
+    """The whole paper grid, written."""
     out = tmp_path_factory.mktemp("out")
-    files = {}
-    for name in FIGURES:
-        files[name] = write_figure(reproduce_figure(name), str(out))
-    return files
+    return {name: write_figure(rep, str(out)) for name, rep in reports.items()}
 
 
 def test_paper_grid_is_section_5():
     np.testing.assert_allclose(PAPER_PERIODS, np.arange(1, 11) * 1e-3, rtol=1e-12)
 
 
+@pytest.mark.xdist_group("reproduce-full")     # `reports` once, not once per xdist worker
 @pytest.mark.parametrize("fig", ["fig5", "fig6"])
 def test_csv_columns_match_library(full, fig):
     csv_path, png, svg, manifest = full[fig]
@@ -92,13 +97,14 @@ def test_bad_inputs():
     assert math.isfinite(reproduce_figure("fig5", [5e-3]).rows[0]["exact"])
 
 
-def test_simulation_stars_within_1e_4_of_exact_on_the_papers_40_points():
+@pytest.mark.xdist_group("reproduce-full")     # `reports` once, beside the CSV test
+def test_simulation_stars_within_1e_4_of_exact_on_the_papers_40_points(reports):
     # issue #9's acceptance: the verdict's rework must keep the paper's procedure
     # exact. The bisection brackets K_max to relative width rtol = 1e-4 and every
     # verdict in it is resolved (noise-free linear runs), so the star is below the
     # exact K_max by less than 1e-4
     for fig in ("fig5", "fig6"):
-        rep = reproduce_figure(fig)
+        rep = reports[fig]           # reproduce_figure(fig), the whole grid
         assert len(rep.rows) == 20
         for r in rep.rows:
             assert 0 <= 1 - r["simulation"] / r["exact"] < 1e-4, r

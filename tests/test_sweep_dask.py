@@ -22,6 +22,10 @@ pa = pytest.importorskip("pyarrow")
 pq = pytest.importorskip("pyarrow.parquet")
 distributed = pytest.importorskip("dask.distributed")
 
+#: every test reads the `reference` sweep (a module fixture: built once per xdist worker
+#: that runs any of them): one worker, one reference
+pytestmark = pytest.mark.xdist_group("sweep-dask")
+
 SRC = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "src")
 #: 4 periods x 20 delays of the paper's HVE, K_max, passivity and a verdict: ~2-4 s on one
 #: core, 20 chunks of 4 points (~0.1-0.2 s each)
