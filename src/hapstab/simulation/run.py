@@ -142,7 +142,7 @@ def simulate(loop: HapticLoop | TeleoperationLoop, duration: float, *,
         & Preusche 2010).
     network : Network or dict, optional
         A network in the position channels (:mod:`hapstab.simulation.network`): a trace
-        (:func:`~hapstab.simulation.network.read_trace`, or ``dict(delay_samples=...,
+        (``hapstab.simulation.read_trace(path)``, or ``dict(delay_samples=...,
         arrived=...)``) or random delays and losses (``dict(jitter=(lo, hi), loss=P,
         seed=S)``). The controller uses the newest sample that has arrived and holds the
         last value it used while nothing newer arrives; PEB: each direction on its own.
