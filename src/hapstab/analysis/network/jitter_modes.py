@@ -46,17 +46,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from hapstab.analysis.network.jump import (
-    _check,
     _layout,
     _mode,
-    _networked,
     _source,
     _term_name,
-    _zoh,
+    networked_plant,
     rigid_householder,
 )
-from hapstab.engine.structure import structure_of
-from hapstab.engine.system import build
 from hapstab.errors import AnalysisError, ModelError
 
 __all__ = ["JitterModes", "jitter_modes", "patterns", "pattern_rates",
@@ -156,16 +152,7 @@ def jitter_modes(loop, lo: int, hi: int) -> JitterModes:
                             "channels are not)")
     if not (isinstance(lo, int) and isinstance(hi, int) and 0 <= lo <= hi):
         raise ModelError(f"delay range = {lo!r}:{hi!r}: whole samples, 0 <= start <= end")
-    st = structure_of(at_lo(loop, lo))
-    ratios = _check(st, "jitter")
-    sys = build(at_lo(loop, lo))
-    T = float(sys.periods[0])
-    n = sys.n_plant
-    Ad, Bd = _zoh(sys.Ac, sys.Bc, T)
-    pos = sys.pos[:, :n]
-    terms = _networked(st)
-    single = len(st.ports) == 1
-    net = [single or j != st.channels[c].port for (c, j, _, _) in terms]
+    st, ratios, sys, T, n, Ad, Bd, pos, terms, net = networked_plant(at_lo(loop, lo), "jitter")
     nets = [i for i, is_net in enumerate(net) if is_net]
     # hi registers: x[k - 1] ... x[k - hi] (w's x[k - lo - 1] is one when hi > lo)
     deep = [(c, j, s, hi if is_net else d) for (c, j, s, d), is_net in zip(terms, net,

@@ -31,6 +31,7 @@ The loop itself: the paper, Fig. 2a (HVE) and eq. (20) (PEB).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any, NamedTuple
 
 import numpy as np
 from scipy import linalg as sla
@@ -40,7 +41,7 @@ from hapstab.engine.system import build
 from hapstab.errors import AnalysisError, ModelError, check_real
 from hapstab.models.controllers import FilteredSpringDamper, SpringDamper
 
-__all__ = ["JumpSystem", "lossy_system", "loss_chain"]
+__all__ = ["JumpSystem", "lossy_system", "loss_chain", "NetworkedPlant", "networked_plant"]
 
 
 @dataclass(frozen=True)
@@ -130,6 +131,39 @@ def _zoh(Ac: np.ndarray, Bc: np.ndarray, T: float) -> tuple[np.ndarray, np.ndarr
     blk[:n, :n], blk[:n, n:] = Ac, Bc
     E = sla.expm(blk * T)
     return E[:n, :n], E[:n, n:]
+
+
+class NetworkedPlant(NamedTuple):
+    """The sampled plant and its measurements through the network, as packet loss and
+    jitter both build them: structure, stiffness ratios, the built loop, T (s), the
+    plant's order, its ZOH matrices, its position rows, the measured terms and which of
+    them cross the network."""
+    structure: LoopStructure
+    ratios: tuple[float, ...]
+    system: Any
+    period_s: float
+    n: int
+    Ad: np.ndarray
+    Bd: np.ndarray
+    pos: np.ndarray
+    terms: list[Any]
+    net: list[bool]
+
+
+def networked_plant(loop: Any, what: str = "packet loss") -> NetworkedPlant:
+    """:class:`NetworkedPlant` of ``loop`` (refused as :func:`_check` refuses, ``what``
+    naming the analysis): with one port every measurement crosses the network; with two,
+    each port's reading of the other."""
+    st = structure_of(loop)
+    ratios = _check(st, what)
+    sys = build(loop)
+    T = float(sys.periods[0])
+    n = sys.n_plant
+    Ad, Bd = _zoh(sys.Ac, sys.Bc, T)
+    terms = _networked(st)
+    single = len(st.ports) == 1
+    net = [single or j != st.channels[c].port for (c, j, _, _) in terms]
+    return NetworkedPlant(st, ratios, sys, T, n, Ad, Bd, sys.pos[:, :n], terms, net)
 
 
 def _check(st: LoopStructure, what: str = "packet loss") -> tuple[float, ...]:
@@ -283,16 +317,7 @@ def lossy_system(loop, loss: float, burst: float | None = None) -> JumpSystem:
     -------
     JumpSystem
     """
-    st = structure_of(loop)
-    ratios = _check(st)
-    sys = build(loop)
-    T = float(sys.periods[0])
-    n = sys.n_plant
-    Ad, Bd = _zoh(sys.Ac, sys.Bc, T)
-    pos = sys.pos[:, :n]
-    terms = _networked(st)
-    single = len(st.ports) == 1
-    net = [single or j != st.channels[c].port for (c, j, _, _) in terms]
+    st, ratios, sys, T, n, Ad, Bd, pos, terms, net = networked_plant(loop)
     lay = _layout(st, n, terms, net)
     m = sum(net)
     mats = [_mode(st, lay, (Ad, Bd, pos, ratios, T), terms, net, i) for i in range(2 ** m)]
