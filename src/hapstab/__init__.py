@@ -8,9 +8,9 @@ Haptic Interaction and Teleoperation", IEEE Haptics Symposium 2014.
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:   # for type checkers and readers; at run time a name loads on first use
-    from hapstab.analysis.audit import AuditResult, audit
-    from hapstab.analysis.circle import circle_test, loop_inverse
-    from hapstab.analysis.closed_forms import colgate, eq18, eq29, eq34, gil, gil2004
+    from hapstab.analysis.conditions.audit import AuditResult, audit
+    from hapstab.analysis.conditions.circle import circle_test, loop_inverse
+    from hapstab.analysis.conditions.closed_forms import colgate, eq18, eq29, eq34, gil, gil2004
     from hapstab.analysis.damping import BestDampingResult, best_damping
     from hapstab.analysis.exact.core import stability
     from hapstab.analysis.exact.many import critical_stiffness_many
@@ -29,8 +29,8 @@ if TYPE_CHECKING:   # for type checkers and readers; at run time a name loads on
         abbott_okamura,
         nonlinear_passivity,
     )
-    from hapstab.analysis.passivity import PassivityResult, sampled_passivity
-    from hapstab.analysis.positive_real import (
+    from hapstab.analysis.conditions.passivity import PassivityResult, sampled_passivity
+    from hapstab.analysis.conditions.positive_real import (
         PositiveRealResult,
         RationalMatrix,
         circle_criterion,
@@ -76,9 +76,9 @@ __version__ = "0.1.0"
 #: name imports its module (:func:`__getattr__`). Keep it equal to the imports above
 #: (tests/test_light_import.py checks).
 _LAZY = {
-    "hapstab.analysis.audit": ("AuditResult", "audit"),
-    "hapstab.analysis.circle": ("circle_test", "loop_inverse"),
-    "hapstab.analysis.closed_forms": ("colgate", "eq18", "eq29", "eq34", "gil", "gil2004"),
+    "hapstab.analysis.conditions.audit": ("AuditResult", "audit"),
+    "hapstab.analysis.conditions.circle": ("circle_test", "loop_inverse"),
+    "hapstab.analysis.conditions.closed_forms": ("colgate", "eq18", "eq29", "eq34", "gil", "gil2004"),
     "hapstab.analysis.damping": ("BestDampingResult", "best_damping"),
     "hapstab.analysis.exact.core": ("stability",),
     "hapstab.analysis.exact.many": ("critical_stiffness_many",),
@@ -88,8 +88,8 @@ _LAZY = {
     "hapstab.analysis.nonlinear_passivity": (
         "NonlinearPassivityResult", "abbott_okamura", "nonlinear_passivity",
     ),
-    "hapstab.analysis.passivity": ("PassivityResult", "sampled_passivity"),
-    "hapstab.analysis.positive_real": (
+    "hapstab.analysis.conditions.passivity": ("PassivityResult", "sampled_passivity"),
+    "hapstab.analysis.conditions.positive_real": (
         "PositiveRealResult", "RationalMatrix", "circle_criterion", "positive_real",
     ),
     "hapstab.analysis.regions": ("RegionResult", "stability_region"),

@@ -359,7 +359,7 @@ def _region(loop: Loop, Kw: tuple[float, float], Bw: tuple[float, float], n: int
 
 
 def _overlay(loop: Loop, name: str, Bs: np.ndarray) -> np.ndarray:
-    from hapstab.analysis import closed_forms
+    from hapstab.analysis.conditions import closed_forms
     from hapstab.analysis.methods import METHODS, critical_stiffness
 
     out = np.full(Bs.size, np.nan)

@@ -61,7 +61,7 @@ from typing import Any
 
 import numpy as np
 
-from hapstab.analysis.circle import _approx, _x
+from hapstab.analysis.conditions.circle import _approx, _x
 from hapstab.engine.device_side import DeviceSide, device_side
 from hapstab.errors import AnalysisError, ModelError, check_reals
 from hapstab.models.loops import TeleoperationLoop, require_loop

@@ -3,7 +3,7 @@ it renders passively, the ones it renders stably, and the impedance a wall actua
 displays over frequency.
 
 * **Passive**: for each virtual damping B the largest K for which the device side is
-  passive (Colgate-Schenkel, :func:`~hapstab.analysis.passivity.critical_stiffness_passivity`):
+  passive (Colgate-Schenkel, :func:`~hapstab.analysis.conditions.passivity.critical_stiffness_passivity`):
   exact for any delay and for a filtered velocity estimate. Passivity is what holds
   against *any* passive operator, so it is the Z-width in Colgate and Brown's sense.
   With encoder quantisation Delta and Coulomb friction f_c, Abbott and Okamura's
@@ -41,7 +41,7 @@ import numpy as np
 
 from hapstab.analysis.kb_plane import check_equal_gains, with_gains
 from hapstab.analysis.nonlinear_passivity import abbott_okamura
-from hapstab.analysis.passivity import critical_stiffness_passivity
+from hapstab.analysis.conditions.passivity import critical_stiffness_passivity
 from hapstab.analysis.regions import kmax_over_B
 from hapstab.errors import AnalysisError, ArgumentTypeError, check_real
 from hapstab.models.loops import HapticLoop, headline, whole_delay

@@ -88,14 +88,14 @@ def _passivity_command(kind: str) -> None:
                                  curve_points)
             return
         if method == "circle":
-            from hapstab.analysis.circle import circle_test
+            from hapstab.analysis.conditions.circle import circle_test
 
             approx = approximation or "forward"
             if approx not in _APPROX:
                 raise HapstabError(f"--approximation = {approximation!r}: allowed: {', '.join(_APPROX)}")
             res = circle_test(loop, approx, sector)
         elif method == "passivity":
-            from hapstab.analysis.passivity import sampled_passivity
+            from hapstab.analysis.conditions.passivity import sampled_passivity
 
             if approximation is not None or sector is not None:
                 raise HapstabError("--approximation/--sector: apply to --method circle only; "
@@ -144,7 +144,7 @@ def _nonlinear_passivity(loop: Any, stiffness: float, resolution: float | None,
     """``passivity hve`` with friction and / or quantisation: both conditions (and the
     friction-free loop's margin over frequency, whose minimum is the margin shown)."""
     from hapstab.analysis.nonlinear_passivity import nonlinear_passivity
-    from hapstab.analysis.passivity import sampled_passivity
+    from hapstab.analysis.conditions.passivity import sampled_passivity
 
     if approximation is not None or sector is not None:
         raise HapstabError("--approximation/--sector: apply to --method circle only; "
@@ -174,7 +174,7 @@ def _audit_command(kind: str) -> None:
     @loop_options(kind)
     @_resolution_option(kind, "audit")
     def _cmd(as_json: bool, **kw: Any) -> None:
-        from hapstab.analysis.audit import audit
+        from hapstab.analysis.conditions.audit import audit
 
         resolution = kw.pop("resolution", None)
         loop = make(kw, 1.0)

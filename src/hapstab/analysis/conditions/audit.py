@@ -16,11 +16,11 @@ from dataclasses import dataclass
 from typing import Any
 
 from hapstab import budget
-from hapstab.analysis.circle import critical_stiffness_circle
-from hapstab.analysis.closed_forms import closed_forms_for
+from hapstab.analysis.conditions.circle import critical_stiffness_circle
+from hapstab.analysis.conditions.closed_forms import closed_forms_for
 from hapstab.analysis.exact.core import exact_critical_stiffness
 from hapstab.analysis.nonlinear_passivity import abbott_okamura
-from hapstab.analysis.passivity import critical_stiffness_passivity
+from hapstab.analysis.conditions.passivity import critical_stiffness_passivity
 from hapstab.engine.system import build
 from hapstab.errors import AnalysisError
 from hapstab.models.controllers import spring_damper
