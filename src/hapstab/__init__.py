@@ -39,8 +39,8 @@ if TYPE_CHECKING:   # for type checkers and readers; at run time a name loads on
     from hapstab.analysis.regions import RegionResult, stability_region
     from hapstab.analysis.robust import RobustStiffnessResult, robust_critical_stiffness
     from hapstab.analysis.robust_damping import RobustDampingResult, robust_best_damping
-    from hapstab.analysis.transparency import TransparencyResult, transparency
-    from hapstab.analysis.twoport import TwoPortResult, llewellyn_test
+    from hapstab.analysis.teleoperation.transparency import TransparencyResult, transparency
+    from hapstab.analysis.teleoperation.twoport import TwoPortResult, llewellyn_test
     from hapstab.analysis.verify import CertificateCheck, verify_certificate
     from hapstab.budget import BudgetError
     from hapstab.engine.system import SampledSystem, build
@@ -95,8 +95,8 @@ _LAZY = {
     "hapstab.analysis.regions": ("RegionResult", "stability_region"),
     "hapstab.analysis.robust": ("RobustStiffnessResult", "robust_critical_stiffness"),
     "hapstab.analysis.robust_damping": ("RobustDampingResult", "robust_best_damping"),
-    "hapstab.analysis.transparency": ("TransparencyResult", "transparency"),
-    "hapstab.analysis.twoport": ("TwoPortResult", "llewellyn_test"),
+    "hapstab.analysis.teleoperation.transparency": ("TransparencyResult", "transparency"),
+    "hapstab.analysis.teleoperation.twoport": ("TwoPortResult", "llewellyn_test"),
     "hapstab.analysis.verify": ("CertificateCheck", "verify_certificate"),
     "hapstab.budget": ("BudgetError",),
     "hapstab.engine.system": ("SampledSystem", "build"),

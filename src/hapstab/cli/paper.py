@@ -231,7 +231,7 @@ def _twoport_command(kind: str) -> None:
                   help="Write frequency_rad_s, margin_N_s_per_m, eta per angle.")
     def _cmd(stiffness: float, approximation: str, plot_path: str | None,
              csv_path: str | None, as_json: bool, **kw: Any) -> None:
-        from hapstab.analysis.twoport import llewellyn_test
+        from hapstab.analysis.teleoperation.twoport import llewellyn_test
         from hapstab.cli.files import check_files, write_files
 
         check_files(csv_path, plot_path, as_json)
@@ -271,7 +271,7 @@ FREQUENCY_COUNT = 400
 def _frequencies(spec: str | None, period_s: float) -> list[float] | None:
     """--frequencies in Hz: start:stop[:count] log-spaced (count default
     :data:`FREQUENCY_COUNT`), or a comma list as given; none above 1/(2T)."""
-    from hapstab.analysis.transparency import NYQUIST_SLACK
+    from hapstab.analysis.teleoperation.transparency import NYQUIST_SLACK
 
     if spec is None:
         return None
@@ -306,7 +306,7 @@ def _transparency_command(kind: str) -> None:
                   help="Write the felt impedances, X_s/X_m and h11..h22 (re, im) per frequency.")
     def _cmd(stiffness: float, approximation: str, frequencies: str | None,
              plot_path: str | None, csv_path: str | None, as_json: bool, **kw: Any) -> None:
-        from hapstab.analysis.transparency import transparency
+        from hapstab.analysis.teleoperation.transparency import transparency
         from hapstab.cli.files import check_files, write_files
 
         check_files(csv_path, plot_path, as_json)
