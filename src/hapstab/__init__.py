@@ -11,7 +11,7 @@ if TYPE_CHECKING:   # for type checkers and readers; at run time a name loads on
     from hapstab.analysis.conditions.audit import AuditResult, audit
     from hapstab.analysis.conditions.circle import circle_test, loop_inverse
     from hapstab.analysis.conditions.closed_forms import colgate, eq18, eq29, eq34, gil, gil2004
-    from hapstab.analysis.damping import BestDampingResult, best_damping
+    from hapstab.analysis.design.damping import BestDampingResult, best_damping
     from hapstab.analysis.exact.core import stability
     from hapstab.analysis.exact.many import critical_stiffness_many
     from hapstab.analysis.identify import identify
@@ -36,7 +36,7 @@ if TYPE_CHECKING:   # for type checkers and readers; at run time a name loads on
         circle_criterion,
         positive_real,
     )
-    from hapstab.analysis.regions import RegionResult, stability_region
+    from hapstab.analysis.design.regions import RegionResult, stability_region
     from hapstab.analysis.robust import RobustStiffnessResult, robust_critical_stiffness
     from hapstab.analysis.robust_damping import RobustDampingResult, robust_best_damping
     from hapstab.analysis.teleoperation.transparency import TransparencyResult, transparency
@@ -79,7 +79,7 @@ _LAZY = {
     "hapstab.analysis.conditions.audit": ("AuditResult", "audit"),
     "hapstab.analysis.conditions.circle": ("circle_test", "loop_inverse"),
     "hapstab.analysis.conditions.closed_forms": ("colgate", "eq18", "eq29", "eq34", "gil", "gil2004"),
-    "hapstab.analysis.damping": ("BestDampingResult", "best_damping"),
+    "hapstab.analysis.design.damping": ("BestDampingResult", "best_damping"),
     "hapstab.analysis.exact.core": ("stability",),
     "hapstab.analysis.exact.many": ("critical_stiffness_many",),
     "hapstab.analysis.limit_cycle_results": ("LimitCycleResult", "PredictedCycle"),
@@ -92,7 +92,7 @@ _LAZY = {
     "hapstab.analysis.conditions.positive_real": (
         "PositiveRealResult", "RationalMatrix", "circle_criterion", "positive_real",
     ),
-    "hapstab.analysis.regions": ("RegionResult", "stability_region"),
+    "hapstab.analysis.design.regions": ("RegionResult", "stability_region"),
     "hapstab.analysis.robust": ("RobustStiffnessResult", "robust_critical_stiffness"),
     "hapstab.analysis.robust_damping": ("RobustDampingResult", "robust_best_damping"),
     "hapstab.analysis.teleoperation.transparency": ("TransparencyResult", "transparency"),

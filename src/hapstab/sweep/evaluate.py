@@ -223,7 +223,7 @@ def _closed_form(loop: Any, errors: list[str], na: list[str]) -> tuple[str, floa
 
 
 def _best(loop: Any, options: dict[str, Any]) -> Any:
-    from hapstab.analysis.damping import best_damping
+    from hapstab.analysis.design.damping import best_damping
 
     return best_damping(loop, **options)
 

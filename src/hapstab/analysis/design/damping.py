@@ -1,5 +1,5 @@
 """The virtual damping that lets a loop render the stiffest wall: B* maximising the
-exact K_max(B), found on the batched K_max-over-B of :mod:`hapstab.analysis.regions`.
+exact K_max(B), found on the batched K_max-over-B of :mod:`hapstab.analysis.design.regions`.
 
 References
 ----------
@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from hapstab import budget, progress
-from hapstab.analysis.regions import Loop, check_equal_gains, kmax_over_B, with_gains
+from hapstab.analysis.design.regions import Loop, check_equal_gains, kmax_over_B, with_gains
 from hapstab.errors import AnalysisError, check_real
 from hapstab.results import Result, jsonable, write_csv
 

@@ -1,5 +1,5 @@
 """K-B stability regions (D-decomposition); the best virtual damping is in
-:mod:`hapstab.analysis.damping`.
+:mod:`hapstab.analysis.design.damping`.
 
 With C = K + B (z - 1)/(T z) on every port (C_m = C_s), the loop depends on (K, B)
 only through the scalar ``h(z) = K + (B/T)(1 - z^-1)``. Its characteristic equation is
@@ -35,7 +35,7 @@ import numpy as np
 from hapstab import budget, progress
 from hapstab.analysis.exact.crossings import analyse, winding
 from hapstab.analysis.exact.stable_set import StableSet
-from hapstab.analysis.kb_plane import (
+from hapstab.analysis.design.kb_plane import (
     Loop,
     check_equal_gains,
     d_decomposition,

@@ -10,7 +10,7 @@ displays over frequency.
   condition adds K <= 2 f_c / Delta (where its assumptions hold: B = 0, no delay;
   :mod:`hapstab.analysis.nonlinear_passivity`).
 * **Stable**: for each B the exact K_max with the loop's own operator
-  (:func:`~hapstab.analysis.regions.kmax_over_B`), the end of the stable interval that
+  (:func:`~hapstab.analysis.design.regions.kmax_over_B`), the end of the stable interval that
   starts at 0. A wall between the two lines is stable with this operator and not
   guaranteed with another.
 * **Displayed impedance** of the wall at one (K, B): the force the hold applies at the
@@ -39,10 +39,10 @@ from typing import Any, cast
 
 import numpy as np
 
-from hapstab.analysis.kb_plane import check_equal_gains, with_gains
+from hapstab.analysis.design.kb_plane import check_equal_gains, with_gains
 from hapstab.analysis.nonlinear_passivity import abbott_okamura
 from hapstab.analysis.conditions.passivity import critical_stiffness_passivity
-from hapstab.analysis.regions import kmax_over_B
+from hapstab.analysis.design.regions import kmax_over_B
 from hapstab.errors import AnalysisError, ArgumentTypeError, check_real
 from hapstab.models.loops import HapticLoop, headline, whole_delay
 from hapstab.results import Result, jsonable, write_csv
