@@ -37,8 +37,8 @@ if TYPE_CHECKING:   # for type checkers and readers; at run time a name loads on
         positive_real,
     )
     from hapstab.analysis.design.regions import RegionResult, stability_region
-    from hapstab.analysis.robust import RobustStiffnessResult, robust_critical_stiffness
-    from hapstab.analysis.robust_damping import RobustDampingResult, robust_best_damping
+    from hapstab.analysis.robust.robust import RobustStiffnessResult, robust_critical_stiffness
+    from hapstab.analysis.robust.robust_damping import RobustDampingResult, robust_best_damping
     from hapstab.analysis.teleoperation.transparency import TransparencyResult, transparency
     from hapstab.analysis.teleoperation.twoport import TwoPortResult, llewellyn_test
     from hapstab.analysis.verify import CertificateCheck, verify_certificate
@@ -93,8 +93,8 @@ _LAZY = {
         "PositiveRealResult", "RationalMatrix", "circle_criterion", "positive_real",
     ),
     "hapstab.analysis.design.regions": ("RegionResult", "stability_region"),
-    "hapstab.analysis.robust": ("RobustStiffnessResult", "robust_critical_stiffness"),
-    "hapstab.analysis.robust_damping": ("RobustDampingResult", "robust_best_damping"),
+    "hapstab.analysis.robust.robust": ("RobustStiffnessResult", "robust_critical_stiffness"),
+    "hapstab.analysis.robust.robust_damping": ("RobustDampingResult", "robust_best_damping"),
     "hapstab.analysis.teleoperation.transparency": ("TransparencyResult", "transparency"),
     "hapstab.analysis.teleoperation.twoport": ("TwoPortResult", "llewellyn_test"),
     "hapstab.analysis.verify": ("CertificateCheck", "verify_certificate"),

@@ -134,7 +134,7 @@ def _best_command(kind: str) -> None:
     @operator_box_options
     def _cmd(B_max: float | None, B_min: float | None, as_json: bool, **kw: Any) -> None:
         from hapstab.analysis.design.damping import best_damping
-        from hapstab.analysis.robust_damping import robust_best_damping
+        from hapstab.analysis.robust.robust_damping import robust_best_damping
 
         _equal_controllers(kw)
         if B_min is not None and B_min > 0:
