@@ -17,14 +17,14 @@ if TYPE_CHECKING:   # for type checkers and readers; at run time a name loads on
     from hapstab.analysis.identify import identify
     from hapstab.analysis.identify_result import IdentificationResult
     from hapstab.analysis.interop import to_control
-    from hapstab.analysis.limit_cycle_results import LimitCycleResult, PredictedCycle
-    from hapstab.analysis.limit_cycles import limit_cycles
+    from hapstab.analysis.nonlinear.limit_cycle_results import LimitCycleResult, PredictedCycle
+    from hapstab.analysis.nonlinear.limit_cycles import limit_cycles
     from hapstab.analysis.margin_result import FrequencyView, MarginResult
     from hapstab.analysis.margins import frequency_view, margins
     from hapstab.analysis.methods import boundary, critical_stiffness, methods_for
     from hapstab.analysis.network.jitter import jitter
     from hapstab.analysis.network.jitter_result import JitterResult
-    from hapstab.analysis.nonlinear_passivity import (
+    from hapstab.analysis.nonlinear.nonlinear_passivity import (
         NonlinearPassivityResult,
         abbott_okamura,
         nonlinear_passivity,
@@ -82,10 +82,10 @@ _LAZY = {
     "hapstab.analysis.design.damping": ("BestDampingResult", "best_damping"),
     "hapstab.analysis.exact.core": ("stability",),
     "hapstab.analysis.exact.many": ("critical_stiffness_many",),
-    "hapstab.analysis.limit_cycle_results": ("LimitCycleResult", "PredictedCycle"),
-    "hapstab.analysis.limit_cycles": ("limit_cycles",),
+    "hapstab.analysis.nonlinear.limit_cycle_results": ("LimitCycleResult", "PredictedCycle"),
+    "hapstab.analysis.nonlinear.limit_cycles": ("limit_cycles",),
     "hapstab.analysis.methods": ("boundary", "critical_stiffness", "methods_for"),
-    "hapstab.analysis.nonlinear_passivity": (
+    "hapstab.analysis.nonlinear.nonlinear_passivity": (
         "NonlinearPassivityResult", "abbott_okamura", "nonlinear_passivity",
     ),
     "hapstab.analysis.conditions.passivity": ("PassivityResult", "sampled_passivity"),

@@ -8,7 +8,7 @@ displays over frequency.
   against *any* passive operator, so it is the Z-width in Colgate and Brown's sense.
   With encoder quantisation Delta and Coulomb friction f_c, Abbott and Okamura's
   condition adds K <= 2 f_c / Delta (where its assumptions hold: B = 0, no delay;
-  :mod:`hapstab.analysis.nonlinear_passivity`).
+  :mod:`hapstab.analysis.nonlinear.nonlinear_passivity`).
 * **Stable**: for each B the exact K_max with the loop's own operator
   (:func:`~hapstab.analysis.design.regions.kmax_over_B`), the end of the stable interval that
   starts at 0. A wall between the two lines is stable with this operator and not
@@ -40,7 +40,7 @@ from typing import Any, cast
 import numpy as np
 
 from hapstab.analysis.design.kb_plane import check_equal_gains, with_gains
-from hapstab.analysis.nonlinear_passivity import abbott_okamura
+from hapstab.analysis.nonlinear.nonlinear_passivity import abbott_okamura
 from hapstab.analysis.conditions.passivity import critical_stiffness_passivity
 from hapstab.analysis.design.regions import kmax_over_B
 from hapstab.errors import AnalysisError, ArgumentTypeError, check_real

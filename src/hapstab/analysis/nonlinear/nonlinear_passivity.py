@@ -44,7 +44,7 @@ interfaces", J. Robotic Systems 14(1), 1997 (b > KT/2 + |B|). N. Diolaiti, G. Ni
 F. Barbagli and J. K. Salisbury, "Stability of haptic rendering: discretization,
 quantization, time delay, and Coulomb effects", IEEE Trans. Robotics 22(2), 2006 (devices
 that violate the quantisation condition are still stable: see
-:mod:`hapstab.analysis.limit_cycles`).
+:mod:`hapstab.analysis.nonlinear.limit_cycles`).
 """
 
 from __future__ import annotations
