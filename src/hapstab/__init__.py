@@ -14,8 +14,8 @@ if TYPE_CHECKING:   # for type checkers and readers; at run time a name loads on
     from hapstab.analysis.design.damping import BestDampingResult, best_damping
     from hapstab.analysis.exact.core import stability
     from hapstab.analysis.exact.many import critical_stiffness_many
-    from hapstab.analysis.identify import identify
-    from hapstab.analysis.identify_result import IdentificationResult
+    from hapstab.analysis.identification.identify import identify
+    from hapstab.analysis.identification.identify_result import IdentificationResult
     from hapstab.analysis.interop import to_control
     from hapstab.analysis.nonlinear.limit_cycle_results import LimitCycleResult, PredictedCycle
     from hapstab.analysis.nonlinear.limit_cycles import limit_cycles
@@ -120,8 +120,8 @@ _LAZY = {
     "hapstab.analysis.interop": ("to_control",),
     "hapstab.analysis.margin_result": ("FrequencyView", "MarginResult",),
     "hapstab.analysis.margins": ("frequency_view", "margins",),
-    "hapstab.analysis.identify": ("identify",),
-    "hapstab.analysis.identify_result": ("IdentificationResult",),
+    "hapstab.analysis.identification.identify": ("identify",),
+    "hapstab.analysis.identification.identify_result": ("IdentificationResult",),
     "hapstab.analysis.network.jitter": ("jitter",),
     "hapstab.analysis.network.jitter_result": ("JitterResult",),
 }
