@@ -11,24 +11,6 @@ if TYPE_CHECKING:   # for type checkers and readers; at run time a name loads on
     from hapstab.analysis.conditions.audit import AuditResult, audit
     from hapstab.analysis.conditions.circle import circle_test, loop_inverse
     from hapstab.analysis.conditions.closed_forms import colgate, eq18, eq29, eq34, gil, gil2004
-    from hapstab.analysis.design.damping import BestDampingResult, best_damping
-    from hapstab.analysis.exact.core import stability
-    from hapstab.analysis.exact.many import critical_stiffness_many
-    from hapstab.analysis.identification.identify import identify
-    from hapstab.analysis.identification.identify_result import IdentificationResult
-    from hapstab.analysis.interop import to_control
-    from hapstab.analysis.nonlinear.limit_cycle_results import LimitCycleResult, PredictedCycle
-    from hapstab.analysis.nonlinear.limit_cycles import limit_cycles
-    from hapstab.analysis.margin_result import FrequencyView, MarginResult
-    from hapstab.analysis.margins import frequency_view, margins
-    from hapstab.analysis.methods import boundary, critical_stiffness, methods_for
-    from hapstab.analysis.network.jitter import jitter
-    from hapstab.analysis.network.jitter_result import JitterResult
-    from hapstab.analysis.nonlinear.nonlinear_passivity import (
-        NonlinearPassivityResult,
-        abbott_okamura,
-        nonlinear_passivity,
-    )
     from hapstab.analysis.conditions.passivity import PassivityResult, sampled_passivity
     from hapstab.analysis.conditions.positive_real import (
         PositiveRealResult,
@@ -36,7 +18,25 @@ if TYPE_CHECKING:   # for type checkers and readers; at run time a name loads on
         circle_criterion,
         positive_real,
     )
+    from hapstab.analysis.design.damping import BestDampingResult, best_damping
     from hapstab.analysis.design.regions import RegionResult, stability_region
+    from hapstab.analysis.exact.core import stability
+    from hapstab.analysis.exact.many import critical_stiffness_many
+    from hapstab.analysis.identification.identify import identify
+    from hapstab.analysis.identification.identify_result import IdentificationResult
+    from hapstab.analysis.interop import to_control
+    from hapstab.analysis.margin_result import FrequencyView, MarginResult
+    from hapstab.analysis.margins import frequency_view, margins
+    from hapstab.analysis.methods import boundary, critical_stiffness, methods_for
+    from hapstab.analysis.network.jitter import jitter
+    from hapstab.analysis.network.jitter_result import JitterResult
+    from hapstab.analysis.nonlinear.limit_cycle_results import LimitCycleResult, PredictedCycle
+    from hapstab.analysis.nonlinear.limit_cycles import limit_cycles
+    from hapstab.analysis.nonlinear.nonlinear_passivity import (
+        NonlinearPassivityResult,
+        abbott_okamura,
+        nonlinear_passivity,
+    )
     from hapstab.analysis.robust.robust import RobustStiffnessResult, robust_critical_stiffness
     from hapstab.analysis.robust.robust_damping import RobustDampingResult, robust_best_damping
     from hapstab.analysis.teleoperation.transparency import TransparencyResult, transparency

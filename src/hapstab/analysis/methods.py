@@ -16,8 +16,8 @@ import numpy as np
 from hapstab import progress
 from hapstab.analysis.conditions.circle import critical_stiffness_circle
 from hapstab.analysis.conditions.closed_forms import CLOSED_FORMS, TABLE
-from hapstab.analysis.exact.core import exact_critical_stiffness, exact_kmax_batch
 from hapstab.analysis.conditions.passivity import critical_stiffness_passivity
+from hapstab.analysis.exact.core import exact_critical_stiffness, exact_kmax_batch
 from hapstab.analysis.teleoperation.twoport import critical_stiffness_llewellyn
 from hapstab.errors import (
     MAX_DELAY_SAMPLES,

@@ -143,8 +143,8 @@ def _nonlinear_passivity(loop: Any, stiffness: float, resolution: float | None,
                          kind: str, curve_points: int = 0) -> None:
     """``passivity hve`` with friction and / or quantisation: both conditions (and the
     friction-free loop's margin over frequency, whose minimum is the margin shown)."""
-    from hapstab.analysis.nonlinear.nonlinear_passivity import nonlinear_passivity
     from hapstab.analysis.conditions.passivity import sampled_passivity
+    from hapstab.analysis.nonlinear.nonlinear_passivity import nonlinear_passivity
 
     if approximation is not None or sector is not None:
         raise HapstabError("--approximation/--sector: apply to --method circle only; "

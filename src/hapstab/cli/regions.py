@@ -88,8 +88,8 @@ def _region_command(kind: str) -> None:
                   help="Write every grid point: stiffness, virtual_damping, stable_exact, stable_grid.")
     def _cmd(K_spec: str, B_spec: str, resolution: int, overlays: str, plot_path: str | None,
              csv_path: str | None, as_json: bool, **kw: Any) -> None:
-        from hapstab.analysis.methods import METHODS
         from hapstab.analysis.design.regions import stability_region
+        from hapstab.analysis.methods import METHODS
         from hapstab.cli.files import check_files, write_files
 
         check_files(csv_path, plot_path, as_json)

@@ -45,13 +45,13 @@ import numpy as np
 
 from hapstab import budget
 from hapstab.analysis.conditions.closed_forms import G_INVERSE
+from hapstab.analysis.conditions.frequency_grid import psd_limit, refine_minimum, theta_grid
 from hapstab.analysis.conditions.positive_real import (
     PositiveRealResult,
     RationalMatrix,
     circle_criterion,
     positive_real,
 )
-from hapstab.analysis.conditions.frequency_grid import psd_limit, refine_minimum, theta_grid
 from hapstab.engine.device_side import DeviceSide, device_side
 from hapstab.engine.structure import structure_of
 from hapstab.engine.system import build

@@ -38,7 +38,12 @@ from typing import Any
 
 import numpy as np
 
-from hapstab.analysis.conditions.frequency_grid import min_eig, psd_limit, refine_minimum, theta_grid
+from hapstab.analysis.conditions.frequency_grid import (
+    min_eig,
+    psd_limit,
+    refine_minimum,
+    theta_grid,
+)
 from hapstab.engine.device_side import DeviceSide, device_side
 from hapstab.errors import AnalysisError
 from hapstab.models.controllers import SpringDamper, has_stiffness

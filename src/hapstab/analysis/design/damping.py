@@ -242,8 +242,8 @@ def loop_delays(loop: Loop) -> list[float]:
 def _caveats(loop: Loop, B: float, K: float) -> tuple[str, float, float, str]:
     """For which terminations the answer holds, K_max at B without them, and how far the
     device side stays passive at B; the words a designer needs beside K*."""
-    from hapstab.analysis.exact.core import exact_critical_stiffness
     from hapstab.analysis.conditions.passivity import critical_stiffness_passivity
+    from hapstab.analysis.exact.core import exact_critical_stiffness
 
     at_B = with_gains(loop, K, B)
     ends = {"operator": at_B.operator, "environment": getattr(at_B, "environment", None)}

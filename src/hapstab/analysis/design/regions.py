@@ -33,14 +33,14 @@ from typing import Any
 import numpy as np
 
 from hapstab import budget, progress
-from hapstab.analysis.exact.crossings import analyse, winding
-from hapstab.analysis.exact.stable_set import StableSet
 from hapstab.analysis.design.kb_plane import (
     Loop,
     check_equal_gains,
     d_decomposition,
     with_gains,
 )
+from hapstab.analysis.exact.crossings import analyse, winding
+from hapstab.analysis.exact.stable_set import StableSet
 from hapstab.engine.frequency import LoopResponse, loop_response, stack_responses
 from hapstab.engine.system import build
 from hapstab.errors import AnalysisError, ArgumentTypeError, check_real

@@ -39,10 +39,10 @@ from typing import Any, cast
 
 import numpy as np
 
-from hapstab.analysis.design.kb_plane import check_equal_gains, with_gains
-from hapstab.analysis.nonlinear.nonlinear_passivity import abbott_okamura
 from hapstab.analysis.conditions.passivity import critical_stiffness_passivity
+from hapstab.analysis.design.kb_plane import check_equal_gains, with_gains
 from hapstab.analysis.design.regions import kmax_over_B
+from hapstab.analysis.nonlinear.nonlinear_passivity import abbott_okamura
 from hapstab.errors import AnalysisError, ArgumentTypeError, check_real
 from hapstab.models.loops import HapticLoop, headline, whole_delay
 from hapstab.results import Result, jsonable, write_csv
