@@ -18,7 +18,7 @@ import time
 
 import hapstab as h
 from hapstab import budget
-from hapstab.analysis.regions import _region_cost
+from hapstab.analysis.design.regions import _region_cost
 from hapstab.engine.system import build
 from hapstab.simulation.search import critical_stiffness_simulation, search_cost
 

@@ -14,7 +14,7 @@ import time
 import numpy as np
 
 import hapstab as h
-from hapstab.analysis.circle import critical_stiffness_circle
+from hapstab.analysis.conditions.circle import critical_stiffness_circle
 
 PERIODS = np.arange(1, 11) * 1e-3
 CASES = [("Fig. 5 HVE", h.paper_hve, 0, h.colgate, "(13)"), ("Fig. 5 HVE", h.paper_hve, 10, h.eq18, "(18)"),

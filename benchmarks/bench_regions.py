@@ -16,7 +16,7 @@ import time
 import numpy as np
 
 import hapstab as h
-from hapstab.analysis.regions import stability_region, with_gains
+from hapstab.analysis.design.regions import stability_region, with_gains
 from hapstab.engine.system import build
 
 LOOP = h.paper_hve(delay_samples=10)

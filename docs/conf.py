@@ -86,7 +86,7 @@ def _internal_reference(app, env, node, contnode):
         return None
     target = node.get("reftarget", "").lstrip("~.")
     # a relative name is looked up beside the object whose docstring holds it
-    # (docutils records "docstring of hapstab.analysis.sweeps.theta_grid" as the source)
+    # (docutils records "docstring of hapstab.analysis.conditions.frequency_grid.theta_grid" as the source)
     owner = re.search(r"docstring of ([\w.]+)", node.source or "")
     scopes = [node.get("py:module")]
     if owner:

@@ -6,7 +6,7 @@ import math
 import pytest
 
 import hapstab as h
-from hapstab.analysis.audit import audit
+from hapstab.analysis.conditions.audit import audit
 from hapstab.errors import AnalysisError
 from hapstab.models.controllers import DiscreteController, SpringDamper
 from hapstab.models.loops import HapticLoop, TeleoperationLoop

@@ -10,7 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import hapstab as h
-from hapstab.analysis.circle import (
+from hapstab.analysis.conditions.circle import (
     APPROXIMATIONS,
     circle_test,
     critical_stiffness_circle,

@@ -22,7 +22,7 @@ import numpy as np
 import pytest
 
 import hapstab as h
-from hapstab.analysis.circle import (
+from hapstab.analysis.conditions.circle import (
     APPROXIMATIONS,
     _two_port_transfer,
     circle_test,

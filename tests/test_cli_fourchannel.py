@@ -198,7 +198,7 @@ def test_region_and_best_damping():
 def test_no_paper_condition_for_a_4ch_loop():
     loop = FourChannelLoop(h.Device(0.015, 0.02), h.Device(0.015, 0.02), h.SpringDamper(1, 0),
                            h.SpringDamper(1, 0), None, None, 1e-3, 2)
-    from hapstab.analysis.closed_forms import paper_condition
+    from hapstab.analysis.conditions.closed_forms import paper_condition
 
     with pytest.raises(h.AnalysisError, match="no paper condition applies"):
         paper_condition(loop)

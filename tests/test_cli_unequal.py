@@ -73,10 +73,10 @@ def test_passivity_and_kmax_methods_unequal(method):
     d = ok_json(run("passivity", "peb", "-K", "5", "--method", method, *UNEQUAL, "--json"))
     loop = paper_unequal(5.0)
     if method == "circle":
-        from hapstab.analysis.circle import circle_test
+        from hapstab.analysis.conditions.circle import circle_test
         assert d["positive_real"] == circle_test(loop).positive_real
     else:
-        from hapstab.analysis.passivity import sampled_passivity
+        from hapstab.analysis.conditions.passivity import sampled_passivity
         assert d["margin"] == sampled_passivity(loop).margin
     k = ok_json(run("kmax", "peb", "--method", method, *UNEQUAL, "--json"))
     assert k["critical_stiffness"] == h.critical_stiffness(paper_unequal(), method=method).critical_stiffness

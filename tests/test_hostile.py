@@ -252,7 +252,7 @@ def test_robust_stops_at_the_time_budget_with_a_sound_gap():
     batch), and its bounds enclose the exact K_max of the operator it names."""
     import time
 
-    from hapstab.analysis.robust import robust_critical_stiffness
+    from hapstab.analysis.robust.robust import robust_critical_stiffness
     from hapstab.models.operators import operator_box
 
     loop = h.paper_hve(1e-3, 10)

@@ -1,7 +1,7 @@
 """hapstab.identify: a device's m, b (and f_c) from a log, with confidence intervals.
 
 The logs are made by two simulators that share no code with the identification's model
-(hapstab.analysis.identify_model): hapstab's own simulator (hapstab.simulate, its exact
+(hapstab.analysis.identification.identify_model): hapstab's own simulator (hapstab.simulate, its exact
 stick-slip in simulation/friction.py) and an independent one written here (the ZOH step
 from scipy's matrix exponential of the augmented matrix, friction's stop found by root
 finding, not the closed form). The truth is known; the campaign counts how often the
@@ -111,7 +111,7 @@ def test_the_independent_simulator_matches_hapstabs():
 
 def test_the_model_matches_the_independent_simulator():
     rng = np.random.default_rng(4)
-    from hapstab.analysis.identify_model import predict
+    from hapstab.analysis.identification.identify_model import predict
     for fc, b in ((0.0, 0.0), (0.0, 2.0), (0.1, 0.5), (0.1, 0.0)):
         F = excitation(rng, 800, 1e-3, 0.6)
         a = independent_log(0.2, b, fc, F, 1e-3, 0.001, 0.02)

@@ -24,13 +24,13 @@ import pytest
 from click.testing import CliRunner
 
 import hapstab as h
-from hapstab.analysis.harmonic import (
+from hapstab.analysis.nonlinear.harmonic import (
     Balance,
     quantize,
     quantizer_describing_function,
     staircase_harmonics,
 )
-from hapstab.analysis.limit_cycles import limit_cycles
+from hapstab.analysis.nonlinear.limit_cycles import limit_cycles
 from hapstab.cli.main import cli
 from hapstab.errors import AnalysisError, ModelError
 

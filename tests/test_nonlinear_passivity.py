@@ -17,8 +17,8 @@ import pytest
 from click.testing import CliRunner
 
 import hapstab as h
-from hapstab.analysis.nonlinear_passivity import abbott_okamura, nonlinear_passivity
-from hapstab.analysis.passivity import critical_stiffness_passivity
+from hapstab.analysis.conditions.passivity import critical_stiffness_passivity
+from hapstab.analysis.nonlinear.nonlinear_passivity import abbott_okamura, nonlinear_passivity
 from hapstab.cli.main import cli
 from hapstab.errors import AnalysisError, ModelError
 from hapstab.simulation.run import quantize

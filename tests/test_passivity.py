@@ -11,7 +11,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import hapstab as h
-from hapstab.analysis.passivity import critical_stiffness_passivity, sampled_passivity
+from hapstab.analysis.conditions.passivity import critical_stiffness_passivity, sampled_passivity
 from hapstab.errors import AnalysisError
 from hapstab.models.controllers import DiscreteController, SpringDamper
 from hapstab.models.loops import HapticLoop, TeleoperationLoop

@@ -7,7 +7,11 @@ import math
 import numpy as np
 import pytest
 
-from hapstab.analysis.positive_real import RationalMatrix, circle_criterion, positive_real
+from hapstab.analysis.conditions.positive_real import (
+    RationalMatrix,
+    circle_criterion,
+    positive_real,
+)
 from hapstab.errors import AnalysisError, ModelError
 
 

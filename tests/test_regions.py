@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 import hapstab as h
-from hapstab.analysis.damping import best_damping
-from hapstab.analysis.regions import d_decomposition, stability_region, with_gains
+from hapstab.analysis.design.damping import best_damping
+from hapstab.analysis.design.regions import d_decomposition, stability_region, with_gains
 from hapstab.engine.system import build
 from hapstab.errors import AnalysisError
 from references import brute

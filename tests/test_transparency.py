@@ -1,5 +1,5 @@
 """Issue #13, item 4: transparency of the sampled-data teleoperator. References it is
-checked against, none taken from hapstab.analysis.transparency: the continuous-time PEB
+checked against, none taken from hapstab.analysis.teleoperation.transparency: the continuous-time PEB
 (Newton's law for each device, solved here), the two-port P of eq. (30) written out by
 hand with the textbook h-parameter identities, the statics of the springs, and the exact
 sampled-data loop in the time domain (hapstab's simulator)."""

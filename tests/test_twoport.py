@@ -11,7 +11,7 @@ import pytest
 from click.testing import CliRunner
 
 import hapstab as h
-from hapstab.analysis.twoport import critical_stiffness_llewellyn, llewellyn_margin
+from hapstab.analysis.teleoperation.twoport import critical_stiffness_llewellyn, llewellyn_margin
 from hapstab.cli.main import cli
 
 
@@ -144,7 +144,7 @@ def test_the_cli_gives_llewellyn_for_peb_and_refuses_it_for_the_hve():
 
 
 def test_the_test_at_one_stiffness_agrees_with_k_max(tmp_path):
-    from hapstab.analysis.twoport import llewellyn_test
+    from hapstab.analysis.teleoperation.twoport import llewellyn_test
 
     loop = h.paper_peb(1e-3, 4).replace(
         master=h.Device(0.015, 0.5), slave=h.Device(0.015, 0.5),

@@ -16,7 +16,7 @@ import pytest
 from click.testing import CliRunner
 
 import hapstab as h
-from hapstab.analysis.twoport import critical_stiffness_llewellyn, llewellyn_test
+from hapstab.analysis.teleoperation.twoport import critical_stiffness_llewellyn, llewellyn_test
 from hapstab.cli.main import cli
 
 

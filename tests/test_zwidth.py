@@ -11,7 +11,7 @@ from click.testing import CliRunner
 from scipy import signal
 
 import hapstab as h
-from hapstab.analysis.zwidth import displayed_impedance, zwidth
+from hapstab.analysis.design.zwidth import displayed_impedance, zwidth
 from hapstab.cli.main import cli
 from hapstab.errors import HapstabError
 

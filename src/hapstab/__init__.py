@@ -8,39 +8,39 @@ Haptic Interaction and Teleoperation", IEEE Haptics Symposium 2014.
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:   # for type checkers and readers; at run time a name loads on first use
-    from hapstab.analysis.audit import AuditResult, audit
-    from hapstab.analysis.circle import circle_test, loop_inverse
-    from hapstab.analysis.closed_forms import colgate, eq18, eq29, eq34, gil, gil2004
-    from hapstab.analysis.damping import BestDampingResult, best_damping
-    from hapstab.analysis.exact.core import stability
-    from hapstab.analysis.exact.many import critical_stiffness_many
-    from hapstab.analysis.identify import identify
-    from hapstab.analysis.identify_result import IdentificationResult
-    from hapstab.analysis.interop import to_control
-    from hapstab.analysis.limit_cycle_results import LimitCycleResult, PredictedCycle
-    from hapstab.analysis.limit_cycles import limit_cycles
-    from hapstab.analysis.margin_result import FrequencyView, MarginResult
-    from hapstab.analysis.margins import frequency_view, margins
-    from hapstab.analysis.methods import boundary, critical_stiffness, methods_for
-    from hapstab.analysis.network.jitter import jitter
-    from hapstab.analysis.network.jitter_result import JitterResult
-    from hapstab.analysis.nonlinear_passivity import (
-        NonlinearPassivityResult,
-        abbott_okamura,
-        nonlinear_passivity,
-    )
-    from hapstab.analysis.passivity import PassivityResult, sampled_passivity
-    from hapstab.analysis.positive_real import (
+    from hapstab.analysis.conditions.audit import AuditResult, audit
+    from hapstab.analysis.conditions.circle import circle_test, loop_inverse
+    from hapstab.analysis.conditions.closed_forms import colgate, eq18, eq29, eq34, gil, gil2004
+    from hapstab.analysis.conditions.passivity import PassivityResult, sampled_passivity
+    from hapstab.analysis.conditions.positive_real import (
         PositiveRealResult,
         RationalMatrix,
         circle_criterion,
         positive_real,
     )
-    from hapstab.analysis.regions import RegionResult, stability_region
-    from hapstab.analysis.robust import RobustStiffnessResult, robust_critical_stiffness
-    from hapstab.analysis.robust_damping import RobustDampingResult, robust_best_damping
-    from hapstab.analysis.transparency import TransparencyResult, transparency
-    from hapstab.analysis.twoport import TwoPortResult, llewellyn_test
+    from hapstab.analysis.design.damping import BestDampingResult, best_damping
+    from hapstab.analysis.design.regions import RegionResult, stability_region
+    from hapstab.analysis.exact.core import stability
+    from hapstab.analysis.exact.many import critical_stiffness_many
+    from hapstab.analysis.identification.identify import identify
+    from hapstab.analysis.identification.identify_result import IdentificationResult
+    from hapstab.analysis.interop import to_control
+    from hapstab.analysis.margin_result import FrequencyView, MarginResult
+    from hapstab.analysis.margins import frequency_view, margins
+    from hapstab.analysis.methods import boundary, critical_stiffness, methods_for
+    from hapstab.analysis.network.jitter import jitter
+    from hapstab.analysis.network.jitter_result import JitterResult
+    from hapstab.analysis.nonlinear.limit_cycle_results import LimitCycleResult, PredictedCycle
+    from hapstab.analysis.nonlinear.limit_cycles import limit_cycles
+    from hapstab.analysis.nonlinear.nonlinear_passivity import (
+        NonlinearPassivityResult,
+        abbott_okamura,
+        nonlinear_passivity,
+    )
+    from hapstab.analysis.robust.robust import RobustStiffnessResult, robust_critical_stiffness
+    from hapstab.analysis.robust.robust_damping import RobustDampingResult, robust_best_damping
+    from hapstab.analysis.teleoperation.transparency import TransparencyResult, transparency
+    from hapstab.analysis.teleoperation.twoport import TwoPortResult, llewellyn_test
     from hapstab.analysis.verify import CertificateCheck, verify_certificate
     from hapstab.budget import BudgetError
     from hapstab.engine.system import SampledSystem, build
@@ -76,27 +76,27 @@ __version__ = "0.1.0"
 #: name imports its module (:func:`__getattr__`). Keep it equal to the imports above
 #: (tests/test_light_import.py checks).
 _LAZY = {
-    "hapstab.analysis.audit": ("AuditResult", "audit"),
-    "hapstab.analysis.circle": ("circle_test", "loop_inverse"),
-    "hapstab.analysis.closed_forms": ("colgate", "eq18", "eq29", "eq34", "gil", "gil2004"),
-    "hapstab.analysis.damping": ("BestDampingResult", "best_damping"),
+    "hapstab.analysis.conditions.audit": ("AuditResult", "audit"),
+    "hapstab.analysis.conditions.circle": ("circle_test", "loop_inverse"),
+    "hapstab.analysis.conditions.closed_forms": ("colgate", "eq18", "eq29", "eq34", "gil", "gil2004"),
+    "hapstab.analysis.design.damping": ("BestDampingResult", "best_damping"),
     "hapstab.analysis.exact.core": ("stability",),
     "hapstab.analysis.exact.many": ("critical_stiffness_many",),
-    "hapstab.analysis.limit_cycle_results": ("LimitCycleResult", "PredictedCycle"),
-    "hapstab.analysis.limit_cycles": ("limit_cycles",),
+    "hapstab.analysis.nonlinear.limit_cycle_results": ("LimitCycleResult", "PredictedCycle"),
+    "hapstab.analysis.nonlinear.limit_cycles": ("limit_cycles",),
     "hapstab.analysis.methods": ("boundary", "critical_stiffness", "methods_for"),
-    "hapstab.analysis.nonlinear_passivity": (
+    "hapstab.analysis.nonlinear.nonlinear_passivity": (
         "NonlinearPassivityResult", "abbott_okamura", "nonlinear_passivity",
     ),
-    "hapstab.analysis.passivity": ("PassivityResult", "sampled_passivity"),
-    "hapstab.analysis.positive_real": (
+    "hapstab.analysis.conditions.passivity": ("PassivityResult", "sampled_passivity"),
+    "hapstab.analysis.conditions.positive_real": (
         "PositiveRealResult", "RationalMatrix", "circle_criterion", "positive_real",
     ),
-    "hapstab.analysis.regions": ("RegionResult", "stability_region"),
-    "hapstab.analysis.robust": ("RobustStiffnessResult", "robust_critical_stiffness"),
-    "hapstab.analysis.robust_damping": ("RobustDampingResult", "robust_best_damping"),
-    "hapstab.analysis.transparency": ("TransparencyResult", "transparency"),
-    "hapstab.analysis.twoport": ("TwoPortResult", "llewellyn_test"),
+    "hapstab.analysis.design.regions": ("RegionResult", "stability_region"),
+    "hapstab.analysis.robust.robust": ("RobustStiffnessResult", "robust_critical_stiffness"),
+    "hapstab.analysis.robust.robust_damping": ("RobustDampingResult", "robust_best_damping"),
+    "hapstab.analysis.teleoperation.transparency": ("TransparencyResult", "transparency"),
+    "hapstab.analysis.teleoperation.twoport": ("TwoPortResult", "llewellyn_test"),
     "hapstab.analysis.verify": ("CertificateCheck", "verify_certificate"),
     "hapstab.budget": ("BudgetError",),
     "hapstab.engine.system": ("SampledSystem", "build"),
@@ -120,8 +120,8 @@ _LAZY = {
     "hapstab.analysis.interop": ("to_control",),
     "hapstab.analysis.margin_result": ("FrequencyView", "MarginResult",),
     "hapstab.analysis.margins": ("frequency_view", "margins",),
-    "hapstab.analysis.identify": ("identify",),
-    "hapstab.analysis.identify_result": ("IdentificationResult",),
+    "hapstab.analysis.identification.identify": ("identify",),
+    "hapstab.analysis.identification.identify_result": ("IdentificationResult",),
     "hapstab.analysis.network.jitter": ("jitter",),
     "hapstab.analysis.network.jitter_result": ("JitterResult",),
 }

@@ -14,11 +14,11 @@ from typing import Any
 import numpy as np
 
 from hapstab import progress
-from hapstab.analysis.circle import critical_stiffness_circle
-from hapstab.analysis.closed_forms import CLOSED_FORMS, TABLE
+from hapstab.analysis.conditions.circle import critical_stiffness_circle
+from hapstab.analysis.conditions.closed_forms import CLOSED_FORMS, TABLE
+from hapstab.analysis.conditions.passivity import critical_stiffness_passivity
 from hapstab.analysis.exact.core import exact_critical_stiffness, exact_kmax_batch
-from hapstab.analysis.passivity import critical_stiffness_passivity
-from hapstab.analysis.twoport import critical_stiffness_llewellyn
+from hapstab.analysis.teleoperation.twoport import critical_stiffness_llewellyn
 from hapstab.errors import (
     MAX_DELAY_SAMPLES,
     PERIOD_RANGE,

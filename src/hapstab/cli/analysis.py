@@ -286,7 +286,7 @@ for _kind in LOOP_KINDS:
 def demo(as_json: bool) -> None:
     """The paper's Fig. 5 and Fig. 6 boundaries: exact K_max beside the paper's lines."""
 
-    from hapstab.analysis.closed_forms import EQUATION, paper_condition
+    from hapstab.analysis.conditions.closed_forms import EQUATION, paper_condition
     from hapstab.analysis.methods import boundary
     from hapstab.models.loops import Loop
     from hapstab.paper.loops import paper_hve, paper_peb

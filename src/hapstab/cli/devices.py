@@ -60,7 +60,7 @@ def zwidth_hve(K_spec: str, B_spec: str, rows: int, at_spec: str | None, stiffne
                resolution_m: float | None, plot_path: str | None,
                csv_path: str | None, as_json: bool, **kw: Any) -> None:
     """Z-width of the HVE's device: passive and stable walls, displayed impedance."""
-    from hapstab.analysis.zwidth import zwidth
+    from hapstab.analysis.design.zwidth import zwidth
     from hapstab.cli.files import check_files, write_files
 
     check_files(csv_path, plot_path, as_json)

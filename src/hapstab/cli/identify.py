@@ -52,7 +52,7 @@ def identify_cmd(log: str, resolution_m: float | None, quantizer: str, friction:
     confidence intervals (white reading errors; see docs/guide/identify.md), and the
     kmax command line for the identified device is printed.
     """
-    from hapstab.analysis.identify import identify
+    from hapstab.analysis.identification.identify import identify
     from hapstab.cli.files import check_files, write_files
 
     check_files(csv_path, plot_path, as_json)
@@ -63,7 +63,7 @@ def identify_cmd(log: str, resolution_m: float | None, quantizer: str, friction:
 
 
 def _table(res: Any) -> None:
-    from hapstab.analysis.identify_result import interval_text
+    from hapstab.analysis.identification.identify_result import interval_text
 
     pct = f"{100 * res.confidence:g} %"
     units = {"mass_kg": ("mass m", "kg"), "damping_N_s_per_m": ("damping b", "N*s/m"),

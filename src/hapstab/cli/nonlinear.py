@@ -1,6 +1,6 @@
 """``hapstab limit-cycle hve``: limit cycles from encoder quantisation and Coulomb friction,
 by describing function refined by harmonic balance
-(:func:`hapstab.analysis.limit_cycles.limit_cycles`)."""
+(:func:`hapstab.analysis.nonlinear.limit_cycles.limit_cycles`)."""
 
 from __future__ import annotations
 
@@ -53,7 +53,7 @@ def limit_cycle_hve(stiffness: float, resolution: float | None, quantizer: str, 
                     max_amplitude: float | None, plot_path: str | None, csv_path: str | None,
                     as_json: bool, **kw: Any) -> None:
     """Limit cycles of the HVE at stiffness K from quantisation and Coulomb friction."""
-    from hapstab.analysis.limit_cycles import limit_cycles
+    from hapstab.analysis.nonlinear.limit_cycles import limit_cycles
     from hapstab.cli.files import check_files, write_files
 
     check_files(csv_path, plot_path, as_json)

@@ -88,14 +88,14 @@ def _passivity_command(kind: str) -> None:
                                  curve_points)
             return
         if method == "circle":
-            from hapstab.analysis.circle import circle_test
+            from hapstab.analysis.conditions.circle import circle_test
 
             approx = approximation or "forward"
             if approx not in _APPROX:
                 raise HapstabError(f"--approximation = {approximation!r}: allowed: {', '.join(_APPROX)}")
             res = circle_test(loop, approx, sector)
         elif method == "passivity":
-            from hapstab.analysis.passivity import sampled_passivity
+            from hapstab.analysis.conditions.passivity import sampled_passivity
 
             if approximation is not None or sector is not None:
                 raise HapstabError("--approximation/--sector: apply to --method circle only; "
@@ -143,8 +143,8 @@ def _nonlinear_passivity(loop: Any, stiffness: float, resolution: float | None,
                          kind: str, curve_points: int = 0) -> None:
     """``passivity hve`` with friction and / or quantisation: both conditions (and the
     friction-free loop's margin over frequency, whose minimum is the margin shown)."""
-    from hapstab.analysis.nonlinear_passivity import nonlinear_passivity
-    from hapstab.analysis.passivity import sampled_passivity
+    from hapstab.analysis.conditions.passivity import sampled_passivity
+    from hapstab.analysis.nonlinear.nonlinear_passivity import nonlinear_passivity
 
     if approximation is not None or sector is not None:
         raise HapstabError("--approximation/--sector: apply to --method circle only; "
@@ -174,7 +174,7 @@ def _audit_command(kind: str) -> None:
     @loop_options(kind)
     @_resolution_option(kind, "audit")
     def _cmd(as_json: bool, **kw: Any) -> None:
-        from hapstab.analysis.audit import audit
+        from hapstab.analysis.conditions.audit import audit
 
         resolution = kw.pop("resolution", None)
         loop = make(kw, 1.0)
@@ -231,7 +231,7 @@ def _twoport_command(kind: str) -> None:
                   help="Write frequency_rad_s, margin_N_s_per_m, eta per angle.")
     def _cmd(stiffness: float, approximation: str, plot_path: str | None,
              csv_path: str | None, as_json: bool, **kw: Any) -> None:
-        from hapstab.analysis.twoport import llewellyn_test
+        from hapstab.analysis.teleoperation.twoport import llewellyn_test
         from hapstab.cli.files import check_files, write_files
 
         check_files(csv_path, plot_path, as_json)
@@ -271,7 +271,7 @@ FREQUENCY_COUNT = 400
 def _frequencies(spec: str | None, period_s: float) -> list[float] | None:
     """--frequencies in Hz: start:stop[:count] log-spaced (count default
     :data:`FREQUENCY_COUNT`), or a comma list as given; none above 1/(2T)."""
-    from hapstab.analysis.transparency import NYQUIST_SLACK
+    from hapstab.analysis.teleoperation.transparency import NYQUIST_SLACK
 
     if spec is None:
         return None
@@ -306,7 +306,7 @@ def _transparency_command(kind: str) -> None:
                   help="Write the felt impedances, X_s/X_m and h11..h22 (re, im) per frequency.")
     def _cmd(stiffness: float, approximation: str, frequencies: str | None,
              plot_path: str | None, csv_path: str | None, as_json: bool, **kw: Any) -> None:
-        from hapstab.analysis.transparency import transparency
+        from hapstab.analysis.teleoperation.transparency import transparency
         from hapstab.cli.files import check_files, write_files
 
         check_files(csv_path, plot_path, as_json)

@@ -88,8 +88,8 @@ def _region_command(kind: str) -> None:
                   help="Write every grid point: stiffness, virtual_damping, stable_exact, stable_grid.")
     def _cmd(K_spec: str, B_spec: str, resolution: int, overlays: str, plot_path: str | None,
              csv_path: str | None, as_json: bool, **kw: Any) -> None:
+        from hapstab.analysis.design.regions import stability_region
         from hapstab.analysis.methods import METHODS
-        from hapstab.analysis.regions import stability_region
         from hapstab.cli.files import check_files, write_files
 
         check_files(csv_path, plot_path, as_json)
@@ -133,8 +133,8 @@ def _best_command(kind: str) -> None:
                        "down; 0 searches B >= 0 only).")
     @operator_box_options
     def _cmd(B_max: float | None, B_min: float | None, as_json: bool, **kw: Any) -> None:
-        from hapstab.analysis.damping import best_damping
-        from hapstab.analysis.robust_damping import robust_best_damping
+        from hapstab.analysis.design.damping import best_damping
+        from hapstab.analysis.robust.robust_damping import robust_best_damping
 
         _equal_controllers(kw)
         if B_min is not None and B_min > 0:

@@ -101,7 +101,7 @@ def _robust_command(kind: str) -> None:
                   help="Write the named operator and the vertex minimum.")
     def _cmd(rtol: float, max_boxes: int, plot_path: str | None, csv_path: str | None,
              as_json: bool, **kw: Any) -> None:
-        from hapstab.analysis.robust import robust_critical_stiffness
+        from hapstab.analysis.robust.robust import robust_critical_stiffness
         from hapstab.cli.files import check_files, write_files
 
         check_files(csv_path, plot_path, as_json)

@@ -156,7 +156,7 @@ class DeviceSide:
         master is weighted by ``d_0 = k_1 S_10 / (k_0 S_01)`` (the slave by 1), so that
         ``D Hc_K(1)`` is symmetric: K_s/K_m for unequal PEB controllers, times
         alpha/beta with position and force scaling. Equal, unscaled controllers give
-        D = I. See :func:`hapstab.analysis.circle.port_scaling` for why stability still
+        D = I. See :func:`hapstab.analysis.conditions.circle.port_scaling` for why stability still
         follows (D must be positive: S_01 and S_10 of one sign).
 
         Parameters

@@ -328,8 +328,8 @@ def friction_note(loop: Any) -> str:
 
 def quantize(x: np.ndarray, resolution: float, quantizer: str = "floor") -> np.ndarray:
     """The encoder's reading of ``x`` (the simulator's encoder and the describing
-    function's quantiser, :mod:`hapstab.analysis.harmonic`): ``Δ floor(x/Δ)`` or the nearest multiple of Δ
-    (ties away from zero, not to even).
+    function's quantiser, :mod:`hapstab.analysis.nonlinear.harmonic`): ``Δ floor(x/Δ)`` or the
+    nearest multiple of Δ (ties away from zero, not to even).
 
     Parameters
     ----------

@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from hapstab.analysis.closed_forms import EQUATION, PAPER, paper_condition
+from hapstab.analysis.conditions.closed_forms import EQUATION, PAPER, paper_condition
 from hapstab.analysis.exact.core import exact_critical_stiffness
 from hapstab.errors import AnalysisError, HapstabError
 from hapstab.paper.loops import paper_hve, paper_peb

@@ -11,7 +11,7 @@ __all__ = ["plot_identification"]
 
 
 def plot_identification(res: Any, ax: Any = None) -> Any:
-    """Draw an :class:`~hapstab.analysis.identify_result.IdentificationResult`.
+    """Draw an :class:`~hapstab.analysis.identification.identify_result.IdentificationResult`.
 
     Parameters
     ----------

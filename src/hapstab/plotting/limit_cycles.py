@@ -28,7 +28,7 @@ __all__ = ["plot_limit_cycles", "balance_grid", "from_root", "NEAR_MISS_NOTE"]
 
 #: How the notes of a cycle begin that harmonic balance found at a near miss of the first
 #: harmonic (it has no root there: the figure's curves come close but do not meet);
-#: :func:`hapstab.analysis.limit_cycles.limit_cycles` writes it.
+#: :func:`hapstab.analysis.nonlinear.limit_cycles.limit_cycles` writes it.
 NEAR_MISS_NOTE = "the describing function has no root here"
 
 
@@ -91,7 +91,7 @@ def balance_grid(res: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def plot_limit_cycles(res: Any, ax: Any = None) -> Any:
-    """Draw a :class:`~hapstab.analysis.limit_cycle_results.LimitCycleResult`.
+    """Draw a :class:`~hapstab.analysis.nonlinear.limit_cycle_results.LimitCycleResult`.
 
     Parameters
     ----------

@@ -11,7 +11,7 @@ __all__ = ["plot_zwidth"]
 
 
 def plot_zwidth(res: Any, ax: Any = None) -> Any:
-    """Draw a :class:`~hapstab.analysis.zwidth.ZWidthResult`.
+    """Draw a :class:`~hapstab.analysis.design.zwidth.ZWidthResult`.
 
     Parameters
     ----------

@@ -211,7 +211,7 @@ def _fractional(loop: Any) -> str:
 def _closed_form(loop: Any, errors: list[str], na: list[str]) -> tuple[str, float]:
     """The paper's condition for the loop (eq. 13 / 18 / 29 / 34) and its K, or ("", NaN)
     with the reason (in ``na``) where none applies."""
-    from hapstab.analysis.closed_forms import EQUATION, paper_condition
+    from hapstab.analysis.conditions.closed_forms import EQUATION, paper_condition
 
     try:
         cond = paper_condition(loop)
@@ -223,7 +223,7 @@ def _closed_form(loop: Any, errors: list[str], na: list[str]) -> tuple[str, floa
 
 
 def _best(loop: Any, options: dict[str, Any]) -> Any:
-    from hapstab.analysis.damping import best_damping
+    from hapstab.analysis.design.damping import best_damping
 
     return best_damping(loop, **options)
 

@@ -102,7 +102,7 @@ def sweep(build: Callable[[dict[str, Any]], Any], axes: Sequence[Axis] | Mapping
     check_stiffness : float, optional
         K in N/m of the ``check`` quantity.
     damping : mapping, optional
-        :func:`~hapstab.analysis.damping.best_damping`'s ``B_min``, ``B_max``,
+        :func:`~hapstab.analysis.design.damping.best_damping`'s ``B_min``, ``B_max``,
         ``resolution`` for ``best-damping``.
     plot : (str, str), optional
         The heat map's x and y axes (default: the first two axes; none with one axis).

@@ -1,5 +1,5 @@
 """K-B stability regions (D-decomposition); the best virtual damping is in
-:mod:`hapstab.analysis.damping`.
+:mod:`hapstab.analysis.design.damping`.
 
 With C = K + B (z - 1)/(T z) on every port (C_m = C_s), the loop depends on (K, B)
 only through the scalar ``h(z) = K + (B/T)(1 - z^-1)``. Its characteristic equation is
@@ -33,14 +33,14 @@ from typing import Any
 import numpy as np
 
 from hapstab import budget, progress
-from hapstab.analysis.exact.crossings import analyse, winding
-from hapstab.analysis.exact.stable_set import StableSet
-from hapstab.analysis.kb_plane import (
+from hapstab.analysis.design.kb_plane import (
     Loop,
     check_equal_gains,
     d_decomposition,
     with_gains,
 )
+from hapstab.analysis.exact.crossings import analyse, winding
+from hapstab.analysis.exact.stable_set import StableSet
 from hapstab.engine.frequency import LoopResponse, loop_response, stack_responses
 from hapstab.engine.system import build
 from hapstab.errors import AnalysisError, ArgumentTypeError, check_real
@@ -359,7 +359,7 @@ def _region(loop: Loop, Kw: tuple[float, float], Bw: tuple[float, float], n: int
 
 
 def _overlay(loop: Loop, name: str, Bs: np.ndarray) -> np.ndarray:
-    from hapstab.analysis import closed_forms
+    from hapstab.analysis.conditions import closed_forms
     from hapstab.analysis.methods import METHODS, critical_stiffness
 
     out = np.full(Bs.size, np.nan)

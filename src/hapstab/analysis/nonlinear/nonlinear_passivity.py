@@ -31,7 +31,7 @@ is the exact linear passivity limit for *any* delay and B, whatever f_c: frictio
 dissipates (so linear passivity suffices), and a motion scaled up by λ makes the
 sampled controller's energy grow as λ² against friction's λ (so it is also necessary).
 That is the friction-free, quantisation-free limit equal to today's
-:func:`~hapstab.analysis.passivity.critical_stiffness_passivity`, exactly (the same call).
+:func:`~hapstab.analysis.conditions.passivity.critical_stiffness_passivity`, exactly (the same call).
 
 References
 ----------
@@ -44,7 +44,7 @@ interfaces", J. Robotic Systems 14(1), 1997 (b > KT/2 + |B|). N. Diolaiti, G. Ni
 F. Barbagli and J. K. Salisbury, "Stability of haptic rendering: discretization,
 quantization, time delay, and Coulomb effects", IEEE Trans. Robotics 22(2), 2006 (devices
 that violate the quantisation condition are still stable: see
-:mod:`hapstab.analysis.limit_cycles`).
+:mod:`hapstab.analysis.nonlinear.limit_cycles`).
 """
 
 from __future__ import annotations
@@ -53,7 +53,7 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
-from hapstab.analysis.passivity import critical_stiffness_passivity, sampled_passivity
+from hapstab.analysis.conditions.passivity import critical_stiffness_passivity, sampled_passivity
 from hapstab.errors import AnalysisError, check_real
 from hapstab.models.controllers import SpringDamper
 from hapstab.models.loops import HapticLoop, require_loop
@@ -135,7 +135,7 @@ def abbott_okamura(loop: HapticLoop, *, coulomb_friction_N: float | None = None,
     """Largest passive K with Coulomb friction and encoder quantisation (see the module).
 
     ``K_max = min(2 b/T, 2 f_c/Δ)`` for Δ > 0 (B = 0, no delay); for Δ = 0 the exact
-    linear passivity limit (:func:`~hapstab.analysis.passivity.critical_stiffness_passivity`,
+    linear passivity limit (:func:`~hapstab.analysis.conditions.passivity.critical_stiffness_passivity`,
     any delay and B), whatever f_c.
 
     Parameters
@@ -260,7 +260,7 @@ def nonlinear_passivity(loop: HapticLoop, *, coulomb_friction_N: float | None = 
     """Is the device side passive at the loop's K, with friction f_c and quantisation Δ?
 
     Both conditions: the exact Colgate-Schenkel test
-    (:func:`~hapstab.analysis.passivity.sampled_passivity`) and, with Δ > 0,
+    (:func:`~hapstab.analysis.conditions.passivity.sampled_passivity`) and, with Δ > 0,
     ``f_c >= K Δ/2`` (Abbott and Okamura; B = 0 and no delay then).
 
     Parameters

@@ -1,6 +1,6 @@
 """Describing functions and harmonic balance of the haptic loop's two nonlinearities: the
 encoder's quantiser (on the sampled position) and Coulomb friction (a relay on the
-device's velocity), for :mod:`hapstab.analysis.limit_cycles`.
+device's velocity), for :mod:`hapstab.analysis.nonlinear.limit_cycles`.
 
 Both are *staircases*: piecewise-constant functions of their input with jumps at
 thresholds (the encoder's lines; zero velocity). For an input that is a trigonometric

@@ -1,7 +1,7 @@
 """The best virtual damping for an uncertain operator: the nominal B* (for the
-loop's own operator, :func:`hapstab.analysis.damping.best_damping`) checked over a
+loop's own operator, :func:`hapstab.analysis.design.damping.best_damping`) checked over a
 box of operators with the certified robust K_max
-(:func:`hapstab.analysis.robust.robust_critical_stiffness`), saying whether B*
+(:func:`hapstab.analysis.robust.robust.robust_critical_stiffness`), saying whether B*
 keeps the loop stable at K* for every operator of the box, and which operator
 breaks it if not.
 
@@ -17,10 +17,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from hapstab.analysis.damping import BestDampingResult, best_damping
-from hapstab.analysis.kb_plane import with_gains
-from hapstab.analysis.robust import DEFAULT_RTOL, MAX_BOXES, robust_critical_stiffness
-from hapstab.analysis.robust_result import RobustStiffnessResult
+from hapstab.analysis.design.damping import BestDampingResult, best_damping
+from hapstab.analysis.design.kb_plane import with_gains
+from hapstab.analysis.robust.robust import DEFAULT_RTOL, MAX_BOXES, robust_critical_stiffness
+from hapstab.analysis.robust.robust_result import RobustStiffnessResult
 from hapstab.models.operators import OperatorBox
 from hapstab.results import Result, jsonable
 
@@ -127,9 +127,9 @@ def robust_best_damping(loop: Any, box: OperatorBox, B_max: float | None = None,
     box : OperatorBox
         The operators B* must also serve.
     B_max, resolution, B_min : optional
-        As :func:`hapstab.analysis.damping.best_damping`.
+        As :func:`hapstab.analysis.design.damping.best_damping`.
     rtol, max_boxes : optional
-        As :func:`hapstab.analysis.robust.robust_critical_stiffness`.
+        As :func:`hapstab.analysis.robust.robust.robust_critical_stiffness`.
     max_memory, max_seconds : float, optional
         Budget in bytes and seconds, for each of the two searches.
 

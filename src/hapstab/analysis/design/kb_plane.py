@@ -4,7 +4,7 @@ stiffness, and the exact boundary where a pole is on |z| = 1 (D-decomposition).
 With C = K + B (z - 1)/(T z) on every port, the loop depends on (K, B) only through
 ``h(z) = K + (B/T)(1 - z^-1)``; a pole sits on |z| = 1 exactly where
 ``h(e^{j theta}) = 1/mu`` for an eigenvalue mu of ``G(e^{j theta})`` (see
-:mod:`hapstab.analysis.regions`).
+:mod:`hapstab.analysis.design.regions`).
 
 References
 ----------

@@ -146,7 +146,7 @@ def eq18(loop: HapticLoop) -> CriticalStiffnessResult:
     ``b + B cos((n+1)wT) - (KT/2) D_n(wT)`` with the Dirichlet kernel
     ``D_n(x) = sin((n + 1/2)x)/sin(x/2) <= 2n + 1``, and both terms are smallest at
     w -> 0 when B <= 0. So for negative B, (18) reads ``K < (b - |B|)/(T/2 + t_d)``
-    and *is* the exact sampled-data passivity limit (:mod:`hapstab.analysis.passivity`), a
+    and *is* the exact sampled-data passivity limit (:mod:`hapstab.analysis.conditions.passivity`), a
     sufficient stability bound with a passive operator; ``b + B <= 0`` gives
     K_max = 0. At n = 0 it reduces to (1)/(13) for B <= 0 only; for B > 0 it
     gives 2(b + B)/T, above (1)'s 2(b - B)/T.

@@ -4,7 +4,7 @@ promising minimum, and the largest K keeping an affine Hermitian matrix
 
 Shared by the positive-real test (:mod:`hapstab.positive_real`), the circle
 criterion (:mod:`hapstab.circle`) and sampled-data passivity
-(:mod:`hapstab.analysis.passivity`). Angles ``theta`` are in rad/sample (theta = w T).
+(:mod:`hapstab.analysis.conditions.passivity`). Angles ``theta`` are in rad/sample (theta = w T).
 """
 
 from __future__ import annotations

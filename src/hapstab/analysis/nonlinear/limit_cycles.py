@@ -4,7 +4,7 @@ predicted by describing functions and refined by harmonic balance.
 The loop (:class:`~hapstab.models.HapticLoop`, spring-damper H(z), n whole samples of
 delay): the device and its operator, ZOH-discretised exactly by the engine
 (:mod:`hapstab.engine.zoh`), the encoder's quantiser q on the sampled position
-(:mod:`hapstab.analysis.harmonic`), and Coulomb friction f_c sign(v) on the port's
+(:mod:`hapstab.analysis.nonlinear.harmonic`), and Coulomb friction f_c sign(v) on the port's
 velocity between the samples. A periodic motion ``x = x0 + A sin(w t) + ...`` balances
 harmonic by harmonic,
 
@@ -31,8 +31,8 @@ of what the encoder reads and of the friction force, k the operator's spring.
    at 1.2837 Hz. The describing function's near misses (|F| < :data:`NEAR_MISS`) are
    tried too: harmonics can close them (a cycle the first harmonic alone misses). A
    refined root keeps its describing function's Loeb verdict; a closed near miss gets
-   Loeb's criterion on the balance itself (:func:`~hapstab.analysis.harmonic.loeb_stable`).
-3. **Rest** (:func:`~hapstab.analysis.limit_cycle_loop.rests`): with an encoder the device
+   Loeb's criterion on the balance itself (:func:`~hapstab.analysis.nonlinear.harmonic.loeb_stable`).
+3. **Rest** (:func:`~hapstab.analysis.nonlinear.limit_cycle_loop.rests`): with an encoder the device
    may have no rest strictly inside a step (the operator's spring relaxed just below a
    floor encoder's line: it chatters across it), rest only on a line, or, free of any
    spring and with f_c < K Δ/2, coast within a step and bounce across its lines. These
@@ -72,14 +72,14 @@ import math
 
 import numpy as np
 
-from hapstab.analysis.harmonic import (
+from hapstab.analysis.nonlinear.harmonic import (
     Balance,
     loeb_stable,
     quantizer_describing_function,
     solve_balance,
     waveform,
 )
-from hapstab.analysis.limit_cycle_loop import (
+from hapstab.analysis.nonlinear.limit_cycle_loop import (
     STEPS_MAX,
     check_loop,
     crossovers,
@@ -87,8 +87,8 @@ from hapstab.analysis.limit_cycle_loop import (
     loop_parts,
     rests,
 )
-from hapstab.analysis.limit_cycle_results import LimitCycleResult, PredictedCycle
-from hapstab.analysis.nonlinear_passivity import coulomb_friction_of, resolution_of
+from hapstab.analysis.nonlinear.limit_cycle_results import LimitCycleResult, PredictedCycle
+from hapstab.analysis.nonlinear.nonlinear_passivity import coulomb_friction_of, resolution_of
 from hapstab.errors import ModelError
 from hapstab.models.loops import HapticLoop
 from hapstab.plotting.limit_cycles import NEAR_MISS_NOTE

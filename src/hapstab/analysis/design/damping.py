@@ -1,5 +1,5 @@
 """The virtual damping that lets a loop render the stiffest wall: B* maximising the
-exact K_max(B), found on the batched K_max-over-B of :mod:`hapstab.analysis.regions`.
+exact K_max(B), found on the batched K_max-over-B of :mod:`hapstab.analysis.design.regions`.
 
 References
 ----------
@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from hapstab import budget, progress
-from hapstab.analysis.regions import Loop, check_equal_gains, kmax_over_B, with_gains
+from hapstab.analysis.design.regions import Loop, check_equal_gains, kmax_over_B, with_gains
 from hapstab.errors import AnalysisError, check_real
 from hapstab.results import Result, jsonable, write_csv
 
@@ -242,8 +242,8 @@ def loop_delays(loop: Loop) -> list[float]:
 def _caveats(loop: Loop, B: float, K: float) -> tuple[str, float, float, str]:
     """For which terminations the answer holds, K_max at B without them, and how far the
     device side stays passive at B; the words a designer needs beside K*."""
+    from hapstab.analysis.conditions.passivity import critical_stiffness_passivity
     from hapstab.analysis.exact.core import exact_critical_stiffness
-    from hapstab.analysis.passivity import critical_stiffness_passivity
 
     at_B = with_gains(loop, K, B)
     ends = {"operator": at_B.operator, "environment": getattr(at_B, "environment", None)}

@@ -16,11 +16,11 @@ from dataclasses import dataclass
 from typing import Any
 
 from hapstab import budget
-from hapstab.analysis.circle import critical_stiffness_circle
-from hapstab.analysis.closed_forms import closed_forms_for
+from hapstab.analysis.conditions.circle import critical_stiffness_circle
+from hapstab.analysis.conditions.closed_forms import closed_forms_for
+from hapstab.analysis.conditions.passivity import critical_stiffness_passivity
 from hapstab.analysis.exact.core import exact_critical_stiffness
-from hapstab.analysis.nonlinear_passivity import abbott_okamura
-from hapstab.analysis.passivity import critical_stiffness_passivity
+from hapstab.analysis.nonlinear.nonlinear_passivity import abbott_okamura
 from hapstab.engine.system import build
 from hapstab.errors import AnalysisError
 from hapstab.models.controllers import spring_damper
@@ -176,7 +176,8 @@ def audit(loop: HapticLoop | TeleoperationLoop, *, coulomb_friction_N: float | N
     coulomb_friction_N : float, optional
         f_c in N (default: the device's ``coulomb_friction``). With friction or
         ``resolution_m`` given (HVE only), a row ``abbott-okamura`` is added: the passivity
-        limit with friction and quantisation (:func:`~hapstab.analysis.nonlinear_passivity.abbott_okamura`).
+        limit with friction and quantisation
+        (:func:`~hapstab.analysis.nonlinear.nonlinear_passivity.abbott_okamura`).
     resolution_m : float, optional
         Encoder resolution Δ in m, for that row.
     max_memory, max_seconds : float, optional

@@ -23,7 +23,7 @@ _NAMES = ("mass_kg", "damping_N_s_per_m", "coulomb_friction_N", "initial_positio
 
 @dataclass(frozen=True, eq=False)
 class IdentificationResult(Result):
-    """A device identified from a log (see :mod:`hapstab.analysis.identify`).
+    """A device identified from a log (see :mod:`hapstab.analysis.identification.identify`).
 
     Attributes
     ----------

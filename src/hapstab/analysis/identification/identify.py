@@ -3,7 +3,7 @@
 A log holds, at each sampling instant t_k = t_0 + k T, the force the controller
 commanded (held until the next sample) and the position the encoder read. The
 parameters ``theta = (m, b, f_c, x_0, v_0)`` are estimated by output-error nonlinear
-least squares on the exact sampled model (:mod:`hapstab.analysis.identify_model`: the
+least squares on the exact sampled model (:mod:`hapstab.analysis.identification.identify_model`: the
 zero-order hold solved in closed form, Coulomb friction's stick-slip events located
 exactly), with the encoder's quantisation in the measurement.
 
@@ -45,9 +45,9 @@ from typing import Any
 
 import numpy as np
 
-from hapstab.analysis.identify_log import read_log
-from hapstab.analysis.identify_model import predict
-from hapstab.analysis.identify_result import IdentificationResult
+from hapstab.analysis.identification.identify_log import read_log
+from hapstab.analysis.identification.identify_model import predict
+from hapstab.analysis.identification.identify_result import IdentificationResult
 from hapstab.errors import AnalysisError, ModelError, check_real
 from hapstab.models.parts import quantize
 
@@ -70,7 +70,7 @@ def identify(log: Any, *, resolution_m: float | None = None, quantizer: str = "f
     ----------
     log : str, os.PathLike, dict or (N, 3) array
         A CSV file with a header (time in s, commanded force in N, measured position in
-        m; see :func:`~hapstab.analysis.identify_log.read_log`), a dict of three arrays
+        m; see :func:`~hapstab.analysis.identification.identify_log.read_log`), a dict of three arrays
         (``time_s``, ``force_N``, ``position_m``) or an array of those three columns.
     resolution_m : float, optional
         The encoder's step Delta in m (default: no quantisation).

@@ -17,7 +17,7 @@ gives the matrix condition
 
     D diag(b_m, b_s) - (T/2) Herm{(1 - e^{-jwT}) D H(e^{jwT})} / (1 - cos wT) >= 0
 
-with H of eq. (21) and the port weights D of :func:`hapstab.analysis.circle.port_scaling`
+with H of eq. (21) and the port weights D of :func:`hapstab.analysis.conditions.circle.port_scaling`
 (D = I for C_m = C_s); this is sufficient for stability with passive
 terminations. It coincides with the forward-difference circle criterion: the
 paper's "worst-case approximation" is exactly sampled-data passivity.
@@ -38,7 +38,12 @@ from typing import Any
 
 import numpy as np
 
-from hapstab.analysis.sweeps import min_eig, psd_limit, refine_minimum, theta_grid
+from hapstab.analysis.conditions.frequency_grid import (
+    min_eig,
+    psd_limit,
+    refine_minimum,
+    theta_grid,
+)
 from hapstab.engine.device_side import DeviceSide, device_side
 from hapstab.errors import AnalysisError
 from hapstab.models.controllers import SpringDamper, has_stiffness
@@ -70,7 +75,7 @@ class PassivityResult(Result):
     curve_frequency_hz : numpy.ndarray or None
         With ``curve_points``: frequencies in Hz from (almost) 0 to the Nyquist frequency
         1/(2T), evenly spaced (the first is the w -> 0 limit, see
-        :func:`hapstab.analysis.sweeps.theta_grid`); None otherwise.
+        :func:`hapstab.analysis.conditions.frequency_grid.theta_grid`); None otherwise.
     curve_margin : numpy.ndarray or None
         The margin at each of them (the smallest eigenvalue of the passivity matrix,
         N*s/m): the curve whose minimum over all w is ``margin``; None otherwise.
@@ -142,7 +147,7 @@ def sampled_passivity(loop: HapticLoop | TeleoperationLoop, scaling: str | None 
         Any controller (SpringDamper or a stable DiscreteController). The
         terminations do not enter: passivity is a property of the device side.
     scaling : {"auto", None}
-        PEB port weighting (see :func:`hapstab.analysis.circle.port_scaling`).
+        PEB port weighting (see :func:`hapstab.analysis.conditions.circle.port_scaling`).
     curve_points : int
         Also return the margin over frequency at this many evenly spaced frequencies from
         the w -> 0 limit to the Nyquist frequency (0: none; at most

@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from hapstab.analysis.sweeps import min_eig, refine_minimum, theta_grid
+from hapstab.analysis.conditions.frequency_grid import min_eig, refine_minimum, theta_grid
 from hapstab.errors import AnalysisError, ArgumentTypeError, ModelError, check_poly, check_real
 from hapstab.results import Result, jsonable
 from hapstab.tolerances import COEFF_ZERO, DIVISOR_FLOOR, ROOT_ON_CIRCLE

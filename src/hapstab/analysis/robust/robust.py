@@ -48,7 +48,7 @@ from hapstab.analysis.exact.core import exact_critical_stiffness
 from hapstab.analysis.exact.families import crossing_gradient, first_events
 from hapstab.analysis.exact.parametric import isolate
 from hapstab.analysis.exact.zonotope import family_floor
-from hapstab.analysis.robust_result import RobustStiffnessResult
+from hapstab.analysis.robust.robust_result import RobustStiffnessResult
 from hapstab.engine.frequency import LoopResponse, PortPoly
 from hapstab.engine.operator_family import BoxPoly, derivative_response, family_response
 from hapstab.engine.structure import structure_of

@@ -2,7 +2,7 @@
 well the slave follows, over frequency.
 
 The two-port. The paper cuts the loop at its terminations (eq. 30 generalised,
-:mod:`hapstab.analysis.twoport`): the device side ``P(z) = diag(b) + Hc(z) X(z)`` takes
+:mod:`hapstab.analysis.teleoperation.twoport`): the device side ``P(z) = diag(b) + Hc(z) X(z)`` takes
 the port velocities to the forces the terminations apply on the devices (no masses: each
 device's mass is on its termination's side). For the operator the slave's mass belongs
 to the environment and the master's is pushed along with the rest, so the teleoperator
@@ -61,7 +61,7 @@ from typing import Any
 
 import numpy as np
 
-from hapstab.analysis.circle import _approx, _x
+from hapstab.analysis.conditions.circle import _approx, _x
 from hapstab.engine.device_side import DeviceSide, device_side
 from hapstab.errors import AnalysisError, ModelError, check_reals
 from hapstab.models.loops import TeleoperationLoop, require_loop

@@ -3,14 +3,14 @@ it renders passively, the ones it renders stably, and the impedance a wall actua
 displays over frequency.
 
 * **Passive**: for each virtual damping B the largest K for which the device side is
-  passive (Colgate-Schenkel, :func:`~hapstab.analysis.passivity.critical_stiffness_passivity`):
+  passive (Colgate-Schenkel, :func:`~hapstab.analysis.conditions.passivity.critical_stiffness_passivity`):
   exact for any delay and for a filtered velocity estimate. Passivity is what holds
   against *any* passive operator, so it is the Z-width in Colgate and Brown's sense.
   With encoder quantisation Delta and Coulomb friction f_c, Abbott and Okamura's
   condition adds K <= 2 f_c / Delta (where its assumptions hold: B = 0, no delay;
-  :mod:`hapstab.analysis.nonlinear_passivity`).
+  :mod:`hapstab.analysis.nonlinear.nonlinear_passivity`).
 * **Stable**: for each B the exact K_max with the loop's own operator
-  (:func:`~hapstab.analysis.regions.kmax_over_B`), the end of the stable interval that
+  (:func:`~hapstab.analysis.design.regions.kmax_over_B`), the end of the stable interval that
   starts at 0. A wall between the two lines is stable with this operator and not
   guaranteed with another.
 * **Displayed impedance** of the wall at one (K, B): the force the hold applies at the
@@ -39,10 +39,10 @@ from typing import Any, cast
 
 import numpy as np
 
-from hapstab.analysis.kb_plane import check_equal_gains, with_gains
-from hapstab.analysis.nonlinear_passivity import abbott_okamura
-from hapstab.analysis.passivity import critical_stiffness_passivity
-from hapstab.analysis.regions import kmax_over_B
+from hapstab.analysis.conditions.passivity import critical_stiffness_passivity
+from hapstab.analysis.design.kb_plane import check_equal_gains, with_gains
+from hapstab.analysis.design.regions import kmax_over_B
+from hapstab.analysis.nonlinear.nonlinear_passivity import abbott_okamura
 from hapstab.errors import AnalysisError, ArgumentTypeError, check_real
 from hapstab.models.loops import HapticLoop, headline, whole_delay
 from hapstab.results import Result, jsonable, write_csv

@@ -1,4 +1,4 @@
-"""The loop as :mod:`hapstab.analysis.limit_cycles` sees it: its frequency responses from
+"""The loop as :mod:`hapstab.analysis.nonlinear.limit_cycles` sees it: its frequency responses from
 the engine's ZOH model, what it refuses, where the device can rest with an encoder, the
 phase crossovers and the describing-function plot's curves."""
 
@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from hapstab.analysis.harmonic import QUANTIZER_OFFSET, Balance
+from hapstab.analysis.nonlinear.harmonic import QUANTIZER_OFFSET, Balance
 from hapstab.engine.structure import structure_of
 from hapstab.engine.zoh import discretize, port_matrices
 from hapstab.errors import AnalysisError, ModelError

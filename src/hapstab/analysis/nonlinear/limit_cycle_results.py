@@ -1,4 +1,4 @@
-"""The results of :func:`hapstab.analysis.limit_cycles.limit_cycles`: each predicted cycle,
+"""The results of :func:`hapstab.analysis.nonlinear.limit_cycles.limit_cycles`: each predicted cycle,
 and the prediction with its existence conditions, describing-function plot and table."""
 
 from __future__ import annotations

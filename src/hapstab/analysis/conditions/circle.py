@@ -15,7 +15,7 @@ tustin        (T/2)(z + 1)/(z - 1)
 
 Forward difference is the paper's worst case, and it is special: its condition
 (iii) is *identical* to the exact sampled-data passivity condition of Colgate and
-Schenkel (see :mod:`hapstab.analysis.passivity`), so its K_max never exceeds the exact
+Schenkel (see :mod:`hapstab.analysis.conditions.passivity`), so its K_max never exceeds the exact
 stability limit with passive terminations. Backward difference and Tustin are
 not bounds: at n = 0 they accept every K (Re{z/(z-1)} = 1/2 and
 Re{(z+1)/(z-1)} = 0 on the circle), although the loop goes unstable.
@@ -44,14 +44,14 @@ from typing import Any
 import numpy as np
 
 from hapstab import budget
-from hapstab.analysis.closed_forms import G_INVERSE
-from hapstab.analysis.positive_real import (
+from hapstab.analysis.conditions.closed_forms import G_INVERSE
+from hapstab.analysis.conditions.frequency_grid import psd_limit, refine_minimum, theta_grid
+from hapstab.analysis.conditions.positive_real import (
     PositiveRealResult,
     RationalMatrix,
     circle_criterion,
     positive_real,
 )
-from hapstab.analysis.sweeps import psd_limit, refine_minimum, theta_grid
 from hapstab.engine.device_side import DeviceSide, device_side
 from hapstab.engine.structure import structure_of
 from hapstab.engine.system import build

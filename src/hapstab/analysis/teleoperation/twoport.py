@@ -1,7 +1,7 @@
 """Absolute stability of the sampled-data teleoperator as a two-port (Llewellyn).
 
 The paper's two-port is the device side of the loop, ``P(z) = G^{-1}(z) = diag(b) +
-Hc(z) X(z)`` (eq. 30 generalised; :func:`hapstab.analysis.circle.loop_inverse`), between
+Hc(z) X(z)`` (eq. 30 generalised; :func:`hapstab.analysis.conditions.circle.loop_inverse`), between
 the port velocities (through the approximation X of the hold) and the forces; the
 terminations (operator with the master's mass, environment with the slave's) close it.
 The circle criterion asks P to be passive. Llewellyn's criterion asks less: that the
@@ -54,8 +54,8 @@ from typing import Any
 
 import numpy as np
 
-from hapstab.analysis.circle import _approx, _stiffness_side, _x
-from hapstab.analysis.sweeps import refine_minimum, theta_grid
+from hapstab.analysis.conditions.circle import _approx, _stiffness_side, _x
+from hapstab.analysis.conditions.frequency_grid import refine_minimum, theta_grid
 from hapstab.engine.device_side import DeviceSide
 from hapstab.engine.structure import own_stiffness, structure_of
 from hapstab.errors import AnalysisError, check_real
