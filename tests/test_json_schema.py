@@ -190,3 +190,20 @@ def test_the_same_key_has_the_same_type_everywhere(outputs):
     for _, _, d in outputs:
         if "delay_samples" in d and not isinstance(d["delay_samples"], list):
             assert isinstance(d["delay_samples"], float)
+
+
+def test_a_studys_network_answers_validate_as_the_commands_do(tmp_path):
+    """hapstab run's kmax.json (with loss) and jitter.json: the kmax-loss and jitter
+    definitions, like the commands' own --json (the run adds nothing the schema forbids)."""
+    p = tmp_path / "net.toml"
+    p.write_text('kind = "peb"\n[loop]\ndelay = 1\n[run.kmax]\nloss = 0.05\nburst = 2\n'
+                 '[run.jitter]\ndelay = "1:2"\nmax-length = 2\n')
+    r = CliRunner().invoke(cli, ["run", str(p), "--out", str(tmp_path / "out"), "--json"])
+    assert r.exit_code == 0, r.stderr
+    assert _validator("run").is_valid(json.loads(r.stdout))
+    for name, file in (("kmax-loss", "kmax.json"), ("jitter", "jitter.json")):
+        d = json.loads((tmp_path / "out" / "base" / file).read_text())
+        errors = sorted(_validator(name).iter_errors(d), key=str)
+        assert not errors, (file, [e.message for e in errors][:5])
+    assert not _validator("jitter").is_valid(
+        json.loads((tmp_path / "out" / "base" / "kmax.json").read_text()))   # it can fail

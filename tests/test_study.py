@@ -224,3 +224,50 @@ def test_regions_and_the_best_damping_report_progress_too():
         h.best_damping(h.paper_hve(), resolution=8)
     assert seen[:5] == [("region: 8 x 8", 4), 1, 1, 1, 1]
     assert seen[5][0] == "best damping" and sum(k for k in seen[6:] if isinstance(k, int)) > 9
+
+
+NETWORK_STUDY = '''kind = "hve"
+[loop]
+mass = 0.3
+damping = 0.5
+rate = "1kHz"
+delay-s = "5ms"
+
+[[variant]]
+name = "late"
+delay = 8
+
+[run.kmax]
+loss = 0.02
+burst = 3
+
+[run.jitter]
+delay = "2:4"
+max-length = 3
+'''
+
+
+def test_a_study_asks_for_loss_and_jitter_answers_and_they_are_the_commands_own(tmp_path):
+    """[run.kmax] with loss/burst and [run.jitter] with its range: the run's answers are the
+    ones the command line gives for the same options; jitter's range replaces the [loop]'s
+    and each variant's constant delay (the late variant's jitter answer equals the base's),
+    while kmax keeps each variant's delay."""
+    p = tmp_path / "net.toml"
+    p.write_text(NETWORK_STUDY)
+    r = run("run", str(p), "--out", str(tmp_path / "out"), "--json")
+    assert r.exit_code == 0, r.stderr
+    got = {(v, c): json.loads((tmp_path / "out" / v / f"{c}.json").read_text())
+           for v in ("base", "late") for c in ("kmax", "jitter")}
+    common = ["--mass", "0.3", "--damping", "0.5", "--rate", "1kHz", "--json"]
+    for v, delay in (("base", ["--delay-s", "5ms"]), ("late", ["--delay", "8"])):
+        direct = json.loads(run("kmax", "hve", *common, *delay, "--loss", "0.02", "--burst",
+                                "3").stdout)
+        assert got[(v, "kmax")]["critical_stiffness"] == direct["critical_stiffness"]
+        assert got[(v, "kmax")]["burst_samples"] == 3
+    assert got[("late", "kmax")]["critical_stiffness"] < got[("base", "kmax")][
+        "critical_stiffness"]                 # 8 samples of delay are not 5: the variant counts
+    direct = json.loads(run("jitter", "hve", *common, "--delay", "2:4", "--max-length",
+                            "3").stdout)
+    for v in ("base", "late"):
+        assert got[(v, "jitter")]["stable_up_to_N_per_m"] == direct["stable_up_to_N_per_m"]
+        assert got[(v, "jitter")]["delay_range_samples"] == [2, 4]

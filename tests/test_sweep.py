@@ -483,3 +483,47 @@ def test_the_heat_map_axes_have_names_units_and_a_tick_per_value():
     assert ax.get_ylabel() == "virtual damping B (N·s/m)"
     assert [t.get_text() for t in ax.get_xticklabels()] == ["500", "1000", "2000"]
     plt.close("all")
+
+
+def test_loss_jitter_width_and_delay_range_are_axes_and_quantities(tmp_path):
+    """Issue 30 item 5: loss, jitter-width and delay-range-width as axes ([sweep.network]
+    for a fixed burst), the three network quantities; every row equals the public API at
+    that point (the same floating-point computation: equal), and a bad value is refused."""
+    from hapstab.analysis.network import (
+        delay_range_critical_stiffness,
+        jitter,
+        loss_critical_stiffness,
+    )
+
+    (tmp_path / "s.toml").write_text(
+        'kind = "hve"\n[loop]\nvirtual-damping = 0.5\n[sweep]\nquantities = ["kmax", '
+        '"loss-kmax", "delay-range-kmax", "jitter"]\n[sweep.network]\nburst = 2\n'
+        '[sweep.axes]\ndelay = [0, 3]\nloss = [0.0, 0.1]\njitter-width = [1]\n'
+        'delay-range-width = [2]\n')
+    r = invoke(["sweep", str(tmp_path / "s.toml"), "--out", str(tmp_path / "o"), "--workers",
+                "1", "--json"])
+    assert r.exit_code == 0, r.stderr
+    got = rows(tmp_path / "o").to_pylist()
+    assert len(got) == 4
+    for row in got:
+        assert row["error"] is None and row["not_applicable"] is None
+        n, P = row["delay_samples"], row["loss"]
+        loop = h.paper_hve(1e-3, n).with_controllers(h.SpringDamper(1.0, 0.5))
+        assert row["loss_kmax_N_per_m"] == loss_critical_stiffness(loop, P, 2.0).critical_stiffness
+        d = delay_range_critical_stiffness(loop, n, n + 2, seconds=False)
+        assert row["delay_range_kmax_N_per_m"] == d.critical_stiffness
+        assert row["worst_delay_samples"] == d.worst_delay_samples
+        j = jitter(loop, (n, n + 1))
+        assert (row["jitter_stable_up_to_N_per_m"], row["jitter_unstable_from_N_per_m"]) == (
+            j.stable_up_to, j.unstable_from)
+        assert row["delay_range_kmax_N_per_m"] <= row["critical_stiffness_N_per_m"]
+    (tmp_path / "s.toml").write_text('kind = "hve"\n[sweep]\nquantities = ["loss-kmax"]\n'
+                                     '[sweep.axes]\nloss = [0.5, 1.0]\n')
+    r = invoke(["sweep", str(tmp_path / "s.toml"), "--out", str(tmp_path / "p")])
+    assert r.exit_code == 2 and "loss = 1.0: allowed: a number in [0, 1)" in r.stderr, r.stderr
+    (tmp_path / "s.toml").write_text('kind = "hve"\n[sweep]\nquantities = ["jitter"]\n'
+                                     '[sweep.network]\njitter-width = 1.5\n[sweep.axes]\n'
+                                     'delay = [0]\n')
+    r = invoke(["sweep", str(tmp_path / "s.toml"), "--out", str(tmp_path / "p")])
+    assert r.exit_code == 2 and "line 5" in r.stderr and \
+        "jitter-width = 1.5: allowed: a whole number of samples >= 0" in r.stderr, r.stderr

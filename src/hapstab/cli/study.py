@@ -57,6 +57,10 @@ ALTERNATIVES = (("period", "rate"), ("delay", "delay_s"))
 #: Loop options a command varies itself: a study's value is not used there (not an error:
 #: a variant with its own B still has a K-B region).
 VARIED = {"region": ("virtual_damping",), "best-damping": ("virtual_damping",)}
+#: Loop options a command replaces by a range of its own: ``jitter``'s ``--delay LO:HI`` is
+#: the delay, so the [loop]'s or a variant's one constant delay (``delay``, ``n``,
+#: ``delay-s``) is not used there; [run.jitter] gives the range.
+REPLACED = {"jitter": ("delay", "n", "delay_s")}
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$")
 #: The largest study file read: 4 MiB, room for tens of thousands of variants (one is
 #: about 60 bytes); a larger one is refused before it is read.
@@ -290,6 +294,8 @@ def study_defaults(study: Study, cmd: click.Command, command: str, variant: str,
     for table, opts in layers:
         seen: dict[str, str] = {}
         for key, value in opts.items():
+            if not table.startswith("run.") and key in REPLACED.get(command, ()):
+                continue
             name = names.get(key)
             if name is None or key in OUTPUT_KEYS:
                 raise _unknown(study, table, key, command, names)

@@ -66,9 +66,14 @@ else:                                    # pragma: no cover - Python 3.10
 __all__ = ["sweep_cmd", "build_loop", "column_of", "plan"]
 
 #: The [sweep] table's keys, and its sub-tables' keys.
-KEYS = {"quantities", "chunk", "axes", "random", "plot", "check", "best-damping"}
+KEYS = {"quantities", "chunk", "axes", "random", "plot", "check", "best-damping", "network"}
+#: The network's parameters (sweep.evaluate.NETWORK), as an axis or in [sweep.network]:
+#: study key -> (name, whole samples, the least value, the largest or None).
+NETWORK_KEYS = {"loss": ("loss", False, 0.0, 1.0), "burst": ("burst", False, 1.0, None),
+                "delay-range-width": ("delay_range_width", True, 0, None),
+                "jitter-width": ("jitter_width", True, 0, None)}
 SUB = {"random": {"samples", "seed"}, "plot": {"x", "y", "reduce", "at"},
-       "check": {"stiffness"},
+       "check": {"stiffness"}, "network": set(NETWORK_KEYS),
        "best-damping": {"min-damping", "max-damping", "resolution"}}
 #: Options of ``kmax`` that are not the loop's: neither an axis nor a [loop] key here.
 NOT_LOOP = {"method", "approximation", "operator_damping_min", "environment_damping_min",
@@ -162,12 +167,20 @@ def plan(study: Study, root: click.Group, yes: bool, reduce: str | None = None,
             raise StudyError(f"{study.where(name, 'loop')}{name.replace('_', '-')}: not a loop "
                              "option (hapstab sweep computes its [sweep] quantities)")
     fixed.update(loop)
+    from hapstab.sweep.evaluate import NETWORK
+
+    fixed.update(NETWORK)
+    for key, value in table.get("network", {}).items():
+        try:
+            fixed[NETWORK_KEYS[key][0]] = _network_value(key, value)
+        except ValueError as e:
+            raise StudyError(f"{study.where(key, 'sweep.network')}sweep.network.{e}") from None
     random = table.get("random")
     if random is not None:
         _random(study, random)                  # (before the axes, which depend on it)
     axes = _axes(study, table.get("axes"), params, random is not None)
     for a in axes:
-        fixed.pop(a.name, None)
+        fixed.pop(a.name, None)         # (a network axis's default too)
         for x, y in ALTERNATIVES:
             if a.name in (x, y):
                 other = y if a.name == x else x
@@ -256,6 +269,17 @@ def _axes(study: Study, axes: Any, params: dict[str, click.Option], random: bool
     out = []
     for key, spec in axes.items():
         where = study.where(key, "sweep.axes")
+        if key.replace("_", "-") in NETWORK_KEYS:
+            net, integer, _, _ = NETWORK_KEYS[key.replace("_", "-")]
+            try:
+                out.append(parse_axis(net, spec, integer=integer, random=random,
+                                      convert=functools.partial(_network_value,
+                                                                key.replace("_", "-")),
+                                      column=net + ("_samples" if integer else ""),
+                                      where=f"sweep.axes.{key}"))
+            except SweepError as e:
+                raise StudyError(f"{where}{e}") from None
+            continue
         name = names.get(key.replace("-", "_"))
         if name is None or key in OUTPUT_KEYS:
             raise StudyError(f"{where}sweep.axes.{key}: not a loop option of {study.kind}; "
@@ -277,6 +301,21 @@ def _axes(study: Study, axes: Any, params: dict[str, click.Option], random: bool
         except SweepError as e:
             raise StudyError(f"{where}{e}") from None
     return out
+
+
+def _network_value(key: str, value: Any) -> Any:
+    """A network parameter's value, checked against its range (NETWORK_KEYS); a
+    ValueError naming what is allowed."""
+    _, integer, low, high = NETWORK_KEYS[key]
+    ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+    if ok and integer:
+        ok = float(value).is_integer()
+    if not ok or value < low or (high is not None and value >= high):
+        allowed = (f"a whole number of samples >= {low}" if integer else
+                   f"a number in [{low:g}, {high:g})" if high is not None else
+                   f"a number >= {low:g}")
+        raise ValueError(f"{key} = {value!r:.40}: allowed: {allowed}")
+    return int(value) if integer else float(value)
 
 
 def _settings(study: Study, table: dict[str, Any], random: Any, axes: list[Any]) -> dict[str, Any]:

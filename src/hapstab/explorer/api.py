@@ -36,7 +36,7 @@ __all__ = ["ApiError", "COMMANDS", "KINDS", "MAX_BODY_BYTES", "BUDGET", "parse_b
 KINDS = ("hve", "peb")
 #: The commands the explorer runs (each under ``POST /api/v1/{command}``).
 COMMANDS = ("kmax", "check", "passivity", "audit", "region", "boundary", "simulate",
-            "best-damping", "twoport", "transparency", "limit-cycle", "zwidth")
+            "best-damping", "twoport", "transparency", "limit-cycle", "zwidth", "jitter")
 #: Loop commands the explorer refuses, and why.
 REFUSED = {"robust": "too slow for the explorer: use the CLI (hapstab robust ...)"}
 #: The largest request body, bytes.

@@ -35,7 +35,18 @@ QUANTITIES: dict[str, tuple[tuple[str, str], ...]] = {
     "check": (("verdict_at_K", "string"),),
     "best-damping": (("best_damping_B_N_s_per_m", "float64"),
                      ("best_damping_K_N_per_m", "float64")),
+    "loss-kmax": (("loss_kmax_N_per_m", "float64"),),
+    "delay-range-kmax": (("delay_range_kmax_N_per_m", "float64"),
+                         ("worst_delay_samples", "float64")),
+    "jitter": (("jitter_stable_up_to_N_per_m", "float64"),
+               ("jitter_unstable_from_N_per_m", "float64")),
 }
+#: The network's parameters (issue 30): axes or fixed values of a sweep, never the loop's
+#: (taken out of a point's options before its loop is built) -> their defaults. ``loss``
+#: (probability) and ``burst`` (mean burst length, samples; None: independent) for
+#: "loss-kmax"; ``delay_range_width`` and ``jitter_width`` (whole samples) make the range
+#: [n, n + width] from the point's own delay n for "delay-range-kmax" and "jitter".
+NETWORK = {"loss": 0.0, "burst": None, "delay_range_width": 0, "jitter_width": 0}
 #: A closed form over-promises where it allows K > K_max (1 + 1e-6) + 1e-12 N/m: the
 #: rule of :func:`hapstab.audit` (K_max agrees to ~1e-9; 1e-12 N/m keeps an exact 0 of
 #: both from counting).
@@ -121,8 +132,10 @@ def _evaluate(spec: Spec, chunk: int) -> dict[str, list[Any]]:
         out[a.column] = values[a.name].tolist()
     errors: list[list[str]] = [[] for _ in range(n)]
     loops: list[Any] = [None] * n
+    nets: list[dict[str, Any]] = [{} for _ in range(n)]
     for i in range(n):
         opts = {**spec.fixed, **{a.name: out[a.column][i] for a in spec.points.axes}}
+        nets[i] = {k: opts.pop(k, d) for k, d in NETWORK.items()}
         try:
             loops[i] = spec.build(opts)
         except HapstabError as e:
@@ -134,6 +147,9 @@ def _evaluate(spec: Spec, chunk: int) -> dict[str, list[Any]]:
     for i in good:
         if loops[i] is not None:
             _others(spec, loops[i], i, out, errors[i], na[i])
+            for q in spec.quantities:
+                if q in NETWORK_QUANTITIES:
+                    _network(q, loops[i], nets[i], i, out, errors[i], na[i])
     out["not_applicable"] = ["; ".join(e) if e else None for e in na]
     out["error"] = ["; ".join(e) if e else None for e in errors]
     return out
@@ -190,6 +206,50 @@ def _others(spec: Spec, loop: Any, i: int, out: dict[str, list[Any]], errors: li
         if res is not None:
             out["best_damping_B_N_s_per_m"][i] = float(res.damping)
             out["best_damping_K_N_per_m"][i] = float(res.critical_stiffness)
+
+
+def _loss(loop: Any, net: dict[str, Any]) -> tuple[float, ...]:
+    from hapstab.analysis.network import loss_critical_stiffness
+
+    return (float(loss_critical_stiffness(loop, net["loss"], net["burst"]).critical_stiffness),)
+
+
+def _delay_range(loop: Any, net: dict[str, Any]) -> tuple[float, ...]:
+    from hapstab.analysis.network import delay_range_critical_stiffness
+
+    n = int(loop.delay_in_samples)
+    r = delay_range_critical_stiffness(loop, n, n + int(net["delay_range_width"]),
+                                       seconds=False)
+    return float(r.critical_stiffness), float(r.worst_delay_samples)
+
+
+def _jitter(loop: Any, net: dict[str, Any]) -> tuple[float, ...]:
+    from hapstab.analysis.network import jitter
+
+    n = int(loop.delay_in_samples)
+    r = jitter(loop, (n, n + int(net["jitter_width"])))
+    return float(r.stable_up_to), float(r.unstable_from)
+
+
+#: The network quantities -> the analysis giving their columns (in QUANTITIES' order) from
+#: the loop and the point's network parameters (:data:`NETWORK`).
+NETWORK_QUANTITIES: dict[str, Callable[[Any, dict[str, Any]], tuple[float, ...]]] = {
+    "loss-kmax": _loss, "delay-range-kmax": _delay_range, "jitter": _jitter}
+
+
+def _network(q: str, loop: Any, net: dict[str, Any], i: int, out: dict[str, list[Any]],
+             errors: list[str], na: list[str]) -> None:
+    """One network quantity at one point: its columns, or NaN with why (a fractional
+    delay: the ranges start at whole samples; an analysis that refuses the point)."""
+    cols = [c for c, _ in QUANTITIES[q]]
+    if q != "loss-kmax" and _fractional(loop):
+        na.append(f"{q}: its range starts at the point's whole-sample delay; this point has "
+                  f"{_fractional(loop)}")
+        values: Any = None
+    else:
+        values = _try(errors, q, lambda: NETWORK_QUANTITIES[q](loop, net), None)
+    for j, c in enumerate(cols):
+        out[c][i] = math.nan if values is None else values[j]
 
 
 def _passivity(loop: Any) -> float:

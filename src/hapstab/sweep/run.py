@@ -37,9 +37,12 @@ INSTALL = "pip install 'hapstab[sweep]'"
 #: Seconds per point of each quantity, for the default chunk size (about, on the project's
 #: machine; benchmarks/bench_sweep.py measures them): K_max 1.4-6.4 ms batched in a chunk
 #: (12-85 ms one by one) on its HVE and PEB spaces, taken as 2 ms; the passivity limit and
-#: a verdict ~4 ms; the best damping ~100 K_max.
+#: a verdict ~4 ms; the best damping ~100 K_max; the network quantities as
+#: benchmarks/bench_network_all.py measures them one by one (loss 0.05 s, a delay range
+#: of 11 delays 0.4 s, a jitter bracket over 0:2 0.25 s; taken as 0.05, 0.1 and 0.3 s).
 POINT_SECONDS = {"kmax": 2e-3, "passivity": 4e-3, "closed-form": 1e-5, "check": 4e-3,
-                 "best-damping": 0.1}
+                 "best-damping": 0.1, "loss-kmax": 0.05, "delay-range-kmax": 0.1,
+                 "jitter": 0.3}
 #: A chunk takes about this long: a Dask task costs ~1 ms, under 1 % of it.
 CHUNK_SECONDS = 2.0
 #: At most this many chunks (a larger sweep gets larger chunks: its manifest stays short).
