@@ -127,6 +127,26 @@ def test_flags_and_spellings(client):
     assert r.status_code == 200 and "--tdpa" not in r.json()["inputs"]["command_line"]
 
 
+def test_check_gives_the_verdict_alone_unless_the_margins_are_asked_for(client):
+    # the page asks for the verdict and, in a request of its own, for the margins: a
+    # check without "margins" is --no-margins (no margin keys), "margins": true has them,
+    # "margins": false is --no-margins too (a --x/--no-x flag's false is --no-x)
+    loop = {"stiffness": 30, "delay": 2}
+    plain = client.post("/api/v1/check", json={"kind": "hve", "options": loop}).json()
+    off = client.post("/api/v1/check", json={"kind": "hve", "options": {**loop,
+                                                                          "margins": False}})
+    on = client.post("/api/v1/check", json={"kind": "hve", "options": {**loop,
+                                                                         "margins": True}})
+    assert off.status_code == on.status_code == 200
+    assert "--no-margins" in plain["inputs"]["command_line"]
+    assert "--no-margins" in off.json()["inputs"]["command_line"]
+    assert "delay_margin_s" not in plain and "delay_margin_s" not in off.json()
+    m = on.json()
+    assert "--margins" in m["inputs"]["command_line"] and m["delay_margin_s"] > 0
+    assert m["verdict"] == plain["verdict"] == "stable"
+    assert m == cli_json(m["inputs"]["command_line"][1:])
+
+
 def test_errors_are_the_cli_line(client):
     for options, param in (({"mass": -1}, "mass"), ({"damping": "abc"}, "damping"),
                            ({"delay": 10 ** 9}, "delay"), ({"operator": "msd:1"}, "operator"),

@@ -195,7 +195,9 @@ def check_request(command: str, body: dict[str, Any]) -> list[str]:
     Returns
     -------
     list of str
-        ``[command, kind, --option=value, ..., --json]``.
+        ``[command, kind, --option=value, ..., --json]``; ``check`` without a
+        ``margins`` option gets ``--no-margins`` (the verdict alone, at once; the page
+        asks for the margins in a request of their own, ``"margins": true``).
 
     Raises
     ------
@@ -217,7 +219,12 @@ def check_request(command: str, body: dict[str, Any]) -> list[str]:
         raise ApiError(400, f"options: must be an object of option: value, not "
                             f"{_json_type(options)}", "options")
     cmd = loop_command(command, kind)
-    return [command, kind, *option_args(cmd, command, kind, options), "--json"]
+    args = option_args(cmd, command, kind, options)
+    if command == "check" and not any(k.replace("-", "_") == "margins" for k in options):
+        # the verdict at once: the margins (seconds for a PEB) only when asked for,
+        # in their own request (the page's "margins" channel), not computed unasked
+        args.append("--no-margins")
+    return [command, kind, *args, "--json"]
 
 
 def option_args(cmd: click.Command, command: str, kind: str, options: dict[str, Any]) -> list[str]:
@@ -265,6 +272,8 @@ def _arg(p: click.Option, name: str, value: Any) -> list[str]:
     if p.is_flag:
         if not isinstance(value, bool):
             raise ApiError(400, f"{name}: a flag, true or false (not {_json_type(value)})", name)
+        if not value and p.secondary_opts:       # --x/--no-x: false is --no-x
+            return [p.secondary_opts[0]]
         return [f"--{name}"] if value else []
     if isinstance(value, (dict, list, bool)) or value is None:
         raise ApiError(400, f"{name}: must be a number or a string, as on the command line "

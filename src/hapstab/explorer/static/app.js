@@ -377,6 +377,15 @@
     const cur = current();
     const kmaxP = run("kmax", "kmax", {}, drawKmax);
     const checkP = run("check", "check", {}, drawCheck);
+    // the margins (seconds for a PEB) in a request of their own on the "margins" channel:
+    // the verdict does not wait for them, and a later change supersedes them
+    $("#margins-detail").textContent = "";
+    if (!unavailable("check")) {
+      call("margins", "check", optionsFor("check", { margins: true }), seq).then((r) => {
+        if (r.ok) drawMargins(r.ok);
+        else if (!r.superseded) $("#margins-detail").textContent = "margins: " + r.error;
+      });
+    }
     const auditP = run("audit", "audit", {}, drawAudit);
     const simP = run("simulate", "simulate", simExtra(), (a) => HapstabPlots.simulate(a), "simulate");
     const pasP = run("passivity", "passivity", has("passivity", "curve") ? { curve: CURVE_POINTS } : {},
@@ -476,11 +485,18 @@
     $("#verdict-detail").textContent = (a.stiffness != null ? `at K = ${fmt(a.stiffness)} N/m · ` : "") +
       `spectral radius ${fmt(a.spectral_radius, 8)}` +
       (a.frequency_hz != null ? ` · ${fmt(a.frequency_hz, 4)} Hz` : "") +
-      (a.delay_margin_s != null ? ` · delay margin ${fmt(a.delay_margin_s * 1e3, 4)} ms` +
-        (a.delay_unstable_s == null ? " (no loss in the search)" : "") : "") +
-      (a.stiffness_max_N_per_m != null ? ` · stable K up to ${fmt(a.stiffness_max_N_per_m)} N/m` : "") +
       " · " + a.reason;
     $("#verdict-detail").title = a.reason;
+  }
+  // the margins' answer (a check with "margins": true), when it arrives
+  function drawMargins(a) {
+    const parts = [];
+    if (a.delay_margin_s != null) parts.push(`delay margin ${fmt(a.delay_margin_s * 1e3, 4)} ms` +
+      (a.delay_unstable_s == null ? " (no loss in the search)" : ""));
+    if (a.stiffness_max_N_per_m != null) parts.push(`stable K up to ${fmt(a.stiffness_max_N_per_m)} N/m`);
+    const why = a.margins_reason || "";
+    $("#margins-detail").textContent = parts.length ? parts.join(" · ") : why;
+    $("#margins-detail").title = why;
   }
   function drawAudit(a) {
     setNum("#passivity-kmax", a.passivity_kmax);
