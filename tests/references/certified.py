@@ -3,8 +3,9 @@
 Scenarios (seeded: class c, index i drawn from ``np.random.default_rng([SEED, c, i])``;
 ``HAPSTAB_SEED`` draws a fresh campaign, the default stays fixed):
 
-* ``wall``: stiff walls on light devices, k T^2/m from 1 to 1e4 (walls 1e5...1e6 N/m,
-  T 0.5...2 ms, masses 1...50 g; the issue's reproducers are in this class), HVE and PEB;
+* ``wall``: stiff walls on light devices, k T^2/m from 1 to 1e4 (stratified in its
+  log: :func:`wall_group`; walls 1e5...1e7 N/m, T 0.5...2 ms, masses 1...50 g; the
+  issue's reproducers are in this class), HVE and PEB;
 * ``marginal``: undamped devices and B = 0 (marginal at K -> 0+), delays near the
   operator's resonance;
 * ``mass``: heavy and light masses over the documented range (grams to tonnes, k T^2/m
@@ -32,10 +33,16 @@ What must hold (each violation is a problem of the scenario):
    within 1e-9 of the circle (hapstab's own band).
 4. a refusal (a HapstabError) is an answer only beyond the documented range (class
    ``mass``, masses above 1e3 kg); elsewhere it is a problem ("refused").
+5. **the certificate**: ``res.certificate``, through JSON as a file holds it, is valid
+   by :func:`hapstab.verify_certificate` against the loop and claims the K_max reported;
+   K_max nudged up 1e-9, an excluded piece dropped, a crossing's direction flipped are
+   each invalid (category "certificate").
 """
 
 from __future__ import annotations
 
+import copy
+import json
 import math
 import os
 import time
@@ -77,18 +84,40 @@ def _logu(rng: np.random.Generator, lo: float, hi: float) -> float:
     return float(np.exp(rng.uniform(math.log(lo), math.log(hi))))
 
 
+#: strata of log10(k T^2/m) over [0, 4] (the issue's 1 to 1e4) for the walls: wall i
+#: draws from stratum i mod WALL_STRATA, so every seed's first WALL_STRATA walls span it
+#: (drawn freely, 400 walls of seed 20261202 spanned only 818x)
+WALL_STRATA = 8
+#: the walls' ranges: masses of light devices (1 to 50 g, the documented range's light
+#: end), haptic periods (0.5 to 2 ms), stiff walls (1e5 to 1e7 N/m)
+WALL_MASS_KG, WALL_PERIOD_S, WALL_STIFFNESS_N_PER_M = (1e-3, 5e-2), (5e-4, 2e-3), (1e5, 1e7)
+
+
+def wall_group(rng: np.random.Generator, i: int) -> tuple[float, float, float]:
+    """(mass, period, wall stiffness) with k T^2/m log-uniform in stratum i mod
+    WALL_STRATA of [1, 1e4]: the group first, then a period for which a mass and a wall
+    in their ranges give it, then the mass, and the wall from the group."""
+    j = i % WALL_STRATA
+    x = 10.0 ** (4.0 * (j + rng.uniform()) / WALL_STRATA)
+    (m_lo, m_hi), (t_lo, t_hi), (k_lo, k_hi) = WALL_MASS_KG, WALL_PERIOD_S, WALL_STIFFNESS_N_PER_M
+    # m = k T^2 / x in [m_lo, m_hi] for some k in [k_lo, k_hi]: T^2 in [m_lo x / k_hi,
+    # m_hi x / k_lo] (non-empty with the periods' range for every x in [1, 1e4])
+    T = _logu(rng, max(t_lo, math.sqrt(m_lo * x / k_hi)), min(t_hi, math.sqrt(m_hi * x / k_lo)))
+    m = _logu(rng, max(m_lo, k_lo * T * T / x), min(m_hi, k_hi * T * T / x))
+    return m, T, x * m / (T * T)
+
+
 def _wall(rng: np.random.Generator, i: int) -> Scenario:
-    while True:
-        m, k, T = _logu(rng, 1e-3, 5e-2), _logu(rng, 1e5, 1e6), _logu(rng, 5e-4, 2e-3)
-        if 1.0 <= k * T * T / m <= 1e4:
-            break
+    m, T, k = wall_group(rng, i)
     b = _logu(rng, 1e-6, 1e-1)
     B = 0.0 if rng.uniform() < 0.3 else _logu(rng, 1e-4, 5e-2)
     n = int(rng.integers(0, 11))
     if rng.uniform() < 0.8:
         return Scenario(f"wall-hve#{i}", "hve", m, b, T, n, B, operator=f"spring:{k!r}")
-    ms, bs = _logu(rng, 1e-3, 5e-2), _logu(rng, 1e-6, 1e-1)
-    return Scenario(f"wall-peb#{i}", "peb", m, b, T, n, B, ms, bs, n, B,
+    # PEB: the wall is the slave's environment, k T^2/m of the slave's mass; the master
+    # is a light device of its own
+    mm, bs = _logu(rng, *WALL_MASS_KG), _logu(rng, 1e-6, 1e-1)
+    return Scenario(f"wall-peb#{i}", "peb", mm, b, T, n, B, m, bs, n, B,
                     operator=f"spring:{_logu(rng, 1.0, 1e3)!r}", environment=f"spring:{k!r}")
 
 
@@ -133,9 +162,10 @@ def _delay(rng: np.random.Generator, i: int, max_delay: int) -> Scenario:
                     B, operator=f"spring:{k!r}", environment=f"spring:{k * _logu(rng, 1, 100)!r}")
 
 
-def scenario(cls: str, i: int, max_delay: int = 10_000) -> Scenario:
-    """Scenario ``i`` of class ``cls`` (deterministic in :data:`SEED`, ``cls`` and ``i``)."""
-    rng = np.random.default_rng([SEED, CLASSES.index(cls), i])
+def scenario(cls: str, i: int, max_delay: int = 10_000, seed: int | None = None) -> Scenario:
+    """Scenario ``i`` of class ``cls`` (deterministic in ``seed``, default :data:`SEED`,
+    ``cls`` and ``i``)."""
+    rng = np.random.default_rng([SEED if seed is None else seed, CLASSES.index(cls), i])
     if cls == "wall":
         return _wall(rng, i)
     if cls == "marginal":
@@ -173,6 +203,8 @@ class Outcome:
     truth: float = math.nan          # the reference's (nan: not computed)
     rel: float = 0.0                 # (K_h - K_t) / K_t where a problem has it
     width: float = 0.0               # the enclosure's width U - K_h (uncertain answers)
+    certificates: int = 0            # genuine certificates verified
+    tampered: int = 0                # forgeries of them checked
     seconds: float = 0.0
 
     @property
@@ -284,6 +316,7 @@ def _check(s: Scenario, long: bool, out: Outcome) -> None:
             out.notes.append(f"refused beyond the documented range: {e}")
         return
     K_h = out.kmax = float(res.critical_stiffness)
+    _certificate(s, res, K_h, out)
     ref = _Referee(s, long)
     lo, hi = ref.first_unstable()
     if long:
@@ -321,6 +354,56 @@ def _check(s: Scenario, long: bool, out: Outcome) -> None:
     _verdicts(s, ref, K_t, K_h, out)
 
 
+def _tampered(cert: dict) -> list[tuple[str, dict]]:
+    """The issue's three forgeries of a genuine certificate, where it has what they edit:
+    K_max nudged up 1e-9 (with its interval), an excluded piece dropped, the first
+    crossing's direction flipped."""
+    out = []
+    claim = cert["claim"]
+    if claim["kmax_N_per_m"] > 0 and claim["stable_intervals_N_per_m"]:
+        t = copy.deepcopy(cert)
+        t["claim"]["kmax_N_per_m"] *= 1 + 1e-9
+        for iv in t["claim"]["stable_intervals_N_per_m"]:
+            if iv[1] == claim["kmax_N_per_m"]:
+                iv[1] = t["claim"]["kmax_N_per_m"]
+        out.append(("K_max nudged", t))
+    gaps = [j for j, g in enumerate(cert["gaps"]) if g["excluded"] and len(g["pieces"]) > 1]
+    if gaps:
+        t = copy.deepcopy(cert)
+        pieces = t["gaps"][gaps[0]]["pieces"]
+        del pieces[len(pieces) // 2]
+        out.append(("piece dropped", t))
+    if cert["crossings"]:
+        t = copy.deepcopy(cert)
+        c = t["crossings"][0]
+        c["direction"] = "inwards" if c["direction"] != "inwards" else "outwards"
+        out.append(("direction flipped", t))
+    return out
+
+
+def _certificate(s: Scenario, res, K_h: float, out: Outcome) -> None:
+    """5. the certificate (as a file holds it: through JSON) verifies from the loop's
+    numbers and claims the K_max reported; each forgery of it is invalid."""
+    cert = getattr(res, "certificate", None)
+    if cert is None:
+        out.problem("certificate", f"no certificate ({res.details.get('proof')!r})")
+        return
+    cert = json.loads(json.dumps(cert))
+    loop = s.hapstab_loop()
+    chk = h.verify_certificate(cert, loop)
+    out.certificates += 1
+    if not chk.valid:
+        out.problem("certificate", f"the genuine certificate is invalid: {chk.reason}")
+        return
+    # a certificate claims a finite K_max: the top examined when hapstab reports inf
+    if chk.kmax != K_h and not (math.isinf(K_h) and chk.kmax <= K_h):
+        out.problem("certificate", f"verifies K_max {chk.kmax!r}, the result says {K_h!r}")
+    for what, t in _tampered(cert):
+        out.tampered += 1
+        if h.verify_certificate(t, loop).valid:
+            out.problem("certificate", f"a forgery ({what}) verifies")
+
+
 def _check_long(ref: _Referee, K_h: float, res, out: Outcome) -> None:
     """1. and 2. against the phase reference (its K_max at 40 digits)."""
     pt = ref.pt
@@ -350,7 +433,11 @@ def _verdicts(s: Scenario, ref: _Referee, K_t: float, K_h: float, out: Outcome) 
     else:
         probes = [s.m / s.T ** 2 * f for f in (1e-6, 1e-2, 1.0)]
     for K in probes:
-        got = h.stability(s.hapstab_loop(K), certify=True).verdict
+        try:
+            got = h.stability(s.hapstab_loop(K), certify=True).verdict
+        except h.HapstabError as e:   # refused (the matrix's budget at long delays): no verdict
+            out.notes.append(f"stability at K = {K!r} refused: {type(e).__name__}: {e}")
+            continue
         if got not in ("stable", "unstable", "marginal"):
             continue                     # not confident (uncertain): never wrong
         v = ref.stable(K)
@@ -372,7 +459,8 @@ def summary(results: list[Outcome] | None = None, top: int = 12) -> str:
         return ""
     bad = [r for r in res if not r.ok]
     lines = [f"certified campaign (seed {SEED}): {len(bad)} of {len(res)} scenarios fail "
-             f"({sum(r.seconds for r in res):.0f} s)"]
+             f"({sum(r.seconds for r in res):.0f} s); {sum(r.certificates for r in res)} "
+             f"certificates verified, {sum(r.tampered for r in res)} forgeries checked"]
     for c in (*CLASSES, "issue26"):
         rc = [r for r in res if r.scenario.name.startswith(c)]
         if not rc:

@@ -55,8 +55,10 @@ DPS = 40
 POINTS_PER_TURN = 32
 
 #: crossings whose double-precision K is within this ratio of the lowest are all refined
-#: at DPS digits (the double K of a crossing is good to ~1e-12 here: 1e-6 is far wider)
-REFINE_WINDOW = 1e-6
+#: at DPS digits (the double K of a crossing is good to ~1e-12 away from a resonance, but
+#: 7.6e-9 off was measured beside a lightly damped one, delay-hve#7 of seed 26, where
+#: |d(e^{j theta})| ~ 1e-7 and its double evaluation loses 7 digits: 1e-4 is far wider)
+REFINE_WINDOW = 1e-4
 
 
 def _require(loop: brute.Loop) -> None:
@@ -69,10 +71,17 @@ def _require(loop: brute.Loop) -> None:
 def _plants(loop: brute.Loop) -> tuple:
     """Per port (d coefficients [1, d1, d0], n coefficients [n1, n0]) as floats and mpf."""
     out = []
-    for a11, a12, a21, a22, b1, b2 in brute._mp_plants(loop, DPS):
-        d = (mpmath.mpf(1), -(a11 + a22), a11 * a22 - a12 * a21)
-        n = (b1, -a22 * b1 + a12 * b2)
-        out.append((d, n))
+    # at DPS digits: the first call comes from the double-precision grid, and mpf
+    # arithmetic rounds to the context's precision, not its operands'. At 53 bits
+    # d0 = a11 a22 - a12 a21 (~1 - b T/m) lost its last digits, which near a lightly
+    # damped resonance (|d(e^{j theta})| ~ 1e-7) moved a crossing's K by 1e-11 relative
+    # (delay-hve#7 of seed 26: 0.014172663834791113 against the referee's
+    # 0.0141726638349430: stable at K_max, unstable 1e-12 above it)
+    with mpmath.workdps(DPS):
+        for a11, a12, a21, a22, b1, b2 in brute._mp_plants(loop, DPS):
+            d = (mpmath.mpf(1), -(a11 + a22), a11 * a22 - a12 * a21)
+            n = (b1, -a22 * b1 + a12 * b2)
+            out.append((d, n))
     return tuple(out)
 
 

@@ -90,6 +90,10 @@ class CertificateCheck:
 
 
 def _ball(a: float, b: float) -> Any:
+    """The ball holding [a, b], an end equal to ``math.pi`` standing for pi: call it at
+    the proof's precision, as the search does (``arb.pi()`` is rounded to the precision
+    in force: at 53 bits a piece ending at pi, next to a pole 1e-12 from the circle,
+    left the winding undecided where the search had proved it: wall-hve#22 of seed 26)."""
     from flint import arb
     lo = arb.pi() if a == math.pi else arb(a)
     hi = arb.pi() if b == math.pi else arb(b)
@@ -100,7 +104,8 @@ def _excludes(al: ArbLoop, a: float, b: float, ka: float, kb: float, how: str) -
     """Whether the box [a, b] x [ka, kb] has no zero of det M, for the reason ``how``
     (``N``: the preconditioned mean-value form, certificate version 2)."""
     from flint import arb
-    th, K = _ball(a, b), arb(ka).union(arb(kb))
+    with working_precision(al.prec):      # pi at the proof's precision (_ball)
+        th, K = _ball(a, b), arb(ka).union(arb(kb))
     if how == "N":
         Fc, Ft, Fk = al.box_derivatives(th, K, key=(a, b))
         with working_precision(al.prec):
@@ -116,10 +121,10 @@ def _excludes(al: ArbLoop, a: float, b: float, ka: float, kb: float, how: str) -
 
 def _increment(al: ArbLoop, a: float, b: float, K: Any, how: str) -> Any:
     """The proved increment of arg det M over [a, b] at K (raises _Invalid)."""
-    P, Q, F = al.box(_ball(a, b), K, key=(a, b))
-    pa, qa, wa = al.parts(_ball(a, a))
-    pb, qb, wb = al.parts(_ball(b, b))
-    with working_precision(al.prec):
+    with working_precision(al.prec):      # pi at the proof's precision (_ball)
+        P, Q, F = al.box(_ball(a, b), K, key=(a, b))
+        pa, qa, wa = al.parts(_ball(a, a))
+        pb, qb, wb = al.parts(_ball(b, b))
         Pa, Qa, Pb, Qb = poly_k(pa, K), poly_k(qa, K), poly_k(pb, K), poly_k(qb, K)
         if how == "P" and P.abs_lower() > Q.abs_upper():
             return (Pb / Pa).arg() + (1 + wb * Qb / Pb).arg() - (1 + wa * Qa / Pa).arg()
