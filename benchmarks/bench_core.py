@@ -14,7 +14,8 @@ CPU time (``time.process_time``: the machine is shared) over repeats:
   master's. Its K_max is compared with the truth and marked WRONG when off by > 1e-6.
 - **expert** (uncertified, written here from scratch, not hapstab code): the delay as an
   exact phase e^{-j n theta}; on a vectorised theta grid (32 points per turn of the
-  phase) the characteristic function of the low-order ZOH plant polynomials and the
+  phase, and 40 geometric points below its first: the low-frequency crossings of
+  fast-sampled loops) the characteristic function of the low-order ZOH plant polynomials and the
   controller K + B (1 - z^-1)/T; K real where Im(...) = 0 (HVE: linear in K; PEB: the
   resultant of the real and imaginary parts of a quadratic in K); sign changes, Newton
   refinement (derivative by central difference, kept in the bracket), the lowest
@@ -182,10 +183,19 @@ def _F(c0, c1, c2, quad: bool):
         return u * u - v * w, -u / v
 
 
+def theta_grid(m: int) -> np.ndarray:
+    """m midpoints of [0, pi] and 40 geometric points below the first (down to 1e-12 of
+    it): a fast-sampled loop's lowest crossing can lie far below pi / m (theta = 2 pi f T:
+    1.5 Hz at T = 0.19 ms is theta = 1.8e-3, under the first midpoint at n = 10)."""
+    first = 0.5 * math.pi / m
+    return np.concatenate([np.geomspace(1e-12 * first, first, 41)[:-1],
+                           (np.arange(m) + 0.5) * (math.pi / m)])
+
+
 def expert_kmax(ports, n: int, B: float, T: float) -> float:
     quad = len(ports) == 2 and n > 0
     m = 32 * 2 * (n + 2) * (2 if quad else 1)
-    th = (np.arange(m) + 0.5) * (math.pi / m)
+    th = theta_grid(m)
     F, _ = _F(*_char(ports, n, B, T, th), quad)
     i = np.flatnonzero(np.sign(F[1:]) * np.sign(F[:-1]) < 0)
     a, b = th[i], th[i + 1]
@@ -226,7 +236,7 @@ def expert_kmax(ports, n: int, B: float, T: float) -> float:
 def expert_many_hve(params, n: int) -> np.ndarray:
     """The expert's K_max of many HVE loops at once: one (loops x theta) array."""
     m = 32 * 2 * (n + 2)
-    th = (np.arange(m) + 0.5) * (math.pi / m)
+    th = theta_grid(m)
     z = np.exp(1j * th)[None, :]
     ph = np.exp(-1j * n * th)[None, :]
     dn = [polys(mm, b, k, T_) for mm, b, k, T_, _ in params]
