@@ -142,6 +142,24 @@ def test_certificate_next_to_a_crossing_at_pi_verifies():
     assert chk.valid, chk.reason
 
 
+def test_certificate_with_an_n_piece_verifies_whatever_the_balls_precision():
+    # mass-peb#6 of seed 1796236426: the search excluded a piece by the preconditioned
+    # mean-value test 'N' with its box's balls formed in doubles; the checker formed them
+    # at 320 bits, where the (non-monotone) test failed: "the genuine certificate is
+    # invalid". Both forms hold the box, so either proves it (analysis/verify.py)
+    loop = h.TeleoperationLoop(
+        h.Device(0.0029688323208371436, 0.0004886776446133478),
+        h.Device(0.0015152964963623147, 3.0900929556583507e-06),
+        h.SpringDamper(1.0, 8.381516324942696e-06), h.SpringDamper(1.0, 8.381516324942696e-06),
+        h.spring(9580957.43211338), h.spring(24913481.261186745),
+        1.9610843817575174e-05, 7)
+    res = h.critical_stiffness(loop, certify=True)
+    assert res.critical_stiffness == 0.0
+    assert any(p[4] == "N" for g in res.certificate["gaps"] for p in g["pieces"])
+    chk = h.verify_certificate(json.loads(json.dumps(res.certificate)), loop)
+    assert chk.valid, chk.reason
+
+
 def test_phase_reference_beside_a_lightly_damped_resonance():
     # delay-hve#7 of seed 26: the reference's plant coefficients rounded to 53 bits put
     # its K_max 1.07e-11 below the truth; the 40-digit matrix referee: stable at

@@ -102,15 +102,26 @@ def _ball(a: float, b: float) -> Any:
 
 def _excludes(al: ArbLoop, a: float, b: float, ka: float, kb: float, how: str) -> bool:
     """Whether the box [a, b] x [ka, kb] has no zero of det M, for the reason ``how``
-    (``N``: the preconditioned mean-value form, certificate version 2)."""
+    (``N``: the preconditioned mean-value form, certificate version 2). Any balls that
+    hold the box prove it; the search forms them in double precision and the counts at
+    the proof's (:func:`_ball`), and the mean-value test is not monotone in the ball
+    (its centre moves), so both forms are tried (seed 1796236426's mass-peb#6: an 'N'
+    piece the search proved failed with the balls formed at 320 bits)."""
+    return any(_excludes_with(al, a, b, ka, kb, how, prec) for prec in (al.prec, None))
+
+
+def _excludes_with(al: ArbLoop, a: float, b: float, ka: float, kb: float, how: str,
+                   prec: int | None) -> bool:
+    """:func:`_excludes` with the box's balls formed at ``prec`` bits (None: doubles)."""
     from flint import arb
-    with working_precision(al.prec):      # pi at the proof's precision (_ball)
+    with working_precision(prec or 53):
         th, K = _ball(a, b), arb(ka).union(arb(kb))
+    key = (a, b, prec)                    # the angle's kernel, per form of its ball
     if how == "N":
-        Fc, Ft, Fk = al.box_derivatives(th, K, key=(a, b))
+        Fc, Ft, Fk = al.box_derivatives(th, K, key=key)
         with working_precision(al.prec):
             return preconditioned_excludes(Fc, Ft, Fk, th.rad(), K.rad())
-    P, Q, F = al.box(th, K, key=(a, b))
+    P, Q, F = al.box(th, K, key=key)
     with working_precision(al.prec):
         if how == "P":
             return bool(P.abs_lower() > Q.abs_upper())
