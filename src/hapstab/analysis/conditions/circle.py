@@ -45,6 +45,14 @@ import numpy as np
 
 from hapstab import budget
 from hapstab.analysis.conditions.closed_forms import G_INVERSE
+from hapstab.analysis.conditions.device_terms import (
+    APPROXIMATIONS,
+    approximation_name,
+    integrator_polynomial,
+    integrator_response,
+    stiffness_side,
+    whole_delay_side,
+)
 from hapstab.analysis.conditions.frequency_grid import psd_limit, refine_minimum, theta_grid
 from hapstab.analysis.conditions.positive_real import (
     PositiveRealResult,
@@ -56,48 +64,12 @@ from hapstab.engine.device_side import DeviceSide, device_side
 from hapstab.engine.structure import structure_of
 from hapstab.engine.system import build
 from hapstab.errors import AnalysisError, ModelError
-from hapstab.models.controllers import SpringDamper
 from hapstab.models.loops import HapticLoop, TeleoperationLoop, require_loop, whole_delay
 from hapstab.results import CriticalStiffnessResult
 from hapstab.tolerances import PSD_SLACK
 
 __all__ = ["APPROXIMATIONS", "loop_inverse", "loop_transfer", "port_scaling", "circle_test",
            "critical_stiffness_circle"]
-
-APPROXIMATIONS = ("forward", "backward", "tustin")
-
-
-def _approx(approximation: Any) -> str:
-    a = str(approximation).strip().lower() if approximation is not None else "forward"
-    if a not in APPROXIMATIONS:
-        raise AnalysisError(f"approximation = {approximation!r}: unknown; allowed: "
-                            + ", ".join(APPROXIMATIONS))
-    return a
-
-
-def _x_poly(a: str, T: float) -> tuple[np.ndarray, np.ndarray]:
-    """X(z) = X_h(z)/V_h(z) as (num, den) in z (Section 3)."""
-    num = {"forward": [T], "backward": [T, 0.0], "tustin": [T / 2, T / 2]}[a]
-    return np.array(num), np.array([1.0, -1.0])
-
-
-def _x(a: str, theta: np.ndarray, T: float) -> np.ndarray:
-    """X(e^{jw}) without cancellation: z - 1 = 2j sin(w/2) e^{jw/2}, never cos(w) - 1."""
-    s = np.sin(theta / 2)
-    if a == "forward":
-        return T * np.exp(-0.5j * theta) / (2j * s)
-    if a == "backward":
-        return T * np.exp(0.5j * theta) / (2j * s)
-    return -0.5j * T * np.cos(theta / 2) / s + 0j
-
-
-def _side(loop: Any, what: str = "the circle criterion", forces: bool = False,
-          equal_delays: bool = True) -> DeviceSide:
-    require_loop(loop)
-    if equal_delays:
-        whole_delay(loop, what)  # the paper's t_d = nT, equal both ways
-    return device_side(loop, what, forces)   # whole samples of delay on every channel
-
 
 def port_scaling(loop: HapticLoop | TeleoperationLoop, scaling: str | None = "auto"
                  ) -> tuple[float, ...]:
@@ -150,8 +122,8 @@ def loop_inverse(loop: HapticLoop | TeleoperationLoop, approximation: str = "for
     -------
     RationalMatrix
     """
-    side = _side(loop)
-    xn, xd = _x_poly(_approx(approximation), side.period_s)
+    side = whole_delay_side(loop)
+    xn, xd = integrator_polynomial(approximation_name(approximation), side.period_s)
     D = side.port_weights(scaling)
     hn, hd = side.controller_polynomials()
     nums: list[list[np.ndarray]] = []
@@ -209,8 +181,8 @@ def loop_transfer(loop: HapticLoop | TeleoperationLoop, approximation: str = "fo
         devices and nothing attached (for forward difference exactly those of the
         sampled-data loop in that limit).
     """
-    a = _approx(approximation)
-    side = _side(loop)
+    a = approximation_name(approximation)
+    side = whole_delay_side(loop)
     if side.ports == 1:
         return loop_inverse(loop, a, scaling).inverse()
     if side.ports != 2:
@@ -231,7 +203,7 @@ def _two_port_transfer(side: DeviceSide, a: str, D: tuple[float, ...]) -> Ration
         raise AnalysisError("circle criterion with a finite sector: derived for one controller "
                             "per port (PEB); this loop has several (C_1 or C_4 apart from C_s, "
                             "C_m); use sector=None or the exact analysis")
-    xn, z1 = _x_poly(a, T)
+    xn, z1 = integrator_polynomial(a, T)
     c: list[np.ndarray] = [np.ones(1), np.ones(1)]
     be: list[np.ndarray] = [np.zeros(1), np.zeros(1)]
     S: list[list[np.ndarray]] = [[np.zeros(1), np.zeros(1)], [np.zeros(1), np.zeros(1)]]
@@ -324,7 +296,7 @@ def circle_test(loop: HapticLoop | TeleoperationLoop, approximation: str = "forw
 def _hermitian_parts(side: DeviceSide, a: str, D: tuple[float, ...], theta: np.ndarray
                      ) -> tuple[np.ndarray, np.ndarray]:
     """Hermitian parts of D G^{-1} = A + K C at K = 0 (A) and per unit K (C)."""
-    X = _x(a, theta, side.period_s)[:, None, None]
+    X = integrator_response(a, theta, side.period_s)[:, None, None]
     w = np.asarray(D)[None, :, None]
     A = w * (np.diag(side.damping)[None] + X * side.controller_matrix(theta, "B"))
     C = w * X * side.controller_matrix(theta, "K")
@@ -341,25 +313,6 @@ def _affine_kmax(parts: Any, oscillations: int) -> tuple[float, float]:
 
     th = theta_grid(oscillations)
     return refine_minimum(k_of, th, k_of(th))[::-1]
-
-
-def _stiffness_side(loop: Any, what: str = "the circle criterion", forces: bool = False,
-                    equal_delays: bool = True) -> DeviceSide:
-    side = _side(loop, what, forces, equal_delays)
-    other = [type(ch.controller).__name__ for ch in side.channels
-             if not isinstance(ch.controller, SpringDamper)]
-    if other and all(n == "FilteredSpringDamper" for n in other):
-        raise AnalysisError(f"{what}: needs SpringDamper controller(s) without a velocity "
-                            "filter; this loop's damper is filtered (a FilteredSpringDamper, "
-                            "a velocity filter): the exact K_max and sampled-data passivity "
-                            "take it")
-    if other:
-        raise AnalysisError(f"{what}: needs SpringDamper controller(s); this loop has "
-                            f"{other[0]} (a DiscreteController has no stiffness to vary)")
-    if side.ratios is None:
-        raise AnalysisError("controllers: the master's stiffness is 0 and the slave's is not, so "
-                            "K_s/K_m is undefined; give the master a stiffness > 0 to vary K")
-    return side
 
 
 def critical_stiffness_circle(loop: HapticLoop | TeleoperationLoop, approximation: str = "forward",
@@ -407,8 +360,8 @@ def critical_stiffness_circle(loop: HapticLoop | TeleoperationLoop, approximatio
     ----------
     The paper, Theorem 2.1, Definition 1, eq. (15) and (30).
     """
-    side = _stiffness_side(loop)
-    a = _approx(approximation)
+    side = stiffness_side(loop)
+    a = approximation_name(approximation)
     T, n = side.period_s, whole_delay(loop, "the circle criterion")
     D = side.port_weights(scaling)
     if sector is not None:

@@ -61,7 +61,7 @@ from typing import Any
 
 import numpy as np
 
-from hapstab.analysis.conditions.circle import _approx, _x
+from hapstab.analysis.conditions.device_terms import approximation_name, integrator_response
 from hapstab.engine.device_side import DeviceSide, device_side
 from hapstab.errors import AnalysisError, ModelError, check_reals
 from hapstab.models.loops import TeleoperationLoop, require_loop
@@ -124,7 +124,7 @@ def _frequencies(frequencies_hz: Any, side: DeviceSide) -> np.ndarray:
 def _impedance(side: DeviceSide, a: str, theta: np.ndarray) -> np.ndarray:
     """P(e^{j theta}) = diag(b) + Hc X, shape (N, 2, 2) (eq. 30 generalised); with force
     channels (I - G_f)^-1 (P + jw M) - jw M (:meth:`DeviceSide.with_forces`)."""
-    X = _x(a, theta, side.period_s)[:, None, None]
+    X = integrator_response(a, theta, side.period_s)[:, None, None]
     return side.with_forces(np.diag(side.damping)[None] + X * side.controller_matrix(theta), theta)
 
 
@@ -316,7 +316,7 @@ def transparency(loop: TeleoperationLoop, approximation: str = "forward",
     Hannaford 1989; Hashtrudi-Zaad and Salcudean 2001 (see the module docstring).
     """
     side = _side(loop)
-    a = _approx(approximation)
+    a = approximation_name(approximation)
     env = loop.environment if environment is None else Impedance.from_any(environment,
                                                                           "environment")
     f = _frequencies(frequencies_hz, side)

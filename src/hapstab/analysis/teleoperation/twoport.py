@@ -54,7 +54,11 @@ from typing import Any
 
 import numpy as np
 
-from hapstab.analysis.conditions.circle import _approx, _stiffness_side, _x
+from hapstab.analysis.conditions.device_terms import (
+    approximation_name,
+    integrator_response,
+    stiffness_side,
+)
 from hapstab.analysis.conditions.frequency_grid import refine_minimum, theta_grid
 from hapstab.engine.device_side import DeviceSide
 from hapstab.engine.structure import own_stiffness, structure_of
@@ -76,14 +80,14 @@ def _side(loop: Any, approximation: Any, bounds: tuple[Any, Any] = (0.0, 0.0)
                             "use 'circle' or 'passivity'")
     # any whole delays: the conditions see the delays only through p12 p21, i.e. the
     # round trip (and so does the loop with any terminations)
-    side = _stiffness_side(loop, "Llewellyn's test", forces=True, equal_delays=False)
+    side = stiffness_side(loop, "Llewellyn's test", forces=True, equal_delays=False)
     side.check_forces("Llewellyn's test")
     extra = _damping_bounds(*bounds)
     if any(extra) and side.forces:     # after the force feedback (DeviceSide.with_forces)
         side = dataclasses.replace(side, extra_damping=np.array(extra, float))
     elif any(extra):
         side = dataclasses.replace(side, damping=side.damping + np.array(extra, float))
-    return side, _approx(approximation)   # forward, backward or tustin
+    return side, approximation_name(approximation)   # forward, backward or tustin
 
 
 def _damping_bounds(operator_min: Any, environment_min: Any) -> tuple[float, float]:
@@ -101,7 +105,7 @@ def _damping_bounds(operator_min: Any, environment_min: Any) -> tuple[float, flo
 
 def _parts(side: DeviceSide, a: str, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """P = A + K C at each angle: (A, C), each (N, 2, 2)."""
-    X = _x(a, theta, side.period_s)[:, None, None]
+    X = integrator_response(a, theta, side.period_s)[:, None, None]
     A = np.diag(side.damping)[None] + X * side.controller_matrix(theta, "B")
     C = X * side.controller_matrix(theta, "K")
     return side.with_forces(A, theta), side.with_forces(C, theta, "K")
