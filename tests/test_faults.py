@@ -126,3 +126,42 @@ def test_four_concurrent_writers_leave_one_complete_file(references, tmp_path):
     assert [p.returncode for p in procs] == [0] * 4, errs
     with open(out, "rb") as fh:
         assert fh.read() == references[name][0]
+
+
+def test_a_ctrl_c_that_an_extension_module_turned_into_an_import_error_exits_130():
+    """pybind11 (scipy.optimize's HiGHS) re-raises a Ctrl-C during its initialisation as
+    ``ImportError: initialization failed`` from the KeyboardInterrupt: still an interrupt."""
+    code = (
+        "import builtins, sys\n"
+        "real = builtins.__import__\n"
+        "def fake(name, *a, **k):\n"
+        "    if name == 'hapstab.cli.main':\n"
+        "        try:\n"
+        "            raise KeyboardInterrupt()\n"
+        "        except KeyboardInterrupt as e:\n"
+        "            raise ImportError('initialization failed') from e\n"
+        "    return real(name, *a, **k)\n"
+        "builtins.__import__ = fake\n"
+        "from hapstab.cli import main\n"
+        "main(['simulate', 'hve', '-K', '9'])\n")
+    r = subprocess.run([sys.executable, "-c", code], env=_env(), capture_output=True,
+                       timeout=60)
+    assert r.returncode == 130 and r.stderr.decode().strip() == "hapstab: interrupted", \
+        r.stderr.decode()
+
+
+def test_an_import_error_without_an_interrupt_is_not_called_one():
+    code = (
+        "import builtins\n"
+        "real = builtins.__import__\n"
+        "def fake(name, *a, **k):\n"
+        "    if name == 'hapstab.cli.main':\n"
+        "        raise ImportError('a broken install')\n"
+        "    return real(name, *a, **k)\n"
+        "builtins.__import__ = fake\n"
+        "from hapstab.cli import main\n"
+        "main(['simulate', 'hve', '-K', '9'])\n")
+    r = subprocess.run([sys.executable, "-c", code], env=_env(), capture_output=True,
+                       timeout=60)
+    assert r.returncode == 1 and b"a broken install" in r.stderr and \
+        b"interrupted" not in r.stderr, r.stderr.decode()

@@ -30,7 +30,9 @@ def main(argv: list[str] | None = None) -> None:
         sys.exit(0)
     try:
         from hapstab.cli.main import main as run
-    except KeyboardInterrupt:          # a Ctrl-C while the commands load (numpy, scipy)
+    except BaseException as e:         # a Ctrl-C while the commands load (numpy, scipy)
+        if not _caused_by_interrupt(e):
+            raise
         import os
 
         print("hapstab: interrupted", file=sys.stderr, flush=True)
@@ -39,6 +41,22 @@ def main(argv: list[str] | None = None) -> None:
         # ``python -m hapstab`` end by SIGINT (-2) whatever sys.exit says
         os._exit(130)
     run(argv)
+
+
+def _caused_by_interrupt(e: BaseException | None) -> bool:
+    """Whether ``e`` is a Ctrl-C or was raised because of one.
+
+    An extension module whose initialisation a Ctrl-C interrupts re-raises it as
+    ``ImportError: initialization failed`` from the KeyboardInterrupt (pybind11 does, in
+    scipy.optimize's HiGHS); the interrupt is then the exception's cause or context.
+    """
+    seen = set()
+    while e is not None and id(e) not in seen:
+        if isinstance(e, KeyboardInterrupt):
+            return True
+        seen.add(id(e))
+        e = e.__cause__ or e.__context__
+    return False
 
 
 def __getattr__(name: str) -> Any:
