@@ -29,6 +29,16 @@ def genuine():
     return loop, json.loads(json.dumps(res.certificate))
 
 
+@pytest.fixture(scope="module")
+def genuine_winding():
+    """A certificate whose counts are windings (degree 43 > ROOTS_MAX_DEGREE)."""
+    loop = h.paper_hve(delay_samples=40)
+    res = h.critical_stiffness(loop, certify=True)
+    cert = json.loads(json.dumps(res.certificate))
+    assert all(g["count"]["method"] == "winding" for g in cert["gaps"] if g["count"])
+    return loop, cert
+
+
 def _forged(cert, edit):
     t = copy.deepcopy(cert)
     edit(t)
@@ -119,8 +129,6 @@ FORGERIES = {
     # 4: empty lists
     "no_gaps": (lambda t: t.update(gaps=[]), "gaps: empty"),
     "gap_no_pieces": (lambda t: _first_gap(t).update(pieces=[]), "pieces: empty"),
-    "count_no_pieces": (lambda t: _counted_gap(t)["count"].update(pieces=[]),
-                        "count.pieces: empty"),
     "no_loop_ports": (lambda t: t["loop"].update(ports=[]), "loop.ports: empty"),
     # 5: pieces that do not advance or do not tile [0, pi] exactly
     "piece_zero_width": (lambda t: _first_gap(t)["pieces"][0].__setitem__(
@@ -138,12 +146,6 @@ FORGERIES = {
                        "pieces missing"),
     "gap_split_bad_letter": (lambda t: _first_gap(t).update(splits="f" + _first_gap(t)["splits"]),
                              "splits: not a string"),
-    "count_piece_dropped": (lambda t: _counted_gap(t)["count"]["pieces"].pop(),
-                            "pieces missing"),
-    "count_piece_short_of_pi": (lambda t: _counted_gap(t)["count"]["pieces"][-1].__setitem__(
-        1, 3.1), "is not part of"),
-    "count_piece_added": (lambda t: _counted_gap(t)["count"]["pieces"].append(
-        list(_counted_gap(t)["count"]["pieces"][-1])), "pieces beyond [0, pi]"),
     "start_pieces_other": (lambda t: t.update(start_pieces=31), "piece"),
     "start_pieces_zero": (lambda t: t.update(start_pieces=0), "start_pieces = 0"),
     # 6: counts and intervals that do not agree
@@ -171,7 +173,7 @@ FORGERIES = {
     "proved_range_wrong": (lambda t: t.update(proved_range_N_per_m=[1e-30, 1e9]),
                            "proved_range_N_per_m"),
     # 7: versions and shapes
-    "version_3": (lambda t: t.update(version=3), "unknown format version"),
+    "version_4": (lambda t: t.update(version=4), "unknown format version"),
     "version_string": (lambda t: t.update(version="1"), "unknown format version"),
     "version_float": (lambda t: t.update(version=1.0), "unknown format version"),
     "version_missing": (lambda t: t.pop("version"), "unknown format version"),
@@ -183,7 +185,7 @@ FORGERIES = {
                             "excluded = 'yes': not true/false"),
     "piece_short": (lambda t: _first_gap(t)["pieces"][0].pop(), "not 4 numbers"),
     "piece_how_other": (lambda t: _first_gap(t)["pieces"][0].__setitem__(4, "Z"),
-                        "not 4 numbers and one of 'P', 'Q', 'F', 'N' (certificate version 2)"),
+                        "not 4 numbers and one of 'P', 'Q', 'F', 'N' (certificate version 3)"),
     # an N piece (the preconditioned test) exists from version 2 only
     "version_1_with_N": (lambda t: (t.update(version=1),
                                     _first_gap(t)["pieces"][0].__setitem__(4, "N")),
@@ -203,6 +205,65 @@ FORGERIES = {
     "precision_float": (lambda t: t.update(precision_bits=320.0), "not a whole number"),
     "crossings_missing": (lambda t: t.pop("crossings"), "missing crossings"),
 }
+
+
+#: forgeries of a winding count's pieces (a certificate of the long delay)
+WINDING_FORGERIES = {
+    "count_no_pieces": (lambda t: _counted_gap(t)["count"].update(pieces=[]),
+                        "count.pieces: empty"),
+    "count_piece_dropped": (lambda t: _counted_gap(t)["count"]["pieces"].pop(),
+                            "pieces missing"),
+    "count_piece_short_of_pi": (lambda t: _counted_gap(t)["count"]["pieces"][-1].__setitem__(
+        1, 3.1), "is not part of"),
+    "count_piece_added": (lambda t: _counted_gap(t)["count"]["pieces"].append(
+        list(_counted_gap(t)["count"]["pieces"][-1])), "pieces beyond [0, pi]"),
+}
+
+#: forgeries of a count by roots (version 3; the paper's HVE, delay 4: degree 7)
+ROOTS_FORGERIES = {
+    "roots_with_pieces": (lambda t: _counted_gap(t)["count"].update(pieces=[[0.0, 3.0, "P"]]),
+                          "pieces given for a count by roots"),
+    "roots_method_missing": (lambda t: _counted_gap(t)["count"].pop("method"),
+                             "count.method = None: not one of 'winding', 'roots'"),
+    "roots_method_other": (lambda t: _counted_gap(t)["count"].update(method="eigenvalues"),
+                           "count.method = 'eigenvalues'"),
+    "roots_in_version_2": (lambda t: t.update(version=2),
+                           "count.method = 'roots': not one of 'winding' (certificate version 2)"),
+    "roots_as_winding": (lambda t: _counted_gap(t)["count"].update(method="winding"),
+                         "count.pieces: empty"),
+    "roots_claim_wrong": (lambda t: _counted_gap(t)["count"].update(outside=2),
+                          "poles outside, not 2 as claimed"),
+}
+
+
+def test_the_short_delays_counts_are_by_roots(genuine):
+    _, cert = genuine
+    assert cert["version"] == 3
+    assert {g["count"]["method"] for g in cert["gaps"] if g["count"]} == {"roots"}
+
+
+def _refused(cert, forgery) -> None:
+    edit, why = forgery
+    chk = h.verify_certificate(_forged(cert, edit))
+    assert not chk.valid
+    assert why in chk.reason, chk.reason
+    assert not chk.reason.startswith("malformed certificate:"), chk.reason
+
+
+@pytest.mark.parametrize("name", sorted(ROOTS_FORGERIES))
+def test_forged_root_count_is_invalid_with_the_check_named(genuine, name):
+    _refused(genuine[1], ROOTS_FORGERIES[name])
+
+
+def test_genuine_winding_certificate_is_valid(genuine_winding):
+    loop, cert = genuine_winding
+    chk = h.verify_certificate(cert, loop)
+    assert chk.valid, chk.reason
+
+
+@pytest.mark.parametrize("name", sorted(WINDING_FORGERIES))
+def test_forged_winding_count_is_invalid_with_the_check_named(genuine_winding, name):
+    _refused(genuine_winding[1], WINDING_FORGERIES[name])
 
 
 @pytest.mark.parametrize("name", sorted(FORGERIES))

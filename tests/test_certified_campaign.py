@@ -142,7 +142,7 @@ def test_certificate_next_to_a_crossing_at_pi_verifies():
     assert chk.valid, chk.reason
 
 
-def test_certificate_with_an_n_piece_verifies_whatever_the_balls_precision():
+def test_certificate_with_an_n_piece_verifies_whatever_the_balls_precision(monkeypatch):
     # mass-peb#6 of seed 1796236426: the search excluded a piece by the preconditioned
     # mean-value test 'N' with its box's balls formed in doubles; the checker formed them
     # at 320 bits, where the (non-monotone) test failed: "the genuine certificate is
@@ -153,6 +153,13 @@ def test_certificate_with_an_n_piece_verifies_whatever_the_balls_precision():
         h.SpringDamper(1.0, 8.381516324942696e-06), h.SpringDamper(1.0, 8.381516324942696e-06),
         h.spring(9580957.43211338), h.spring(24913481.261186745),
         1.9610843817575174e-05, 7)
+    res = h.critical_stiffness(loop, certify=True)      # counted by roots (version 3)
+    assert res.critical_stiffness == 0.0
+    chk = h.verify_certificate(json.loads(json.dumps(res.certificate)), loop)
+    assert chk.valid, chk.reason
+    # the certificate of the pinned bug: counts by the argument principle alone
+    from hapstab.analysis.exact import winding
+    monkeypatch.setattr(winding, "ROOTS_MAX_DEGREE", -1)
     res = h.critical_stiffness(loop, certify=True)
     assert res.critical_stiffness == 0.0
     assert any(p[4] == "N" for g in res.certificate["gaps"] for p in g["pieces"])

@@ -11,10 +11,14 @@ from hapstab.engine.arb_loop import base_point
 
 #: The certificate's ``format`` and the ``version`` numbers this checker reads.
 FORMAT = "hapstab-certificate"
-VERSIONS = (1, 2)
+VERSIONS = (1, 2, 3)
 #: The reasons a piece may give for excluding 0, by version: ``N`` (the preconditioned
 #: mean-value test) from version 2, for gap pieces only (a count piece has one K).
-REASONS = {1: ("P", "Q", "F"), 2: ("P", "Q", "F", "N")}
+REASONS = {1: ("P", "Q", "F"), 2: ("P", "Q", "F", "N"), 3: ("P", "Q", "F", "N")}
+#: How a count is proved, by version: from version 3 a count names its ``method``,
+#: ``winding`` (its pieces, the argument principle) or ``roots`` (no pieces: the roots
+#: of the characteristic polynomial isolated in balls); before, a winding.
+COUNT_METHODS = {1: ("winding",), 2: ("winding",), 3: ("winding", "roots")}
 #: Most start pieces a certificate may ask for: the proof uses 32; a higher number
 #: only makes the replay slower, so beyond this it is refused (a valve on time).
 MAX_START_PIECES = 4096
@@ -166,7 +170,16 @@ def _check_gap_shape(g: Any, i: int, version: int) -> None:
     _obj(c, f"{what}.count", ("K_N_per_m", "outside", "pieces"))
     K = _num(c["K_N_per_m"], f"{what}.count.K_N_per_m", positive=True)
     _int(c["outside"], f"{what}.count.outside", 0)
-    _check_pieces(c["pieces"], f"{what}.count.pieces", 3)
+    method = c.get("method", "winding")
+    if method not in COUNT_METHODS[version] or (version >= 3 and "method" not in c):
+        raise _Invalid(f"{what}.count.method = {c.get('method')!r}: not one of "
+                       f"{', '.join(map(repr, COUNT_METHODS[version]))} (certificate version "
+                       f"{version})")
+    if method == "roots":
+        if _list(c["pieces"], f"{what}.count.pieces"):
+            raise _Invalid(f"{what}.count: pieces given for a count by roots")
+    else:
+        _check_pieces(c["pieces"], f"{what}.count.pieces", 3)
     if not lo <= K <= hi:
         raise _Invalid(f"{what}: its count at K = {K!r} lies outside [{lo!r}, {hi!r}]")
 

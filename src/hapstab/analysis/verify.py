@@ -16,7 +16,9 @@ that produced it: it rebuilds the characteristic function from the certificate's
    of [0, pi] by halving (so they tile [0, pi] by construction: a dropped or altered
    piece breaks the replay), each prove its increment of arg det M (``P``: |P| > |Q|,
    ``Q``: |Q| > |P|, ``F``: 0 not in the ball); the winding gives the poles outside,
-   which must equal the count claimed;
+   which must equal the count claimed; a count by ``roots`` (version 3) is redone: the
+   roots of the characteristic polynomial, rebuilt from the loop's numbers, isolated
+   in balls each clear of the circle;
 2. **gaps** -- each excluded gap's pieces, replayed from ``start_pieces`` x [lo, hi]
    (halving theta at the midpoint, or K at the geometric mean of a wide range, else
    the midpoint), each excluding 0 for the reason given (``P``, ``Q``, ``F`` or, from
@@ -156,9 +158,40 @@ def _start(n: int) -> list[tuple[float, float]]:
     return near + [(i * step, math.pi if i == n - 1 else (i + 1) * step) for i in range(1, n)]
 
 
+def _root_count(al: ArbLoop, K: float) -> int | None:
+    """Poles outside at K from the roots of the characteristic polynomial in balls
+    (:meth:`~hapstab.engine.arb_loop.ArbLoop.polynomial`), exact zero coefficients at
+    the bottom divided out: Arb's ``acb_poly.roots`` gives disjoint balls holding one
+    root each; the count is decided when each ball is strictly inside or outside the
+    circle (else None)."""
+    from flint import acb_poly
+    with working_precision(al.prec):
+        p = al.polynomial(K)
+        low = next(i for i in range(p.degree() + 1) if not p[i].is_zero())
+        q = acb_poly([p[i] for i in range(low, p.degree() + 1)])
+        for tol in (None, 1e-20):
+            try:
+                rs = q.roots(tol=tol, maxprec=4 * al.prec) if q.degree() > 0 else []
+            except ValueError:
+                return None
+            out = sum(1 for r in rs if r.abs_lower() > 1)
+            if len(rs) == q.degree() and out + sum(1 for r in rs if r.abs_upper() < 1) == len(rs):
+                return out
+    return None
+
+
 def _check_count(al: ArbLoop, c: dict[str, Any], n0: int) -> int:
-    """Replay a count's pieces; the verified number of poles outside."""
+    """Replay a count's pieces (or isolate its roots); the verified poles outside."""
     from flint import arb
+    if c.get("method") == "roots":
+        out = _root_count(al, c["K_N_per_m"])
+        if out is None:
+            raise _Invalid(f"count at K = {c['K_N_per_m']!r}: the roots are not isolated "
+                           "clear of the unit circle")
+        if out != c["outside"]:
+            raise _Invalid(f"count at K = {c['K_N_per_m']!r}: {out} poles outside, not "
+                           f"{c['outside']} as claimed")
+        return out
     K = arb(c["K_N_per_m"])
     pieces = [tuple(p) for p in c["pieces"]]
     stack = _start(n0)[::-1]

@@ -448,6 +448,46 @@ class ArbLoop:
             Kc, km = acb(K), acb(K.mid())
             return poly_k(Fm, km), poly_k(Fd, Kc), dpoly_k(Fm, Kc)
 
+    @property
+    def degree(self) -> int:
+        """The degree of :meth:`polynomial` in z: the closed loop's number of states."""
+        e = len(self.ports)
+        return self.n_phase + e + self.q
+
+    def polynomial(self, K: Any) -> Any:
+        """The closed loop's characteristic polynomial chi(z) = z^(n + e) det M(z, K) in
+        balls (acb_poly in z; n = :attr:`n_phase`, e the number of ports), monic of
+        degree :attr:`degree`: its roots are the closed-loop poles.
+
+        With ``G_j(z) = z H_j = K k_j z + beta_j (z - 1)`` and the port polynomials in
+        ``y = z - 1`` composed with ``z - 1``: one port, ``chi = z^(n+1) d + s N G``;
+        two ports, ``chi = z^n (z d_0 + s_0 N_0 G_0)(z d_1 + s_1 N_1 G_1) +
+        s_2 N_0 N_1 G_0 G_1`` (module doc's P, Q and w = z^-n, times z^(n+2)). The
+        z^(n+e) adds roots at z = 0 only, so the roots outside the unit circle are the
+        zeros of det M there. Monic: d_j is monic of degree 2 in y and every other
+        term has a lower degree.
+
+        Parameters
+        ----------
+        K : float or arb
+            Stiffness (N/m).
+
+        Returns
+        -------
+        acb_poly
+        """
+        from flint import acb, acb_poly
+        with working_precision(self.prec):
+            Kc = acb(K)
+            y, z = acb_poly([-1, 1]), acb_poly([0, 1])
+            dz = [p.d(y) for p in self.ports]
+            nz = [p.N(y) for p in self.ports]
+            G = [z * (Kc * k) + (z - 1) * b for k, b in zip(self.k, self.beta, strict=True)]
+            if len(self.ports) == 1:
+                return z ** (self.n_phase + 1) * dz[0] + nz[0] * G[0] * self.s[0]
+            a = [z * dz[j] + nz[j] * G[j] * self.s[j] for j in range(2)]
+            return z ** self.n_phase * a[0] * a[1] + nz[0] * nz[1] * G[0] * G[1] * self.s[2]
+
     def value(self, theta: Any, K: Any) -> Any:
         """det M on the balls ``theta`` (arb) and ``K`` (arb, N/m): an acb ball."""
         from flint import acb

@@ -13,12 +13,14 @@ from hapstab.analysis.exact.winding import START_PIECES, Count
 
 __all__ = ["certificate", "VERSION"]
 
-#: 2: gap pieces may be excluded by ``N`` (the preconditioned mean-value form); a
-#: version-1 certificate (``P``, ``Q``, ``F`` only) is still verified.
-VERSION = 2
+#: 2: gap pieces may be excluded by ``N`` (the preconditioned mean-value form); 3: each
+#: count names its ``method``, ``winding`` (its pieces) or ``roots`` (the characteristic
+#: polynomial's roots isolated in balls, no pieces). Versions 1 and 2 are still verified.
+VERSION = 3
 
 def _count_json(c: Count) -> dict[str, Any]:
-    return {"K_N_per_m": c.K, "outside": c.outside, "pieces": [list(p) for p in c.pieces]}
+    return {"K_N_per_m": c.K, "outside": c.outside, "method": c.method,
+            "pieces": [list(p) for p in c.pieces]}
 
 
 def certificate(pr: Proof) -> dict[str, Any]:

@@ -314,7 +314,8 @@ def _winding_cells(resp: LoopResponse, c: Cells, leaves: np.ndarray, u: np.ndarr
 
 
 # ------------------------------------------------------------------ the analysis
-def analyse(resp: LoopResponse, full: bool = True, proof: bool = False) -> list[StableSet]:
+def analyse(resp: LoopResponse, full: bool = True, proof: bool = False,
+            fast: bool = True) -> list[StableSet]:
     """Exact K_max and stable set in K for every item of ``resp``.
 
     Parameters
@@ -327,12 +328,22 @@ def analyse(resp: LoopResponse, full: bool = True, proof: bool = False) -> list[
         Re-prove each covered item's answer in ball arithmetic
         (:mod:`~hapstab.analysis.exact.proved`; False, the default: the float search's
         answer, whose rounding allowances are not proved).
+    fast : bool
+        With ``proof``, one port: let the angle grid of
+        :mod:`~hapstab.analysis.exact.candidates` propose the crossings, and fall back
+        to the certified float search for an item whose proof does not settle
+        everything (default True; the answer is proved either way). Two ports keep the
+        certified float search: on the campaign's teleoperators the grid missed
+        crossings above K_max that hid later stable intervals.
 
     Returns
     -------
     list of StableSet
         One per item.
     """
+    if proof and fast and len(resp.ports) == 1 and resp.params and \
+            all(p is not None for p in resp.params):
+        return _analyse_fast(resp, full)
     L = resp.size
     items = np.arange(L)
     c = Cells()
@@ -360,3 +371,23 @@ def analyse(resp: LoopResponse, full: bool = True, proof: bool = False) -> list[
     return prove_sets(resp, sets, full, lambda one: analyse(one, True, False)[0])
 
 
+
+
+def _analyse_fast(resp: LoopResponse, full: bool) -> list[StableSet]:
+    """:func:`analyse` with a proof, each item proposed by the angle grid first
+    (:func:`~hapstab.analysis.exact.candidates.candidate_set`); an item whose proof
+    leaves anything open (:func:`~hapstab.analysis.exact.candidates.consistent`) is
+    analysed again with the certified float search proposing."""
+    from hapstab.analysis.exact.candidates import candidate_set, consistent
+    from hapstab.analysis.exact.proved import item_response, prove_sets
+    out = []
+    for i in range(resp.size):
+        one = item_response(resp, i)
+        ss = candidate_set(one, 0, full)
+        got = None
+        if ss is not None:
+            got = prove_sets(one, [ss], full, lambda r: analyse(r, True, False)[0])[0]
+            if not consistent(ss, got):
+                got = None
+        out.append(got if got is not None else analyse(one, full, True, fast=False)[0])
+    return out

@@ -18,8 +18,8 @@ from typing import Any
 
 from hapstab.engine.arb_loop import ArbLoop, poly_k, working_precision
 
-__all__ = ["Count", "count", "piece_increment", "start_pieces", "theta_ball", "k_ball",
-           "START_PIECES", "FLOOR", "MAX_PIECES"]
+__all__ = ["Count", "count", "root_count", "piece_increment", "start_pieces", "theta_ball",
+           "k_ball", "START_PIECES", "FLOOR", "MAX_PIECES", "ROOTS_MAX_DEGREE"]
 
 #: Pieces of [0, pi] a search starts from.
 START_PIECES = 8
@@ -28,6 +28,21 @@ START_PIECES = 8
 FLOOR = 4e-16
 #: Most pieces one exclusion or count may try (a valve on time: beyond it, uncertain).
 MAX_PIECES = 4000
+#: Highest degree of the characteristic polynomial counted by root isolation
+#: (:func:`root_count`) before the argument principle: measured, Arb isolates the roots
+#: of degree 12 in ~0.1-1.4 ms and of degree 64 in 2-23 ms at 320 bits, while a winding
+#: count costs 4-19 ms at any degree (HVE, PEB; 2026-12-02). Not a tolerance: either
+#: count is a proof.
+ROOTS_MAX_DEGREE = 32
+#: The isolating balls' radii :func:`root_count` asks for in turn: Arb's own (None, the
+#: cheapest: wide balls of ~1e-3 near a lightly damped pair), then 1e-20 (a pole within
+#: 1e-20 of the circle is left to the argument principle). Not tolerances of the
+#: answer: a ball that still meets the circle decides nothing.
+ROOT_TOLERANCES = (None, 1e-20)
+#: Arb's root finder may raise its precision to this multiple of the loop's: two modes
+#: 1e-10 apart (the two ports of a PEB with nearly equal devices) need ~1280 bits where
+#: the default gives up at 320 (measured on mass-peb#1001 of seed 26).
+ROOTS_MAX_PREC_FACTOR = 4
 
 
 def theta_ball(a: float, b: float) -> Any:
@@ -89,15 +104,71 @@ def piece_increment(al: ArbLoop, a: float, b: float, K: Any, cache: dict) -> tup
 
 @dataclass
 class Count:
-    """Poles outside at K (None: not proved), with the pieces of [0, pi] used."""
+    """Poles outside at K (None: not proved), with the pieces of [0, pi] used
+    (``method`` "winding") or none (``method`` "roots": :func:`root_count`)."""
     K: float
     outside: int | None
     pieces: list[tuple[float, float, str]] = field(default_factory=list)
+    method: str = "winding"
 
 
-def count(al: ArbLoop, K: float, max_pieces: int = MAX_PIECES) -> Count:
-    """Poles of the closed loop outside the unit circle at stiffness K, by the
-    argument principle in balls (module doc, 3).
+def root_count(al: ArbLoop, K: float) -> int | None:
+    """Poles outside the unit circle at stiffness K by isolating every root of the
+    characteristic polynomial (:meth:`~hapstab.engine.arb_loop.ArbLoop.polynomial`).
+
+    The exact zero coefficients at the bottom are divided out (roots at z = 0, inside).
+    Arb's ``acb_poly.roots`` returns pairwise disjoint balls, each containing exactly one
+    root of every polynomial within the coefficient balls (the inclusion disc of radius
+    deg |p(m) / p'(m)| about each approximation holds a root; disjoint discs, as many as
+    the degree, hold one each). The count is proved when every ball lies strictly inside
+    or strictly outside |z| = 1.
+
+    Parameters
+    ----------
+    al : ArbLoop
+    K : float
+        Stiffness (N/m).
+
+    Returns
+    -------
+    int or None
+        The number of poles outside; None when Arb cannot isolate the roots (a multiple
+        or nearly multiple root) or a ball meets the circle.
+
+    References
+    ----------
+    F. Johansson, "Arb: efficient arbitrary-precision midpoint-radius interval
+    arithmetic", IEEE Trans. Computers 66 (2017) 1281-1292 (``acb_poly_find_roots``,
+    ``acb_poly_validate_roots``); P. Henrici, *Applied and Computational Complex
+    Analysis*, vol. 1, Wiley 1974, sec. 6.4 (root inclusion).
+    """
+    from flint import acb_poly
+    with working_precision(al.prec):
+        p = al.polynomial(K)
+        low = 0
+        while low < p.degree() and p[low].is_zero():
+            low += 1
+        q = acb_poly([p[i] for i in range(low, p.degree() + 1)])
+        if q.degree() < 1:
+            return 0
+        for tol in ROOT_TOLERANCES:
+            try:
+                roots = q.roots(tol=tol, maxprec=ROOTS_MAX_PREC_FACTOR * al.prec)
+            except ValueError:          # not isolated: a (nearly) multiple root
+                return None
+            if len(roots) != q.degree():
+                return None
+            out = sum(1 for r in roots if r.abs_lower() > 1)
+            inside = sum(1 for r in roots if r.abs_upper() < 1)
+            if out + inside == len(roots):
+                return out
+    return None
+
+
+def count(al: ArbLoop, K: float, max_pieces: int = MAX_PIECES, roots: bool = True) -> Count:
+    """Poles of the closed loop outside the unit circle at stiffness K: by root
+    isolation (:func:`root_count`) up to :data:`ROOTS_MAX_DEGREE`, else (or when it
+    cannot decide) by the argument principle in balls (module doc, 3).
 
     Parameters
     ----------
@@ -106,6 +177,8 @@ def count(al: ArbLoop, K: float, max_pieces: int = MAX_PIECES) -> Count:
         Stiffness (N/m).
     max_pieces : int
         Safety valve on the number of pieces tried.
+    roots : bool
+        Try root isolation first (default; False: the argument principle alone).
 
     Returns
     -------
@@ -114,6 +187,10 @@ def count(al: ArbLoop, K: float, max_pieces: int = MAX_PIECES) -> Count:
         or within the balls' width of the circle) or the valve closed.
     """
     from flint import arb
+    if roots and al.degree <= ROOTS_MAX_DEGREE:
+        got = root_count(al, K)
+        if got is not None:
+            return Count(K, got, [], "roots")
     Kb = arb(K)
     cache: dict = {}
     res = Count(K, None)
