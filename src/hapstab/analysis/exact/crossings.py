@@ -78,6 +78,8 @@ MAX_BOXES = 2_000_000
 #: Safety valve on the rounds of splitting: 50 halvings of theta per decade of u and
 #: 60 of u reach both floors from the initial boxes several times over.
 MAX_ROUNDS = 600
+#: Loops of at most this many ports are proposed by the angle grid first (see analyse)
+FAST_PORTS = 2
 
 
 @dataclass
@@ -341,7 +343,7 @@ def analyse(resp: LoopResponse, full: bool = True, proof: bool = False,
     list of StableSet
         One per item.
     """
-    if proof and fast and len(resp.ports) == 1 and resp.params and \
+    if proof and fast and len(resp.ports) <= FAST_PORTS and resp.params and \
             all(p is not None for p in resp.params):
         return _analyse_fast(resp, full)
     L = resp.size
