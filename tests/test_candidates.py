@@ -1,0 +1,111 @@
+"""The angle grid that proposes crossings to the ball proof (issue 26: speed;
+hapstab.analysis.exact.candidates): its candidates are the certified float search's
+crossings, the answer with it is the answer without it, and a wrong proposal (a
+crossing dropped, a direction flipped) ends in the certified search's answer, never in
+a different one."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import pytest
+
+import hapstab as h
+from hapstab.analysis.exact import candidates, crossings
+from hapstab.analysis.exact.crossings import analyse
+from hapstab.engine.frequency import loop_response
+from references import campaign, certified
+
+#: K_max of the two paths agree to this (relative): each is the lower end of its proved
+#: window, 2^-40 wide about a Newton point at 320 bits, so they differ by rounding only
+SAME_K = 1e-12
+
+
+def _loops():
+    out = [("paper-hve-4", h.paper_hve(delay_samples=4)), ("paper-peb-4", h.paper_peb(delay_samples=4)),
+           ("paper-peb-0", h.paper_peb(delay_samples=0)), ("paper-hve-100", h.paper_hve(delay_samples=100))]
+    for cls in ("wall", "marginal", "mass"):
+        for i in range(3):
+            s = certified.scenario(cls, 500 + i, max_delay=60)
+            out.append((s.name, s.hapstab_loop()))
+    for i in range(6):
+        s = campaign.scenario(700 + i)
+        out.append((s.name, s.hapstab_loop()))
+    return out
+
+
+LOOPS = _loops()
+
+
+def _same(a, b) -> None:
+    assert (a.kmax == b.kmax == 0) or math.isclose(a.kmax, b.kmax, rel_tol=SAME_K), (a.kmax, b.kmax)
+    assert len(a.intervals) == len(b.intervals), (a.intervals, b.intervals)
+    for (x0, x1), (y0, y1) in zip(a.intervals, b.intervals, strict=True):
+        assert math.isclose(x0, y0, rel_tol=SAME_K, abs_tol=0.0) or x0 == y0 == 0.0
+        assert math.isclose(x1, y1, rel_tol=SAME_K) or x1 == y1
+
+
+@pytest.mark.parametrize("name,loop", LOOPS, ids=[n for n, _ in LOOPS])
+def test_the_grid_path_gives_the_certified_search_paths_answer(name, loop):
+    resp = loop_response(loop)
+    if not resp.params or resp.params[0] is None:
+        pytest.skip("not covered by the ball core")
+    _same(analyse(resp, True, True)[0], analyse(resp, True, True, fast=False)[0])
+
+
+@pytest.mark.parametrize("name,loop", LOOPS[:4], ids=[n for n, _ in LOOPS[:4]])
+def test_candidates_are_the_certified_searchs_crossings_up_to_the_first_ones(name, loop):
+    resp = loop_response(loop)
+    ss = candidates.candidate_set(resp, 0, True)
+    ref = analyse(resp, True, False)[0]
+    assert ss is not None
+    first = [e for e in ref.events if e[4] > 0][:3]
+    for e in first:
+        assert any(math.isclose(e[0], c[0], rel_tol=1e-8) and c[3] == e[3] for c in ss.events), e
+
+
+@pytest.mark.parametrize("edit", ["drop", "flip"])
+def test_a_wrong_proposal_ends_in_the_certified_searchs_answer(monkeypatch, edit):
+    loop = h.paper_peb(delay_samples=4)
+    resp = loop_response(loop)
+    want = analyse(resp, True, True, fast=False)[0]
+    real = candidates.candidate_set
+    used = []
+
+    def wrong(r, i, full):
+        ss = real(r, i, full)
+        ev = list(ss.events)
+        ev = ev[1:] if edit == "drop" else [(*ev[0][:3], -ev[0][3], ev[0][4]), *ev[1:]]
+        used.append(True)
+        return dataclasses.replace(ss, events=tuple(ev))
+
+    monkeypatch.setattr(candidates, "candidate_set", wrong)
+    fell_back = []
+    old = crossings.analyse
+
+    def spy(r, full=True, proof=False, fast=True):
+        if not fast:
+            fell_back.append(True)
+        return old(r, full, proof, fast)
+
+    monkeypatch.setattr(crossings, "analyse", spy)
+    got = crossings._analyse_fast(resp, True)[0]
+    assert used
+    _same(got, want)
+    # a dropped crossing leaves the first gap unprovable: the certified search proposes;
+    # a flipped direction is not what the proof uses (it counts), so nothing changes
+    assert bool(fell_back) == (edit == "drop")
+
+
+def test_the_grid_counts_poles_by_the_argument_principle():
+    # the grid's own count at K -> 0+ and in each gap is what the cross-check compares
+    import numpy as np
+    loop = h.paper_hve(delay_samples=10)
+    resp = loop_response(loop)
+    th, c = candidates._refined(resp, 0, candidates._grid(resp))
+    s = float(resp.scale[0])
+    # below K_max nothing is outside; just above it, one pair
+    kmax = h.critical_stiffness(loop).critical_stiffness
+    got = candidates._grid_counts(resp, 0, th, c, np.array([0.5 * kmax / s, 1.01 * kmax / s]))
+    assert list(got) == [0, 2]
