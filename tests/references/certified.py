@@ -61,6 +61,10 @@ SEED = int(os.environ.get("HAPSTAB_SEED", "26"))
 #: digits of the referee (the issue's: 40)
 DPS = 40
 
+#: most states for which an undecided verdict is settled by refining the whole spectrum
+#: at DPS digits (Aberth: ~0.4 s at 72 states; quadratic in the states per iteration)
+WHOLE_SPECTRUM_MAX = 160
+
 #: relative distance below the truth within which K_max counts as tight (the issue's)
 TIGHT = 1e-9
 
@@ -235,7 +239,25 @@ class _Referee:
     def stable(self, K: float) -> bool | None:
         if self.long:
             return phase.decided(self.pt, self.L, K)
-        return brute.robust(self.L, K, dps=DPS).stable
+        v = brute.robust(self.L, K, dps=DPS).stable
+        return v if v is not None else self._whole_spectrum(K)
+
+    def _whole_spectrum(self, K: float) -> bool | None:
+        """The verdict from every eigenvalue refined together at DPS digits (Aberth on
+        det(zI - A(K))), where :func:`brute.robust` left a cluster of more than 40 near
+        the circle undecided (undamped two-port loops with stiff walls: four poles
+        1e-14..1e-12 outside among 72, marginal-peb#100065 of seed 1796310007).
+        None when the loop is too large for it or Aberth does not converge."""
+        import mpmath
+        A0, A1 = brute.matrices(self.L)
+        if A0.shape[0] > WHOLE_SPECTRUM_MAX:
+            return None
+        roots = brute.aberth(self.L, K, np.linalg.eigvals(A0 + K * A1), DPS, iters=400)
+        if roots is None:
+            return None
+        with mpmath.workdps(DPS):
+            top = max(abs(r) for r in roots)
+        return None if top == 1 else bool(top < 1)
 
     def rho_near_circle(self, K: float) -> bool:
         """Within :data:`MARGINAL_BAND` of the circle ("marginal" acceptable)."""
@@ -257,6 +279,8 @@ class _Referee:
             v = self.stable(float(K))
             if v is False:          # unstable at the scan's bottom: K_max = 0
                 return (prev, float(K)) if prev > 0 else (0.0, 0.0)
+            if v is None:           # undecided even at DPS digits: no truth claimed above
+                return (prev, float(K)) if prev > 0 else (0.0, float(K))
             prev = float(K)
         return prev, math.inf
 
