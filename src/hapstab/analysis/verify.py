@@ -169,6 +169,8 @@ def _root_count(al: ArbLoop, K: float) -> int | None:
         p = al.polynomial(K)
         low = next(i for i in range(p.degree() + 1) if not p[i].is_zero())
         q = acb_poly([p[i] for i in range(low, p.degree() + 1)])
+        # Arb's own radii first (cheapest), then 1e-20: a pole nearer the circle than
+        # that is left undecided (None), never guessed
         for tol in (None, 1e-20):
             try:
                 rs = q.roots(tol=tol, maxprec=4 * al.prec) if q.degree() > 0 else []

@@ -52,6 +52,7 @@ MIN_POINTS = 1024
 #: Geometric points from THETA_LOW up to the first uniform point: fast-sampled heavy
 #: loops cross at theta ~ omega T down to ~1e-9 rad.
 LOW_POINTS = 120
+#: the lowest angle of that geometric grid, three decades below the lowest crossing seen
 THETA_LOW = 1e-12
 #: Newton steps on a bracket's crossing: from the grid's linear interpolation the
 #: error is ~1e-3 relative; five steps bring it to rounding, and the ball proof's own
@@ -181,6 +182,9 @@ def _real_crossings(resp: LoopResponse, i: int, quad: bool) -> list[tuple]:
         coef = [x[0].real for x in c]
         roots: Any = np.roots(coef[::-1] if quad else coef[1::-1]) if any(coef[1:]) else []
         for r in roots:
+            # a root with an imaginary part above 1e-9 of its size is a complex pair, not a
+            # real K; a candidate only proposes: a crossing dropped here (a near-double root
+            # split by rounding) shows in the grid's counts, and the certified search takes over
             if abs(r.imag) > 1e-9 * abs(r) or not (U_LO < r.real < U_HI):
                 continue
             u = float(r.real)
@@ -279,6 +283,8 @@ def _grid_counts(resp: LoopResponse, i: int, th: np.ndarray, c: list, u: np.ndar
                            e[0][1:] + U * (e[1][1:] + U * e[2][1:])], axis=1)
     with np.errstate(all="ignore"):
         turns = np.sum(np.angle(vals[:, 1:] / vals[:, :-1]), axis=1) / math.pi
+    # a winding number is an integer: a sum of angles farther than 1e-6 turn from one
+    # means the grid missed a fast phase change there (the gap is recounted, not trusted)
     whole = np.isfinite(turns) & (np.abs(turns - np.round(turns)) <= 1e-6)
     return np.where(whole, resp.q - np.round(np.where(whole, turns, 0)).astype(int), -1)
 
