@@ -249,8 +249,11 @@ def test_copy_as_cli_reproduces_kmax(page):
 
 
 def test_four_plots_drawn_with_the_region_marker(page):
-    # the paper's HVE with n = 10 at K = 8 N/m (README's docs/explorer.png is this view)
-    open_page(page, "?delay=10&stiffness=8")
+    # the paper's HVE with n = 10 at K = 8 N/m, the network card asked about 5-15 ms, 5:15
+    # samples of jitter and 5 % loss in bursts of 3 (docs/explorer.png is this view)
+    open_page(page, "?delay=10&stiffness=8&_range=5ms%3A15ms&_jitter=5%3A15&_loss=0.05&_burst=3")
+    for channel in ("net-range", "net-jitter", "net-loss"):
+        assert network_shown(page, channel), channel
     for key in ("boundary", "region", "simulate", "passivity"):
         fig = f"#plot-{key}"
         assert page.locator(f"{fig} canvas").count() == 1, key
