@@ -118,3 +118,53 @@ def test_modules_and_functions_are_short(path):
             start = body[0].end_lineno + 1 if doc and len(body) > 1 else body[0].lineno
             code = node.end_lineno - start + 1
             assert code <= 62, f"{path.name}: {node.name} has {code} lines of code"  # ~60
+
+
+def _cli_names_used(tree: ast.AST) -> list[tuple[int, str]]:
+    """Every name a module takes from hapstab.cli: ``from hapstab.cli.x import name``,
+    ``import hapstab.cli.x as m`` / ``from hapstab.cli import x`` then ``m.name``."""
+    used, aliases = [], set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom) and (node.module or "").startswith("hapstab.cli"):
+            used += [(node.lineno, f"{node.module}.{a.name}") for a in node.names]
+            aliases |= {a.asname or a.name for a in node.names}
+        elif isinstance(node, ast.Import):
+            for a in node.names:
+                if a.name.startswith("hapstab.cli"):
+                    used.append((node.lineno, a.name))
+                    aliases.add(a.asname or a.name)
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Attribute) and ast.unparse(node.value) in aliases:
+            used.append((node.lineno, f"{ast.unparse(node.value)}.{node.attr}"))
+    return used
+
+
+def _private(dotted: str) -> bool:
+    return any(p.startswith("_") and not (p.startswith("__") and p.endswith("__"))
+               for p in dotted.split("."))
+
+
+def test_the_explorer_asks_the_cli_through_public_names_only():
+    """Issue 28: the explorer runs the CLI's commands through the CLI's public seams
+    (``cli.study.option_spellings``, the click group's table of commands), never a private
+    name of cli (one starting with ``_``): a private name may change without notice."""
+    for path in sorted((SRC / "explorer").rglob("*.py")):
+        for line, name in _cli_names_used(ast.parse(path.read_text())):
+            assert not _private(name), f"explorer/{path.name}:{line} uses {name}"
+
+
+def test_the_cli_imports_the_explorer_only_inside_a_command():
+    """No import cycle at import time: the explorer imports the CLI (it runs its
+    commands), and the CLI reaches the explorer only inside ``hapstab explore``'s body,
+    so importing any CLI module never imports the explorer."""
+    for path in sorted((SRC / "cli").rglob("*.py")):
+        tree = ast.parse(path.read_text())
+        inner = {id(n) for f in ast.walk(tree)
+                 if isinstance(f, (ast.FunctionDef, ast.AsyncFunctionDef))
+                 for n in ast.walk(f)}
+        for node in ast.walk(tree):
+            if isinstance(node, (ast.Import, ast.ImportFrom)) and id(node) not in inner:
+                mods = [node.module or ""] if isinstance(node, ast.ImportFrom) else \
+                    [a.name for a in node.names]
+                assert not any(m.startswith("hapstab.explorer") for m in mods), \
+                    f"cli/{path.name}:{node.lineno} imports the explorer at import time"

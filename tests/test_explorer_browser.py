@@ -249,8 +249,11 @@ def test_copy_as_cli_reproduces_kmax(page):
 
 
 def test_four_plots_drawn_with_the_region_marker(page):
-    # the paper's HVE with n = 10 at K = 8 N/m (README's docs/explorer.png is this view)
-    open_page(page, "?delay=10&stiffness=8")
+    # the paper's HVE with n = 10 at K = 8 N/m, the network card asked about 5-15 ms, 5:15
+    # samples of jitter and 5 % loss in bursts of 3 (docs/explorer.png is this view)
+    open_page(page, "?delay=10&stiffness=8&_range=5ms%3A15ms&_jitter=5%3A15&_loss=0.05&_burst=3")
+    for channel in ("net-range", "net-jitter", "net-loss"):
+        assert network_shown(page, channel), channel
     for key in ("boundary", "region", "simulate", "passivity"):
         fig = f"#plot-{key}"
         assert page.locator(f"{fig} canvas").count() == 1, key
@@ -295,3 +298,82 @@ def test_downloads(page, tmp_path):
         page.click('[data-png="region"]')
     dl.value.save_as(tmp_path / "r.png")
     assert (tmp_path / "r.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+# ------------------------------------------------------------- the network card
+def network_shown(pg, channel: str) -> dict:
+    """The numbers of one of the card's answers (full precision, from ``data-value``)."""
+    text = pg.get_attribute(f"#{channel}-value", "data-value")
+    assert text, f"no answer on {channel}: {pg.inner_text(f'#{channel}')}"
+    return json.loads(text)
+
+
+def test_network_card_answers_are_the_librarys(page):
+    """Issue 30 item 5: the card's three answers for the loop on the page (the paper's HVE,
+    n = 2 samples of delay, B = 0.05 N·s/m) equal the library's own functions at the same
+    point, each says its model with "exact" / "sufficient", and compares with the
+    constant-delay K_max the page shows; the network requests wait for the verdict."""
+    import hapstab as h
+    from hapstab.analysis.network import delay_range_critical_stiffness, loss_critical_stiffness
+
+    order: list[str] = []
+    page.on("request", lambda r: order.append("ask " + r.url.rsplit("/", 1)[-1])
+            if "/api/v1/" in r.url else None)
+    page.on("requestfinished", lambda r: order.append("got " + r.url.rsplit("/", 1)[-1])
+            if "/api/v1/" in r.url else None)
+    open_page(page, "?delay=2&virtual-damping=0.05&_loss=0.05")
+    # the loss answer was asked after the verdict and K_max had come back
+    assert order.index("got check") < order.index("ask kmax", order.index("got kmax"))
+    set_field(page, "_range", "1ms:3ms")
+    set_field(page, "_jitter", "1:3")
+    set_field(page, "_burst", "2")
+    loop = h.paper_hve(1e-3, delay_samples=2, damping=0.05)
+    rng = delay_range_critical_stiffness(loop, 1e-3, 3e-3)
+    assert network_shown(page, "net-range") == {"kmax": rng.critical_stiffness,
+                                                "worst": rng.worst_delay_samples}
+    jit = h.jitter(loop, (1, 3))
+    shown = network_shown(page, "net-jitter")
+    assert shown["stable"] == pytest.approx(jit.stable_up_to, rel=1e-12)
+    assert shown["unstable"] == pytest.approx(jit.unstable_from, rel=1e-12)
+    assert "destabilising pattern " + " ".join(str(s[0]) for s in jit.pattern) in \
+        page.inner_text("#net-jitter-detail")
+    loss = loss_critical_stiffness(loop, 0.05, burst=2.0)
+    assert network_shown(page, "net-loss")["kmax"] == pytest.approx(loss.critical_stiffness,
+                                                                    rel=1e-12)
+    # each with its model, exact or sufficient, and against the constant-delay K_max
+    assert "exact" in page.inner_text("#net-range-model")
+    assert "sufficient" in page.inner_text("#net-jitter-model") and \
+        "exact" in page.inner_text("#net-jitter-model")
+    assert "exact" in page.inner_text("#net-loss-model") and \
+        "bursts of mean 2" in page.inner_text("#net-loss-model")
+    km = kmax_shown(page)
+    assert km == h.critical_stiffness(loop).critical_stiffness
+    ratio = float(page.inner_text("#net-range-cmp").split(" \u00d7")[0])
+    assert ratio == pytest.approx(rng.critical_stiffness / km, rel=1e-2)   # shown to 3 digits
+    assert "kind=hve" in page.url and "_jitter=1%3A3" in page.url
+
+
+def test_network_card_refusals_and_superseded_requests(page):
+    """A value the API refuses is its one line on the card (the loop's fields stay
+    clean); a change of K does not ask the network questions again; typing supersedes."""
+    open_page(page, "?delay=2&_jitter=0:1")
+    first = network_shown(page, "net-jitter")
+    set_field(page, "_loss", "2")
+    assert page.inner_text("#net-loss-msg") == cli_error("kmax", "hve", "-n", "2", "--loss", "2")
+    assert page.get_attribute("#net-loss-value", "data-value") == ""
+    assert not page.locator("#form .field.invalid").count()
+    asked: list[str] = []
+    page.on("request", lambda r: asked.append(r.url.rsplit("/", 1)[-1]) if "/api/v1/" in r.url
+            else None)
+    set_field(page, "stiffness", "20")
+    assert "jitter" not in asked and "check" in asked
+    assert network_shown(page, "net-jitter") == first
+    page.locator("#f-_jitter").select_text()
+    page.locator("#f-_jitter").press_sequentially("2:4", delay=0)
+    settle(page)
+    ref = cli_json("jitter", "hve", "--delay", "2:4", "--json")
+    assert network_shown(page, "net-jitter")["stable"] == pytest.approx(
+        ref["stable_up_to_N_per_m"], rel=1e-12)
+    set_field(page, "_jitter", "")
+    assert page.get_attribute("#net-jitter-value", "data-value") == ""
+    assert "give the range" in page.inner_text("#net-jitter-detail")

@@ -22,7 +22,7 @@ else:                                    # pragma: no cover - Python 3.10
 
 ROOT = Path(__file__).resolve().parent.parent
 STATIC = importlib.resources.files("hapstab.explorer") / "static"
-PAGE = ("index.html", "app.js", "plots.js", "window.js", "app.css")
+PAGE = ("index.html", "app.js", "plots.js", "window.js", "network.js", "app.css")
 VENDOR = ("uPlot.iife.min.js", "uPlot.min.css", "uPlot.LICENSE", "README.md")
 
 

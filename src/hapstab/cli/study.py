@@ -46,7 +46,7 @@ if sys.version_info >= (3, 11):
 else:                                    # pragma: no cover - Python 3.10
     import tomli as tomllib  # type: ignore[import-not-found,unused-ignore]
 
-__all__ = ["Study", "load_study", "study_defaults", "BASE", "OUTPUT_KEYS"]
+__all__ = ["Study", "load_study", "study_defaults", "option_spellings", "BASE", "OUTPUT_KEYS"]
 
 #: The variant that is the [loop] table itself.
 BASE = "base"
@@ -286,7 +286,7 @@ def study_defaults(study: Study, cmd: click.Command, command: str, variant: str,
         raise StudyError(f"--variant = {variant!r}: {study.path} has "
                          f"{', '.join(map(repr, study.variants))}")
     params = {p.name: p for p in cmd.params if isinstance(p, click.Option) and p.name}
-    names = _option_names(params)
+    names = option_spellings(params)
     out: dict[str, Any] = {}
     by_variant: set[str] = set()
     layers = [("loop", study.loop), ("variant", study.variants[variant]),
@@ -340,11 +340,25 @@ def _once(study: Study, table: str, key: str, name: str, seen: dict[str, str]) -
     seen[name] = key
 
 
-def _option_names(params: dict[str, click.Option]) -> dict[str, str]:
-    """Every spelling a study may use for an option -> the parameter's name: the
-    parameter's name, its long options without dashes (``delay_s``, ``K``) and its short
-    ones where no long option spells the same (``K`` for simulate's ``-K``; region's
-    ``--B`` is the window, not ``-B``)."""
+def option_spellings(params: dict[str, click.Option]) -> dict[str, str]:
+    """Every spelling a study (or an explorer request) may use for an option -> the
+    parameter's name.
+
+    The parameter's name, its long options without dashes (``delay_s``, ``K``) and its
+    short ones where no long option spells the same (``K`` for simulate's ``-K``; region's
+    ``--B`` is the window, not ``-B``). Where the answer goes (``--json``, ``--csv``,
+    ``--plot``) has no spelling.
+
+    Parameters
+    ----------
+    params : dict of str to click.Option
+        A command's options by parameter name.
+
+    Returns
+    -------
+    dict of str to str
+        Spelling (with ``_`` for ``-``) -> parameter name.
+    """
     out: dict[str, str] = {}
     short: dict[str, str] = {}
     for name, p in params.items():

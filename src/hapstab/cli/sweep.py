@@ -52,8 +52,8 @@ from hapstab.cli.study import (
     OUTPUT_KEYS,
     Study,
     StudyError,
-    _option_names,
     load_study,
+    option_spellings,
     study_defaults,
 )
 from hapstab.results import dumps
@@ -265,7 +265,7 @@ def _axes(study: Study, axes: Any, params: dict[str, click.Option], random: bool
     if not isinstance(axes, dict) or not axes:
         raise StudyError(f"{study.where('axes', 'sweep')}sweep.axes: give at least one axis "
                          "([sweep.axes] with a loop option = a list or \"lo:hi:count\")")
-    names = _option_names(params)
+    names = option_spellings(params)
     out = []
     for key, spec in axes.items():
         where = study.where(key, "sweep.axes")

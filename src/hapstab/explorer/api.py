@@ -30,7 +30,8 @@ import click
 from hapstab.errors import HapstabError
 
 __all__ = ["ApiError", "COMMANDS", "KINDS", "MAX_BODY_BYTES", "BUDGET", "parse_body",
-           "check_request", "run_command", "schema", "option_json"]
+           "check_request", "run_command", "schema", "option_json", "command_kinds",
+           "loop_command"]
 
 #: Loop kinds the explorer builds.
 KINDS = ("hve", "peb")
@@ -108,17 +109,41 @@ def loop_command(command: str, kind: Any) -> click.Command:
     ------
     ApiError
     """
+    takes = command_kinds(command)
+    if kind not in takes:
+        raise ApiError(422, f"kind = {kind!r:.40}: {command} in the explorer takes "
+                            f"{' or '.join(takes)} loops", "kind")
+    group = _root().commands[command]
+    assert isinstance(group, click.Group)
+    return group.commands[kind]
+
+
+def command_kinds(command: str) -> tuple[str, ...]:
+    """The loop kinds of :data:`KINDS` that ``hapstab COMMAND`` takes, read from the CLI's
+    own command table (the kinds are the subcommands of its click group: ``twoport`` has
+    ``peb`` only); :class:`ApiError` 404 for a command the explorer does not run, 422 for
+    one it refuses (:data:`REFUSED`).
+
+    Parameters
+    ----------
+    command : str
+        The command's name (``kmax``).
+
+    Returns
+    -------
+    tuple of str
+
+    Raises
+    ------
+    ApiError
+    """
     if command in REFUSED:
         raise ApiError(422, f"{command}: {REFUSED[command]}", None)
     if command not in COMMANDS:
         raise ApiError(404, f"unknown command {command[:60]!r}; allowed: {', '.join(COMMANDS)}")
     group = _root().commands[command]
     assert isinstance(group, click.Group)
-    takes = [k for k in KINDS if k in group.commands]
-    if kind not in takes:
-        raise ApiError(422, f"kind = {kind!r:.40}: {command} in the explorer takes "
-                            f"{' or '.join(takes)} loops", "kind")
-    return group.commands[kind]
+    return tuple(k for k in KINDS if k in group.commands)
 
 
 def _refuse_constant(name: str) -> Any:
@@ -170,10 +195,10 @@ def _json_type(value: Any) -> str:
 def option_names(cmd: click.Command) -> dict[str, click.Option]:
     """Every spelling a request may use (long names with ``-`` or ``_``, the parameter's
     name, short names no long name spells) -> the option."""
-    from hapstab.cli.study import _option_names
+    from hapstab.cli.study import option_spellings
 
     params = {p.name: p for p in cmd.params if isinstance(p, click.Option) and p.name}
-    return {k: params[v] for k, v in _option_names(params).items()}
+    return {k: params[v] for k, v in option_spellings(params).items()}
 
 
 def long_name(param: click.Parameter) -> str:

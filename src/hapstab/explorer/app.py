@@ -40,6 +40,7 @@ from hapstab.explorer.api import (
     MAX_BODY_BYTES,
     ApiError,
     check_request,
+    command_kinds,
     loop_command,
     option_args,
     parse_body,
@@ -291,7 +292,7 @@ def create_app(study_path: str | None = None, host: str | None = None) -> Starle
         name = request.path_params["command"]
         if name == "schema":
             raise ApiError(405, "method POST not allowed on /api/v1/schema (GET it)")
-        loop_command(name, "hve" if name not in ("twoport", "transparency") else "peb")
+        command_kinds(name)     # 404 / 422 for a command it does not run, before the body
         argv = check_request(name, await _read_body(request))
         return await compute(request, "command", argv)
 

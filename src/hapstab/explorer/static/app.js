@@ -15,7 +15,8 @@
   const CURVE_POINTS = 400;      // the passivity margin curve
   const REGION_RESOLUTION = 48;  // K-B rows of B (each row's K intervals are exact)
   const SWEEP = 25;              // periods of the K_max-against-T plot, T/4 ... 4T
-  const PAGE_FIELDS = ["_kwin", "_bwin"];
+  const NET = HapstabNetwork;                             // the network card (network.js)
+  const PAGE_FIELDS = ["_kwin", "_bwin", ...NET.FIELDS];
   const MAIN = {
     hve: [["Device", ["mass", "damping"]], ["Operator", ["operator"]],
           ["Sampling and delay", ["period", "delay"]], ["Controller", ["stiffness", "virtual-damping"]]],
@@ -46,7 +47,7 @@
   const state = { kind: "hve", values: {} };   // values: name -> text, only those changed
   const shown = {};                            // command -> last good answer shown
   const ctrls = {};
-  let SEQ = 0, timer = null;
+  let SEQ = 0, timer = null, NETSEQ = 0;
 
   // ------------------------------------------------------------------ schema helpers
   const cmds = () => schema.kinds[state.kind].commands;
@@ -119,12 +120,12 @@
 
   // the loop's options the user set that COMMAND does not take (boundary peb has no
   // --delay-forward): its answer would be another loop's, so the page does not ask for it
-  function unavailable(command) {
+  function unavailable(command, ignore = []) {
     if (!cmds()[command]) return `not available for this model: no "hapstab ${command} ${state.kind}"`;
     const allowed = new Set(optsOf(command).map((o) => o.name));
     const loop = new Set(loopOptions(state.kind).map((o) => o.name));
     const missing = Object.keys(state.values).filter((n) => loop.has(n) && !allowed.has(n) &&
-      state.values[n] !== "" && !(VARIED[command] || []).includes(n));
+      state.values[n] !== "" && !(VARIED[command] || []).includes(n) && !ignore.includes(n));
     if (!missing.length) return null;
     return `not available for this model: hapstab ${command} ${state.kind} takes no ` +
       missing.map((n) => "--" + n).join(", ");
@@ -188,6 +189,7 @@
   }
 
   function fillForm() {
+    for (const f of NET.FIELDS) $("#f-" + f).value = state.values[f] || "";
     for (const div of document.querySelectorAll("#form .field")) {
       const name = div.dataset.name;
       const input = $("#f-" + name);
@@ -213,7 +215,7 @@
     const dflt = PAGE_FIELDS.includes(name) ? "" : defaultText(name);
     if (text === dflt || (input.type === "checkbox" && text === "false")) delete state.values[name];
     else state.values[name] = text;
-    schedule();
+    if (NET.FIELDS.includes(name)) scheduleNet(); else schedule();
   }
 
   // period <-> rate, samples <-> seconds: converted with the last answer's loop
@@ -263,8 +265,10 @@
   }
 
   // ------------------------------------------------------------------ requests
+  let updating = false;                     // a change is waiting for, or in, update()
   function schedule() {
     clearTimeout(timer);
+    updating = true;
     document.body.dataset.pending = "1";     // a test waits for this to go
     timer = setTimeout(update, DEBOUNCE_MS);
   }
@@ -277,7 +281,8 @@
     else if (s.className === "busy") { s.className = "idle"; s.textContent = "up to date"; }
   }
 
-  async function call(channel, command, options, seq) {
+  // live(): whether the answer is still wanted (default: no later change of the page)
+  async function call(channel, command, options, seq, live = () => seq === SEQ) {
     if (ctrls[channel]) ctrls[channel].abort();
     const ac = new AbortController();
     ctrls[channel] = ac;
@@ -292,11 +297,11 @@
       });
       let body = null;
       try { body = await r.json(); } catch (e) { body = { error: `HTTP ${r.status}: not JSON` }; }
-      if (seq !== SEQ || r.status === 409) return { superseded: true };
+      if (!live() || r.status === 409) return { superseded: true };
       if (!r.ok) return { error: body.error || `HTTP ${r.status}`, parameter: body.parameter, status: r.status };
       return { ok: body };
     } catch (e) {
-      if (e.name === "AbortError" || seq !== SEQ) return { superseded: true };
+      if (e.name === "AbortError" || !live()) return { superseded: true };
       return { error: `the explorer's server does not answer (${e.message})`, parameter: null };
     } finally {
       busy(-1);
@@ -362,6 +367,7 @@
   async function update() {
     const seq = ++SEQ;
     writeUrl();
+    netAbortChanged();        // a network question that changed frees its worker at once
     const errors = [], notes = [];
     const run = async (channel, command, extra, draw, plot) => {
       const na = unavailable(command);
@@ -421,8 +427,11 @@
     if (model.length) { s.className = "error"; s.textContent = "input refused"; }
     else if (own.length) { s.className = "error"; s.textContent = "refused: " + [...new Set(own.map((e) => e.command))].join(", "); }
     else if (!inflight) { s.className = "idle"; s.textContent = notes.length ? "up to date (some plots not available)" : "up to date"; }
+    modelRefused = model.length > 0;
+    network();                // after every main answer: it never holds back the verdict
     document.body.dataset.seq = String(seq);
     document.body.dataset.settled = model.length ? "error" : own.length ? "refused" : "ok";
+    updating = false;
     delete document.body.dataset.pending;
   }
 
@@ -519,6 +528,79 @@
     const p = $("#passivity-detail");
     p.textContent = `at K: ${a.verdict}, margin ${fmt(a.margin, 4)} N·s/m at ${fmt(a.worst_frequency_hz, 4)} Hz`;
     p.title = a.reason;
+  }
+
+  // ------------------------------------------------------------------ the network card
+  // Each of its three questions is asked once per distinct request: a change elsewhere
+  // (K, the plots' window) that leaves it the same keeps its answer, or its flight.
+  const netKey = {};            // channel -> the request its answer or flight is for
+  let modelRefused = false, netTimer = null;
+
+  function netRequests() {
+    const out = {};
+    for (const [ch, r] of Object.entries(NET.requests(state.values))) {
+      if (r.hint) { out[ch] = r; continue; }
+      const na = unavailable(r.command, r.drop);
+      if (na) { out[ch] = { error: na }; continue; }
+      const options = optionsFor(r.command, {});
+      for (const d of r.drop) delete options[d];
+      out[ch] = { command: r.command, options: Object.assign(options, r.extra),
+                  key: JSON.stringify([state.kind, r.command, options]) };
+    }
+    return out;
+  }
+  // before the main answers are asked: a network request whose question changed is
+  // aborted (the server ends its worker), so that it never holds a worker they wait for
+  function netAbortChanged() {
+    const reqs = netRequests();
+    for (const ch of NET.CHANNELS) {
+      if (ctrls[ch] && netKey[ch] !== reqs[ch].key) { netKey[ch] = null; ctrls[ch].abort(); }
+    }
+  }
+  function netShow(ch, a, hint, error) {
+    const el = $("#" + ch);
+    el.classList.remove("stale");
+    el.classList.toggle("hinted", !a && !error);
+    const r = a ? NET.read[ch](a, shown.kmax ? shown.kmax.critical_stiffness : null) : null;
+    const v = $(`#${ch}-value`);
+    v.textContent = r ? r.big : "–";
+    v.dataset.value = r ? JSON.stringify(r.values) : "";
+    const lines = { detail: r ? r.detail : hint || "", model: r ? r.model : "", cmp: r ? r.cmp : "",
+                    msg: error || "" };
+    for (const [k, text] of Object.entries(lines)) { const e = $(`#${ch}-${k}`); e.textContent = text; e.title = text; }
+    if (a) shown[ch] = a; else delete shown[ch];
+  }
+  function network() {
+    const reqs = netRequests();
+    for (const ch of NET.CHANNELS) {
+      const r = reqs[ch];
+      if (modelRefused) { stale(ch, true); continue; }     // the loop's fields say why
+      if (!r.key) {
+        netKey[ch] = null;
+        if (ctrls[ch]) ctrls[ch].abort();
+        netShow(ch, null, r.hint, r.error);
+        continue;
+      }
+      if (netKey[ch] === r.key) {                         // the same question
+        if (!ctrls[ch] && shown[ch]) netShow(ch, shown[ch]);   // (the page's K_max may be new)
+        if (ctrls[ch] || shown[ch] || $(`#${ch}-msg`).textContent) continue;
+      }
+      const key = netKey[ch] = r.key;
+      call(ch, r.command, r.options, ++NETSEQ, () => netKey[ch] === key).then((res) => {
+        if (res.superseded) return;
+        if (res.error) netShow(ch, null, null, res.error); else netShow(ch, res.ok);
+      });
+    }
+  }
+  // a change of the card's own inputs asks the card only (the loop's answers stand)
+  function scheduleNet() {
+    if (updating) return;            // update() asks the card at its end, with these values
+    clearTimeout(netTimer);
+    document.body.dataset.pending = "1";
+    netTimer = setTimeout(() => {
+      writeUrl();
+      if (!updating) { network(); delete document.body.dataset.pending; }
+    }, DEBOUNCE_MS);
   }
 
   // ------------------------------------------------------------------ downloads, code
