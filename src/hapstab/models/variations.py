@@ -11,10 +11,10 @@ undelayed.
 from __future__ import annotations
 
 import dataclasses
-from typing import Any
+from typing import Any, cast
 
 from hapstab.errors import AnalysisError, check_real
-from hapstab.models.controllers import Controller, FilteredSpringDamper, SpringDamper
+from hapstab.models.controllers import Controller
 from hapstab.models.delays import split_delay
 from hapstab.models.loops import HapticLoop
 
@@ -48,10 +48,11 @@ def extra_delay(loop: Any, samples: float) -> Any:
 
 def _more_damping(c: Controller, damping: float, name: str) -> Controller:
     """``c`` with ``damping`` added to its virtual damping B."""
-    if not isinstance(c, (SpringDamper, FilteredSpringDamper)):
+    gains = c.gains()
+    if gains is None:
         raise AnalysisError(f"{name}: a virtual damping B to vary needs a SpringDamper or "
                             f"FilteredSpringDamper; got {type(c).__name__}")
-    return dataclasses.replace(c, damping=c.damping + damping)
+    return dataclasses.replace(cast(Any, c), damping=gains[1] + damping)
 
 
 def extra_damping(loop: Any, damping: float) -> Any:
