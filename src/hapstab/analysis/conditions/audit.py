@@ -243,7 +243,7 @@ def audit(loop: HapticLoop | TeleoperationLoop, *, coulomb_friction_N: float | N
             nonlinear.critical_stiffness, "passivity", nonlinear.reason)
     rows.append(AuditRow("exact", "exact sampled-data stability", float(exact), "exact",
                          _verdict(exact_res.stable_intervals, exact), None, exact_res.reason))
-    name = "controller" if loop.kind == "hve" else "master_controller"
+    name = loop.controller_names[0]
     B = spring_damper(loop.controllers[0], name).damping
     return AuditResult(kind, loop.period, loop.delay_samples, B, tuple(rows), float(exact),
                        float(passive))
