@@ -58,7 +58,7 @@ def check_loop(loop: Any, delta: float, fc: float, quantizer: str, harmonics: An
     if loop.kind != "hve":
         raise AnalysisError(f"limit cycles: derived for the haptic loop (hve), not a {loop.kind} "
                             "loop")
-    if not isinstance(loop.controller, SpringDamper):
+    if not loop.controller.admits("eq23"):
         raise AnalysisError("limit cycles: derived for a spring-damper virtual environment "
                             "(SpringDamper), not a general H(z)")
     if loop.fractional_delay:

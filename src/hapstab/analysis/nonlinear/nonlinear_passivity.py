@@ -55,7 +55,6 @@ from typing import Any
 
 from hapstab.analysis.conditions.passivity import critical_stiffness_passivity, sampled_passivity
 from hapstab.errors import AnalysisError, check_real
-from hapstab.models.controllers import SpringDamper
 from hapstab.models.loops import HapticLoop, require_loop
 from hapstab.results import CriticalStiffnessResult, Result, jsonable
 
@@ -114,7 +113,7 @@ def _haptic(loop: Any, what: str) -> HapticLoop:
     if loop.kind != "hve":
         raise AnalysisError(f"{what}: derived for the haptic loop (hve: one device and a virtual "
                             f"environment), not a {loop.kind} loop")
-    if not isinstance(loop.controller, SpringDamper):
+    if not loop.controller.admits("eq23"):
         raise AnalysisError(f"{what}: derived for a spring-damper virtual environment "
                             "(SpringDamper), not a general H(z)")
     return loop
