@@ -256,7 +256,7 @@ def _abbott_okamura(loop: Any, coulomb_friction_N: float | None,
     fc = getattr(getattr(loop, "device", None), "coulomb_friction", 0.0)
     if coulomb_friction_N is None and resolution_m is None and not fc:
         return None
-    if loop.kind != "hve":
+    if len(loop.port_names) != 1:                # one device: the haptic loop
         raise AnalysisError(f"coulomb_friction_N / resolution_m: the Abbott-Okamura condition is "
                             f"derived for the haptic loop (hve), not a {loop.kind} loop")
     return abbott_okamura(loop, coulomb_friction_N=coulomb_friction_N, resolution_m=resolution_m)

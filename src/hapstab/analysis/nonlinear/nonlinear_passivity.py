@@ -110,7 +110,7 @@ def resolution_of(resolution_m: Any) -> float:
 
 def _haptic(loop: Any, what: str) -> HapticLoop:
     require_loop(loop)
-    if loop.kind != "hve":
+    if len(loop.port_names) != 1:                # one device: the haptic loop
         raise AnalysisError(f"{what}: derived for the haptic loop (hve: one device and a virtual "
                             f"environment), not a {loop.kind} loop")
     if not loop.controller.admits("eq23"):
