@@ -128,6 +128,21 @@ def test_loop_kinds_are_told_apart_only_in_models_and_the_builder():
                 "(models/protocol.py: gains, affine_parts, response, realisation, admits)")
 
 
+def test_the_library_asks_a_loop_rather_than_comparing_its_kind():
+    """Below the command line (whose commands are named by kind), a loop's kind is a key
+    into a table (``PAPER[loop.kind]``), never compared with a literal: the loop answers
+    (``port_names``, ``controller_names``, its controllers' ``admits``)."""
+    for path in MODULES:
+        rel = str(path.relative_to(SRC))
+        if rel.startswith(("models/", "cli/", "explorer/")):
+            continue
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Compare) and isinstance(node.left, ast.Attribute) \
+                    and node.left.attr == "kind" and getattr(node.left.value, "id", "") == "loop":
+                literal = [c for c in node.comparators if isinstance(c, (ast.Constant, ast.Tuple))]
+                assert not literal, f"{rel}:{node.lineno} compares loop.kind with a literal"
+
+
 def test_the_class_check_finder_sees_a_check(tmp_path):
     tree = ast.parse("if isinstance(c, (SpringDamper, m.FilteredSpringDamper)): pass\n"
                      "if type(loop).__name__ == 'HapticLoop': pass\n"
