@@ -69,3 +69,51 @@ def draw(cases: Iterable[Any], reduced: int, ids: Any = None) -> list[Any]:
 def size(reduced: int, full: int) -> int:
     """A draw's size inside one test: ``full`` under ``HAPSTAB_CAMPAIGN=full``, else ``reduced``."""
     return full if FULL else reduced
+
+
+def costly(*values: Any, id: str | None = None) -> Any:
+    """One case of a grid that the default lane leaves to ``make test-campaign``, where a
+    cheaper sibling of it asks the same question (``peb`` at n = 30 beside n = 120);
+    unmarked under ``HAPSTAB_CAMPAIGN=full``.
+
+    Parameters
+    ----------
+    *values
+        The case's parameter values.
+    id : str, optional
+        Its test id (the one it had in the grid).
+
+    Returns
+    -------
+    pytest.param
+    """
+    return pytest.param(*values, marks=() if FULL else (pytest.mark.campaign,), id=id)
+
+
+def part(cases: Sequence[Any], reduced: int, rest: bool) -> list[Any]:
+    """One lane's part of a draw that lives inside one test: the ``reduced`` evenly spaced
+    cases (`reduced_indices`), or with ``rest`` the others. Parametrize the test with
+    :data:`PARTS`: the default lane checks the reduced part, ``make test-campaign`` the rest,
+    so together they check every case once (under ``HAPSTAB_CAMPAIGN=full`` both parts run
+    in the default lane).
+
+    Parameters
+    ----------
+    cases : sequence
+        The whole draw, built the same way in both lanes.
+    reduced : int
+        How many of them the default lane checks.
+    rest : bool
+        The other cases instead.
+
+    Returns
+    -------
+    list
+    """
+    keep = set(reduced_indices(len(cases), reduced))
+    return [c for i, c in enumerate(cases) if (i in keep) != rest]
+
+
+#: ``@pytest.mark.parametrize("rest", PARTS)``: the reduced part of a draw in the default
+#: lane, the rest marked ``campaign`` (see `part`)
+PARTS = draw([False, True], 1, ids=lambda rest: "rest" if rest else "reduced")

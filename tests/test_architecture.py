@@ -94,16 +94,63 @@ def test_no_registry_of_strings():
         assert "importlib" not in path.read_text(), path
 
 
+#: The loop and controller classes: outside models/ and the engine's builder, code asks
+#: them (models/protocol.py) instead of testing their class.
+LOOP_CLASSES = {"HapticLoop", "TeleoperationLoop", "FourChannelLoop"}
+CONTROLLER_CLASSES = {"SpringDamper", "FilteredSpringDamper", "AffineController",
+                      "DiscreteController", "Controller", "StiffnessController"}
+
+
+def _class_checks(tree: ast.AST):
+    """(line, names) of each isinstance / issubclass call and each comparison of a
+    ``type(x).__name__`` with a string, with the class names it tests."""
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Call) and len(node.args) == 2 and \
+                getattr(node.func, "id", "") in ("isinstance", "issubclass"):
+            yield node.lineno, {getattr(n, "id", getattr(n, "attr", None))
+                                for n in ast.walk(node.args[1])}
+        if isinstance(node, ast.Compare) and any(
+                isinstance(n, ast.Attribute) and n.attr == "__name__"
+                for n in ast.walk(node.left)):
+            yield node.lineno, {c.value for c in node.comparators
+                                if isinstance(c, ast.Constant)}
+
+
 def test_loop_kinds_are_told_apart_only_in_models_and_the_builder():
-    kinds = {"HapticLoop", "TeleoperationLoop"}
     for path in MODULES:
         rel = str(path.relative_to(SRC))
         if rel.startswith("models/") or rel == "engine/structure.py":
             continue
+        for line, names in _class_checks(ast.parse(path.read_text())):
+            assert not names & LOOP_CLASSES, f"{rel}:{line} isinstance on a loop kind"
+            assert not names & CONTROLLER_CLASSES, (
+                f"{rel}:{line} a class check on a controller: ask it instead "
+                "(models/protocol.py: gains, affine_parts, response, realisation, admits)")
+
+
+def test_the_library_asks_a_loop_rather_than_comparing_its_kind():
+    """Below the command line (whose commands are named by kind), a loop's kind is a key
+    into a table (``PAPER[loop.kind]``), never compared with a literal: the loop answers
+    (``port_names``, ``controller_names``, its controllers' ``admits``)."""
+    for path in MODULES:
+        rel = str(path.relative_to(SRC))
+        if rel.startswith(("models/", "cli/", "explorer/")):
+            continue
         for node in ast.walk(ast.parse(path.read_text())):
-            if isinstance(node, ast.Call) and getattr(node.func, "id", "") == "isinstance":
-                names = {n.id for n in ast.walk(node.args[1]) if isinstance(n, ast.Name)}
-                assert not names & kinds, f"{rel}:{node.lineno} isinstance on a loop kind"
+            if isinstance(node, ast.Compare) and isinstance(node.left, ast.Attribute) \
+                    and node.left.attr == "kind" and getattr(node.left.value, "id", "") == "loop":
+                literal = [c for c in node.comparators if isinstance(c, (ast.Constant, ast.Tuple))]
+                assert not literal, f"{rel}:{node.lineno} compares loop.kind with a literal"
+
+
+def test_the_class_check_finder_sees_a_check(tmp_path):
+    tree = ast.parse("if isinstance(c, (SpringDamper, m.FilteredSpringDamper)): pass\n"
+                     "if type(loop).__name__ == 'HapticLoop': pass\n"
+                     "if isinstance(x, float): pass\n")
+    found = dict(_class_checks(tree))
+    assert found[1] & CONTROLLER_CLASSES == {"SpringDamper", "FilteredSpringDamper"}
+    assert found[2] & LOOP_CLASSES == {"HapticLoop"}
+    assert not found[3] & (LOOP_CLASSES | CONTROLLER_CLASSES)
 
 
 @pytest.mark.parametrize("path", MODULES, ids=lambda p: str(p.relative_to(SRC)))

@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 
 import hapstab as h
 from hapstab.analysis.exact import many
@@ -22,6 +23,7 @@ from hapstab.errors import HapstabError
 from hapstab.models.controllers import AffineController, FilteredSpringDamper
 from hapstab.models.fourchannel import FourChannelLoop
 from hapstab.models.parts import Impedance
+from lanes import PARTS, part
 
 
 def _single(loop):
@@ -89,7 +91,8 @@ def test_hve_options_differing_in_one_structural_thing_equal_the_single_core():
     _check(loops)
 
 
-def test_teleoperators_differing_in_one_structural_thing_equal_the_single_core():
+@pytest.mark.parametrize("rest", PARTS)     # 27 of the 81 loops by default, the rest -m campaign
+def test_teleoperators_differing_in_one_structural_thing_equal_the_single_core(rest):
     rng = np.random.default_rng(16_22)
 
     def dev():
@@ -113,10 +116,11 @@ def test_teleoperators_differing_in_one_structural_thing_equal_the_single_core()
     # master stiffness 0 with the slave's not (refused), next to accepted neighbours
     loops.append(h.TeleoperationLoop(dev(), dev(), h.SpringDamper(0, 0.01), h.SpringDamper(1, 0.01),
                                      None, None, 1e-3, 2))
-    _check(loops)
+    _check(part(loops, 27, rest))
 
 
-def test_four_channel_gains_and_dampers_equal_the_single_core():
+@pytest.mark.parametrize("rest", PARTS)     # 10 of the 30 loops by default, the rest -m campaign
+def test_four_channel_gains_and_dampers_equal_the_single_core(rest):
     rng = np.random.default_rng(16_23)
     loops = []
     for gains in ((0.0, 0.0, 0.0, 0.0), (0.5, 0.0, 0.0, 0.0), (0.0, 0.5, 0.0, 0.0),
@@ -131,7 +135,7 @@ def test_four_channel_gains_and_dampers_equal_the_single_core():
                     "spring:30", "msd:0.05,0.01,300", 1e-3, int(rng.integers(1, 4)),
                     int(rng.integers(1, 4)), master_from_slave=c4, force_to_master=f2m,
                     force_to_slave=f2s, slave_force_feedback=sff, master_force_feedback=mff))
-    _check(loops)
+    _check(part(loops, 10, rest))
 
 
 def test_structure_keys_separate_what_the_core_treats_as_structure():

@@ -297,7 +297,9 @@ def cli() -> None:
 
 
 def _register() -> None:
-    """Add every command to :data:`cli` (one place, in the order of ``--help``)."""
+    """Add every command to :data:`cli` (one place): the analyses' commands as the one table
+    of analyses lists them (:data:`hapstab.analysis.table.TABLE`), then the others."""
+    from hapstab.analysis.table import commands
     from hapstab.cli import (
         analysis,
         devices,
@@ -313,13 +315,14 @@ def _register() -> None:
         sweep,
     )
 
-    for cmd in (analysis.kmax, analysis.check, analysis.boundary_cmd, analysis.demo,
-                analysis.verify_cmd, jitter.jitter_cmd,
-                paper.passivity_cmd, paper.twoport_cmd, paper.transparency_cmd,
-                paper.audit_cmd, nonlinear.limit_cycle_cmd, regions.region,
-                regions.best, robust.robust, devices.zwidth_cmd, simulation.simulate_cmd,
-                simulation.reproduce_cmd, run.run_cmd, explore.explore_cmd,
-                sweep.sweep_cmd, identify.identify_cmd):
+    modules = (analysis, devices, explore, identify, jitter, nonlinear, paper, regions, robust,
+               run, simulation, sweep)
+    found = {c.name: c for m in modules for c in vars(m).values()
+             if isinstance(c, click.Command)}
+    # the analyses' commands, by the one table of analyses; then the others
+    others = (analysis.demo, analysis.verify_cmd, simulation.reproduce_cmd, run.run_cmd,
+              explore.explore_cmd, sweep.sweep_cmd)
+    for cmd in (*(found[name] for name in commands()), *others):
         cli.add_command(cmd)
         _describe(cmd)
 

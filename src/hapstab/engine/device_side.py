@@ -32,7 +32,6 @@ import numpy as np
 
 from hapstab.engine.structure import Channel, channel_ratios, structure_of
 from hapstab.errors import AnalysisError
-from hapstab.models.controllers import AffineController, FilteredSpringDamper, SpringDamper
 from hapstab.models.loops import HapticLoop, TeleoperationLoop, split_delay
 
 __all__ = ["DeviceSide", "device_side", "PARTS"]
@@ -213,8 +212,8 @@ class DeviceSide:
                                 "controllers with the master's stiffness > 0 if the slave's is)")
         out = np.zeros((th.size, self.ports, self.ports), complex)
         for c, ch in enumerate(self.channels):
-            h = _response(ch.controller, th, self.period_s, part,
-                          self.ratios[c] if self.ratios is not None else 1.0)
+            h = ch.controller.response(th, self.period_s, part,
+                                       self.ratios[c] if self.ratios is not None else 1.0)
             for j, s, d in ch.terms:
                 out[:, ch.port, j] += s * np.exp(-1j * int(d) * th) * h
         return out
@@ -239,29 +238,6 @@ class DeviceSide:
                 zn = np.concatenate([[1.0], np.zeros(int(d))])  # z^-n: z^n into the denominator
                 nums[i][j], dens[i][j] = s * hn, np.polymul(hd, zn)
         return nums, dens
-
-
-def _response(c: object, theta: np.ndarray, T: float, part: str | None, ratio: float
-              ) -> np.ndarray:
-    """H(e^{j theta}) of one controller, or its K-part (times ``ratio``) or B-part.
-    A spring-damper's ``1 - e^{-j theta}`` is ``2j sin(theta/2) e^{-j theta/2}``:
-    no cancellation as theta -> 0."""
-    z = np.exp(1j * theta)
-    if isinstance(c, (SpringDamper, FilteredSpringDamper)):
-        one_minus = 2j * np.sin(theta / 2) * np.exp(-0.5j * theta)
-        k = ratio if part == "K" else (0.0 if part == "B" else c.stiffness)
-        B = 0.0 if part == "K" else c.damping
-        if isinstance(c, FilteredSpringDamper) and B:
-            fn, fd = c.velocity_filter.transfer(T)
-            one_minus = one_minus * np.polyval(fn, z) / np.polyval(fd, z)
-        return k + B * one_minus / T
-    if isinstance(c, AffineController) and part is not None:   # K P(z) + Q(z)
-        pn, pd, qn, qd = c.parts()
-        if part == "K":
-            return ratio * np.polyval(pn, z) / np.polyval(pd, z)
-        return np.polyval(qn, z) / np.polyval(qd, z)
-    num, den = c.transfer(T)  # type: ignore[attr-defined]
-    return np.polyval(num, z) / np.polyval(den, z)
 
 
 def _force_determinant(forces: tuple[Channel, ...], p: int) -> np.ndarray:

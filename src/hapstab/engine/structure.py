@@ -7,8 +7,10 @@ samples (``e_i = sum_j s_ij z^-n_ij x_j``).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from fractions import Fraction
+from typing import Any
 
 import numpy as np
 
@@ -306,21 +308,25 @@ def structure_of(loop: HapticLoop | TeleoperationLoop) -> LoopStructure:
     ArgumentTypeError
         If ``loop`` is neither kind (a :class:`TypeError`).
     """
-    if isinstance(loop, HapticLoop):
-        return LoopStructure(
-            (Port(loop.device, loop.operator, "device"),),
-            (Channel(0, loop.controller, ((0, 1.0, loop.delay_in_samples),)),))
-    if isinstance(loop, FourChannelLoop):
-        return _four_channel(loop)
-    if isinstance(loop, TeleoperationLoop):
-        fwd, bwd = loop.forward_delay_in_samples, loop.backward_delay_in_samples
-        a, b = loop.position_scale, loop.force_scale       # eq. (20) when both are 1
-        return LoopStructure(
-            (Port(loop.master, loop.operator, "master"), Port(loop.slave, loop.environment, "slave")),
-            (Channel(0, loop.master_controller, ((0, b * a, 0.0), (1, -b, bwd))),
-             Channel(1, loop.slave_controller, ((1, 1.0, 0.0), (0, -a, fwd)))))
     require_loop(loop)
-    raise AssertionError("unreachable: require_loop accepts only the two kinds above")
+    return _BUILDERS[loop.kind](loop)
+
+
+def _haptic(loop: HapticLoop) -> LoopStructure:
+    """Fig. 2a: one device, the virtual environment on its delayed position."""
+    return LoopStructure(
+        (Port(loop.device, loop.operator, "device"),),
+        (Channel(0, loop.controller, ((0, 1.0, loop.delay_in_samples),)),))
+
+
+def _teleoperation(loop: TeleoperationLoop) -> LoopStructure:
+    """Fig. 3 / eq. (20): PEB, with position and force scaling."""
+    fwd, bwd = loop.forward_delay_in_samples, loop.backward_delay_in_samples
+    a, b = loop.position_scale, loop.force_scale       # eq. (20) when both are 1
+    return LoopStructure(
+        (Port(loop.master, loop.operator, "master"), Port(loop.slave, loop.environment, "slave")),
+        (Channel(0, loop.master_controller, ((0, b * a, 0.0), (1, -b, bwd))),
+         Channel(1, loop.slave_controller, ((1, 1.0, 0.0), (0, -a, fwd)))))
 
 
 def _four_channel(loop: FourChannelLoop) -> LoopStructure:
@@ -343,6 +349,11 @@ def _four_channel(loop: FourChannelLoop) -> LoopStructure:
     return LoopStructure(
         (Port(loop.master, loop.operator, "master"), Port(loop.slave, loop.environment, "slave")),
         tuple(chans), reference=2 * loop.stiffness_reference)
+
+
+#: The one builder of each loop kind (the loop's ``kind`` names it).
+_BUILDERS: dict[str, Callable[[Any], LoopStructure]] = {
+    "hve": _haptic, "peb": _teleoperation, "4ch": _four_channel}
 
 
 def channel_name(structure: LoopStructure, channel: Channel) -> str:

@@ -45,79 +45,10 @@ from hapstab.engine.structure import (
 )
 from hapstab.engine.zoh import discretize, port_matrices
 from hapstab.errors import ModelError
-from hapstab.models.controllers import (
-    AffineController,
-    Controller,
-    DiscreteController,
-    FilteredSpringDamper,
-    SpringDamper,
-    has_stiffness,
-)
+from hapstab.models.controllers import has_stiffness
 from hapstab.models.loops import HapticLoop, TeleoperationLoop, split_delay
 
 __all__ = ['SampledSystem', 'build']
-
-
-def _controller_parts(c: Controller, periods: np.ndarray) -> tuple[np.ndarray, ...]:
-    """Batched state-space (Ah, Bh, Ch, D_fixed, D_per_K, Ch_K) of H(z) = K H_K + rest:
-    u = Ch xi + D_fixed e + K (Ch_K xi + D_per_K e).
-
-    For a spring-damper, H = K + B/T - (B/T) z^-1: one state, and K only in the
-    direct feed-through. A state with zero output (B = 0) is dropped. A filtered
-    spring-damper is K + Q(z) with Q = (B/T)(1 - z^-1) F(z), realised per period (the
-    low-pass pole depends on T). An affine controller K P + Q: P's and Q's states side
-    by side, K on P's output.
-    """
-    P = periods.size
-    if isinstance(c, AffineController):
-        pn, pd, qn, qd = c.parts()
-        rep = lambda a: np.broadcast_to(a, (P, *a.shape)).copy()  # noqa: E731
-        Ap, Bp, Cp, Dp = _realize(rep(pn), rep(pd))
-        Aq, Bq, Cq, Dq = _realize(rep(qn), rep(qd))
-        p, q = Ap.shape[1], Aq.shape[1]
-        Ah = np.zeros((P, p + q, p + q))
-        Ah[:, :p, :p], Ah[:, p:, p:] = Ap, Aq
-        z = np.zeros((P, 1, p + q))
-        Ch, ChK = z.copy(), z.copy()
-        Ch[:, :, p:], ChK[:, :, :p] = Cq, Cp
-        return Ah, np.concatenate([Bp, Bq], axis=1), Ch, Dq, Dp, ChK
-    if isinstance(c, SpringDamper) or (isinstance(c, FilteredSpringDamper) and c.damping == 0):
-        if c.damping == 0:
-            return (np.zeros((P, 0, 0)), np.zeros((P, 0, 1)), np.zeros((P, 1, 0)),
-                    np.zeros(P), np.ones(P), np.zeros((P, 1, 0)))
-        BT = c.damping / periods
-        return (np.zeros((P, 1, 1)), np.ones((P, 1, 1)), -BT[:, None, None],
-                BT.copy(), np.ones(P), np.zeros((P, 1, 1)))
-    if isinstance(c, FilteredSpringDamper):
-        nums, dens = [], []
-        for T in periods:
-            fn, fd = c.velocity_filter.transfer(float(T))
-            nums.append(np.convolve(fn, [1.0, -1.0]) * (c.damping / T))
-            dens.append(np.concatenate([fd, [0.0]]))
-        Ah, Bh, Ch, D = _realize(np.array(nums), np.array(dens))
-        return Ah, Bh, Ch, D, np.ones(P), np.zeros_like(Ch)
-    assert isinstance(c, DiscreteController)
-    num, den = np.array(c.num), np.array(c.den)
-    num = np.concatenate([np.zeros(den.size - num.size), num])
-    rep = lambda a: np.broadcast_to(a, (P, *a.shape)).copy()  # noqa: E731
-    Ah, Bh, Ch, D = _realize(rep(num), rep(den))
-    return Ah, Bh, Ch, D, np.zeros(P), np.zeros_like(Ch)
-
-
-def _realize(num: np.ndarray, den: np.ndarray
-             ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Controllable canonical (Ah, Bh, Ch, D) of num/den (P, q+1), highest power first."""
-    num, den = num / den[:, :1], den / den[:, :1]
-    P, q = den.shape[0], den.shape[1] - 1
-    d = num[:, 0]
-    Ah = np.zeros((P, q, q))
-    Bh = np.zeros((P, q, 1))
-    if q:
-        Ah[:, 0, :] = -den[:, 1:]
-        Ah[:, 1:, :-1] = np.eye(q - 1)
-        Bh[:, 0, 0] = 1.0
-    Ch = (num[:, 1:] - d[:, None] * den[:, 1:])[:, None, :]
-    return Ah, Bh, Ch, d
 
 
 @dataclass
@@ -465,7 +396,7 @@ def build(loop: HapticLoop | TeleoperationLoop,
     budget.check(budget.build_cost(P, len(st.ports) * (loop.delay_in_samples + 4) + 2),
                  max_memory, max_seconds)
     Ac, Bc, Cf, Ad, Bd, off_p = _plant(st, T)
-    parts = [_controller_parts(ch.controller, T) for ch in st.channels]
+    parts = [ch.controller.realisation(T) for ch in st.channels]
     lay = _layout(st, off_p, [pa[0].shape[1] for pa in parts])
     R = termination_rows(st, lay.force, Ac, Cf, off_p)
     pos, vel, E = _selectors(st, lay, R)

@@ -46,7 +46,6 @@ import numpy as np
 
 from hapstab.engine.discs import Jet, const, one_minus_delay_jet, poly_jet
 from hapstab.errors import AnalysisError
-from hapstab.models.controllers import AffineController
 
 __all__ = ["filters_of", "filter_order", "damper_jets", "stack_filters"]
 
@@ -60,8 +59,9 @@ def filters_of(controllers: Sequence[Any], T: np.ndarray) -> tuple[Filter, ...]:
     underflows to 0 at every period (f_c = inf) and N = 1 are no filter."""
     out: list[Filter] = []
     for c in controllers:
-        if isinstance(c, AffineController):
-            pn, pd, qn, qd = c.parts()
+        parts = c.affine_parts()
+        if parts is not None:                       # K P(z) + Q(z), P and Q fixed in z
+            pn, pd, qn, qd = parts
             out.append(("affine", (np.convolve(pn, qd), np.convolve(qn, pd), np.convolve(pd, qd))))
             continue
         vf = getattr(c, "velocity_filter", None)

@@ -10,20 +10,22 @@ Equation and figure numbers below are the paper's.
 from __future__ import annotations
 
 import dataclasses
-import re
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any, TypeGuard
 
 import numpy as np
 
-from hapstab.errors import ModelError, ascii_float, check_real
+from hapstab.errors import ModelError, check_real
 from hapstab.models.parts import _poly
+from hapstab.models.protocol import check_analysis
+from hapstab.models.realisation import Realisation, realize, replicate, spring_damper_states
+from hapstab.models.velocity_filter import MIN_FILTER_GAIN, VelocityFilter
 
 __all__ = ['SpringDamper', 'VelocityFilter', 'FilteredSpringDamper', 'AffineController',
            'DiscreteController',
            'Controller', 'spring_damper', 'stiffness_controller', 'has_stiffness',
-           'stiffness_ratios']
+           'stiffness_ratios', 'MIN_FILTER_GAIN']
 
 
 # ----------------------------------------------------------------------- controllers
@@ -64,133 +66,32 @@ class SpringDamper:
     def with_stiffness(self, K: float) -> SpringDamper:
         return dataclasses.replace(self, stiffness=K)
 
+    def gains(self) -> tuple[float, float]:
+        """(K, B)."""
+        return self.stiffness, self.damping
+
+    def affine_parts(self) -> None:
+        """None: its Q = (B/T)(1 - z^-1) depends on T (it answers :meth:`gains`)."""
+        return None
+
+    def response(self, theta: np.ndarray, period: float, part: str | None = None,
+                 ratio: float = 1.0) -> np.ndarray:
+        """H(e^{j theta}), or its K-part (times ``ratio``) or B-part (``part``)."""
+        return _damper_response(self, theta, period, part, ratio, None)
+
+    def realisation(self, periods: np.ndarray) -> Realisation:
+        """One state (none when B = 0), K only in the direct feed-through."""
+        return spring_damper_states(self.damping, periods)
+
+    def admits(self, analysis: str) -> bool:
+        """Every analysis of :data:`~hapstab.models.protocol.ANALYSES`."""
+        check_analysis(analysis)
+        return True
+
     def to_dict(self) -> dict[str, Any]:
         """The controller as JSON-ready values, units in the keys."""
         return {"type": "spring-damper", "stiffness_N_per_m": self.stiffness,
                 "virtual_damping_N_s_per_m": self.damping}
-
-
-#: The smallest gain 1 - a of a low-pass velocity filter: 1000 ulps of 1, so that the
-#: pole a = exp(-2 pi f_c T), rounded to a double, still gives 1 - a to 1e-3 (below it
-#: the pole is not representable apart from 1, and at a = 1 the loop degenerates).
-MIN_FILTER_GAIN = 1000 * float(np.finfo(float).eps)
-
-
-@dataclass(frozen=True)
-class VelocityFilter:
-    """The velocity estimate a virtual damper acts on: the backward difference
-    ``(x[k] - x[k-1]) / T`` passed through F(z).
-
-    * ``"lowpass"``: a first-order low-pass with cutoff f_c, its pole placed by the
-      exponential map, ``F(z) = (1 - a) / (1 - a z^-1)``, ``a = exp(-2 pi f_c T)``:
-      ``v[k] = a v[k-1] + (1 - a) (x[k] - x[k-1]) / T``, unit gain at DC; as
-      f_c -> infinity, a -> 0 and F -> 1 (the plain backward difference of eq. 23).
-    * ``"average"``: the mean of the last N backward differences,
-      ``v[k] = (x[k] - x[k-N]) / (N T)``, ``F(z) = (1 - z^-N) / (N (1 - z^-1))``;
-      N = 1 is the plain backward difference.
-
-    Parameters
-    ----------
-    kind : str
-        ``"lowpass"`` or ``"average"``.
-    cutoff_hz : float
-        f_c in Hz, > 0 (``"lowpass"`` only; ``inf`` is the plain difference).
-    samples : int
-        N >= 1 (``"average"`` only).
-
-    Raises
-    ------
-    ModelError
-        An unknown kind, f_c <= 0 or not a number, N < 1 or not whole.
-
-    References
-    ----------
-    F. Janabi-Sharifi, V. Hayward and C.-S. J. Chen, "Discrete-time adaptive
-    windowing for velocity estimation", IEEE Trans. Control Systems Technology
-    8(6), 2000 (backward differences, their averages and low-pass filters as the
-    velocity estimators of haptic devices); J. E. Colgate and J. M. Brown, "Factors
-    affecting the Z-width of a haptic display", IEEE ICRA 1994 (the filtered
-    velocity limits the damping a wall can display).
-    """
-
-    kind: str = "lowpass"
-    cutoff_hz: float = float("inf")
-    samples: int = 1
-
-    def __post_init__(self) -> None:
-        if self.kind not in ("lowpass", "average"):
-            raise ModelError(f"velocity filter kind = {self.kind!r}: must be 'lowpass' or 'average'")
-        if self.kind == "lowpass":
-            c = self.cutoff_hz
-            if not isinstance(c, (int, float)) or isinstance(c, bool) or not c > 0:
-                raise ModelError(f"velocity filter cutoff = {c!r} Hz: must be a number > 0 "
-                                 "(inf: no filter)")
-            object.__setattr__(self, "cutoff_hz", float(c))
-        n = self.samples
-        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1 or n > 100000:
-            raise ModelError(f"velocity filter samples = {n!r}: must be a whole number from 1 "
-                             "to 100000")
-        object.__setattr__(self, "samples", int(n))
-
-    @classmethod
-    def parse(cls, spec: str) -> VelocityFilter:
-        """``"lowpass:F"`` (f_c in Hz) or ``"average:N"`` (N samples).
-
-        Raises
-        ------
-        ModelError
-            Anything else, naming the spec and what is allowed.
-        """
-        kind, _, val = str(spec).partition(":")
-        try:
-            if kind == "lowpass":
-                return cls("lowpass", cutoff_hz=ascii_float(val))
-            if kind == "average" and re.fullmatch("[0-9]+", val.strip()):
-                return cls("average", samples=int(val))
-        except ValueError:
-            pass
-        raise ModelError(f"velocity filter = {spec!r}: must be lowpass:F (cutoff F Hz > 0) or "
-                         "average:N (N >= 1 samples)")
-
-    def pole(self, period: np.ndarray | float) -> np.ndarray:
-        """The low-pass pole a = exp(-2 pi f_c T) per period (0 for ``"average"``).
-
-        Raises
-        ------
-        ModelError
-            The cutoff is too low for the period: 1 - a, the filter's gain, is below
-            :data:`MIN_FILTER_GAIN` (``lowpass:1e-320`` makes a = 1 exactly: a filter
-            that passes nothing, with a pole on the unit circle).
-        """
-        T = np.asarray(period, float)
-        if self.kind != "lowpass":
-            return np.zeros(T.shape)
-        x = 2.0 * np.pi * self.cutoff_hz * T
-        bad = -np.expm1(-x) < MIN_FILTER_GAIN
-        if np.any(bad):
-            t = float(np.max(np.atleast_1d(T)[np.atleast_1d(bad)]))
-            raise ModelError(f"velocity filter cutoff = {self.cutoff_hz:g} Hz: too low for the "
-                             f"period {t:g} s (the pole exp(-2 pi f_c T) is 1 to within "
-                             f"{MIN_FILTER_GAIN:g}: not representable apart from 1); allowed: "
-                             f"f_c >= {MIN_FILTER_GAIN / (2 * np.pi * t):.3g} Hz at this period")
-        return np.exp(-x)
-
-    def transfer(self, period: float) -> tuple[np.ndarray, np.ndarray]:
-        """(num, den) of F(z) in z, highest power first."""
-        if self.kind == "average":
-            N = self.samples
-            return np.ones(N) / N, np.concatenate([[1.0], np.zeros(N - 1)])
-        a = float(self.pole(period))
-        return np.array([1.0 - a, 0.0]), np.array([1.0, -a])
-
-    def to_dict(self) -> dict[str, Any]:
-        """The filter as JSON-ready values, units in the keys."""
-        if self.kind == "average":
-            return {"kind": "average", "samples": self.samples}
-        return {"kind": "lowpass", "cutoff_Hz": self.cutoff_hz}
-
-    def __str__(self) -> str:
-        return f"average:{self.samples}" if self.kind == "average" else f"lowpass:{self.cutoff_hz:g}"
 
 
 @dataclass(frozen=True)
@@ -247,6 +148,37 @@ class FilteredSpringDamper:
 
     def with_stiffness(self, K: float) -> FilteredSpringDamper:
         return dataclasses.replace(self, stiffness=K)
+
+    def gains(self) -> tuple[float, float]:
+        """(K, B); B acts on the filtered velocity."""
+        return self.stiffness, self.damping
+
+    def affine_parts(self) -> None:
+        """None: its Q depends on T (it answers :meth:`gains`)."""
+        return None
+
+    def response(self, theta: np.ndarray, period: float, part: str | None = None,
+                 ratio: float = 1.0) -> np.ndarray:
+        """H(e^{j theta}), or its K-part (times ``ratio``) or B-part (``part``)."""
+        return _damper_response(self, theta, period, part, ratio, self.velocity_filter)
+
+    def realisation(self, periods: np.ndarray) -> Realisation:
+        """K + Q(z), Q = (B/T)(1 - z^-1) F(z) realised per period (the low-pass pole
+        depends on T); eq. (23)'s when B = 0."""
+        if self.damping == 0:
+            return spring_damper_states(0.0, periods)
+        nums, dens = [], []
+        for T in periods:
+            fn, fd = self.velocity_filter.transfer(float(T))
+            nums.append(np.convolve(fn, [1.0, -1.0]) * (self.damping / T))
+            dens.append(np.concatenate([fd, [0.0]]))
+        Ah, Bh, Ch, D = realize(np.array(nums), np.array(dens))
+        return Ah, Bh, Ch, D, np.ones(periods.size), np.zeros_like(Ch)
+
+    def admits(self, analysis: str) -> bool:
+        """K to vary; the network models only without a damper (B = 0: H = K)."""
+        return check_analysis(analysis) == "stiffness" or (
+            analysis == "packet-loss" and self.damping == 0)
 
     def to_dict(self) -> dict[str, Any]:
         """The controller as JSON-ready values, units in the keys."""
@@ -330,6 +262,44 @@ class AffineController:
     def with_stiffness(self, K: float) -> AffineController:
         return dataclasses.replace(self, stiffness=K)
 
+    def gains(self) -> None:
+        """None: not a spring-damper."""
+        return None
+
+    def affine_parts(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`parts`."""
+        return self.parts()
+
+    def response(self, theta: np.ndarray, period: float, part: str | None = None,
+                 ratio: float = 1.0) -> np.ndarray:
+        """H(e^{j theta}), or ``ratio`` P (``part="K"``) or Q (``part="B"``)."""
+        z = np.exp(1j * theta)
+        if part is None:
+            num, den = self.transfer(period)
+            return np.polyval(num, z) / np.polyval(den, z)
+        pn, pd, qn, qd = self.parts()
+        if part == "K":
+            return ratio * np.polyval(pn, z) / np.polyval(pd, z)
+        return np.polyval(qn, z) / np.polyval(qd, z)
+
+    def realisation(self, periods: np.ndarray) -> Realisation:
+        """P's and Q's states side by side, K on P's output."""
+        P = periods.size
+        pn, pd, qn, qd = self.parts()
+        Ap, Bp, Cp, Dp = realize(replicate(pn, P), replicate(pd, P))
+        Aq, Bq, Cq, Dq = realize(replicate(qn, P), replicate(qd, P))
+        p, q = Ap.shape[1], Aq.shape[1]
+        Ah = np.zeros((P, p + q, p + q))
+        Ah[:, :p, :p], Ah[:, p:, p:] = Ap, Aq
+        z = np.zeros((P, 1, p + q))
+        Ch, ChK = z.copy(), z.copy()
+        Ch[:, :, p:], ChK[:, :, :p] = Cq, Cp
+        return Ah, np.concatenate([Bp, Bq], axis=1), Ch, Dq, Dp, ChK
+
+    def admits(self, analysis: str) -> bool:
+        """K to vary, and nothing derived for eq. (23) itself."""
+        return check_analysis(analysis) == "stiffness"
+
     def to_dict(self) -> dict[str, Any]:
         """The controller as JSON-ready values: H = K P + Q, highest power first."""
         return {"type": "affine", "stiffness": self.stiffness,
@@ -377,8 +347,50 @@ class DiscreteController:
     def transfer(self, period: float) -> tuple[np.ndarray, np.ndarray]:
         return np.array(self.num), np.array(self.den)
 
+    def gains(self) -> None:
+        """None: not a spring-damper."""
+        return None
+
+    def affine_parts(self) -> None:
+        """None: no stiffness K."""
+        return None
+
+    def response(self, theta: np.ndarray, period: float, part: str | None = None,
+                 ratio: float = 1.0) -> np.ndarray:
+        """H(e^{j theta}) (it has no K- or B-part: ``part`` and ``ratio`` are unused)."""
+        z = np.exp(1j * theta)
+        num, den = self.transfer(period)
+        return np.polyval(num, z) / np.polyval(den, z)
+
+    def realisation(self, periods: np.ndarray) -> Realisation:
+        """num/den's controllable canonical form; no K."""
+        P = periods.size
+        num, den = np.array(self.num), np.array(self.den)
+        num = np.concatenate([np.zeros(den.size - num.size), num])
+        Ah, Bh, Ch, D = realize(replicate(num, P), replicate(den, P))
+        return Ah, Bh, Ch, D, np.zeros(P), np.zeros_like(Ch)
+
+    def admits(self, analysis: str) -> bool:
+        """None of :data:`~hapstab.models.protocol.ANALYSES` (no K to vary)."""
+        check_analysis(analysis)
+        return False
+
 
 Controller = SpringDamper | FilteredSpringDamper | AffineController | DiscreteController
+
+
+def _damper_response(c: SpringDamper | FilteredSpringDamper, theta: np.ndarray, T: float,
+                     part: str | None, ratio: float, vf: VelocityFilter | None) -> np.ndarray:
+    """A spring-damper's H(e^{j theta}) (or its K- or B-part). ``1 - e^{-j theta}`` is
+    ``2j sin(theta/2) e^{-j theta/2}``: no cancellation as theta -> 0."""
+    z = np.exp(1j * theta)
+    one_minus = 2j * np.sin(theta / 2) * np.exp(-0.5j * theta)
+    k = ratio if part == "K" else (0.0 if part == "B" else c.stiffness)
+    B = 0.0 if part == "K" else c.damping
+    if vf is not None and B:
+        fn, fd = vf.transfer(T)
+        one_minus = one_minus * np.polyval(fn, z) / np.polyval(fd, z)
+    return k + B * one_minus / T
 
 
 def _common_root(x: Any, y: Any) -> complex | None:
@@ -412,7 +424,8 @@ def has_stiffness(controller: Any) -> TypeGuard[StiffnessController]:
     -------
     bool
     """
-    return isinstance(controller, (SpringDamper, FilteredSpringDamper, AffineController))
+    admits = getattr(controller, "admits", None)
+    return callable(admits) and bool(admits("stiffness"))
 
 
 def stiffness_controller(controller: Controller, name: str = "controller") -> StiffnessController:

@@ -84,6 +84,9 @@ class FourChannelLoop(TeleoperationLoop):
 
     #: The loop's kind, as the CLI names it.
     kind: ClassVar[str] = "4ch"
+    #: Its position controllers' names, in :attr:`controllers`' order.
+    controller_names: ClassVar[tuple[str, ...]] = ("master_controller", "slave_controller",
+                                                   "slave_from_master", "master_from_slave")
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -123,8 +126,7 @@ class FourChannelLoop(TeleoperationLoop):
     def with_stiffness(self, K: float) -> FourChannelLoop:
         """K on the reference controller (C_m, or C_s when C_m's stiffness is 0); every
         other position controller keeps its stiffness ratio to it."""
-        names = ("master_controller", "slave_controller", "slave_from_master",
-                 "master_from_slave")
+        names = self.controller_names
         cs = [spring_damper(c, nm) for c, nm in zip(self.position_controllers, names, strict=True)]
         ref = self.stiffness_reference
         order = [ref] + [i for i in range(4) if i != ref]

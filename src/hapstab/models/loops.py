@@ -23,7 +23,6 @@ from hapstab.errors import (
 )
 from hapstab.models.controllers import (
     Controller,
-    FilteredSpringDamper,
     SpringDamper,
     has_stiffness,
     stiffness_controller,
@@ -108,6 +107,9 @@ class HapticLoop:
 
     #: The loop's kind, as the CLI names it.
     kind: ClassVar[str] = "hve"
+    #: Its ports' names, and its controllers' (the fields they live in), in their order.
+    port_names: ClassVar[tuple[str, ...]] = ("device",)
+    controller_names: ClassVar[tuple[str, ...]] = ("controller",)
 
     def to_dict(self) -> dict[str, Any]:
         """The loop as JSON-ready values (what a result was computed for), units in keys."""
@@ -288,6 +290,9 @@ class TeleoperationLoop:
 
     #: The loop's kind, as the CLI names it.
     kind: ClassVar[str] = "peb"
+    #: Its ports' names, and its controllers' (the fields they live in), in their order.
+    port_names: ClassVar[tuple[str, ...]] = ("master", "slave")
+    controller_names: ClassVar[tuple[str, ...]] = ("master_controller", "slave_controller")
 
     def to_dict(self) -> dict[str, Any]:
         """The loop as JSON-ready values (what a result was computed for), units in keys."""
@@ -416,8 +421,8 @@ def headline(loop: HapticLoop | TeleoperationLoop) -> str:
     else:
         parts = [dev("device", loop.device), term("operator", loop.operator)]
         delay = f"t_d = {loop.delay_s * 1e3:.4g} ms"
-    filters = {str(c.velocity_filter) for c in loop.controllers[:2]
-               if isinstance(c, FilteredSpringDamper)}
+    filters = {str(vf) for c in loop.controllers[:2]
+               if (vf := getattr(c, "velocity_filter", None)) is not None}
     if filters:
         parts.append("damper on " + " / ".join(sorted(filters)) + " velocity")
     n = loop.delay_in_samples
@@ -431,10 +436,11 @@ FORCE_NAMES = {"force_to_master": "C_2", "force_to_slave": "C_3", "slave_force_f
 
 def _gain(c: Controller) -> str:
     """A position controller in a headline: ``K 10, B 0.5`` or ``H(z)``."""
-    if not isinstance(c, (SpringDamper, FilteredSpringDamper)):
+    gains = c.gains()
+    if gains is None:
         return f"K {c.stiffness:g} P(z) + Q(z)" if has_stiffness(c) else "H(z)"
     vf = getattr(c, "velocity_filter", None)
-    return f"K {c.stiffness:g}, B {c.damping:g}" + (f" on {vf}" if vf else "")
+    return f"K {gains[0]:g}, B {gains[1]:g}" + (f" on {vf}" if vf else "")
 
 
 def _check_filters(controllers: tuple[Controller, ...], period: float) -> None:

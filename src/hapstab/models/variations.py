@@ -11,12 +11,11 @@ undelayed.
 from __future__ import annotations
 
 import dataclasses
-from typing import Any
+from typing import Any, cast
 
 from hapstab.errors import AnalysisError, check_real
-from hapstab.models.controllers import Controller, FilteredSpringDamper, SpringDamper
+from hapstab.models.controllers import Controller
 from hapstab.models.delays import split_delay
-from hapstab.models.loops import HapticLoop
 
 __all__ = ["extra_delay", "extra_damping", "virtual_damping"]
 
@@ -37,7 +36,7 @@ def extra_delay(loop: Any, samples: float) -> Any:
     HapticLoop or TeleoperationLoop
     """
     x = check_real("extra delay", samples, nonnegative=True)
-    if isinstance(loop, HapticLoop):
+    if len(loop.port_names) == 1:                 # one delay (the HVE's)
         n, f = split_delay(loop.delay_in_samples + x)
         return dataclasses.replace(loop, delay_samples=n, fractional_delay=f)
     n, f = split_delay(loop.forward_delay_in_samples + x)
@@ -48,10 +47,11 @@ def extra_delay(loop: Any, samples: float) -> Any:
 
 def _more_damping(c: Controller, damping: float, name: str) -> Controller:
     """``c`` with ``damping`` added to its virtual damping B."""
-    if not isinstance(c, (SpringDamper, FilteredSpringDamper)):
+    gains = c.gains()
+    if gains is None:
         raise AnalysisError(f"{name}: a virtual damping B to vary needs a SpringDamper or "
                             f"FilteredSpringDamper; got {type(c).__name__}")
-    return dataclasses.replace(c, damping=c.damping + damping)
+    return dataclasses.replace(cast(Any, c), damping=gains[1] + damping)
 
 
 def extra_damping(loop: Any, damping: float) -> Any:
@@ -74,13 +74,9 @@ def extra_damping(loop: Any, damping: float) -> Any:
     AnalysisError
         A controller without a virtual damping (a general H(z)).
     """
-    if isinstance(loop, HapticLoop):
-        return dataclasses.replace(loop, controller=_more_damping(loop.controller, damping,
-                                                                  "controller"))
-    return dataclasses.replace(
-        loop, master_controller=_more_damping(loop.master_controller, damping,
-                                              "master_controller"),
-        slave_controller=_more_damping(loop.slave_controller, damping, "slave_controller"))
+    names = loop.controller_names[:2]             # the HVE's; the master's and the slave's
+    return dataclasses.replace(loop, **{name: _more_damping(getattr(loop, name), damping, name)
+                                        for name in names})
 
 
 def virtual_damping(loop: Any) -> float:

@@ -171,7 +171,7 @@ def simulate(loop: HapticLoop | TeleoperationLoop, duration: float, *,
     require_loop(loop)
     T = loop.period
     M = _samples(duration, T, dense)
-    haptic = loop.kind == "hve"
+    haptic = len(loop.port_names) == 1           # one device, one delay
     nl = _nonlinear_options(haptic, environment_force, wall, wall_pulls, saturation, resolution,
                             quantizer)
     if (net := network_options(network)) is not None:

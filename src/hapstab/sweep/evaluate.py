@@ -19,28 +19,15 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from hapstab import progress
+from hapstab.analysis.table import quantities
 from hapstab.errors import HapstabError
 from hapstab.sweep.axes import Points, ids_of
 
 __all__ = ["Spec", "QUANTITIES", "columns", "evaluate_chunk", "OVER_PROMISE_REL"]
 
-#: The quantities a sweep may ask for -> their columns (name, type). "closed-form"
-#: needs K_max and adds it.
-QUANTITIES: dict[str, tuple[tuple[str, str], ...]] = {
-    "kmax": (("critical_stiffness_N_per_m", "float64"), ("reason", "string"),
-             ("crossing_frequency_hz", "float64")),
-    "passivity": (("passivity_kmax_N_per_m", "float64"),),
-    "closed-form": (("closed_form_equation", "string"), ("closed_form_N_per_m", "float64"),
-                    ("closed_form_over_promises", "bool")),
-    "check": (("verdict_at_K", "string"),),
-    "best-damping": (("best_damping_B_N_s_per_m", "float64"),
-                     ("best_damping_K_N_per_m", "float64")),
-    "loss-kmax": (("loss_kmax_N_per_m", "float64"),),
-    "delay-range-kmax": (("delay_range_kmax_N_per_m", "float64"),
-                         ("worst_delay_samples", "float64")),
-    "jitter": (("jitter_stable_up_to_N_per_m", "float64"),
-               ("jitter_unstable_from_N_per_m", "float64")),
-}
+#: The quantities a sweep may ask for -> their columns (name, type), from the one table
+#: of analyses (:data:`hapstab.analysis.table.TABLE`). "closed-form" needs K_max and adds it.
+QUANTITIES: dict[str, tuple[tuple[str, str], ...]] = quantities()
 #: The network's parameters (issue 30): axes or fixed values of a sweep, never the loop's
 #: (taken out of a point's options before its loop is built) -> their defaults. ``loss``
 #: (probability) and ``burst`` (mean burst length, samples; None: independent) for

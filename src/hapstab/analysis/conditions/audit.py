@@ -243,7 +243,7 @@ def audit(loop: HapticLoop | TeleoperationLoop, *, coulomb_friction_N: float | N
             nonlinear.critical_stiffness, "passivity", nonlinear.reason)
     rows.append(AuditRow("exact", "exact sampled-data stability", float(exact), "exact",
                          _verdict(exact_res.stable_intervals, exact), None, exact_res.reason))
-    name = "controller" if loop.kind == "hve" else "master_controller"
+    name = loop.controller_names[0]
     B = spring_damper(loop.controllers[0], name).damping
     return AuditResult(kind, loop.period, loop.delay_samples, B, tuple(rows), float(exact),
                        float(passive))
@@ -256,7 +256,7 @@ def _abbott_okamura(loop: Any, coulomb_friction_N: float | None,
     fc = getattr(getattr(loop, "device", None), "coulomb_friction", 0.0)
     if coulomb_friction_N is None and resolution_m is None and not fc:
         return None
-    if loop.kind != "hve":
+    if len(loop.port_names) != 1:                # one device: the haptic loop
         raise AnalysisError(f"coulomb_friction_N / resolution_m: the Abbott-Okamura condition is "
                             f"derived for the haptic loop (hve), not a {loop.kind} loop")
     return abbott_okamura(loop, coulomb_friction_N=coulomb_friction_N, resolution_m=resolution_m)

@@ -15,7 +15,6 @@ from dataclasses import dataclass
 from typing import Any, cast
 
 from hapstab.errors import AnalysisError
-from hapstab.models.controllers import SpringDamper
 from hapstab.models.loops import HapticLoop, TeleoperationLoop
 from hapstab.results import CriticalStiffnessResult
 
@@ -28,9 +27,10 @@ def _hve(loop, name: str) -> tuple[float, float, float, float]:
     if getattr(loop, "kind", None) != "hve":
         raise AnalysisError(f"method = {name!r}: applies to a HapticLoop (hve), not {type(loop).__name__}")
     loop = cast(HapticLoop, loop)
-    if not isinstance(loop.controller, SpringDamper):
+    gains = loop.controller.gains() if loop.controller.admits("eq23") else None
+    if gains is None:
         raise AnalysisError(f"method = {name!r}: needs a SpringDamper virtual environment")
-    return loop.device.damping, loop.controller.damping, loop.period, loop.delay_in_samples
+    return loop.device.damping, gains[1], loop.period, loop.delay_in_samples
 
 
 def _peb(loop, name: str) -> tuple[float, float, float, float]:
@@ -39,9 +39,11 @@ def _peb(loop, name: str) -> tuple[float, float, float, float]:
                             f"not {type(loop).__name__}")
     loop = cast(TeleoperationLoop, loop)
     cm, cs = loop.master_controller, loop.slave_controller
-    if not (isinstance(cm, SpringDamper) and isinstance(cs, SpringDamper)):
+    eq23 = cm.admits("eq23") and cs.admits("eq23")
+    gm, gs = (cm.gains(), cs.gains()) if eq23 else (None, None)
+    if gm is None or gs is None:
         raise AnalysisError(f"method = {name!r}: needs SpringDamper controllers")
-    if cm.damping != cs.damping or cm.stiffness != cs.stiffness:
+    if gm != gs:
         raise AnalysisError(f"method = {name!r}: derived for C_m = C_s (equal K and B)")
     if not loop.symmetric_delay:
         raise AnalysisError(f"method = {name!r}: derived for equal delays in both directions")
@@ -50,7 +52,7 @@ def _peb(loop, name: str) -> tuple[float, float, float, float]:
                             f"{loop.position_scale:g}, force_scale = {loop.force_scale:g}; "
                             "both must be 1)")
     b = min(loop.master.damping, loop.slave.damping)
-    return b, cm.damping, loop.period, loop.delay_in_samples
+    return b, gm[1], loop.period, loop.delay_in_samples
 
 
 def _result(K: float, method: str, reason: str, loop,

@@ -15,7 +15,6 @@ import numpy as np
 
 from hapstab.engine.device_side import DeviceSide, device_side
 from hapstab.errors import AnalysisError
-from hapstab.models.controllers import SpringDamper
 from hapstab.models.loops import require_loop, whole_delay
 
 __all__ = ["APPROXIMATIONS", "approximation_name", "integrator_polynomial",
@@ -142,16 +141,15 @@ def stiffness_side(loop: Any, what: str = "the circle criterion", forces: bool =
         A controller that is not a plain SpringDamper, or K_s/K_m undefined.
     """
     side = whole_delay_side(loop, what, forces, equal_delays)
-    other = [type(ch.controller).__name__ for ch in side.channels
-             if not isinstance(ch.controller, SpringDamper)]
-    if other and all(n == "FilteredSpringDamper" for n in other):
+    other = [ch.controller for ch in side.channels if not ch.controller.admits("eq23")]
+    if other and all(c.gains() is not None for c in other):     # a spring-damper, filtered
         raise AnalysisError(f"{what}: needs SpringDamper controller(s) without a velocity "
                             "filter; this loop's damper is filtered (a FilteredSpringDamper, "
                             "a velocity filter): the exact K_max and sampled-data passivity "
                             "take it")
     if other:
         raise AnalysisError(f"{what}: needs SpringDamper controller(s); this loop has "
-                            f"{other[0]} (a DiscreteController has no stiffness to vary)")
+                            f"{type(other[0]).__name__} (a DiscreteController has no stiffness to vary)")
     if side.ratios is None:
         raise AnalysisError("controllers: the master's stiffness is 0 and the slave's is not, so "
                             "K_s/K_m is undefined; give the master a stiffness > 0 to vary K")

@@ -234,7 +234,7 @@ def _search(kmax: Any, Bs: np.ndarray, span: float, advance: Any
 def loop_delays(loop: Loop) -> list[float]:
     """The loop's delays in samples (one for the HVE, both directions for a
     teleoperator: PEB or the 4-channel loop)."""
-    if loop.kind != "hve":
+    if len(loop.port_names) == 2:                # a delay each way
         return [loop.forward_delay_in_samples, loop.backward_delay_in_samples]  # type: ignore[union-attr]
     return [loop.delay_in_samples]
 

@@ -14,14 +14,14 @@ Gil, Avello, Rubio, Florez 2004; Hulin, Preusche, Hirzinger 2008 (K-B charts).
 from __future__ import annotations
 
 import dataclasses
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
 from hapstab.engine.structure import structure_of
 from hapstab.engine.system import build
 from hapstab.errors import AnalysisError
-from hapstab.models.controllers import FilteredSpringDamper, SpringDamper
+from hapstab.models.controllers import SpringDamper
 from hapstab.models.loops import HapticLoop, TeleoperationLoop, require_loop
 from hapstab.tolerances import DIVISOR_FLOOR
 
@@ -50,7 +50,7 @@ def check_equal_gains(loop: Loop) -> float:
     """
     require_loop(loop)
     cs = loop.controllers
-    if not all(isinstance(c, (SpringDamper, FilteredSpringDamper)) for c in cs):
+    if not all(c.gains() is not None for c in cs):
         raise AnalysisError("controller: a K-B region needs SpringDamper (or "
                             "FilteredSpringDamper) controllers")
     if any(c != cs[0] for c in cs):
@@ -62,8 +62,8 @@ def with_gains(loop: Loop, K: float, B: float) -> Loop:
     """The loop with stiffness K and virtual damping B on every controller (a velocity
     filter kept)."""
     c = loop.controllers[0]
-    if isinstance(c, FilteredSpringDamper):
-        return loop.with_controllers(dataclasses.replace(c, stiffness=K, damping=B))
+    if c.gains() is not None:     # a spring-damper: its fields K and B (its filter kept)
+        return loop.with_controllers(dataclasses.replace(cast(Any, c), stiffness=K, damping=B))
     return loop.with_controllers(SpringDamper(K, B))
 
 

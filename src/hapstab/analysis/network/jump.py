@@ -39,7 +39,6 @@ from scipy import linalg as sla
 from hapstab.engine.structure import LoopStructure, channel_ratios, structure_of
 from hapstab.engine.system import build
 from hapstab.errors import AnalysisError, ModelError, check_real
-from hapstab.models.controllers import FilteredSpringDamper, SpringDamper
 
 __all__ = ["JumpSystem", "lossy_system", "loss_chain", "NetworkedPlant", "networked_plant"]
 
@@ -174,8 +173,7 @@ def _check(st: LoopStructure, what: str = "packet loss") -> tuple[float, ...]:
         if ch.measures != "position":
             raise AnalysisError(f"{what}: modelled for position channels only; this loop "
                                 "has force channels (force gains C_2, C_3, C_5, C_6 must be 0)")
-        if not (isinstance(c, SpringDamper)
-                or (isinstance(c, FilteredSpringDamper) and c.damping == 0)):
+        if not c.admits("packet-loss"):
             raise AnalysisError(f"{what}: controller = {c!r}: modelled for spring-damper "
                                 "controllers K + B (z - 1)/(T z) (the issue's u = K y + B (y[k] - "
                                 "y[k-1]) / T); not a filtered damper or a general H(z)")

@@ -55,10 +55,10 @@ def loop_parts(loop: HapticLoop) -> tuple[Any, Any, float, float]:
 
 def check_loop(loop: Any, delta: float, fc: float, quantizer: str, harmonics: Any) -> HapticLoop:
     require_loop(loop)
-    if loop.kind != "hve":
+    if len(loop.port_names) != 1:                # one device: the haptic loop
         raise AnalysisError(f"limit cycles: derived for the haptic loop (hve), not a {loop.kind} "
                             "loop")
-    if not isinstance(loop.controller, SpringDamper):
+    if not loop.controller.admits("eq23"):
         raise AnalysisError("limit cycles: derived for a spring-damper virtual environment "
                             "(SpringDamper), not a general H(z)")
     if loop.fractional_delay:

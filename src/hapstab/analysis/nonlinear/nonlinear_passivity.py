@@ -55,7 +55,6 @@ from typing import Any
 
 from hapstab.analysis.conditions.passivity import critical_stiffness_passivity, sampled_passivity
 from hapstab.errors import AnalysisError, check_real
-from hapstab.models.controllers import SpringDamper
 from hapstab.models.loops import HapticLoop, require_loop
 from hapstab.results import CriticalStiffnessResult, Result, jsonable
 
@@ -111,10 +110,10 @@ def resolution_of(resolution_m: Any) -> float:
 
 def _haptic(loop: Any, what: str) -> HapticLoop:
     require_loop(loop)
-    if loop.kind != "hve":
+    if len(loop.port_names) != 1:                # one device: the haptic loop
         raise AnalysisError(f"{what}: derived for the haptic loop (hve: one device and a virtual "
                             f"environment), not a {loop.kind} loop")
-    if not isinstance(loop.controller, SpringDamper):
+    if not loop.controller.admits("eq23"):
         raise AnalysisError(f"{what}: derived for a spring-damper virtual environment "
                             "(SpringDamper), not a general H(z)")
     return loop

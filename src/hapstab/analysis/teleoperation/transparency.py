@@ -89,7 +89,7 @@ NYQUIST_SLACK = 1e-12
 
 def _side(loop: Any) -> DeviceSide:
     require_loop(loop)
-    if loop.kind not in ("peb", "4ch"):
+    if len(loop.port_names) != 2:                # a master and a slave
         raise AnalysisError(f"loop: transparency is a teleoperator's (master and slave); got "
                             f"a loop of kind {loop.kind!r}; allowed: 'peb' (TeleoperationLoop) "
                             "or '4ch' (FourChannelLoop)")

@@ -74,7 +74,7 @@ def _side(loop: Any, approximation: Any, bounds: tuple[Any, Any] = (0.0, 0.0)
     """The device side with the terminations' least damping moved into it (bounded
     impedance, :func:`_damping_bounds`), and the approximation's name."""
     require_loop(loop)
-    if loop.kind not in ("peb", "4ch"):
+    if len(loop.port_names) != 2:                # a two-port: master and slave
         raise AnalysisError("method = 'llewellyn': a two-port criterion, for a "
                             "TeleoperationLoop (peb) or a FourChannelLoop (4ch); for the HVE "
                             "use 'circle' or 'passivity'")
