@@ -27,6 +27,7 @@ from typing import Any
 
 import click
 
+from hapstab.analysis.table import endpoints
 from hapstab.errors import HapstabError
 
 __all__ = ["ApiError", "COMMANDS", "KINDS", "MAX_BODY_BYTES", "BUDGET", "parse_body",
@@ -35,9 +36,9 @@ __all__ = ["ApiError", "COMMANDS", "KINDS", "MAX_BODY_BYTES", "BUDGET", "parse_b
 
 #: Loop kinds the explorer builds.
 KINDS = ("hve", "peb")
-#: The commands the explorer runs (each under ``POST /api/v1/{command}``).
-COMMANDS = ("kmax", "check", "passivity", "audit", "region", "boundary", "simulate",
-            "best-damping", "twoport", "transparency", "limit-cycle", "zwidth", "jitter")
+#: The commands the explorer runs (each under ``POST /api/v1/{command}``): the explorer
+#: endpoints of the table of analyses (:mod:`hapstab.analysis.table`), in its order.
+COMMANDS = endpoints()
 #: Loop commands the explorer refuses, and why.
 REFUSED = {"robust": "too slow for the explorer: use the CLI (hapstab robust ...)"}
 #: The largest request body, bytes.
