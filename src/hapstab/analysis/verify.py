@@ -22,7 +22,10 @@ that produced it: it rebuilds the characteristic function from the certificate's
 2. **gaps** -- each excluded gap's pieces, replayed from ``start_pieces`` x [lo, hi]
    (halving theta at the midpoint, or K at the geometric mean of a wide range, else
    the midpoint), each excluding 0 for the reason given (``P``, ``Q``, ``F`` or, from
-   version 2, ``N``: :func:`~hapstab.engine.arb_loop.preconditioned_excludes`);
+   version 2, ``N``: :func:`~hapstab.engine.arb_loop.preconditioned_excludes`), its
+   balls formed as the certificate's version says (from version 4 by the angle kernel
+   of precomputed ball polynomials, :mod:`~hapstab.engine.arb_kernel`; before, by
+   forward-mode derivatives);
 3. **the claim** -- every stable interval is a chain of excluded gaps with a verified
    count 0 inside, starting and ending where the interval does; K_max is the upper
    end of the one from K_0; ``kmax_upper`` has a verified count > 0 at it; each
@@ -102,28 +105,31 @@ def _ball(a: float, b: float) -> Any:
     return lo.union(hi)
 
 
-def _excludes(al: ArbLoop, a: float, b: float, ka: float, kb: float, how: str) -> bool:
+def _excludes(al: ArbLoop, a: float, b: float, ka: float, kb: float, how: str,
+              scaled: bool) -> bool:
     """Whether the box [a, b] x [ka, kb] has no zero of det M, for the reason ``how``
     (``N``: the preconditioned mean-value form, certificate version 2). Any balls that
     hold the box prove it; the search forms them in double precision and the counts at
     the proof's (:func:`_ball`), and the mean-value test is not monotone in the ball
     (its centre moves), so both forms are tried (seed 1796236426's mass-peb#6: an 'N'
-    piece the search proved failed with the balls formed at 320 bits)."""
-    return any(_excludes_with(al, a, b, ka, kb, how, prec) for prec in (al.prec, None))
+    piece the search proved failed with the balls formed at 320 bits). ``scaled``: the
+    angle kernel of precomputed ball polynomials (certificate version 4,
+    :mod:`~hapstab.engine.arb_kernel`), else forward-mode derivatives (versions 1-3)."""
+    return any(_excludes_with(al, a, b, ka, kb, how, prec, scaled) for prec in (al.prec, None))
 
 
 def _excludes_with(al: ArbLoop, a: float, b: float, ka: float, kb: float, how: str,
-                   prec: int | None) -> bool:
+                   prec: int | None, scaled: bool) -> bool:
     """:func:`_excludes` with the box's balls formed at ``prec`` bits (None: doubles)."""
     from flint import arb
     with working_precision(prec or 53):
         th, K = _ball(a, b), arb(ka).union(arb(kb))
     key = (a, b, prec)                    # the angle's kernel, per form of its ball
     if how == "N":
-        Fc, Ft, Fk = al.box_derivatives(th, K, key=key)
+        Fc, Ft, Fk = al.box_derivatives(th, K, key=key, scaled=scaled)
         with working_precision(al.prec):
             return preconditioned_excludes(Fc, Ft, Fk, th.rad(), K.rad())
-    P, Q, F = al.box(th, K, key=key)
+    P, Q, F = al.box(th, K, key=key, scaled=scaled)
     with working_precision(al.prec):
         if how == "P":
             return bool(P.abs_lower() > Q.abs_upper())
@@ -235,10 +241,10 @@ def _split_k(k0: float, k1: float) -> float:
     return math.sqrt(k0 * k1) if k1 > 4 * k0 else 0.5 * (k0 + k1)
 
 
-def _check_gap(al: ArbLoop, g: dict[str, Any], n0: int) -> None:
+def _check_gap(al: ArbLoop, g: dict[str, Any], n0: int, version: int) -> None:
     """Replay an excluded gap's subdivision of [0, pi] x [lo, hi], boxes taken lowest K
     first (``splits``: per box "x" the next piece excludes it, "t" halve theta, "k"
-    split K) and check each piece."""
+    split K) and check each piece (with the kernel of the certificate's ``version``)."""
     import heapq
     lo, hi = g["lo_N_per_m"], g["hi_N_per_m"]
     pieces = [tuple(p) for p in g["pieces"]]
@@ -265,7 +271,7 @@ def _check_gap(al: ArbLoop, g: dict[str, Any], n0: int) -> None:
             if i >= len(pieces) or pieces[i][:4] != box:
                 raise _Invalid(f"gap [{lo!r}, {hi!r}]: the box theta in [{a!r}, {b!r}], K in "
                                f"[{k0!r}, {k1!r}] has no piece of its own")
-            if not _excludes(al, *box, pieces[i][4]):
+            if not _excludes(al, *box, pieces[i][4], version >= 4):
                 raise _Invalid(f"gap [{lo!r}, {hi!r}]: the piece theta in [{a!r}, {b!r}], K in "
                                f"[{k0!r}, {k1!r}] is not excluded by '{pieces[i][4]}'")
             i += 1
@@ -348,7 +354,7 @@ def _check(cert: dict[str, Any], loop: Any) -> CertificateCheck:
         if g["count"] is not None:
             counts[g["count"]["K_N_per_m"]] = _check_count(al, g["count"], n0)
         if g["excluded"]:
-            _check_gap(al, g, n0)
+            _check_gap(al, g, n0, cert["version"])
     _check_crossings(cert, counts)
     kmax = _check_claim(cert, counts)
     said = cert.get("proved_range_N_per_m", [k0, kmax] if kmax > 0 else None)

@@ -45,7 +45,16 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Any
 
-from hapstab.engine.arb_forms import Dual, accuracy_bits, dpoly_k, poly_k, preconditioned_excludes
+from hapstab.engine.arb_forms import (
+    Dual,
+    accuracy_bits,
+    box_balls,
+    dpoly_k,
+    exclusion_test,
+    poly_k,
+    preconditioned_excludes,
+)
+from hapstab.engine.arb_kernel import ScaledPolys, scaled_kernel, scaled_polys
 
 __all__ = ["ArbLoop", "arb_parameters", "working_precision", "PREC", "poly_k", "dpoly_k", "Dual",
            "base_point", "k_scale", "damping_scale", "BASE_RATIO", "preconditioned_excludes"]
@@ -226,6 +235,8 @@ class ArbLoop:
     def __init__(self, params: dict[str, Any], prec: int = PREC) -> None:
         self.params = params
         self._kernels: dict[Any, tuple] = {}
+        self._skernels: dict[Any, tuple] = {}
+        self._scaled: ScaledPolys | None = None
         while True:
             with working_precision(prec):
                 ok = self._build(params)
@@ -326,7 +337,7 @@ class ArbLoop:
              c * (self.k[0] * self.k[1])]
         return P, Q, w
 
-    def kernel(self, theta: Any, key: Any = None) -> tuple:
+    def kernel(self, theta: Any, key: Any = None, scaled: bool = False) -> tuple:
         """What :meth:`box` needs of the angle alone, as coefficients in K: P, Q and
         det M = P + w Q at the ball's centre, and the values and d/dtheta over the ball
         (det M's combined before any K enters, so that terms of P and w Q that cancel
@@ -341,6 +352,11 @@ class ArbLoop:
             A ball of angles (rad/sample).
         key : hashable, optional
             The cache key of this ball (e.g. the piece's ends (a, b)).
+        scaled : bool
+            The scaled functions z^e P, z^e Q, z^e det M from precomputed ball
+            polynomials (:mod:`~hapstab.engine.arb_kernel`, certificate version 4;
+            several times faster) instead of P, Q, det M by forward-mode derivatives
+            (versions 1-3, and the argument-principle counts).
 
         Returns
         -------
@@ -348,29 +364,43 @@ class ArbLoop:
             ``(Pm, Qm, Fm, Pd, Qd, Fd)``: lists of 3 acb, the coefficients of K^0..K^2
             of P, Q, det M at the centre and of their d/dtheta over the ball.
         """
+        cache = self._skernels if scaled else self._kernels
         if key is not None:
-            got = self._kernels.get(key)
+            got = cache.get(key)
             if got is not None:
                 return got
         from flint import arb
         with working_precision(self.prec):
-            Pm, Qm, wm = self._parts(arb(theta.mid()), False)
-            Pt, Qt, wt = self._parts(theta, True)
-            Fm = [p + wm * q for p, q in zip(Pm, Qm, strict=True)]
-            Pd, Qd = [p.d for p in Pt], [q.d for q in Qt]
-            Fd = [p + wt.d * q.v + wt.v * dq for p, q, dq in zip(Pd, Qt, Qd, strict=True)]
-        kern = (Pm, Qm, Fm, Pd, Qd, Fd)
+            if scaled:
+                kern = scaled_kernel(self.scaled_polys, theta)
+            else:
+                Pm, Qm, wm = self._parts(arb(theta.mid()), False)
+                Pt, Qt, wt = self._parts(theta, True)
+                Fm = [p + wm * q for p, q in zip(Pm, Qm, strict=True)]
+                Pd, Qd = [p.d for p in Pt], [q.d for q in Qt]
+                Fd = [p + wt.d * q.v + wt.v * dq for p, q, dq in zip(Pd, Qt, Qd, strict=True)]
+                kern = (Pm, Qm, Fm, Pd, Qd, Fd)
         if key is not None:
-            if len(self._kernels) >= KERNEL_CACHE:
-                self._kernels.clear()
-            self._kernels[key] = kern
+            if len(cache) >= KERNEL_CACHE:
+                cache.clear()
+            cache[key] = kern
         return kern
 
-    def box(self, theta: Any, K: Any, key: Any = None) -> tuple[Any, Any, Any]:
+    @property
+    def scaled_polys(self) -> ScaledPolys:
+        """P~ = z^e P and Q~ = z^e Q as ball polynomials in y (:mod:`~hapstab.engine.arb_kernel`),
+        formed once, at the loop's precision."""
+        if self._scaled is None:
+            with working_precision(self.prec):
+                self._scaled = scaled_polys(self.ports, self.s, self.k, self.beta, self.n_phase)
+        return self._scaled
+
+    def box(self, theta: Any, K: Any, key: Any = None, scaled: bool = False) -> tuple[Any, Any, Any]:
         """Balls of P, Q and det M = P + w Q over the balls ``theta`` x ``K``, in the
         centred (mean-value) form: the value at the centre plus the radii times the
         derivatives over the box, so the overestimation is of second order. Each is a
-        polynomial in K with coefficients from :meth:`kernel`.
+        polynomial in K with coefficients from :meth:`kernel` (``scaled``: of the scaled
+        functions, there).
 
         Parameters
         ----------
@@ -378,75 +408,48 @@ class ArbLoop:
             Balls of angles and of stiffnesses (N/m).
         key : hashable, optional
             Cache key of the angle's :meth:`kernel` (the same ball every time).
+        scaled : bool
+            As :meth:`kernel`.
 
         Returns
         -------
         P, Q, F : acb
         """
-        from flint import acb, arb
-        Pm, Qm, Fm, Pd, Qd, Fd = self.kernel(theta, key)
+        kern = self.kernel(theta, key, scaled)
         with working_precision(self.prec):
-            Kc, km = acb(K), acb(K.mid())         # acb: see _build
-            hh, kk = acb(arb(0, theta.rad())), acb(arb(0, K.rad()))
-            P = poly_k(Pm, km) + hh * poly_k(Pd, Kc) + kk * dpoly_k(Pm, Kc)
-            Q = poly_k(Qm, km) + hh * poly_k(Qd, Kc) + kk * dpoly_k(Qm, Kc)
-            Ft, Fk = poly_k(Fd, Kc), dpoly_k(Fm, Kc)
-            F = poly_k(Fm, km) + hh * Ft + kk * Fk
-            return P, Q, F
+            return box_balls(kern, theta, K)[:3]
 
-    def exclusion(self, theta: Any, K: Any, key: Any = None) -> tuple[str | None, float, float]:
+    def exclusion(self, theta: Any, K: Any, key: Any = None,
+                  scaled: bool = False) -> tuple[str | None, float, float]:
         """Whether det M has no zero on the box ``theta`` x ``K``, by the tests a
-        certificate names, in order: ``"P"`` (|P| > |Q|: then |det M| >= |P| - |Q| > 0
-        whatever the delay's phase), ``"Q"`` (|Q| > |P|), ``"F"`` (0 not in det M's
-        ball), ``"N"`` (0 not in the preconditioned ball); the balls are :meth:`box`'s,
-        each formed only when the test before it fails.
-
-        Parameters
-        ----------
-        theta, K : arb
-            Balls of angles and of stiffnesses (N/m).
-        key : hashable, optional
-            Cache key of the angle's :meth:`kernel`.
+        certificate names, in order (:func:`~hapstab.engine.arb_forms.exclusion_test`):
+        ``"P"`` (|P| > |Q|: then |det M| >= |P| - |Q| > 0 whatever the delay's phase),
+        ``"Q"`` (|Q| > |P|), ``"F"`` (0 not in det M's ball), ``"N"`` (0 not in the
+        preconditioned ball); the balls are :meth:`box`'s (``scaled``: of the scaled
+        functions, :mod:`~hapstab.engine.arb_kernel`).
 
         Returns
         -------
         how : {"P", "Q", "F", "N"} or None
-            The test that excludes the box (None: none does); ``"N"``: the
-            preconditioned mean-value form (:func:`preconditioned_excludes`).
+            The test that excludes the box (None: none does).
         spread_theta, spread_K : float
             With ``how`` None: upper bounds of |d det M/d theta| rad(theta) and
             |d det M/dK| rad(K) over the box, the widths of det M's ball due to each
             (to choose a split); else 0.
         """
-        from flint import acb, arb
-        Pm, Qm, Fm, Pd, Qd, Fd = self.kernel(theta, key)
+        kern = self.kernel(theta, key, scaled)
         with working_precision(self.prec):
-            Kc, km = acb(K), acb(K.mid())         # the same balls as box()
-            hh, kk = acb(arb(0, theta.rad())), acb(arb(0, K.rad()))
-            P = poly_k(Pm, km) + hh * poly_k(Pd, Kc) + kk * dpoly_k(Pm, Kc)
-            Q = poly_k(Qm, km) + hh * poly_k(Qd, Kc) + kk * dpoly_k(Qm, Kc)
-            if P.abs_lower() > Q.abs_upper():
-                return "P", 0.0, 0.0
-            if Q.abs_lower() > P.abs_upper():
-                return "Q", 0.0, 0.0
-            Ft, Fk = poly_k(Fd, Kc), dpoly_k(Fm, Kc)
-            Fc = poly_k(Fm, km)
-            F = Fc + hh * Ft + kk * Fk
-            if not F.contains(0):
-                return "F", 0.0, 0.0
-            if preconditioned_excludes(Fc, Ft, Fk, theta.rad(), K.rad()):
-                return "N", 0.0, 0.0
-            return None, float(Ft.abs_upper() * theta.rad()), float(Fk.abs_upper() * K.rad())
+            return exclusion_test(kern, theta, K)
 
-    def box_derivatives(self, theta: Any, K: Any, key: Any = None) -> tuple[Any, Any, Any]:
+    def box_derivatives(self, theta: Any, K: Any, key: Any = None,
+                        scaled: bool = False) -> tuple[Any, Any, Any]:
         """det M at the box's centre and its derivatives over the box, as :meth:`box`
         forms them: ``(F_c, dF/dtheta, dF/dK)`` (acb), for the preconditioned test
         (:func:`preconditioned_excludes`)."""
-        from flint import acb
-        _Pm, _Qm, Fm, _Pd, _Qd, Fd = self.kernel(theta, key)
+        kern = self.kernel(theta, key, scaled)
         with working_precision(self.prec):
-            Kc, km = acb(K), acb(K.mid())
-            return poly_k(Fm, km), poly_k(Fd, Kc), dpoly_k(Fm, Kc)
+            return box_balls(kern, theta, K)[3:]
+
 
     @property
     def degree(self) -> int:

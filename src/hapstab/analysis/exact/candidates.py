@@ -123,8 +123,9 @@ def _halve(resp: LoopResponse, i: int, th: np.ndarray, c: list, j: np.ndarray
 
 
 def _coef(resp: LoopResponse, i: int, th: np.ndarray) -> tuple[list, list]:
-    """c_0..c_2 and their d/dtheta at the angles (complex arrays)."""
-    F = resp.coefficients(np.full(th.size, i), th, np.zeros(th.size))
+    """c_0..c_2 and their d/dtheta at the angles (complex arrays; the jets' centres
+    alone: a proposer needs no enclosures)."""
+    F = resp.coefficients(np.full(th.size, i), th, np.zeros(th.size), values_only=True)
     return [f.vc for f in F], [f.dc for f in F]
 
 

@@ -66,6 +66,10 @@ MAX_PIECES_UNSURE = 400
 #: search places its crossings to ~1e-13, so the window holds the crossing; a gap
 #: beside it that is examined then proves up to 1e-9 below the truth (the safe side).
 ROUGH = 1e-9
+#: The gap pieces are proved with the angle kernel of precomputed ball polynomials
+#: (:mod:`~hapstab.engine.arb_kernel`, certificate version 4); False: forward-mode
+#: derivatives (version 3; the checker still reads both).
+SCALED = True
 #: Widening of the float search's intervals when choosing which candidates to polish
 #: (relative, far above ROUGH: see :func:`_needs_polish`).
 HINT_MARGIN = 1e-6
@@ -85,7 +89,7 @@ def box_status(al: ArbLoop, a: float, b: float, ka: float, kb: float) -> tuple[s
         spreads :meth:`~hapstab.engine.arb_loop.ArbLoop.exclusion` returns; 0 when
         excluded).
     """
-    how, s_t, s_k = al.exclusion(theta_ball(a, b), k_ball(ka, kb), key=(a, b))
+    how, s_t, s_k = al.exclusion(theta_ball(a, b), k_ball(ka, kb), key=(a, b), scaled=SCALED)
     if how is not None:
         return how, 0.0
     if not (math.isfinite(s_t) and math.isfinite(s_k)):
@@ -217,6 +221,8 @@ class Proof:
     #: (:func:`~hapstab.analysis.exact.top.prove_tail`): only then does a stable
     #: interval reaching k_top stand for [.., inf)
     tail_proved: bool = False
+    #: the certificate version its gap pieces were proved for (:data:`SCALED`)
+    version: int = 4
 
 
 def _windows(al: ArbLoop, events: tuple, k0: float, k_top: float,
@@ -429,7 +435,7 @@ def _assemble(al: ArbLoop, params: dict[str, Any], k0: float, k_top: float,
     bottoms = {g.lo for g in stable if g.hi > g.lo}
     uncertain += [(lo, hi) for lo, hi, _t in wins if lo in tops and hi in bottoms]
     return Proof(params, k0, wins, gaps, intervals, kmax, kmax_hi, sorted(set(uncertain)),
-                 theta, al.prec, k_top, base.outside, tail)
+                 theta, al.prec, k_top, base.outside, tail, 4 if SCALED else 3)
 
 
 def prove_base(params: dict[str, Any], k0: float) -> tuple[ArbLoop, Count]:
