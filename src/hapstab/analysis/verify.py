@@ -21,11 +21,14 @@ that produced it: it rebuilds the characteristic function from the certificate's
    in balls each clear of the circle;
 2. **gaps** -- each excluded gap's pieces, replayed from ``start_pieces`` x [lo, hi]
    (halving theta at the midpoint, or K at the geometric mean of a wide range, else
-   the midpoint), each excluding 0 for the reason given (``P``, ``Q``, ``F`` or, from
-   version 2, ``N``: :func:`~hapstab.engine.arb_loop.preconditioned_excludes`), its
-   balls formed as the certificate's version says (from version 4 by the angle kernel
-   of precomputed ball polynomials, :mod:`~hapstab.engine.arb_kernel`; before, by
-   forward-mode derivatives);
+   the midpoint; from version 4 the start pieces have no ladder near theta = 0, a
+   piece [a, b] of angles with b > 4a > 0 is halved at its geometric mean and a
+   K-range with k1 > 64 k0 cut at k1 / 8), each excluding 0 for the reason given
+   (``P``, ``Q``, ``F`` or, from version 2, ``N``:
+   :func:`~hapstab.engine.arb_loop.preconditioned_excludes`), its balls formed as the
+   certificate's version says (from version 4 by the angle kernel of precomputed
+   ball polynomials, :mod:`~hapstab.engine.arb_kernel`; before, by forward-mode
+   derivatives);
 3. **the claim** -- every stable interval is a chain of excluded gaps with a verified
    count 0 inside, starting and ending where the interval does; K_max is the upper
    end of the one from K_0; ``kmax_upper`` has a verified count > 0 at it; each
@@ -106,30 +109,30 @@ def _ball(a: float, b: float) -> Any:
 
 
 def _excludes(al: ArbLoop, a: float, b: float, ka: float, kb: float, how: str,
-              scaled: bool) -> bool:
+              polys: bool) -> bool:
     """Whether the box [a, b] x [ka, kb] has no zero of det M, for the reason ``how``
     (``N``: the preconditioned mean-value form, certificate version 2). Any balls that
     hold the box prove it; the search forms them in double precision and the counts at
     the proof's (:func:`_ball`), and the mean-value test is not monotone in the ball
     (its centre moves), so both forms are tried (seed 1796236426's mass-peb#6: an 'N'
-    piece the search proved failed with the balls formed at 320 bits). ``scaled``: the
+    piece the search proved failed with the balls formed at 320 bits). ``polys``: the
     angle kernel of precomputed ball polynomials (certificate version 4,
     :mod:`~hapstab.engine.arb_kernel`), else forward-mode derivatives (versions 1-3)."""
-    return any(_excludes_with(al, a, b, ka, kb, how, prec, scaled) for prec in (al.prec, None))
+    return any(_excludes_with(al, a, b, ka, kb, how, prec, polys) for prec in (al.prec, None))
 
 
 def _excludes_with(al: ArbLoop, a: float, b: float, ka: float, kb: float, how: str,
-                   prec: int | None, scaled: bool) -> bool:
+                   prec: int | None, polys: bool) -> bool:
     """:func:`_excludes` with the box's balls formed at ``prec`` bits (None: doubles)."""
     from flint import arb
     with working_precision(prec or 53):
         th, K = _ball(a, b), arb(ka).union(arb(kb))
     key = (a, b, prec)                    # the angle's kernel, per form of its ball
     if how == "N":
-        Fc, Ft, Fk = al.box_derivatives(th, K, key=key, scaled=scaled)
+        Fc, Ft, Fk = al.box_derivatives(th, K, key=key, polys=polys)
         with working_precision(al.prec):
             return preconditioned_excludes(Fc, Ft, Fk, th.rad(), K.rad())
-    P, Q, F = al.box(th, K, key=key, scaled=scaled)
+    P, Q, F = al.box(th, K, key=key, polys=polys)
     with working_precision(al.prec):
         if how == "P":
             return bool(P.abs_lower() > Q.abs_upper())
@@ -237,7 +240,26 @@ def _check_count(al: ArbLoop, c: dict[str, Any], n0: int) -> int:
     return out
 
 
-def _split_k(k0: float, k1: float) -> float:
+def _gap_start(n: int, version: int) -> list[tuple[float, float]]:
+    """A gap's start pieces: from version 4, [0, pi/n 2^-40], [pi/n 2^-40, pi/n] and
+    the other n - 1 equal pieces of [0, pi]; before, :func:`_start`'s."""
+    if version < 4:
+        return _start(n)
+    step = math.pi / n
+    return [(0.0, step * 2.0 ** -40), (step * 2.0 ** -40, step), *_start(n)[41:]]
+
+
+def _split_theta(a: float, b: float, version: int) -> float:
+    """Where a gap's piece of angles is halved: from version 4 at the geometric mean
+    when 0 < a and b > 4 a, else (and before) the midpoint."""
+    return math.sqrt(a * b) if version >= 4 and 0 < a and b > 4 * a else 0.5 * (a + b)
+
+
+def _split_k(k0: float, k1: float, version: int) -> float:
+    """Where a gap's K-range is cut: from version 4 at k1 / 8 when k1 > 64 k0;
+    otherwise the geometric mean of a range wider than 4, else the midpoint."""
+    if version >= 4 and k1 > 64 * k0:
+        return k1 / 8
     return math.sqrt(k0 * k1) if k1 > 4 * k0 else 0.5 * (k0 + k1)
 
 
@@ -248,7 +270,7 @@ def _check_gap(al: ArbLoop, g: dict[str, Any], n0: int, version: int) -> None:
     import heapq
     lo, hi = g["lo_N_per_m"], g["hi_N_per_m"]
     pieces = [tuple(p) for p in g["pieces"]]
-    heap = [(lo, a, b, hi) for a, b in _start(n0)]       # lowest K first, as written
+    heap = [(lo, a, b, hi) for a, b in _gap_start(n0, version)]   # lowest K first
     heapq.heapify(heap)
     i = 0
     for step in g["splits"]:
@@ -257,7 +279,7 @@ def _check_gap(al: ArbLoop, g: dict[str, Any], n0: int, version: int) -> None:
         k0, a, b, k1 = heapq.heappop(heap)
         box = (a, b, k0, k1)
         if step in "tk":
-            m = 0.5 * (a + b) if step == "t" else _split_k(k0, k1)
+            m = _split_theta(a, b, version) if step == "t" else _split_k(k0, k1, version)
             if not ((a < m < b) if step == "t" else (k0 < m < k1)):
                 raise _Invalid(f"gap [{lo!r}, {hi!r}]: splitting the box theta in [{a!r}, "
                                f"{b!r}], K in [{k0!r}, {k1!r}] ('{step}') does not advance")

@@ -14,8 +14,9 @@ One port: ``P_0 = d``, ``Q_0 = v s beta N``, ``Q_1 = s k N``. Two ports: with
 ``a_j = d_j + v s_j beta_j N_j``, ``b_j = s_j k_j N_j``, ``c = s_2 N_0 N_1``:
 ``P = [a_0 a_1, a_0 b_1 + a_1 b_0, b_0 b_1]``, ``Q = c [v^2 beta_0 beta_1,
 v (beta_0 k_1 + beta_1 k_0), k_0 k_1]``. Without delay (w = 1) det M's coefficients
-``P_i + Q_i`` are formed as polynomials themselves, so terms that cancel (the K^2 terms
-of a two-port loop) cancel in their coefficients. On an angle ball the kernel is each
+``P_i + Q_i`` are formed as polynomials themselves, so terms that cancel cancel in
+their coefficients; the K^2 one, ``(s_0 s_1 + s_2) k_0 k_1 N_0 N_1``, is exactly 0 when
+the signs cancel (the position-error structure), not a ball around 0. On an angle ball the kernel is each
 function's value at the centre and its derivative over the ball,
 ``d/dtheta = sum_m (m v^(m-1) v' p_im + v^m p_im' y')`` with ``y' = j z`` and
 ``v' = j z^-1``: the same functions and the same mean-value forms as versions 1-3,
@@ -36,16 +37,17 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-__all__ = ["ScaledPolys", "scaled_polys", "scaled_kernel"]
+__all__ = ["KernelPolys", "kernel_polys", "poly_kernel"]
 
 #: A function of the angle: its polynomials in y per power of v (None: exactly 0).
 VPoly = list
 
 
 @dataclass
-class ScaledPolys:
+class KernelPolys:
     """The coefficients in K (K^0, K^1, K^2) of P and Q, and of det M = P + Q without
-    delay (``F``, else None), as :data:`VPoly` (module doc), with the derivatives in y."""
+    delay (``F``, else None), as :data:`VPoly` (module doc), with the derivatives in y
+    (``dP``, ``dQ``, ``dF``)."""
 
     P: list[VPoly]
     Q: list[VPoly]
@@ -75,8 +77,8 @@ def _mul(a: VPoly, b: VPoly) -> VPoly:
     return out
 
 
-def scaled_polys(ports: list[Any], s: list[Any], k: list[Any], beta: list[Any],
-                 n_phase: int) -> ScaledPolys:
+def kernel_polys(ports: list[Any], s: list[Any], k: list[Any], beta: list[Any],
+                 n_phase: int) -> KernelPolys:
     """P and Q as :data:`VPoly` (module doc) from the port polynomials d_j, N_j in y
     (``ports``: objects with ``d`` and ``N`` acb_poly), the signs ``s``, the stiffness
     ratios ``k`` and ``beta_j = B_j / T`` (acb), at the precision in force."""
@@ -99,7 +101,12 @@ def scaled_polys(ports: list[Any], s: list[Any], k: list[Any], beta: list[Any],
         Q = [_mul(c, _mul(h[0], h[1])), _mul(c, _add(_mul(h[0], kk[1]), _mul(h[1], kk[0]))),
              _mul(c, _mul(kk[0], kk[1]))]
     F = [_add(p, q) for p, q in zip(P, Q, strict=True)] if n_phase == 0 else None
-    return ScaledPolys(P, Q, F, n_phase)
+    if F is not None and len(ports) == 2:
+        # the K^2 coefficient (s_0 s_1 + s_2) k_0 k_1 N_0 N_1 as one product: exactly 0
+        # when the signs cancel (the position-error structure), not a ball around 0
+        lead = (s[0] * s[1] + s[2]) * k[0] * k[1]
+        F[2] = [None] if lead.is_zero() else [ports[0].N * ports[1].N * lead]
+    return KernelPolys(P, Q, F, n_phase)
 
 
 def _value(f: VPoly, y: Any, vp: list[Any], zero: Any) -> Any:
@@ -122,7 +129,7 @@ def _slope(f: VPoly, df: VPoly, y: Any, vp: list[Any], jz: Any, jzi: Any, zero: 
     return out
 
 
-def scaled_kernel(sp: ScaledPolys, theta: Any) -> tuple:
+def poly_kernel(sp: KernelPolys, theta: Any) -> tuple:
     """The kernel on the angle ball ``theta`` (arb), at the precision in force:
     ``(Pm, Qm, Fm, Pd, Qd, Fd)``, lists of 3 acb, the coefficients of K^0..K^2 of P,
     Q, det M at the ball's centre and of their d/dtheta over the ball, as

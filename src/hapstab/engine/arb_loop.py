@@ -39,12 +39,18 @@ eq. (20) and (23); K. J. Astrom and B. Wittenmark, *Computer-Controlled Systems*
 
 from __future__ import annotations
 
-import math
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Any
 
+from hapstab.engine.arb_base import (
+    BASE_RATIO,
+    NEGLIGIBLE_DAMPING,
+    base_point,
+    damping_scale,
+    k_scale,
+)
 from hapstab.engine.arb_forms import (
     Dual,
     accuracy_bits,
@@ -54,10 +60,11 @@ from hapstab.engine.arb_forms import (
     poly_k,
     preconditioned_excludes,
 )
-from hapstab.engine.arb_kernel import ScaledPolys, scaled_kernel, scaled_polys
+from hapstab.engine.arb_kernel import KernelPolys, kernel_polys, poly_kernel
 
 __all__ = ["ArbLoop", "arb_parameters", "working_precision", "PREC", "poly_k", "dpoly_k", "Dual",
-           "base_point", "k_scale", "damping_scale", "BASE_RATIO", "preconditioned_excludes"]
+           "base_point", "k_scale", "damping_scale", "BASE_RATIO", "NEGLIGIBLE_DAMPING",
+           "preconditioned_excludes"]
 
 #: Working precision in bits. The port polynomials cancel: with E ~ T^2/m the
 #: coefficients are 1e-35 of the unit terms for a 1e29 kg device at T = 1 ms
@@ -70,56 +77,6 @@ MIN_BITS = 80
 #: Most angle kernels (:meth:`ArbLoop.kernel`) kept at once (memory; a proof of a
 #: long delay visits a few thousand pieces of [0, pi]).
 KERNEL_CACHE = 20000
-
-
-#: The base point K_0 standing for K -> 0+, relative to the loop's K scale (the
-#: smaller of m/T^2 and b/T): the float search's lower end U_LO
-#: (:mod:`hapstab.analysis.exact.boxes`, the same number; a test pins it). What holds
-#: for K in (0, K_0) is not proved.
-BASE_RATIO = 1e-14
-
-
-def k_scale(params: dict[str, Any]) -> float:
-    """The loop's K scale (N/m): the power of two nearest min M / T^2 over the ports
-    (M = device + termination mass), as :mod:`hapstab.engine.frequency` takes it."""
-    import numpy as np
-    T = params["period_s"]
-    masses = [p["mass_kg"] + p["termination_mass_kg"] for p in params["ports"]]
-    with np.errstate(all="ignore"):     # a scale beyond doubles is inf: no K_0 matches it
-        return float(2.0 ** np.round(np.log2(np.float64(min(masses)) / np.float64(T) ** 2)))
-
-
-#: A damping below this fraction of the total damping at its port does not set the
-#: damping scale: it is within double rounding of the sum it enters (b + B = b to the
-#: last bit; 2^-52), so it cannot move K_max's scale (2 (b + B)/T in the heavy
-#: limit), while a K_0 it set (1e-14 |B|/T, e.g. 1e-182 N/m for |B| = 1e-168) puts
-#: the poles near z = 1 closer to the circle than the proof's pieces resolve.
-NEGLIGIBLE_DAMPING = 2.0 ** -52
-
-
-def damping_scale(params: dict[str, Any]) -> float:
-    """The smallest positive b/T or |B|/T of the loop (N/m; inf if none), leaving out a
-    damping negligible at its port (:data:`NEGLIGIBLE_DAMPING`; channel i acts on port
-    i): with m/T^2 it sets the base point K_0 standing for K -> 0+, so that a heavy
-    device (m/T^2 far above the stiffness its damping allows, K_max ~ 2 b/T) is not
-    examined from a K_0 above its K_max."""
-    T = params["period_s"]
-    own = [p["damping_N_s_per_m"] + p["termination_damping_N_s_per_m"] for p in params["ports"]]
-    chan = [abs(c["damping_N_s_per_m"]) for c in params["channels"]]
-    # the total damping at each port: its device and termination, and its channel's |B|
-    total = [abs(b) + (chan[i] if i < len(chan) else 0.0) for i, b in enumerate(own)]
-    vals = [(v, total[i]) for i, v in enumerate(own)]
-    vals += [(v, total[i] if i < len(total) else v) for i, v in enumerate(chan)]
-    pos = [v / T for v, tot in vals if v > 0 and v >= NEGLIGIBLE_DAMPING * tot]
-    return min(pos) if pos else math.inf
-
-
-def base_point(params: dict[str, Any]) -> float:
-    """The base point K_0 (N/m) standing for K -> 0+, from the loop's numbers alone:
-    :data:`BASE_RATIO` times the smaller of :func:`k_scale` and :func:`damping_scale`.
-    The proof counts the poles there and proves stability on [K_0, K_max]; a
-    certificate's K_0 is re-derived with this (:mod:`hapstab.analysis.verify`)."""
-    return BASE_RATIO * min(k_scale(params), damping_scale(params))
 
 
 @contextmanager
@@ -236,7 +193,7 @@ class ArbLoop:
         self.params = params
         self._kernels: dict[Any, tuple] = {}
         self._skernels: dict[Any, tuple] = {}
-        self._scaled: ScaledPolys | None = None
+        self._polys: KernelPolys | None = None
         while True:
             with working_precision(prec):
                 ok = self._build(params)
@@ -337,7 +294,7 @@ class ArbLoop:
              c * (self.k[0] * self.k[1])]
         return P, Q, w
 
-    def kernel(self, theta: Any, key: Any = None, scaled: bool = False) -> tuple:
+    def kernel(self, theta: Any, key: Any = None, polys: bool = False) -> tuple:
         """What :meth:`box` needs of the angle alone, as coefficients in K: P, Q and
         det M = P + w Q at the ball's centre, and the values and d/dtheta over the ball
         (det M's combined before any K enters, so that terms of P and w Q that cancel
@@ -352,11 +309,11 @@ class ArbLoop:
             A ball of angles (rad/sample).
         key : hashable, optional
             The cache key of this ball (e.g. the piece's ends (a, b)).
-        scaled : bool
-            The scaled functions z^e P, z^e Q, z^e det M from precomputed ball
-            polynomials (:mod:`~hapstab.engine.arb_kernel`, certificate version 4;
-            several times faster) instead of P, Q, det M by forward-mode derivatives
-            (versions 1-3, and the argument-principle counts).
+        polys : bool
+            By precomputed ball polynomials (:mod:`~hapstab.engine.arb_kernel`,
+            certificate version 4; a few times faster) instead of forward-mode
+            derivatives (versions 1-3, and the argument-principle counts): the same
+            functions, balls that differ in their rounding.
 
         Returns
         -------
@@ -364,15 +321,15 @@ class ArbLoop:
             ``(Pm, Qm, Fm, Pd, Qd, Fd)``: lists of 3 acb, the coefficients of K^0..K^2
             of P, Q, det M at the centre and of their d/dtheta over the ball.
         """
-        cache = self._skernels if scaled else self._kernels
+        cache = self._skernels if polys else self._kernels
         if key is not None:
             got = cache.get(key)
             if got is not None:
                 return got
         from flint import arb
         with working_precision(self.prec):
-            if scaled:
-                kern = scaled_kernel(self.scaled_polys, theta)
+            if polys:
+                kern = poly_kernel(self.kernel_polys, theta)
             else:
                 Pm, Qm, wm = self._parts(arb(theta.mid()), False)
                 Pt, Qt, wt = self._parts(theta, True)
@@ -387,20 +344,19 @@ class ArbLoop:
         return kern
 
     @property
-    def scaled_polys(self) -> ScaledPolys:
-        """P~ = z^e P and Q~ = z^e Q as ball polynomials in y (:mod:`~hapstab.engine.arb_kernel`),
-        formed once, at the loop's precision."""
-        if self._scaled is None:
+    def kernel_polys(self) -> KernelPolys:
+        """P and Q as ball polynomials (:mod:`~hapstab.engine.arb_kernel`), formed once,
+        at the loop's precision."""
+        if self._polys is None:
             with working_precision(self.prec):
-                self._scaled = scaled_polys(self.ports, self.s, self.k, self.beta, self.n_phase)
-        return self._scaled
+                self._polys = kernel_polys(self.ports, self.s, self.k, self.beta, self.n_phase)
+        return self._polys
 
-    def box(self, theta: Any, K: Any, key: Any = None, scaled: bool = False) -> tuple[Any, Any, Any]:
+    def box(self, theta: Any, K: Any, key: Any = None, polys: bool = False) -> tuple[Any, Any, Any]:
         """Balls of P, Q and det M = P + w Q over the balls ``theta`` x ``K``, in the
         centred (mean-value) form: the value at the centre plus the radii times the
         derivatives over the box, so the overestimation is of second order. Each is a
-        polynomial in K with coefficients from :meth:`kernel` (``scaled``: of the scaled
-        functions, there).
+        polynomial in K with coefficients from :meth:`kernel`.
 
         Parameters
         ----------
@@ -408,25 +364,24 @@ class ArbLoop:
             Balls of angles and of stiffnesses (N/m).
         key : hashable, optional
             Cache key of the angle's :meth:`kernel` (the same ball every time).
-        scaled : bool
+        polys : bool
             As :meth:`kernel`.
 
         Returns
         -------
         P, Q, F : acb
         """
-        kern = self.kernel(theta, key, scaled)
+        kern = self.kernel(theta, key, polys)
         with working_precision(self.prec):
             return box_balls(kern, theta, K)[:3]
 
     def exclusion(self, theta: Any, K: Any, key: Any = None,
-                  scaled: bool = False) -> tuple[str | None, float, float]:
+                  polys: bool = False) -> tuple[str | None, float, float]:
         """Whether det M has no zero on the box ``theta`` x ``K``, by the tests a
         certificate names, in order (:func:`~hapstab.engine.arb_forms.exclusion_test`):
         ``"P"`` (|P| > |Q|: then |det M| >= |P| - |Q| > 0 whatever the delay's phase),
         ``"Q"`` (|Q| > |P|), ``"F"`` (0 not in det M's ball), ``"N"`` (0 not in the
-        preconditioned ball); the balls are :meth:`box`'s (``scaled``: of the scaled
-        functions, :mod:`~hapstab.engine.arb_kernel`).
+        preconditioned ball); the balls are :meth:`box`'s (``polys``: as :meth:`kernel`).
 
         Returns
         -------
@@ -437,16 +392,16 @@ class ArbLoop:
             |d det M/dK| rad(K) over the box, the widths of det M's ball due to each
             (to choose a split); else 0.
         """
-        kern = self.kernel(theta, key, scaled)
+        kern = self.kernel(theta, key, polys)
         with working_precision(self.prec):
             return exclusion_test(kern, theta, K)
 
     def box_derivatives(self, theta: Any, K: Any, key: Any = None,
-                        scaled: bool = False) -> tuple[Any, Any, Any]:
+                        polys: bool = False) -> tuple[Any, Any, Any]:
         """det M at the box's centre and its derivatives over the box, as :meth:`box`
         forms them: ``(F_c, dF/dtheta, dF/dK)`` (acb), for the preconditioned test
         (:func:`preconditioned_excludes`)."""
-        kern = self.kernel(theta, key, scaled)
+        kern = self.kernel(theta, key, polys)
         with working_precision(self.prec):
             return box_balls(kern, theta, K)[3:]
 

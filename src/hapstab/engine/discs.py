@@ -250,6 +250,11 @@ def poly_jet(coef: np.ndarray, err: np.ndarray, x: Jet) -> Jet:
     ``coef`` has one row per cell (already gathered); ``err`` bounds the error of
     each coefficient itself (same shape).
     """
+    if x.vr is NO_RADIUS:       # values only: the same centres, without the discs
+        v, d = coef[:, -1].astype(complex), np.zeros(coef.shape[0], complex)
+        for k in range(coef.shape[-1] - 2, -1, -1):
+            v, d = v * x.vc + coef[:, k], d * x.vc + v * x.dc
+        return Jet(v, NO_RADIUS, d, NO_RADIUS)
     acc = const(coef[:, -1], err[:, -1])
     for k in range(coef.shape[-1] - 2, -1, -1):
         acc = acc * x + const(coef[:, k], err[:, k])

@@ -43,6 +43,7 @@ from hapstab.analysis.exact.polish import polish
 from hapstab.analysis.exact.winding import (
     FLOOR,
     MAX_PIECES,
+    START_PIECES,
     Count,
     count,
     k_ball,
@@ -69,7 +70,18 @@ ROUGH = 1e-9
 #: The gap pieces are proved with the angle kernel of precomputed ball polynomials
 #: (:mod:`~hapstab.engine.arb_kernel`, certificate version 4); False: forward-mode
 #: derivatives (version 3; the checker still reads both).
-SCALED = True
+POLY_KERNEL = True
+#: Version 4's subdivision of a gap (with :data:`POLY_KERNEL`): a piece [a, b] of
+#: angles with 0 < a and b > GEOMETRIC a is halved at its geometric mean (the pieces
+#: near theta = 0, where a fast-sampled loop's poles crowd z = 1, shrink geometrically
+#: only as far as needed: the start pieces no longer carry the fixed ladder of 40);
+#: a K-range with k1 > K_WIDE k0 is cut at k1 / K_TOP (its top, where the crossing
+#: is, peeled off), narrower ones as before (geometric mean above GEOMETRIC, else
+#: the midpoint). Choices of where to cut, not tolerances: any cut is replayed by
+#: the checker and every piece proved.
+GEOMETRIC = 4
+K_WIDE = 64
+K_TOP = 8
 #: Widening of the float search's intervals when choosing which candidates to polish
 #: (relative, far above ROUGH: see :func:`_needs_polish`).
 HINT_MARGIN = 1e-6
@@ -81,20 +93,43 @@ def box_status(al: ArbLoop, a: float, b: float, ka: float, kb: float) -> tuple[s
 
     Returns
     -------
-    status : {"P", "Q", "F"} or None
+    status : {"P", "Q", "F", "N"} or None
         ``"P"``: |P| > |Q| on the box; ``"Q"``: |Q| > |P|; ``"F"``: 0 not in the ball
-        of P + w Q; None: not excluded.
+        of P + w Q; ``"N"``: nor in its preconditioned ball; None: not excluded.
     theta_share : float
         In [0, 1]: how much of the ball's width comes from theta rather than K (the
         spreads :meth:`~hapstab.engine.arb_loop.ArbLoop.exclusion` returns; 0 when
         excluded).
     """
-    how, s_t, s_k = al.exclusion(theta_ball(a, b), k_ball(ka, kb), key=(a, b), scaled=SCALED)
+    how, s_t, s_k = al.exclusion(theta_ball(a, b), k_ball(ka, kb), key=(a, b), polys=POLY_KERNEL)
     if how is not None:
         return how, 0.0
     if not (math.isfinite(s_t) and math.isfinite(s_k)):
         return None, 1.0 if not math.isfinite(s_t) else 0.0
     return None, s_t / (s_t + s_k) if s_t + s_k > 0 else 0.5
+
+
+def gap_start_pieces(v4: bool) -> list[tuple[float, float]]:
+    """The pieces of [0, pi] a gap's subdivision starts from: version 4 (``v4``),
+    [0, pi/n 2^-40], [pi/n 2^-40, pi/n] and the other n - 1 equal pieces; before, the
+    first cut again at pi/n 2^-k, k = 1..40 (:func:`~hapstab.analysis.exact.winding.start_pieces`)."""
+    if not v4:
+        return start_pieces()
+    step = math.pi / START_PIECES
+    rest = start_pieces()[41:]
+    return [(0.0, step * 2.0 ** -40), (step * 2.0 ** -40, step), *rest]
+
+
+def split_theta(a: float, b: float, v4: bool) -> float:
+    """Where a gap's piece [a, b] of angles is halved (:data:`GEOMETRIC`)."""
+    return math.sqrt(a * b) if v4 and a > 0 and b > GEOMETRIC * a else 0.5 * (a + b)
+
+
+def split_k(k0: float, k1: float, v4: bool) -> float:
+    """Where a gap's K-range [k0, k1] is cut (:data:`K_WIDE`)."""
+    if v4 and k1 > K_WIDE * k0:
+        return k1 / K_TOP
+    return math.sqrt(k0 * k1) if k1 > GEOMETRIC * k0 else 0.5 * (k0 + k1)
 
 
 @dataclass
@@ -128,7 +163,7 @@ def exclude(al: ArbLoop, ka: float, kb: float, max_pieces: int = MAX_PIECES) -> 
     out = Exclusion()
     # boxes by their lowest K first: when the valve closes, what is left lies above
     # everything proved, so the proved part of the gap is [ka, lowest K left]
-    heap = [(ka, a, b, kb) for a, b in start_pieces()]
+    heap = [(ka, a, b, kb) for a, b in gap_start_pieces(POLY_KERNEL)]
     heapq.heapify(heap)
     tried = 0
     while heap:
@@ -146,12 +181,12 @@ def exclude(al: ArbLoop, ka: float, kb: float, max_pieces: int = MAX_PIECES) -> 
         th_ok = (b - a) > FLOOR * b
         k_ok = (k1 - k0) > FLOOR * k1
         if th_ok and (share >= 0.5 or not k_ok):
-            m = 0.5 * (a + b)
+            m = split_theta(a, b, POLY_KERNEL)
             heapq.heappush(heap, (k0, a, m, k1))
             heapq.heappush(heap, (k0, m, b, k1))
             out.splits.append("t")
         elif k_ok:
-            m = math.sqrt(k0 * k1) if k1 > 4 * k0 else 0.5 * (k0 + k1)
+            m = split_k(k0, k1, POLY_KERNEL)
             heapq.heappush(heap, (k0, a, b, m))
             heapq.heappush(heap, (m, a, b, k1))
             out.splits.append("k")
@@ -221,7 +256,7 @@ class Proof:
     #: (:func:`~hapstab.analysis.exact.top.prove_tail`): only then does a stable
     #: interval reaching k_top stand for [.., inf)
     tail_proved: bool = False
-    #: the certificate version its gap pieces were proved for (:data:`SCALED`)
+    #: the certificate version its gap pieces were proved for (:data:`POLY_KERNEL`)
     version: int = 4
 
 
@@ -435,7 +470,7 @@ def _assemble(al: ArbLoop, params: dict[str, Any], k0: float, k_top: float,
     bottoms = {g.lo for g in stable if g.hi > g.lo}
     uncertain += [(lo, hi) for lo, hi, _t in wins if lo in tops and hi in bottoms]
     return Proof(params, k0, wins, gaps, intervals, kmax, kmax_hi, sorted(set(uncertain)),
-                 theta, al.prec, k_top, base.outside, tail, 4 if SCALED else 3)
+                 theta, al.prec, k_top, base.outside, tail, 4 if POLY_KERNEL else 3)
 
 
 def prove_base(params: dict[str, Any], k0: float) -> tuple[ArbLoop, Count]:
