@@ -102,7 +102,8 @@ def _ball(a: float, b: float) -> Any:
     the proof's precision, as the search does (``arb.pi()`` is rounded to the precision
     in force: at 53 bits a piece ending at pi, next to a pole 1e-12 from the circle,
     left the winding undecided where the search had proved it: wall-hve#22 of seed 26)."""
-    from flint import arb
+    import flint
+    arb = flint.arb
     lo = arb.pi() if a == math.pi else arb(a)
     hi = arb.pi() if b == math.pi else arb(b)
     return lo.union(hi)
@@ -124,7 +125,8 @@ def _excludes(al: ArbLoop, a: float, b: float, ka: float, kb: float, how: str,
 def _excludes_with(al: ArbLoop, a: float, b: float, ka: float, kb: float, how: str,
                    prec: int | None, polys: bool) -> bool:
     """:func:`_excludes` with the box's balls formed at ``prec`` bits (None: doubles)."""
-    from flint import arb
+    import flint
+    arb = flint.arb
     with working_precision(prec or 53):
         th, K = _ball(a, b), arb(ka).union(arb(kb))
     key = (a, b, prec)                    # the angle's kernel, per form of its ball
@@ -173,7 +175,8 @@ def _root_count(al: ArbLoop, K: float) -> int | None:
     the bottom divided out: Arb's ``acb_poly.roots`` gives disjoint balls holding one
     root each; the count is decided when each ball is strictly inside or outside the
     circle (else None)."""
-    from flint import acb_poly
+    import flint
+    acb_poly = flint.acb_poly
     with working_precision(al.prec):
         p = al.polynomial(K)
         low = next(i for i in range(p.degree() + 1) if not p[i].is_zero())
@@ -193,7 +196,8 @@ def _root_count(al: ArbLoop, K: float) -> int | None:
 
 def _check_count(al: ArbLoop, c: dict[str, Any], n0: int) -> int:
     """Replay a count's pieces (or isolate its roots); the verified poles outside."""
-    from flint import arb
+    import flint
+    arb = flint.arb
     if c.get("method") == "roots":
         out = _root_count(al, c["K_N_per_m"])
         if out is None:

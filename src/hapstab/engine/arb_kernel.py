@@ -82,7 +82,8 @@ def kernel_polys(ports: list[Any], s: list[Any], k: list[Any], beta: list[Any],
     """P and Q as :data:`VPoly` (module doc) from the port polynomials d_j, N_j in y
     (``ports``: objects with ``d`` and ``N`` acb_poly), the signs ``s``, the stiffness
     ratios ``k`` and ``beta_j = B_j / T`` (acb), at the precision in force."""
-    from flint import acb_poly
+    import flint
+    acb_poly = flint.acb_poly
 
     def const(c: Any) -> VPoly:
         return [None if c == 0 else acb_poly([c])]
@@ -134,7 +135,8 @@ def poly_kernel(sp: KernelPolys, theta: Any) -> tuple:
     ``(Pm, Qm, Fm, Pd, Qd, Fd)``, lists of 3 acb, the coefficients of K^0..K^2 of P,
     Q, det M at the ball's centre and of their d/dtheta over the ball, as
     :meth:`~hapstab.engine.arb_loop.ArbLoop.kernel` gives them in versions 1-3."""
-    from flint import acb, arb
+    import flint
+    acb, arb = flint.acb, flint.arb
     zero = acb(0)
     jm, jt = acb(0, arb(theta.mid())), acb(0, theta)
     ym, y = jm.expm1(), jt.expm1()

@@ -39,8 +39,6 @@ eq. (20) and (23); K. J. Astrom and B. Wittenmark, *Computer-Controlled Systems*
 
 from __future__ import annotations
 
-from collections.abc import Iterator
-from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Any
 
@@ -79,16 +77,25 @@ MIN_BITS = 80
 KERNEL_CACHE = 20000
 
 
-@contextmanager
-def working_precision(prec: int) -> Iterator[None]:
-    """Run with Arb's (global) precision at ``prec`` bits, restored afterwards."""
-    from flint import ctx
-    old = ctx.prec
-    ctx.prec = prec
-    try:
-        yield
-    finally:
-        ctx.prec = old
+class working_precision:
+    """Run with Arb's (global) precision at ``prec`` bits, restored afterwards (a
+    context manager; a class, not a generator: the proof enters it a few times per
+    box, and a generator's context costs ~2 us, a tenth of a box)."""
+
+    __slots__ = ("ctx", "old", "prec")
+
+    def __init__(self, prec: int) -> None:
+        import flint  # cached after the first import: a dict lookup
+        self.ctx, self.prec, self.old = flint.ctx, prec, 0
+
+    def __enter__(self) -> None:
+        self.old = self.ctx.prec
+        if self.old != self.prec:       # setting it costs ~1 us; nested uses often agree
+            self.ctx.prec = self.prec
+
+    def __exit__(self, *exc: object) -> None:
+        if self.old != self.prec:
+            self.ctx.prec = self.old
 
 
 def arb_parameters(loop: Any, period_s: float | None = None) -> dict[str, Any] | None:
@@ -205,7 +212,8 @@ class ArbLoop:
 
     # -------------------------------------------------------------- building
     def _build(self, params: dict[str, Any]) -> bool:
-        from flint import acb, arb
+        import flint
+        acb, arb = flint.acb, flint.arb
         T = arb(params["period_s"])
         self.ports = [self._port(p, T) for p in params["ports"]]
         self.q = sum(p.order for p in self.ports)
@@ -226,7 +234,8 @@ class ArbLoop:
 
     @staticmethod
     def _port(p: dict[str, Any], T: Any) -> _Port:
-        from flint import acb_poly, arb, arb_mat
+        import flint
+        acb_poly, arb, arb_mat = flint.acb_poly, flint.arb, flint.arb_mat
         M = arb(p["mass_kg"]) + arb(p["termination_mass_kg"])
         b = arb(p["damping_N_s_per_m"]) + arb(p["termination_damping_N_s_per_m"])
         k = arb(p["termination_stiffness_N_per_m"])
@@ -262,7 +271,8 @@ class ArbLoop:
 
     def _parts(self, theta: Any, deriv: bool) -> tuple[list[Any], list[Any], Any]:
         """:meth:`parts` at the precision already set."""
-        from flint import acb
+        import flint
+        acb = flint.acb
         jt = acb(0, theta)
         y = jt.expm1()
         omz = -(-jt).expm1()                 # 1 - z^-1
@@ -326,7 +336,8 @@ class ArbLoop:
             got = cache.get(key)
             if got is not None:
                 return got
-        from flint import arb
+        import flint
+        arb = flint.arb
         with working_precision(self.prec):
             if polys:
                 kern = poly_kernel(self.kernel_polys, theta)
@@ -434,7 +445,8 @@ class ArbLoop:
         -------
         acb_poly
         """
-        from flint import acb, acb_poly
+        import flint
+        acb, acb_poly = flint.acb, flint.acb_poly
         with working_precision(self.prec):
             Kc = acb(K)
             y, z = acb_poly([-1, 1]), acb_poly([0, 1])
@@ -448,7 +460,8 @@ class ArbLoop:
 
     def value(self, theta: Any, K: Any) -> Any:
         """det M on the balls ``theta`` (arb) and ``K`` (arb, N/m): an acb ball."""
-        from flint import acb
+        import flint
+        acb = flint.acb
         with working_precision(self.prec):
             P, Q, w = self._parts(theta, False)
             Kc = acb(K)
@@ -456,7 +469,8 @@ class ArbLoop:
 
     def dvalue_dk(self, theta: Any, K: Any) -> Any:
         """d det M / dK on the balls (for Newton's method and the crossing's direction)."""
-        from flint import acb
+        import flint
+        acb = flint.acb
         with working_precision(self.prec):
             P, Q, w = self._parts(theta, False)
             Kc = acb(K)

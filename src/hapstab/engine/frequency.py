@@ -472,7 +472,7 @@ def _check_finite(resp: LoopResponse, ctrls) -> None:
     """Refuse parameters whose characteristic function overflows (e.g. B = 1e300)."""
     th = np.array([0.0, 1.0, np.pi])
     idx = np.repeat(np.arange(resp.size), th.size)
-    F = resp.coefficients(idx, np.tile(th, resp.size), np.zeros(idx.size))
+    F = resp.coefficients(idx, np.tile(th, resp.size), np.zeros(idx.size), values_only=True)
     with np.errstate(all="ignore"):
         top = [np.abs(f.vc) * u for f, u in zip(F, (1.0, 1e10, 1e20), strict=True)]   # up to u = U_HI
     if not all(np.all(np.isfinite(t)) for t in top):

@@ -50,7 +50,7 @@ from hapstab.analysis.exact.winding import (
     start_pieces,
     theta_ball,
 )
-from hapstab.engine.arb_loop import ArbLoop
+from hapstab.engine.arb_loop import ArbLoop, working_precision
 
 __all__ = ["Proof", "prove", "prove_base", "count", "exclude", "theta_ball", "DELTA"]
 
@@ -159,6 +159,14 @@ def exclude(al: ArbLoop, ka: float, kb: float, max_pieces: int = MAX_PIECES) -> 
         ``failed`` empty: proved. Otherwise the boxes left (at the floor, or when the
         valve closed).
     """
+    # the boxes' balls are formed at the proof's precision too (the checker tries
+    # both that and doubles), and the precision is set once, not per box
+    with working_precision(al.prec):
+        return _exclude(al, ka, kb, max_pieces)
+
+
+def _exclude(al: ArbLoop, ka: float, kb: float, max_pieces: int) -> Exclusion:
+    """:func:`exclude` at the precision already set."""
     import heapq
     out = Exclusion()
     # boxes by their lowest K first: when the valve closes, what is left lies above

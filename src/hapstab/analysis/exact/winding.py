@@ -47,7 +47,8 @@ ROOTS_MAX_PREC_FACTOR = 4
 
 def theta_ball(a: float, b: float) -> Any:
     """The ball holding [a, b]; an end equal to ``math.pi`` stands for pi itself."""
-    from flint import arb
+    import flint
+    arb = flint.arb
     lo = arb.pi() if a == math.pi else arb(a)
     hi = arb.pi() if b == math.pi else arb(b)
     return lo.union(hi)
@@ -55,7 +56,8 @@ def theta_ball(a: float, b: float) -> Any:
 
 def k_ball(a: float, b: float) -> Any:
     """The ball holding [a, b] (N/m)."""
-    from flint import arb
+    import flint
+    arb = flint.arb
     return arb(a).union(arb(b))
 
 
@@ -142,7 +144,8 @@ def root_count(al: ArbLoop, K: float) -> int | None:
     ``acb_poly_validate_roots``); P. Henrici, *Applied and Computational Complex
     Analysis*, vol. 1, Wiley 1974, sec. 6.4 (root inclusion).
     """
-    from flint import acb_poly
+    import flint
+    acb_poly = flint.acb_poly
     with working_precision(al.prec):
         p = al.polynomial(K)
         low = 0
@@ -186,7 +189,8 @@ def count(al: ArbLoop, K: float, max_pieces: int = MAX_PIECES, roots: bool = Tru
         ``outside`` None when a piece at the floor keeps 0 in its ball (a pole on
         or within the balls' width of the circle) or the valve closed.
     """
-    from flint import arb
+    import flint
+    arb = flint.arb
     if roots and al.degree <= ROOTS_MAX_DEGREE:
         got = root_count(al, K)
         if got is not None:
