@@ -15,7 +15,8 @@ that produced it: it rebuilds the characteristic function from the certificate's
 1. **counts** -- each count's pieces, replayed from the ``start_pieces`` equal pieces
    of [0, pi] by halving (so they tile [0, pi] by construction: a dropped or altered
    piece breaks the replay), each prove its increment of arg det M (``P``: |P| > |Q|,
-   ``Q``: |Q| > |P|, ``F``: 0 not in the ball); the winding gives the poles outside,
+   ``Q``: |Q| > |P|, ``F``: 0 not in the ball; its balls by the version's kernel, as
+   for the gaps below); the winding gives the poles outside,
    which must equal the count claimed; a count by ``roots`` (version 3) is redone: the
    roots of the characteristic polynomial, rebuilt from the loop's numbers, isolated
    in balls each clear of the circle;
@@ -143,10 +144,11 @@ def _excludes_with(al: ArbLoop, a: float, b: float, ka: float, kb: float, how: s
         return how == "F" and not F.contains(0)
 
 
-def _increment(al: ArbLoop, a: float, b: float, K: Any, how: str) -> Any:
-    """The proved increment of arg det M over [a, b] at K (raises _Invalid)."""
+def _increment(al: ArbLoop, a: float, b: float, K: Any, how: str, version: int) -> Any:
+    """The proved increment of arg det M over [a, b] at K (raises _Invalid), the piece's
+    balls by the kernel of the certificate's ``version`` (as :func:`_excludes`)."""
     with working_precision(al.prec):      # pi at the proof's precision (_ball)
-        P, Q, F = al.box(_ball(a, b), K, key=(a, b))
+        P, Q, F = al.box(_ball(a, b), K, key=(a, b), polys=version >= 4)
         pa, qa, wa = al.parts(_ball(a, a))
         pb, qb, wb = al.parts(_ball(b, b))
         Pa, Qa, Pb, Qb = poly_k(pa, K), poly_k(qa, K), poly_k(pb, K), poly_k(qb, K)
@@ -194,7 +196,7 @@ def _root_count(al: ArbLoop, K: float) -> int | None:
     return None
 
 
-def _check_count(al: ArbLoop, c: dict[str, Any], n0: int) -> int:
+def _check_count(al: ArbLoop, c: dict[str, Any], n0: int, version: int) -> int:
     """Replay a count's pieces (or isolate its roots); the verified poles outside."""
     import flint
     arb = flint.arb
@@ -218,7 +220,7 @@ def _check_count(al: ArbLoop, c: dict[str, Any], n0: int) -> int:
                            f"[{a!r}, {b!r}] not covered)")
         pa, pb, how = pieces[i]
         if (pa, pb) == (a, b):
-            inc = _increment(al, a, b, K, how)
+            inc = _increment(al, a, b, K, how, version)
             with working_precision(al.prec):
                 total = total + inc
             i += 1
@@ -378,7 +380,7 @@ def _check(cert: dict[str, Any], loop: Any) -> CertificateCheck:
     counts: dict[float, int] = {}
     for g in cert["gaps"]:
         if g["count"] is not None:
-            counts[g["count"]["K_N_per_m"]] = _check_count(al, g["count"], n0)
+            counts[g["count"]["K_N_per_m"]] = _check_count(al, g["count"], n0, cert["version"])
         if g["excluded"]:
             _check_gap(al, g, n0, cert["version"])
     _check_crossings(cert, counts)

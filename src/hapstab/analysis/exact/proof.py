@@ -347,7 +347,7 @@ def _prove_gap(al: ArbLoop, lo: float, hi: float, base: Count | None,
     ex = exclude(al, lo, hi, valve)
     if not ex.failed:
         c = base if base is not None and lo <= base.K <= hi else \
-            count(al, _inside(lo, hi), valve)
+            count(al, _inside(lo, hi), valve, polys=POLY_KERNEL)
         return [Gap(lo, hi, True, c.outside, ex, c)]
     first = min(f[2] for f in ex.failed)
     top = min(min((f[3] for f in ex.failed if f[2] == first), default=hi), hi)
@@ -393,7 +393,7 @@ def prove(params: dict[str, Any], events: tuple, k0: float, k_top: float,
     Proof
     """
     al = ArbLoop(params)
-    base = count(al, k0)
+    base = count(al, k0, polys=POLY_KERNEL)
     if not full:
         wins = _windows(al, _first_only(events, k0), k0, k_top)
         if base.outside != 0:       # K_max is 0 (or not proved): nothing to exclude
@@ -401,7 +401,7 @@ def prove(params: dict[str, Any], events: tuple, k0: float, k_top: float,
                              [Gap(k0, k0, True, base.outside, Exclusion(), base)], base)
         gaps = _prove_gap(al, k0, wins[0][0] if wins else k_top, base)
         if wins and all(g.proved and g.outside == 0 for g in gaps):
-            after = count(al, wins[0][1])         # instability just above the window
+            after = count(al, wins[0][1], polys=POLY_KERNEL)   # unstable above the window
             gaps.append(Gap(wins[0][1], wins[0][1], True, after.outside, Exclusion(), after))
         return _assemble(al, params, k0, k_top, wins, gaps, base)
     wins = _windows(al, events, k0, k_top, _needs_polish(events, hint + unsure, k0))
@@ -427,7 +427,7 @@ def prove(params: dict[str, Any], events: tuple, k0: float, k_top: float,
             hi = b
         else:
             tail = None
-        c = base if g == 0 else count(al, lo, valve)
+        c = base if g == 0 else count(al, lo, valve, polys=POLY_KERNEL)
         if c.outside:       # unstable there: counted, not excluded (see Gap.sampled)
             gaps.append(Gap(lo, hi, False, c.outside, Exclusion(), c, True))
         else:
@@ -484,5 +484,5 @@ def _assemble(al: ArbLoop, params: dict[str, Any], k0: float, k_top: float,
 def prove_base(params: dict[str, Any], k0: float) -> tuple[ArbLoop, Count]:
     """The loop in balls and its proved count of poles outside at K_0."""
     al = ArbLoop(params)
-    return al, count(al, k0)
+    return al, count(al, k0, polys=POLY_KERNEL)
 

@@ -34,11 +34,14 @@ MAX_PIECES = 4000
 #: count costs 4-19 ms at any degree (HVE, PEB; 2026-12-02). Not a tolerance: either
 #: count is a proof.
 ROOTS_MAX_DEGREE = 32
-#: The isolating balls' radii :func:`root_count` asks for in turn: Arb's own (None, the
-#: cheapest: wide balls of ~1e-3 near a lightly damped pair), then 1e-20 (a pole within
-#: 1e-20 of the circle is left to the argument principle). Not tolerances of the
-#: answer: a ball that still meets the circle decides nothing.
-ROOT_TOLERANCES = (None, 1e-20)
+#: The isolating balls' radii :func:`root_count` asks for in turn: 1e-20 (a pole within
+#: 1e-20 of the circle is left to the argument principle; about as cheap as Arb's own
+#: radii, and it decides the count just above a crossing's window, |z| - 1 ~ 1e-12,
+#: where Arb's own balls of ~1e-3 did not and a second search followed: measured 0.9 of
+#: 2.5 ms on the paper's PEB at n = 10), then Arb's own (None) when Arb cannot reach
+#: 1e-20 within its precision (a cluster). Not tolerances of the answer: a ball that
+#: still meets the circle decides nothing.
+ROOT_TOLERANCES = (1e-20, None)
 #: Arb's root finder may raise its precision to this multiple of the loop's: two modes
 #: 1e-10 apart (the two ports of a PEB with nearly equal devices) need ~1280 bits where
 #: the default gives up at 320 (measured on mass-peb#1001 of seed 26).
@@ -79,16 +82,18 @@ def _point(al: ArbLoop, t: float, K: Any, cache: dict) -> tuple[Any, Any, Any]:
     return cache[t]
 
 
-def piece_increment(al: ArbLoop, a: float, b: float, K: Any, cache: dict) -> tuple[str | None, Any]:
+def piece_increment(al: ArbLoop, a: float, b: float, K: Any, cache: dict,
+                    polys: bool = True) -> tuple[str | None, Any]:
     """The increment of arg det M over [a, b] at K, and how it is proved.
 
     ``"P"``: |P| > |Q| on the piece, arg det M = arg P + arg(1 + w Q / P) with the
     second term in (-pi/2, pi/2); ``"Q"``: |Q| > |P|, arg det M = arg Q - n theta +
     arg(1 + P / (w Q)); ``"F"``: the ball of det M excludes 0. Each principal value is
     the true increment because the function stays in a convex ball excluding 0 (or in
-    the right half-plane). None: no proof on this piece.
+    the right half-plane). None: no proof on this piece. ``polys``: the balls from the
+    kernel of ball polynomials (certificate version 4), else forward-mode derivatives.
     """
-    Pv, Qv, Fv = al.box(theta_ball(a, b), K, key=(a, b))
+    Pv, Qv, Fv = al.box(theta_ball(a, b), K, key=(a, b), polys=polys)
     with working_precision(al.prec):
         Pa, Qa, wa = _point(al, a, K, cache)
         Pb, Qb, wb = _point(al, b, K, cache)
@@ -157,10 +162,10 @@ def root_count(al: ArbLoop, K: float) -> int | None:
         for tol in ROOT_TOLERANCES:
             try:
                 roots = q.roots(tol=tol, maxprec=ROOTS_MAX_PREC_FACTOR * al.prec)
-            except ValueError:          # not isolated: a (nearly) multiple root
-                return None
+            except ValueError:          # not isolated (a nearly multiple root), or not
+                continue                # to these radii: the next tolerance, else None
             if len(roots) != q.degree():
-                return None
+                continue
             out = sum(1 for r in roots if r.abs_lower() > 1)
             inside = sum(1 for r in roots if r.abs_upper() < 1)
             if out + inside == len(roots):
@@ -168,7 +173,8 @@ def root_count(al: ArbLoop, K: float) -> int | None:
     return None
 
 
-def count(al: ArbLoop, K: float, max_pieces: int = MAX_PIECES, roots: bool = True) -> Count:
+def count(al: ArbLoop, K: float, max_pieces: int = MAX_PIECES, roots: bool = True,
+          polys: bool = True) -> Count:
     """Poles of the closed loop outside the unit circle at stiffness K: by root
     isolation (:func:`root_count`) up to :data:`ROOTS_MAX_DEGREE`, else (or when it
     cannot decide) by the argument principle in balls (module doc, 3).
@@ -182,6 +188,9 @@ def count(al: ArbLoop, K: float, max_pieces: int = MAX_PIECES, roots: bool = Tru
         Safety valve on the number of pieces tried.
     roots : bool
         Try root isolation first (default; False: the argument principle alone).
+    polys : bool
+        The pieces' balls from the kernel of ball polynomials (certificate version 4;
+        :meth:`~hapstab.engine.arb_loop.ArbLoop.kernel`), else forward-mode derivatives.
 
     Returns
     -------
@@ -206,7 +215,7 @@ def count(al: ArbLoop, K: float, max_pieces: int = MAX_PIECES, roots: bool = Tru
         tried += 1
         if tried > max_pieces:
             return res
-        how, inc = piece_increment(al, a, b, Kb, cache)
+        how, inc = piece_increment(al, a, b, Kb, cache, polys)
         if how is not None:
             res.pieces.append((a, b, how))
             with working_precision(al.prec):
