@@ -13,7 +13,8 @@ that produced it: it rebuilds the characteristic function from the certificate's
    the base point K_0, re-derived from the loop's numbers
    (:func:`~hapstab.engine.arb_loop.base_point`), never taken from the certificate;
 1. **counts** -- each count's pieces, replayed from the ``start_pieces`` equal pieces
-   of [0, pi] by halving (so they tile [0, pi] by construction: a dropped or altered
+   of [0, pi] by halving (from version 4 with the start and the halving of the gaps
+   below; so they tile [0, pi] by construction: a dropped or altered
    piece breaks the replay), each prove its increment of arg det M (``P``: |P| > |Q|,
    ``Q``: |Q| > |P|, ``F``: 0 not in the ball; its balls by the version's kernel, as
    for the gaps below); the winding gives the poles outside,
@@ -211,7 +212,7 @@ def _check_count(al: ArbLoop, c: dict[str, Any], n0: int, version: int) -> int:
         return out
     K = arb(c["K_N_per_m"])
     pieces = [tuple(p) for p in c["pieces"]]
-    stack = _start(n0)[::-1]
+    stack = _gap_start(n0, version)[::-1]
     total, i = arb(0), 0
     while stack:
         a, b = stack.pop()
@@ -225,7 +226,7 @@ def _check_count(al: ArbLoop, c: dict[str, Any], n0: int, version: int) -> int:
                 total = total + inc
             i += 1
         elif a <= pa and pb <= b and (pa, pb) != (a, b):
-            m = 0.5 * (a + b)
+            m = _split_theta(a, b, version)
             if not a < m < b:
                 raise _Invalid(f"count at K = {c['K_N_per_m']!r}: halving [{a!r}, {b!r}] does "
                                "not advance (its ends are adjacent doubles)")

@@ -42,12 +42,13 @@ from typing import Any
 from hapstab.analysis.exact.polish import polish
 from hapstab.analysis.exact.winding import (
     FLOOR,
+    GEOMETRIC,
     MAX_PIECES,
-    START_PIECES,
     Count,
     count,
     k_ball,
-    start_pieces,
+    split_theta,
+    subdivision_start,
     theta_ball,
 )
 from hapstab.engine.arb_loop import ArbLoop, working_precision
@@ -71,15 +72,13 @@ ROUGH = 1e-9
 #: (:mod:`~hapstab.engine.arb_kernel`, certificate version 4); False: forward-mode
 #: derivatives (version 3; the checker still reads both).
 POLY_KERNEL = True
-#: Version 4's subdivision of a gap (with :data:`POLY_KERNEL`): a piece [a, b] of
-#: angles with 0 < a and b > GEOMETRIC a is halved at its geometric mean (the pieces
-#: near theta = 0, where a fast-sampled loop's poles crowd z = 1, shrink geometrically
-#: only as far as needed: the start pieces no longer carry the fixed ladder of 40);
-#: a K-range with k1 > K_WIDE k0 is cut at k1 / K_TOP (its top, where the crossing
-#: is, peeled off), narrower ones as before (geometric mean above GEOMETRIC, else
-#: the midpoint). Choices of where to cut, not tolerances: any cut is replayed by
-#: the checker and every piece proved.
-GEOMETRIC = 4
+#: Version 4's subdivision of a gap (with :data:`POLY_KERNEL`; the angles':
+#: :func:`~hapstab.analysis.exact.winding.subdivision_start` and
+#: :func:`~hapstab.analysis.exact.winding.split_theta`): a K-range with
+#: k1 > K_WIDE k0 is cut at k1 / K_TOP (its top, where the crossing is, peeled off),
+#: narrower ones as before (geometric mean above GEOMETRIC, else the midpoint).
+#: Choices of where to cut, not tolerances: any cut is replayed by the checker and
+#: every piece proved.
 K_WIDE = 64
 K_TOP = 8
 #: Widening of the float search's intervals when choosing which candidates to polish
@@ -107,22 +106,6 @@ def box_status(al: ArbLoop, a: float, b: float, ka: float, kb: float) -> tuple[s
     if not (math.isfinite(s_t) and math.isfinite(s_k)):
         return None, 1.0 if not math.isfinite(s_t) else 0.0
     return None, s_t / (s_t + s_k) if s_t + s_k > 0 else 0.5
-
-
-def gap_start_pieces(v4: bool) -> list[tuple[float, float]]:
-    """The pieces of [0, pi] a gap's subdivision starts from: version 4 (``v4``),
-    [0, pi/n 2^-40], [pi/n 2^-40, pi/n] and the other n - 1 equal pieces; before, the
-    first cut again at pi/n 2^-k, k = 1..40 (:func:`~hapstab.analysis.exact.winding.start_pieces`)."""
-    if not v4:
-        return start_pieces()
-    step = math.pi / START_PIECES
-    rest = start_pieces()[41:]
-    return [(0.0, step * 2.0 ** -40), (step * 2.0 ** -40, step), *rest]
-
-
-def split_theta(a: float, b: float, v4: bool) -> float:
-    """Where a gap's piece [a, b] of angles is halved (:data:`GEOMETRIC`)."""
-    return math.sqrt(a * b) if v4 and a > 0 and b > GEOMETRIC * a else 0.5 * (a + b)
 
 
 def split_k(k0: float, k1: float, v4: bool) -> float:
@@ -171,7 +154,7 @@ def _exclude(al: ArbLoop, ka: float, kb: float, max_pieces: int) -> Exclusion:
     out = Exclusion()
     # boxes by their lowest K first: when the valve closes, what is left lies above
     # everything proved, so the proved part of the gap is [ka, lowest K left]
-    heap = [(ka, a, b, kb) for a, b in gap_start_pieces(POLY_KERNEL)]
+    heap = [(ka, a, b, kb) for a, b in subdivision_start(POLY_KERNEL)]
     heapq.heapify(heap)
     tried = 0
     while heap:

@@ -19,7 +19,8 @@ from typing import Any
 from hapstab.engine.arb_loop import ArbLoop, poly_k, working_precision
 
 __all__ = ["Count", "count", "root_count", "piece_increment", "start_pieces", "theta_ball",
-           "k_ball", "START_PIECES", "FLOOR", "MAX_PIECES", "ROOTS_MAX_DEGREE"]
+           "k_ball", "START_PIECES", "FLOOR", "MAX_PIECES", "ROOTS_MAX_DEGREE",
+           "subdivision_start", "split_theta", "GEOMETRIC"]
 
 #: Pieces of [0, pi] a search starts from.
 START_PIECES = 8
@@ -71,6 +72,30 @@ def start_pieces(n: int = START_PIECES) -> list[tuple[float, float]]:
     near = [(0.0, step * 2.0 ** -40)] + [(step * 2.0 ** -k, step * 2.0 ** (1 - k))
                                           for k in range(40, 0, -1)]
     return near + [(i * step, math.pi if i == n - 1 else (i + 1) * step) for i in range(1, n)]
+
+
+#: Version 4's subdivisions of [0, pi] (gaps and counts): a piece [a, b] with
+#: 0 < a and b > GEOMETRIC a is halved at its geometric mean, so the pieces near
+#: theta = 0, where a fast-sampled loop's poles crowd z = 1, shrink geometrically only
+#: as far as needed (the start pieces no longer carry the fixed ladder of 40). Where
+#: to cut, not a tolerance: the checker replays every cut.
+GEOMETRIC = 4
+
+
+def subdivision_start(v4: bool) -> list[tuple[float, float]]:
+    """The pieces of [0, pi] a subdivision starts from: version 4 (``v4``),
+    [0, pi/n 2^-40], [pi/n 2^-40, pi/n] and the other n - 1 equal pieces; before,
+    :func:`start_pieces` (the first cut again at pi/n 2^-k, k = 1..40)."""
+    if not v4:
+        return start_pieces()
+    step = math.pi / START_PIECES
+    return [(0.0, step * 2.0 ** -40), (step * 2.0 ** -40, step), *start_pieces()[41:]]
+
+
+def split_theta(a: float, b: float, v4: bool) -> float:
+    """Where a piece [a, b] of angles is halved (:data:`GEOMETRIC`; before version 4
+    the midpoint)."""
+    return math.sqrt(a * b) if v4 and a > 0 and b > GEOMETRIC * a else 0.5 * (a + b)
 
 
 def _point(al: ArbLoop, t: float, K: Any, cache: dict) -> tuple[Any, Any, Any]:
@@ -207,7 +232,7 @@ def count(al: ArbLoop, K: float, max_pieces: int = MAX_PIECES, roots: bool = Tru
     Kb = arb(K)
     cache: dict = {}
     res = Count(K, None)
-    stack = start_pieces()[::-1]
+    stack = subdivision_start(polys)[::-1]       # version 4's with its kernel
     total = arb(0)
     tried = 0
     while stack:
@@ -223,7 +248,7 @@ def count(al: ArbLoop, K: float, max_pieces: int = MAX_PIECES, roots: bool = Tru
             continue
         if (b - a) <= FLOOR * b:
             return res
-        m = 0.5 * (a + b)
+        m = split_theta(a, b, polys)
         stack += [(m, b), (a, m)]
     with working_precision(al.prec):
         turns = (total / arb.pi()).unique_fmpz()
