@@ -64,8 +64,9 @@ def test_polynomial_kernel_derivatives_hold_the_difference_quotient(name):
                 assert fd.overlaps(q)
 
 
-def test_version_3_certificates_still_verify(monkeypatch):
-    loop = h.paper_peb(delay_samples=4)
+@pytest.mark.parametrize("n", [4, 40])     # counts by roots (n = 4) and by winding (n = 40)
+def test_version_3_certificates_still_verify(monkeypatch, n):
+    loop = h.paper_peb(delay_samples=n)
     new = h.critical_stiffness(loop, certify=True)
     assert new.certificate["version"] == 4
     assert h.verify_certificate(new.certificate, loop).valid
