@@ -111,23 +111,25 @@ def kernel_polys(ports: list[Any], s: list[Any], k: list[Any], beta: list[Any],
 
 
 def _value(f: VPoly, y: Any, vp: list[Any], zero: Any) -> Any:
-    """sum_m v^m f_m(y), with ``vp`` the powers of v."""
-    out = zero
+    """sum_m v^m f_m(y), with ``vp`` the powers of v (``zero`` when f is 0)."""
+    out = None
     for m, p in enumerate(f):
         if p is not None:
-            out = out + (p(y) if m == 0 else vp[m] * p(y))
-    return out
+            term = p(y) if m == 0 else vp[m] * p(y)
+            out = term if out is None else out + term
+    return zero if out is None else out
 
 
 def _slope(f: VPoly, df: VPoly, y: Any, vp: list[Any], jz: Any, jzi: Any, zero: Any) -> Any:
-    """d/dtheta of sum_m v^m f_m(y) over the ball (``jz = y'``, ``jzi = v'``)."""
-    out = zero
+    """d/dtheta of sum_m v^m f_m(y) over the ball (``jz = y'``, ``jzi = v'``; ``zero``
+    when f is 0)."""
+    out = None
     for m, (p, dp) in enumerate(zip(f, df, strict=True)):
         if p is None:
             continue
-        out = out + (dp(y) * jz if m == 0 else vp[m] * dp(y) * jz
-                     + (m * vp[m - 1]) * jzi * p(y))
-    return out
+        term = dp(y) * jz if m == 0 else vp[m] * dp(y) * jz + (m * vp[m - 1]) * jzi * p(y)
+        out = term if out is None else out + term
+    return zero if out is None else out
 
 
 def poly_kernel(sp: KernelPolys, theta: Any) -> tuple:

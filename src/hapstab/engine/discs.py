@@ -161,8 +161,9 @@ def base_jets(theta: np.ndarray, rho: np.ndarray) -> dict[str, Jet]:
     th = np.asarray(theta)
     h = 0.5 * th
     ez, ezi = np.exp(1j * th), np.exp(-1j * th)
-    y = 2j * np.sin(h) * np.exp(1j * h)          # e^{j theta} - 1 without cancellation
-    omz = 2j * np.sin(h) * np.exp(-1j * h)       # 1 - e^{-j theta}
+    s = np.sin(h)
+    y = 2j * s * np.exp(1j * h)                  # e^{j theta} - 1 without cancellation
+    omz = 2j * s * np.exp(-1j * h)               # 1 - e^{-j theta}
     # theta is exact (chosen by the caller); the centres carry a few rounding errors
     # relative to their own size, which matters near theta = 0 where y is tiny
     r1 = rho + EPS_OP
