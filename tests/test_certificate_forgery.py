@@ -173,7 +173,7 @@ FORGERIES = {
     "proved_range_wrong": (lambda t: t.update(proved_range_N_per_m=[1e-30, 1e9]),
                            "proved_range_N_per_m"),
     # 7: versions and shapes
-    "version_4": (lambda t: t.update(version=4), "unknown format version"),
+    "version_5": (lambda t: t.update(version=5), "unknown format version"),
     "version_string": (lambda t: t.update(version="1"), "unknown format version"),
     "version_float": (lambda t: t.update(version=1.0), "unknown format version"),
     "version_missing": (lambda t: t.pop("version"), "unknown format version"),
@@ -185,7 +185,7 @@ FORGERIES = {
                             "excluded = 'yes': not true/false"),
     "piece_short": (lambda t: _first_gap(t)["pieces"][0].pop(), "not 4 numbers"),
     "piece_how_other": (lambda t: _first_gap(t)["pieces"][0].__setitem__(4, "Z"),
-                        "not 4 numbers and one of 'P', 'Q', 'F', 'N' (certificate version 3)"),
+                        "not 4 numbers and one of 'P', 'Q', 'F', 'N' (certificate version 4)"),
     # an N piece (the preconditioned test) exists from version 2 only
     "version_1_with_N": (lambda t: (t.update(version=1),
                                     _first_gap(t)["pieces"][0].__setitem__(4, "N")),
@@ -238,7 +238,7 @@ ROOTS_FORGERIES = {
 
 def test_the_short_delays_counts_are_by_roots(genuine):
     _, cert = genuine
-    assert cert["version"] == 3
+    assert cert["version"] == 4
     assert {g["count"]["method"] for g in cert["gaps"] if g["count"]} == {"roots"}
 
 

@@ -13,16 +13,24 @@ that produced it: it rebuilds the characteristic function from the certificate's
    the base point K_0, re-derived from the loop's numbers
    (:func:`~hapstab.engine.arb_loop.base_point`), never taken from the certificate;
 1. **counts** -- each count's pieces, replayed from the ``start_pieces`` equal pieces
-   of [0, pi] by halving (so they tile [0, pi] by construction: a dropped or altered
+   of [0, pi] by halving (from version 4 with the start and the halving of the gaps
+   below; so they tile [0, pi] by construction: a dropped or altered
    piece breaks the replay), each prove its increment of arg det M (``P``: |P| > |Q|,
-   ``Q``: |Q| > |P|, ``F``: 0 not in the ball); the winding gives the poles outside,
+   ``Q``: |Q| > |P|, ``F``: 0 not in the ball; its balls by the version's kernel, as
+   for the gaps below); the winding gives the poles outside,
    which must equal the count claimed; a count by ``roots`` (version 3) is redone: the
    roots of the characteristic polynomial, rebuilt from the loop's numbers, isolated
    in balls each clear of the circle;
 2. **gaps** -- each excluded gap's pieces, replayed from ``start_pieces`` x [lo, hi]
    (halving theta at the midpoint, or K at the geometric mean of a wide range, else
-   the midpoint), each excluding 0 for the reason given (``P``, ``Q``, ``F`` or, from
-   version 2, ``N``: :func:`~hapstab.engine.arb_loop.preconditioned_excludes`);
+   the midpoint; from version 4 the start pieces have no ladder near theta = 0, a
+   piece [a, b] of angles with b > 4a > 0 is halved at its geometric mean and a
+   K-range with k1 > 64 k0 cut at k1 / 8), each excluding 0 for the reason given
+   (``P``, ``Q``, ``F`` or, from version 2, ``N``:
+   :func:`~hapstab.engine.arb_loop.preconditioned_excludes`), its balls formed as the
+   certificate's version says (from version 4 by the angle kernel of precomputed
+   ball polynomials, :mod:`~hapstab.engine.arb_kernel`; before, by forward-mode
+   derivatives);
 3. **the claim** -- every stable interval is a chain of excluded gaps with a verified
    count 0 inside, starting and ending where the interval does; K_max is the upper
    end of the one from K_0; ``kmax_upper`` has a verified count > 0 at it; each
@@ -96,34 +104,39 @@ def _ball(a: float, b: float) -> Any:
     the proof's precision, as the search does (``arb.pi()`` is rounded to the precision
     in force: at 53 bits a piece ending at pi, next to a pole 1e-12 from the circle,
     left the winding undecided where the search had proved it: wall-hve#22 of seed 26)."""
-    from flint import arb
+    import flint
+    arb = flint.arb
     lo = arb.pi() if a == math.pi else arb(a)
     hi = arb.pi() if b == math.pi else arb(b)
     return lo.union(hi)
 
 
-def _excludes(al: ArbLoop, a: float, b: float, ka: float, kb: float, how: str) -> bool:
+def _excludes(al: ArbLoop, a: float, b: float, ka: float, kb: float, how: str,
+              polys: bool) -> bool:
     """Whether the box [a, b] x [ka, kb] has no zero of det M, for the reason ``how``
     (``N``: the preconditioned mean-value form, certificate version 2). Any balls that
     hold the box prove it; the search forms them in double precision and the counts at
     the proof's (:func:`_ball`), and the mean-value test is not monotone in the ball
     (its centre moves), so both forms are tried (seed 1796236426's mass-peb#6: an 'N'
-    piece the search proved failed with the balls formed at 320 bits)."""
-    return any(_excludes_with(al, a, b, ka, kb, how, prec) for prec in (al.prec, None))
+    piece the search proved failed with the balls formed at 320 bits). ``polys``: the
+    angle kernel of precomputed ball polynomials (certificate version 4,
+    :mod:`~hapstab.engine.arb_kernel`), else forward-mode derivatives (versions 1-3)."""
+    return any(_excludes_with(al, a, b, ka, kb, how, prec, polys) for prec in (al.prec, None))
 
 
 def _excludes_with(al: ArbLoop, a: float, b: float, ka: float, kb: float, how: str,
-                   prec: int | None) -> bool:
+                   prec: int | None, polys: bool) -> bool:
     """:func:`_excludes` with the box's balls formed at ``prec`` bits (None: doubles)."""
-    from flint import arb
+    import flint
+    arb = flint.arb
     with working_precision(prec or 53):
         th, K = _ball(a, b), arb(ka).union(arb(kb))
     key = (a, b, prec)                    # the angle's kernel, per form of its ball
     if how == "N":
-        Fc, Ft, Fk = al.box_derivatives(th, K, key=key)
+        Fc, Ft, Fk = al.box_derivatives(th, K, key=key, polys=polys)
         with working_precision(al.prec):
             return preconditioned_excludes(Fc, Ft, Fk, th.rad(), K.rad())
-    P, Q, F = al.box(th, K, key=key)
+    P, Q, F = al.box(th, K, key=key, polys=polys)
     with working_precision(al.prec):
         if how == "P":
             return bool(P.abs_lower() > Q.abs_upper())
@@ -132,10 +145,11 @@ def _excludes_with(al: ArbLoop, a: float, b: float, ka: float, kb: float, how: s
         return how == "F" and not F.contains(0)
 
 
-def _increment(al: ArbLoop, a: float, b: float, K: Any, how: str) -> Any:
-    """The proved increment of arg det M over [a, b] at K (raises _Invalid)."""
+def _increment(al: ArbLoop, a: float, b: float, K: Any, how: str, version: int) -> Any:
+    """The proved increment of arg det M over [a, b] at K (raises _Invalid), the piece's
+    balls by the kernel of the certificate's ``version`` (as :func:`_excludes`)."""
     with working_precision(al.prec):      # pi at the proof's precision (_ball)
-        P, Q, F = al.box(_ball(a, b), K, key=(a, b))
+        P, Q, F = al.box(_ball(a, b), K, key=(a, b), polys=version >= 4)
         pa, qa, wa = al.parts(_ball(a, a))
         pb, qb, wb = al.parts(_ball(b, b))
         Pa, Qa, Pb, Qb = poly_k(pa, K), poly_k(qa, K), poly_k(pb, K), poly_k(qb, K)
@@ -164,7 +178,8 @@ def _root_count(al: ArbLoop, K: float) -> int | None:
     the bottom divided out: Arb's ``acb_poly.roots`` gives disjoint balls holding one
     root each; the count is decided when each ball is strictly inside or outside the
     circle (else None)."""
-    from flint import acb_poly
+    import flint
+    acb_poly = flint.acb_poly
     with working_precision(al.prec):
         p = al.polynomial(K)
         low = next(i for i in range(p.degree() + 1) if not p[i].is_zero())
@@ -182,9 +197,10 @@ def _root_count(al: ArbLoop, K: float) -> int | None:
     return None
 
 
-def _check_count(al: ArbLoop, c: dict[str, Any], n0: int) -> int:
+def _check_count(al: ArbLoop, c: dict[str, Any], n0: int, version: int) -> int:
     """Replay a count's pieces (or isolate its roots); the verified poles outside."""
-    from flint import arb
+    import flint
+    arb = flint.arb
     if c.get("method") == "roots":
         out = _root_count(al, c["K_N_per_m"])
         if out is None:
@@ -196,7 +212,7 @@ def _check_count(al: ArbLoop, c: dict[str, Any], n0: int) -> int:
         return out
     K = arb(c["K_N_per_m"])
     pieces = [tuple(p) for p in c["pieces"]]
-    stack = _start(n0)[::-1]
+    stack = _gap_start(n0, version)[::-1]
     total, i = arb(0), 0
     while stack:
         a, b = stack.pop()
@@ -205,12 +221,12 @@ def _check_count(al: ArbLoop, c: dict[str, Any], n0: int) -> int:
                            f"[{a!r}, {b!r}] not covered)")
         pa, pb, how = pieces[i]
         if (pa, pb) == (a, b):
-            inc = _increment(al, a, b, K, how)
+            inc = _increment(al, a, b, K, how, version)
             with working_precision(al.prec):
                 total = total + inc
             i += 1
         elif a <= pa and pb <= b and (pa, pb) != (a, b):
-            m = 0.5 * (a + b)
+            m = _split_theta(a, b, version)
             if not a < m < b:
                 raise _Invalid(f"count at K = {c['K_N_per_m']!r}: halving [{a!r}, {b!r}] does "
                                "not advance (its ends are adjacent doubles)")
@@ -231,18 +247,37 @@ def _check_count(al: ArbLoop, c: dict[str, Any], n0: int) -> int:
     return out
 
 
-def _split_k(k0: float, k1: float) -> float:
+def _gap_start(n: int, version: int) -> list[tuple[float, float]]:
+    """A gap's start pieces: from version 4, [0, pi/n 2^-40], [pi/n 2^-40, pi/n] and
+    the other n - 1 equal pieces of [0, pi]; before, :func:`_start`'s."""
+    if version < 4:
+        return _start(n)
+    step = math.pi / n
+    return [(0.0, step * 2.0 ** -40), (step * 2.0 ** -40, step), *_start(n)[41:]]
+
+
+def _split_theta(a: float, b: float, version: int) -> float:
+    """Where a gap's piece of angles is halved: from version 4 at the geometric mean
+    when 0 < a and b > 4 a, else (and before) the midpoint."""
+    return math.sqrt(a * b) if version >= 4 and 0 < a and b > 4 * a else 0.5 * (a + b)
+
+
+def _split_k(k0: float, k1: float, version: int) -> float:
+    """Where a gap's K-range is cut: from version 4 at k1 / 8 when k1 > 64 k0;
+    otherwise the geometric mean of a range wider than 4, else the midpoint."""
+    if version >= 4 and k1 > 64 * k0:
+        return k1 / 8
     return math.sqrt(k0 * k1) if k1 > 4 * k0 else 0.5 * (k0 + k1)
 
 
-def _check_gap(al: ArbLoop, g: dict[str, Any], n0: int) -> None:
+def _check_gap(al: ArbLoop, g: dict[str, Any], n0: int, version: int) -> None:
     """Replay an excluded gap's subdivision of [0, pi] x [lo, hi], boxes taken lowest K
     first (``splits``: per box "x" the next piece excludes it, "t" halve theta, "k"
-    split K) and check each piece."""
+    split K) and check each piece (with the kernel of the certificate's ``version``)."""
     import heapq
     lo, hi = g["lo_N_per_m"], g["hi_N_per_m"]
     pieces = [tuple(p) for p in g["pieces"]]
-    heap = [(lo, a, b, hi) for a, b in _start(n0)]       # lowest K first, as written
+    heap = [(lo, a, b, hi) for a, b in _gap_start(n0, version)]   # lowest K first
     heapq.heapify(heap)
     i = 0
     for step in g["splits"]:
@@ -251,7 +286,7 @@ def _check_gap(al: ArbLoop, g: dict[str, Any], n0: int) -> None:
         k0, a, b, k1 = heapq.heappop(heap)
         box = (a, b, k0, k1)
         if step in "tk":
-            m = 0.5 * (a + b) if step == "t" else _split_k(k0, k1)
+            m = _split_theta(a, b, version) if step == "t" else _split_k(k0, k1, version)
             if not ((a < m < b) if step == "t" else (k0 < m < k1)):
                 raise _Invalid(f"gap [{lo!r}, {hi!r}]: splitting the box theta in [{a!r}, "
                                f"{b!r}], K in [{k0!r}, {k1!r}] ('{step}') does not advance")
@@ -265,7 +300,7 @@ def _check_gap(al: ArbLoop, g: dict[str, Any], n0: int) -> None:
             if i >= len(pieces) or pieces[i][:4] != box:
                 raise _Invalid(f"gap [{lo!r}, {hi!r}]: the box theta in [{a!r}, {b!r}], K in "
                                f"[{k0!r}, {k1!r}] has no piece of its own")
-            if not _excludes(al, *box, pieces[i][4]):
+            if not _excludes(al, *box, pieces[i][4], version >= 4):
                 raise _Invalid(f"gap [{lo!r}, {hi!r}]: the piece theta in [{a!r}, {b!r}], K in "
                                f"[{k0!r}, {k1!r}] is not excluded by '{pieces[i][4]}'")
             i += 1
@@ -346,9 +381,9 @@ def _check(cert: dict[str, Any], loop: Any) -> CertificateCheck:
     counts: dict[float, int] = {}
     for g in cert["gaps"]:
         if g["count"] is not None:
-            counts[g["count"]["K_N_per_m"]] = _check_count(al, g["count"], n0)
+            counts[g["count"]["K_N_per_m"]] = _check_count(al, g["count"], n0, cert["version"])
         if g["excluded"]:
-            _check_gap(al, g, n0)
+            _check_gap(al, g, n0, cert["version"])
     _check_crossings(cert, counts)
     kmax = _check_claim(cert, counts)
     said = cert.get("proved_range_N_per_m", [k0, kmax] if kmax > 0 else None)

@@ -2,14 +2,19 @@
 (:class:`~hapstab.engine.arb_loop.ArbLoop`): forward-mode derivatives over acb balls,
 the quadratic in K and its derivative, the preconditioned mean-value exclusion test,
 and the accuracy of a ball polynomial. Everything here is rigorous given rigorous
-(python-flint Arb) inputs; see each docstring."""
+(python-flint Arb) inputs; see each docstring.
+
+python-flint is imported lazily (``import hapstab`` stays light) as ``import flint``
+inside the functions: ``from flint import acb, arb`` costs ~1.5 us a call (the import
+machinery's fromlist), a tenth of an exclusion box, and these run per box."""
 
 from __future__ import annotations
 
 import math
 from typing import Any
 
-__all__ = ["Dual", "preconditioned_excludes", "poly_k", "dpoly_k", "accuracy_bits"]
+__all__ = ["Dual", "preconditioned_excludes", "poly_k", "dpoly_k", "accuracy_bits",
+           "box_balls", "exclusion_test"]
 
 
 class Dual:
@@ -59,13 +64,21 @@ def preconditioned_excludes(Fc: Any, Ft: Any, Fk: Any, r_theta: Any, r_K: Any) -
     -------
     bool
     """
-    from flint import arb
+    import flint
+    arb = flint.arb
     a, b = float(Ft.real.mid()), float(Fk.real.mid())
     c, d = float(Ft.imag.mid()), float(Fk.imag.mid())
     det = a * d - b * c
     if not (math.isfinite(det) and det != 0.0):
         return False
     Y = ((d / det, -b / det), (-c / det, a / det))
+    # Y A is the identity at its centre, so each component's ball is at least as wide
+    # as the box's radius in that variable: where the centre's image is inside both
+    # (in doubles, with 1 % to spare for their rounding), no ball can exclude 0
+    f1, f2 = float(Fc.real.mid()), float(Fc.imag.mid())
+    rt, rk = float(r_theta), float(r_K)
+    if abs(Y[0][0] * f1 + Y[0][1] * f2) < 0.99 * rt and abs(Y[1][0] * f1 + Y[1][1] * f2) < 0.99 * rk:
+        return False
     ht, hk = arb(0, r_theta), arb(0, r_K)
     for y1, y2 in Y:
         if not (math.isfinite(y1) and math.isfinite(y2)):
@@ -95,3 +108,63 @@ def accuracy_bits(poly: Any) -> float:
             continue
         worst = min(worst, c.rel_accuracy_bits())
     return worst
+
+
+def box_balls(kern: tuple, theta: Any, K: Any) -> tuple[Any, Any, Any, Any, Any, Any]:
+    """Balls of P, Q and det M over the box ``theta`` x ``K`` (arb balls) in the centred
+    (mean-value) form, from an angle kernel ``(Pm, Qm, Fm, Pd, Qd, Fd)``
+    (:meth:`~hapstab.engine.arb_loop.ArbLoop.kernel`): ``f(theta, K) - f(c) =
+    f_theta(xi_1, K) dtheta + f_K(theta_c, xi_2) dK``, the first over the whole box, the
+    second at the centre angle, so the overestimation is of second order. At the
+    precision in force.
+
+    Returns
+    -------
+    P, Q, F, Fc, Ft, Fk : acb
+        The three balls, then det M at the centre and its derivatives d/dtheta (over
+        the box) and d/dK (at the centre angle, over K).
+    """
+    import flint
+    acb, arb = flint.acb, flint.arb
+    Pm, Qm, Fm, Pd, Qd, Fd = kern
+    Kc, km = acb(K), acb(K.mid())         # acb: python-flint's acb x acb is fastest
+    hh, kk = acb(arb(0, theta.rad())), acb(arb(0, K.rad()))
+    P = poly_k(Pm, km) + hh * poly_k(Pd, Kc) + kk * dpoly_k(Pm, Kc)
+    Q = poly_k(Qm, km) + hh * poly_k(Qd, Kc) + kk * dpoly_k(Qm, Kc)
+    Ft, Fk = poly_k(Fd, Kc), dpoly_k(Fm, Kc)
+    Fc = poly_k(Fm, km)
+    return P, Q, Fc + hh * Ft + kk * Fk, Fc, Ft, Fk
+
+
+def exclusion_test(kern: tuple, theta: Any, K: Any) -> tuple[str | None, float, float]:
+    """The tests a certificate names, in order, on the balls of :func:`box_balls`
+    (each formed only when the test before it fails): ``"P"`` (|P| > |Q|), ``"Q"``
+    (|Q| > |P|), ``"F"`` (0 not in det M's ball), ``"N"``
+    (:func:`preconditioned_excludes`). At the precision in force.
+
+    Returns
+    -------
+    how : {"P", "Q", "F", "N"} or None
+        The test that excludes the box (None: none does).
+    spread_theta, spread_K : float
+        With ``how`` None: upper bounds of |d det M/d theta| rad(theta) and
+        |d det M/dK| rad(K) over the box (to choose a split); else 0.
+    """
+    import flint
+    acb, arb = flint.acb, flint.arb
+    Pm, Qm, Fm, Pd, Qd, Fd = kern
+    Kc, km = acb(K), acb(K.mid())         # the same balls as box_balls
+    hh, kk = acb(arb(0, theta.rad())), acb(arb(0, K.rad()))
+    P = poly_k(Pm, km) + hh * poly_k(Pd, Kc) + kk * dpoly_k(Pm, Kc)
+    Q = poly_k(Qm, km) + hh * poly_k(Qd, Kc) + kk * dpoly_k(Qm, Kc)
+    if P.abs_lower() > Q.abs_upper():
+        return "P", 0.0, 0.0
+    if Q.abs_lower() > P.abs_upper():
+        return "Q", 0.0, 0.0
+    Ft, Fk = poly_k(Fd, Kc), dpoly_k(Fm, Kc)
+    Fc = poly_k(Fm, km)
+    if not (Fc + hh * Ft + kk * Fk).contains(0):
+        return "F", 0.0, 0.0
+    if preconditioned_excludes(Fc, Ft, Fk, theta.rad(), K.rad()):
+        return "N", 0.0, 0.0
+    return None, float(Ft.abs_upper() * theta.rad()), float(Fk.abs_upper() * K.rad())

@@ -39,16 +39,30 @@ eq. (20) and (23); K. J. Astrom and B. Wittenmark, *Computer-Controlled Systems*
 
 from __future__ import annotations
 
-import math
-from collections.abc import Iterator
-from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Any
 
-from hapstab.engine.arb_forms import Dual, accuracy_bits, dpoly_k, poly_k, preconditioned_excludes
+from hapstab.engine.arb_base import (
+    BASE_RATIO,
+    NEGLIGIBLE_DAMPING,
+    base_point,
+    damping_scale,
+    k_scale,
+)
+from hapstab.engine.arb_forms import (
+    Dual,
+    accuracy_bits,
+    box_balls,
+    dpoly_k,
+    exclusion_test,
+    poly_k,
+    preconditioned_excludes,
+)
+from hapstab.engine.arb_kernel import KernelPolys, kernel_polys, poly_kernel
 
 __all__ = ["ArbLoop", "arb_parameters", "working_precision", "PREC", "poly_k", "dpoly_k", "Dual",
-           "base_point", "k_scale", "damping_scale", "BASE_RATIO", "preconditioned_excludes"]
+           "base_point", "k_scale", "damping_scale", "BASE_RATIO", "NEGLIGIBLE_DAMPING",
+           "preconditioned_excludes"]
 
 #: Working precision in bits. The port polynomials cancel: with E ~ T^2/m the
 #: coefficients are 1e-35 of the unit terms for a 1e29 kg device at T = 1 ms
@@ -63,66 +77,25 @@ MIN_BITS = 80
 KERNEL_CACHE = 20000
 
 
-#: The base point K_0 standing for K -> 0+, relative to the loop's K scale (the
-#: smaller of m/T^2 and b/T): the float search's lower end U_LO
-#: (:mod:`hapstab.analysis.exact.boxes`, the same number; a test pins it). What holds
-#: for K in (0, K_0) is not proved.
-BASE_RATIO = 1e-14
+class working_precision:
+    """Run with Arb's (global) precision at ``prec`` bits, restored afterwards (a
+    context manager; a class, not a generator: the proof enters it a few times per
+    box, and a generator's context costs ~2 us, a tenth of a box)."""
 
+    __slots__ = ("ctx", "old", "prec")
 
-def k_scale(params: dict[str, Any]) -> float:
-    """The loop's K scale (N/m): the power of two nearest min M / T^2 over the ports
-    (M = device + termination mass), as :mod:`hapstab.engine.frequency` takes it."""
-    import numpy as np
-    T = params["period_s"]
-    masses = [p["mass_kg"] + p["termination_mass_kg"] for p in params["ports"]]
-    with np.errstate(all="ignore"):     # a scale beyond doubles is inf: no K_0 matches it
-        return float(2.0 ** np.round(np.log2(np.float64(min(masses)) / np.float64(T) ** 2)))
+    def __init__(self, prec: int) -> None:
+        import flint  # cached after the first import: a dict lookup
+        self.ctx, self.prec, self.old = flint.ctx, prec, 0
 
+    def __enter__(self) -> None:
+        self.old = self.ctx.prec
+        if self.old != self.prec:       # setting it costs ~1 us; nested uses often agree
+            self.ctx.prec = self.prec
 
-#: A damping below this fraction of the total damping at its port does not set the
-#: damping scale: it is within double rounding of the sum it enters (b + B = b to the
-#: last bit; 2^-52), so it cannot move K_max's scale (2 (b + B)/T in the heavy
-#: limit), while a K_0 it set (1e-14 |B|/T, e.g. 1e-182 N/m for |B| = 1e-168) puts
-#: the poles near z = 1 closer to the circle than the proof's pieces resolve.
-NEGLIGIBLE_DAMPING = 2.0 ** -52
-
-
-def damping_scale(params: dict[str, Any]) -> float:
-    """The smallest positive b/T or |B|/T of the loop (N/m; inf if none), leaving out a
-    damping negligible at its port (:data:`NEGLIGIBLE_DAMPING`; channel i acts on port
-    i): with m/T^2 it sets the base point K_0 standing for K -> 0+, so that a heavy
-    device (m/T^2 far above the stiffness its damping allows, K_max ~ 2 b/T) is not
-    examined from a K_0 above its K_max."""
-    T = params["period_s"]
-    own = [p["damping_N_s_per_m"] + p["termination_damping_N_s_per_m"] for p in params["ports"]]
-    chan = [abs(c["damping_N_s_per_m"]) for c in params["channels"]]
-    # the total damping at each port: its device and termination, and its channel's |B|
-    total = [abs(b) + (chan[i] if i < len(chan) else 0.0) for i, b in enumerate(own)]
-    vals = [(v, total[i]) for i, v in enumerate(own)]
-    vals += [(v, total[i] if i < len(total) else v) for i, v in enumerate(chan)]
-    pos = [v / T for v, tot in vals if v > 0 and v >= NEGLIGIBLE_DAMPING * tot]
-    return min(pos) if pos else math.inf
-
-
-def base_point(params: dict[str, Any]) -> float:
-    """The base point K_0 (N/m) standing for K -> 0+, from the loop's numbers alone:
-    :data:`BASE_RATIO` times the smaller of :func:`k_scale` and :func:`damping_scale`.
-    The proof counts the poles there and proves stability on [K_0, K_max]; a
-    certificate's K_0 is re-derived with this (:mod:`hapstab.analysis.verify`)."""
-    return BASE_RATIO * min(k_scale(params), damping_scale(params))
-
-
-@contextmanager
-def working_precision(prec: int) -> Iterator[None]:
-    """Run with Arb's (global) precision at ``prec`` bits, restored afterwards."""
-    from flint import ctx
-    old = ctx.prec
-    ctx.prec = prec
-    try:
-        yield
-    finally:
-        ctx.prec = old
+    def __exit__(self, *exc: object) -> None:
+        if self.old != self.prec:
+            self.ctx.prec = self.old
 
 
 def arb_parameters(loop: Any, period_s: float | None = None) -> dict[str, Any] | None:
@@ -226,6 +199,8 @@ class ArbLoop:
     def __init__(self, params: dict[str, Any], prec: int = PREC) -> None:
         self.params = params
         self._kernels: dict[Any, tuple] = {}
+        self._skernels: dict[Any, tuple] = {}
+        self._polys: KernelPolys | None = None
         while True:
             with working_precision(prec):
                 ok = self._build(params)
@@ -237,7 +212,8 @@ class ArbLoop:
 
     # -------------------------------------------------------------- building
     def _build(self, params: dict[str, Any]) -> bool:
-        from flint import acb, arb
+        import flint
+        acb, arb = flint.acb, flint.arb
         T = arb(params["period_s"])
         self.ports = [self._port(p, T) for p in params["ports"]]
         self.q = sum(p.order for p in self.ports)
@@ -258,7 +234,8 @@ class ArbLoop:
 
     @staticmethod
     def _port(p: dict[str, Any], T: Any) -> _Port:
-        from flint import acb_poly, arb, arb_mat
+        import flint
+        acb_poly, arb, arb_mat = flint.acb_poly, flint.arb, flint.arb_mat
         M = arb(p["mass_kg"]) + arb(p["termination_mass_kg"])
         b = arb(p["damping_N_s_per_m"]) + arb(p["termination_damping_N_s_per_m"])
         k = arb(p["termination_stiffness_N_per_m"])
@@ -294,7 +271,8 @@ class ArbLoop:
 
     def _parts(self, theta: Any, deriv: bool) -> tuple[list[Any], list[Any], Any]:
         """:meth:`parts` at the precision already set."""
-        from flint import acb
+        import flint
+        acb = flint.acb
         jt = acb(0, theta)
         y = jt.expm1()
         omz = -(-jt).expm1()                 # 1 - z^-1
@@ -326,7 +304,7 @@ class ArbLoop:
              c * (self.k[0] * self.k[1])]
         return P, Q, w
 
-    def kernel(self, theta: Any, key: Any = None) -> tuple:
+    def kernel(self, theta: Any, key: Any = None, polys: bool = False) -> tuple:
         """What :meth:`box` needs of the angle alone, as coefficients in K: P, Q and
         det M = P + w Q at the ball's centre, and the values and d/dtheta over the ball
         (det M's combined before any K enters, so that terms of P and w Q that cancel
@@ -341,6 +319,11 @@ class ArbLoop:
             A ball of angles (rad/sample).
         key : hashable, optional
             The cache key of this ball (e.g. the piece's ends (a, b)).
+        polys : bool
+            By precomputed ball polynomials (:mod:`~hapstab.engine.arb_kernel`,
+            certificate version 4; a few times faster) instead of forward-mode
+            derivatives (versions 1-3, and the argument-principle counts): the same
+            functions, balls that differ in their rounding.
 
         Returns
         -------
@@ -348,25 +331,39 @@ class ArbLoop:
             ``(Pm, Qm, Fm, Pd, Qd, Fd)``: lists of 3 acb, the coefficients of K^0..K^2
             of P, Q, det M at the centre and of their d/dtheta over the ball.
         """
+        cache = self._skernels if polys else self._kernels
         if key is not None:
-            got = self._kernels.get(key)
+            got = cache.get(key)
             if got is not None:
                 return got
-        from flint import arb
+        import flint
+        arb = flint.arb
         with working_precision(self.prec):
-            Pm, Qm, wm = self._parts(arb(theta.mid()), False)
-            Pt, Qt, wt = self._parts(theta, True)
-            Fm = [p + wm * q for p, q in zip(Pm, Qm, strict=True)]
-            Pd, Qd = [p.d for p in Pt], [q.d for q in Qt]
-            Fd = [p + wt.d * q.v + wt.v * dq for p, q, dq in zip(Pd, Qt, Qd, strict=True)]
-        kern = (Pm, Qm, Fm, Pd, Qd, Fd)
+            if polys:
+                kern = poly_kernel(self.kernel_polys, theta)
+            else:
+                Pm, Qm, wm = self._parts(arb(theta.mid()), False)
+                Pt, Qt, wt = self._parts(theta, True)
+                Fm = [p + wm * q for p, q in zip(Pm, Qm, strict=True)]
+                Pd, Qd = [p.d for p in Pt], [q.d for q in Qt]
+                Fd = [p + wt.d * q.v + wt.v * dq for p, q, dq in zip(Pd, Qt, Qd, strict=True)]
+                kern = (Pm, Qm, Fm, Pd, Qd, Fd)
         if key is not None:
-            if len(self._kernels) >= KERNEL_CACHE:
-                self._kernels.clear()
-            self._kernels[key] = kern
+            if len(cache) >= KERNEL_CACHE:
+                cache.clear()
+            cache[key] = kern
         return kern
 
-    def box(self, theta: Any, K: Any, key: Any = None) -> tuple[Any, Any, Any]:
+    @property
+    def kernel_polys(self) -> KernelPolys:
+        """P and Q as ball polynomials (:mod:`~hapstab.engine.arb_kernel`), formed once,
+        at the loop's precision."""
+        if self._polys is None:
+            with working_precision(self.prec):
+                self._polys = kernel_polys(self.ports, self.s, self.k, self.beta, self.n_phase)
+        return self._polys
+
+    def box(self, theta: Any, K: Any, key: Any = None, polys: bool = False) -> tuple[Any, Any, Any]:
         """Balls of P, Q and det M = P + w Q over the balls ``theta`` x ``K``, in the
         centred (mean-value) form: the value at the centre plus the radii times the
         derivatives over the box, so the overestimation is of second order. Each is a
@@ -378,75 +375,47 @@ class ArbLoop:
             Balls of angles and of stiffnesses (N/m).
         key : hashable, optional
             Cache key of the angle's :meth:`kernel` (the same ball every time).
+        polys : bool
+            As :meth:`kernel`.
 
         Returns
         -------
         P, Q, F : acb
         """
-        from flint import acb, arb
-        Pm, Qm, Fm, Pd, Qd, Fd = self.kernel(theta, key)
+        kern = self.kernel(theta, key, polys)
         with working_precision(self.prec):
-            Kc, km = acb(K), acb(K.mid())         # acb: see _build
-            hh, kk = acb(arb(0, theta.rad())), acb(arb(0, K.rad()))
-            P = poly_k(Pm, km) + hh * poly_k(Pd, Kc) + kk * dpoly_k(Pm, Kc)
-            Q = poly_k(Qm, km) + hh * poly_k(Qd, Kc) + kk * dpoly_k(Qm, Kc)
-            Ft, Fk = poly_k(Fd, Kc), dpoly_k(Fm, Kc)
-            F = poly_k(Fm, km) + hh * Ft + kk * Fk
-            return P, Q, F
+            return box_balls(kern, theta, K)[:3]
 
-    def exclusion(self, theta: Any, K: Any, key: Any = None) -> tuple[str | None, float, float]:
+    def exclusion(self, theta: Any, K: Any, key: Any = None,
+                  polys: bool = False) -> tuple[str | None, float, float]:
         """Whether det M has no zero on the box ``theta`` x ``K``, by the tests a
-        certificate names, in order: ``"P"`` (|P| > |Q|: then |det M| >= |P| - |Q| > 0
-        whatever the delay's phase), ``"Q"`` (|Q| > |P|), ``"F"`` (0 not in det M's
-        ball), ``"N"`` (0 not in the preconditioned ball); the balls are :meth:`box`'s,
-        each formed only when the test before it fails.
-
-        Parameters
-        ----------
-        theta, K : arb
-            Balls of angles and of stiffnesses (N/m).
-        key : hashable, optional
-            Cache key of the angle's :meth:`kernel`.
+        certificate names, in order (:func:`~hapstab.engine.arb_forms.exclusion_test`):
+        ``"P"`` (|P| > |Q|: then |det M| >= |P| - |Q| > 0 whatever the delay's phase),
+        ``"Q"`` (|Q| > |P|), ``"F"`` (0 not in det M's ball), ``"N"`` (0 not in the
+        preconditioned ball); the balls are :meth:`box`'s (``polys``: as :meth:`kernel`).
 
         Returns
         -------
         how : {"P", "Q", "F", "N"} or None
-            The test that excludes the box (None: none does); ``"N"``: the
-            preconditioned mean-value form (:func:`preconditioned_excludes`).
+            The test that excludes the box (None: none does).
         spread_theta, spread_K : float
             With ``how`` None: upper bounds of |d det M/d theta| rad(theta) and
             |d det M/dK| rad(K) over the box, the widths of det M's ball due to each
             (to choose a split); else 0.
         """
-        from flint import acb, arb
-        Pm, Qm, Fm, Pd, Qd, Fd = self.kernel(theta, key)
+        kern = self.kernel(theta, key, polys)
         with working_precision(self.prec):
-            Kc, km = acb(K), acb(K.mid())         # the same balls as box()
-            hh, kk = acb(arb(0, theta.rad())), acb(arb(0, K.rad()))
-            P = poly_k(Pm, km) + hh * poly_k(Pd, Kc) + kk * dpoly_k(Pm, Kc)
-            Q = poly_k(Qm, km) + hh * poly_k(Qd, Kc) + kk * dpoly_k(Qm, Kc)
-            if P.abs_lower() > Q.abs_upper():
-                return "P", 0.0, 0.0
-            if Q.abs_lower() > P.abs_upper():
-                return "Q", 0.0, 0.0
-            Ft, Fk = poly_k(Fd, Kc), dpoly_k(Fm, Kc)
-            Fc = poly_k(Fm, km)
-            F = Fc + hh * Ft + kk * Fk
-            if not F.contains(0):
-                return "F", 0.0, 0.0
-            if preconditioned_excludes(Fc, Ft, Fk, theta.rad(), K.rad()):
-                return "N", 0.0, 0.0
-            return None, float(Ft.abs_upper() * theta.rad()), float(Fk.abs_upper() * K.rad())
+            return exclusion_test(kern, theta, K)
 
-    def box_derivatives(self, theta: Any, K: Any, key: Any = None) -> tuple[Any, Any, Any]:
+    def box_derivatives(self, theta: Any, K: Any, key: Any = None,
+                        polys: bool = False) -> tuple[Any, Any, Any]:
         """det M at the box's centre and its derivatives over the box, as :meth:`box`
         forms them: ``(F_c, dF/dtheta, dF/dK)`` (acb), for the preconditioned test
         (:func:`preconditioned_excludes`)."""
-        from flint import acb
-        _Pm, _Qm, Fm, _Pd, _Qd, Fd = self.kernel(theta, key)
+        kern = self.kernel(theta, key, polys)
         with working_precision(self.prec):
-            Kc, km = acb(K), acb(K.mid())
-            return poly_k(Fm, km), poly_k(Fd, Kc), dpoly_k(Fm, Kc)
+            return box_balls(kern, theta, K)[3:]
+
 
     @property
     def degree(self) -> int:
@@ -476,7 +445,8 @@ class ArbLoop:
         -------
         acb_poly
         """
-        from flint import acb, acb_poly
+        import flint
+        acb, acb_poly = flint.acb, flint.acb_poly
         with working_precision(self.prec):
             Kc = acb(K)
             y, z = acb_poly([-1, 1]), acb_poly([0, 1])
@@ -490,7 +460,8 @@ class ArbLoop:
 
     def value(self, theta: Any, K: Any) -> Any:
         """det M on the balls ``theta`` (arb) and ``K`` (arb, N/m): an acb ball."""
-        from flint import acb
+        import flint
+        acb = flint.acb
         with working_precision(self.prec):
             P, Q, w = self._parts(theta, False)
             Kc = acb(K)
@@ -498,7 +469,8 @@ class ArbLoop:
 
     def dvalue_dk(self, theta: Any, K: Any) -> Any:
         """d det M / dK on the balls (for Newton's method and the crossing's direction)."""
-        from flint import acb
+        import flint
+        acb = flint.acb
         with working_precision(self.prec):
             P, Q, w = self._parts(theta, False)
             Kc = acb(K)

@@ -25,11 +25,16 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = ["Jet", "EPS_OP", "base_jets", "delay_jet", "poly_jet", "geometric_sum_jet",
-           "one_minus_delay_jet", "const", "zero"]
+           "one_minus_delay_jet", "const", "zero", "NO_RADIUS"]
 
 #: Rounding allowance per operation: 4 unit round-offs covers a complex product
 #: (at most sqrt(5) u) or sum (at most sqrt(2) u) and the product of the radii.
 EPS_OP = 4.0 * np.finfo(float).eps
+#: The radii of a *values-only* jet (:meth:`Jet.values_only`; told by identity): no
+#: enclosure, only the centres' value and derivative, for a proposer that proves
+#: nothing (:mod:`~hapstab.analysis.exact.candidates`). An operation with such an
+#: operand gives such a result, with the centres computed exactly as with radii.
+NO_RADIUS = np.full(0, np.nan)
 
 
 class Jet:
@@ -56,8 +61,14 @@ class Jet:
             self._da = np.abs(self.dc)
         return self._da
 
+    def values_only(self) -> Jet:
+        """The same centres without enclosures (:data:`NO_RADIUS`)."""
+        return Jet(self.vc, NO_RADIUS, self.dc, NO_RADIUS)
+
     def __add__(self, o: Jet) -> Jet:
         vc, dc = self.vc + o.vc, self.dc + o.dc
+        if self.vr is NO_RADIUS or o.vr is NO_RADIUS:
+            return Jet(vc, NO_RADIUS, dc, NO_RADIUS)
         vr = self.vr + o.vr + EPS_OP * (self.va + o.va)
         dr = self.dr + o.dr + EPS_OP * (self.da + o.da)
         return Jet(vc, vr, dc, dr)
@@ -72,6 +83,8 @@ class Jet:
 
     def __mul__(self, o: Jet) -> Jet:
         a, b = self, o
+        if a.vr is NO_RADIUS or b.vr is NO_RADIUS:
+            return Jet(a.vc * b.vc, NO_RADIUS, a.dc * b.vc + a.vc * b.dc, NO_RADIUS)
         av, bv, ad, bd = a.va, b.va, a.da, b.da
         vc = a.vc * b.vc
         vr = av * b.vr + a.vr * (bv + b.vr) + EPS_OP * av * bv
@@ -83,6 +96,8 @@ class Jet:
     def scale(self, s: np.ndarray | complex) -> Jet:
         """Multiply by exactly known numbers ``s``."""
         s = np.asarray(s)
+        if self.vr is NO_RADIUS:
+            return Jet(s * self.vc, NO_RADIUS, s * self.dc, NO_RADIUS)
         a = np.abs(s)
         return Jet(s * self.vc, a * self.vr + EPS_OP * a * np.abs(self.vc),
                    s * self.dc, a * self.dr + EPS_OP * a * np.abs(self.dc))
@@ -90,6 +105,10 @@ class Jet:
     def reciprocal(self) -> Jet:
         """1/f, an enclosure where the value disc excludes 0 (else infinite radii)."""
         c, r = self.vc, self.vr
+        if r is NO_RADIUS:          # values only: the same formulas with r = 0
+            with np.errstate(all="ignore"):
+                vc = np.conj(c) / (np.abs(c) ** 2)
+            return Jet(vc, NO_RADIUS, -(self.dc * (vc * vc)), NO_RADIUS)
         with np.errstate(all="ignore"):
             den = np.abs(c) ** 2 - r * r
             ok = den > 0
@@ -142,8 +161,9 @@ def base_jets(theta: np.ndarray, rho: np.ndarray) -> dict[str, Jet]:
     th = np.asarray(theta)
     h = 0.5 * th
     ez, ezi = np.exp(1j * th), np.exp(-1j * th)
-    y = 2j * np.sin(h) * np.exp(1j * h)          # e^{j theta} - 1 without cancellation
-    omz = 2j * np.sin(h) * np.exp(-1j * h)       # 1 - e^{-j theta}
+    s = np.sin(h)
+    y = 2j * s * np.exp(1j * h)                  # e^{j theta} - 1 without cancellation
+    omz = 2j * s * np.exp(-1j * h)               # 1 - e^{-j theta}
     # theta is exact (chosen by the caller); the centres carry a few rounding errors
     # relative to their own size, which matters near theta = 0 where y is tiny
     r1 = rho + EPS_OP
@@ -231,6 +251,11 @@ def poly_jet(coef: np.ndarray, err: np.ndarray, x: Jet) -> Jet:
     ``coef`` has one row per cell (already gathered); ``err`` bounds the error of
     each coefficient itself (same shape).
     """
+    if x.vr is NO_RADIUS:       # values only: the same centres, without the discs
+        v, d = coef[:, -1].astype(complex), np.zeros(coef.shape[0], complex)
+        for k in range(coef.shape[-1] - 2, -1, -1):
+            v, d = v * x.vc + coef[:, k], d * x.vc + v * x.dc
+        return Jet(v, NO_RADIUS, d, NO_RADIUS)
     acc = const(coef[:, -1], err[:, -1])
     for k in range(coef.shape[-1] - 2, -1, -1):
         acc = acc * x + const(coef[:, k], err[:, k])

@@ -128,10 +128,12 @@ class LoopResponse:
         return sum(most) + self.q + 2 + sum(map(filter_order, self.filters))
 
     # ------------------------------------------------------------------ evaluation
-    def coefficients(self, idx: np.ndarray, theta: np.ndarray, rho: np.ndarray) -> list[Jet]:
+    def coefficients(self, idx: np.ndarray, theta: np.ndarray, rho: np.ndarray,
+                     values_only: bool = False) -> list[Jet]:
         """Jets of F0, F1, F2 (det M = F0 + u F1 + u^2 F2, u = K/scale) on the cells
-        ``[theta - rho, theta + rho]`` of items ``idx``."""
+        ``[theta - rho, theta + rho]`` of items ``idx`` (``values_only``: centres alone)."""
         b = base_jets(theta, rho)
+        b = {name: jet.values_only() for name, jet in b.items()} if values_only else b
         cache: dict = {}
 
         def pj(name: str, j: int, f: float = 0.0) -> Jet:
@@ -470,7 +472,7 @@ def _check_finite(resp: LoopResponse, ctrls) -> None:
     """Refuse parameters whose characteristic function overflows (e.g. B = 1e300)."""
     th = np.array([0.0, 1.0, np.pi])
     idx = np.repeat(np.arange(resp.size), th.size)
-    F = resp.coefficients(idx, np.tile(th, resp.size), np.zeros(idx.size))
+    F = resp.coefficients(idx, np.tile(th, resp.size), np.zeros(idx.size), values_only=True)
     with np.errstate(all="ignore"):
         top = [np.abs(f.vc) * u for f, u in zip(F, (1.0, 1e10, 1e20), strict=True)]   # up to u = U_HI
     if not all(np.all(np.isfinite(t)) for t in top):

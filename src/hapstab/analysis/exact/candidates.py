@@ -123,8 +123,9 @@ def _halve(resp: LoopResponse, i: int, th: np.ndarray, c: list, j: np.ndarray
 
 
 def _coef(resp: LoopResponse, i: int, th: np.ndarray) -> tuple[list, list]:
-    """c_0..c_2 and their d/dtheta at the angles (complex arrays)."""
-    F = resp.coefficients(np.full(th.size, i), th, np.zeros(th.size))
+    """c_0..c_2 and their d/dtheta at the angles (complex arrays; the jets' centres
+    alone: a proposer needs no enclosures)."""
+    F = resp.coefficients(np.full(th.size, i), th, np.zeros(th.size), values_only=True)
     return [f.vc for f in F], [f.dc for f in F]
 
 
@@ -173,12 +174,18 @@ def _newton(resp: LoopResponse, i: int, th: np.ndarray, u: np.ndarray
         return th, u, np.where(np.abs(F) <= RESIDUAL * size, s, 0.0)
 
 
-def _real_crossings(resp: LoopResponse, i: int, quad: bool) -> list[tuple]:
+def _ends(resp: LoopResponse, i: int) -> tuple[list, list]:
+    """c_0..c_2 and their d/dtheta at theta = 0 and pi (one evaluation for
+    :func:`_real_crossings` and :func:`_anchor`)."""
+    return _coef(resp, i, np.array([0.0, math.pi]))
+
+
+def _real_crossings(ends: tuple[list, list], quad: bool) -> list[tuple]:
     """Crossings through z = +1 (theta = 0) and z = -1 (theta = pi): positive real
-    roots u of the real polynomial det M there."""
+    roots u of the real polynomial det M there (``ends``: :func:`_ends`)."""
     out = []
-    for t in (0.0, math.pi):
-        c, d = _coef(resp, i, np.array([t]))
+    for k, t in enumerate((0.0, math.pi)):
+        c, d = [x[k:k + 1] for x in ends[0]], [x[k:k + 1] for x in ends[1]]
         coef = [x[0].real for x in c]
         roots: Any = np.roots(coef[::-1] if quad else coef[1::-1]) if any(coef[1:]) else []
         for r in roots:
@@ -209,11 +216,12 @@ def _merge_close(cross: list[tuple]) -> list[tuple]:
     return out
 
 
-def _anchor(resp: LoopResponse, i: int, th: np.ndarray, c: list) -> int:
+def _anchor(resp: LoopResponse, ends: tuple[list, list], c: list) -> int:
     """Poles outside at u = U_LO by the argument principle on the grid (and its ends
-    0 and pi): Z_out = q - wind(det M), the winding over [0, pi] in half turns. A
-    proposal like the rest (the proof counts in balls); -1 if not a whole number."""
-    e, _ = _coef(resp, i, np.array([0.0, math.pi]))
+    0 and pi, ``ends``: :func:`_ends`): Z_out = q - wind(det M), the winding over
+    [0, pi] in half turns. A proposal like the rest (the proof counts in balls); -1 if
+    not a whole number."""
+    e = ends[0]
     ends = e[0] + U_LO * (e[1] + U_LO * e[2])
     mid = c[0] + U_LO * (c[1] + U_LO * c[2])
     vals = np.concatenate([ends[:1], mid, ends[1:]])
@@ -259,8 +267,9 @@ def candidate_set(resp: LoopResponse, i: int, full: bool) -> StableSet | None:
         (tn > 0) & (tn < math.pi)
     cross = [(float(a), float(b), int(d), 2) for a, b, d in zip(un[keep], tn[keep], dn[keep],
                                                                 strict=True)]
-    cross = _merge_close(cross + _real_crossings(resp, i, quad))
-    anchor = _anchor(resp, i, th, c)
+    ends = _ends(resp, i)
+    cross = _merge_close(cross + _real_crossings(ends, quad))
+    anchor = _anchor(resp, ends, c)
     if anchor < 0:
         return None
     try:

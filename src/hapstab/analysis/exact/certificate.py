@@ -15,8 +15,10 @@ __all__ = ["certificate", "VERSION"]
 
 #: 2: gap pieces may be excluded by ``N`` (the preconditioned mean-value form); 3: each
 #: count names its ``method``, ``winding`` (its pieces) or ``roots`` (the characteristic
-#: polynomial's roots isolated in balls, no pieces). Versions 1 and 2 are still verified.
-VERSION = 3
+#: polynomial's roots isolated in balls, no pieces); 4: the gap pieces are proved with
+#: the angle kernel of precomputed ball polynomials (:mod:`~hapstab.engine.arb_kernel`),
+#: which the checker then uses. Versions 1 to 3 are still verified.
+VERSION = 4
 
 def _count_json(c: Count) -> dict[str, Any]:
     return {"K_N_per_m": c.K, "outside": c.outside, "method": c.method,
@@ -76,7 +78,7 @@ def certificate(pr: Proof) -> dict[str, Any]:
     # when the tail above the top is proved too, the certificate still covers only
     # [K_0, top], which is what its pieces show)
     kmax = next((b for a, b in pr.intervals if a == pr.k0), 0.0)
-    return {"format": "hapstab-certificate", "version": VERSION, "loop": pr.params,
+    return {"format": "hapstab-certificate", "version": pr.version, "loop": pr.params,
             "precision_bits": pr.prec, "start_pieces": START_PIECES,
             "base_point_N_per_m": pr.k0, "top_N_per_m": pr.k_top,
             "proved_range_N_per_m": [pr.k0, kmax] if kmax > 0 else None,

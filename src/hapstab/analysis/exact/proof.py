@@ -42,14 +42,16 @@ from typing import Any
 from hapstab.analysis.exact.polish import polish
 from hapstab.analysis.exact.winding import (
     FLOOR,
+    GEOMETRIC,
     MAX_PIECES,
     Count,
     count,
     k_ball,
-    start_pieces,
+    split_theta,
+    subdivision_start,
     theta_ball,
 )
-from hapstab.engine.arb_loop import ArbLoop
+from hapstab.engine.arb_loop import ArbLoop, working_precision
 
 __all__ = ["Proof", "prove", "prove_base", "count", "exclude", "theta_ball", "DELTA"]
 
@@ -66,6 +68,19 @@ MAX_PIECES_UNSURE = 400
 #: search places its crossings to ~1e-13, so the window holds the crossing; a gap
 #: beside it that is examined then proves up to 1e-9 below the truth (the safe side).
 ROUGH = 1e-9
+#: The gap pieces are proved with the angle kernel of precomputed ball polynomials
+#: (:mod:`~hapstab.engine.arb_kernel`, certificate version 4); False: forward-mode
+#: derivatives (version 3; the checker still reads both).
+POLY_KERNEL = True
+#: Version 4's subdivision of a gap (with :data:`POLY_KERNEL`; the angles':
+#: :func:`~hapstab.analysis.exact.winding.subdivision_start` and
+#: :func:`~hapstab.analysis.exact.winding.split_theta`): a K-range with
+#: k1 > K_WIDE k0 is cut at k1 / K_TOP (its top, where the crossing is, peeled off),
+#: narrower ones as before (geometric mean above GEOMETRIC, else the midpoint).
+#: Choices of where to cut, not tolerances: any cut is replayed by the checker and
+#: every piece proved.
+K_WIDE = 64
+K_TOP = 8
 #: Widening of the float search's intervals when choosing which candidates to polish
 #: (relative, far above ROUGH: see :func:`_needs_polish`).
 HINT_MARGIN = 1e-6
@@ -77,20 +92,27 @@ def box_status(al: ArbLoop, a: float, b: float, ka: float, kb: float) -> tuple[s
 
     Returns
     -------
-    status : {"P", "Q", "F"} or None
+    status : {"P", "Q", "F", "N"} or None
         ``"P"``: |P| > |Q| on the box; ``"Q"``: |Q| > |P|; ``"F"``: 0 not in the ball
-        of P + w Q; None: not excluded.
+        of P + w Q; ``"N"``: nor in its preconditioned ball; None: not excluded.
     theta_share : float
         In [0, 1]: how much of the ball's width comes from theta rather than K (the
         spreads :meth:`~hapstab.engine.arb_loop.ArbLoop.exclusion` returns; 0 when
         excluded).
     """
-    how, s_t, s_k = al.exclusion(theta_ball(a, b), k_ball(ka, kb), key=(a, b))
+    how, s_t, s_k = al.exclusion(theta_ball(a, b), k_ball(ka, kb), key=(a, b), polys=POLY_KERNEL)
     if how is not None:
         return how, 0.0
     if not (math.isfinite(s_t) and math.isfinite(s_k)):
         return None, 1.0 if not math.isfinite(s_t) else 0.0
     return None, s_t / (s_t + s_k) if s_t + s_k > 0 else 0.5
+
+
+def split_k(k0: float, k1: float, v4: bool) -> float:
+    """Where a gap's K-range [k0, k1] is cut (:data:`K_WIDE`)."""
+    if v4 and k1 > K_WIDE * k0:
+        return k1 / K_TOP
+    return math.sqrt(k0 * k1) if k1 > GEOMETRIC * k0 else 0.5 * (k0 + k1)
 
 
 @dataclass
@@ -120,11 +142,19 @@ def exclude(al: ArbLoop, ka: float, kb: float, max_pieces: int = MAX_PIECES) -> 
         ``failed`` empty: proved. Otherwise the boxes left (at the floor, or when the
         valve closed).
     """
+    # the boxes' balls are formed at the proof's precision too (the checker tries
+    # both that and doubles), and the precision is set once, not per box
+    with working_precision(al.prec):
+        return _exclude(al, ka, kb, max_pieces)
+
+
+def _exclude(al: ArbLoop, ka: float, kb: float, max_pieces: int) -> Exclusion:
+    """:func:`exclude` at the precision already set."""
     import heapq
     out = Exclusion()
     # boxes by their lowest K first: when the valve closes, what is left lies above
     # everything proved, so the proved part of the gap is [ka, lowest K left]
-    heap = [(ka, a, b, kb) for a, b in start_pieces()]
+    heap = [(ka, a, b, kb) for a, b in subdivision_start(POLY_KERNEL)]
     heapq.heapify(heap)
     tried = 0
     while heap:
@@ -142,12 +172,12 @@ def exclude(al: ArbLoop, ka: float, kb: float, max_pieces: int = MAX_PIECES) -> 
         th_ok = (b - a) > FLOOR * b
         k_ok = (k1 - k0) > FLOOR * k1
         if th_ok and (share >= 0.5 or not k_ok):
-            m = 0.5 * (a + b)
+            m = split_theta(a, b, POLY_KERNEL)
             heapq.heappush(heap, (k0, a, m, k1))
             heapq.heappush(heap, (k0, m, b, k1))
             out.splits.append("t")
         elif k_ok:
-            m = math.sqrt(k0 * k1) if k1 > 4 * k0 else 0.5 * (k0 + k1)
+            m = split_k(k0, k1, POLY_KERNEL)
             heapq.heappush(heap, (k0, a, b, m))
             heapq.heappush(heap, (m, a, b, k1))
             out.splits.append("k")
@@ -217,6 +247,8 @@ class Proof:
     #: (:func:`~hapstab.analysis.exact.top.prove_tail`): only then does a stable
     #: interval reaching k_top stand for [.., inf)
     tail_proved: bool = False
+    #: the certificate version its gap pieces were proved for (:data:`POLY_KERNEL`)
+    version: int = 4
 
 
 def _windows(al: ArbLoop, events: tuple, k0: float, k_top: float,
@@ -298,7 +330,7 @@ def _prove_gap(al: ArbLoop, lo: float, hi: float, base: Count | None,
     ex = exclude(al, lo, hi, valve)
     if not ex.failed:
         c = base if base is not None and lo <= base.K <= hi else \
-            count(al, _inside(lo, hi), valve)
+            count(al, _inside(lo, hi), valve, polys=POLY_KERNEL)
         return [Gap(lo, hi, True, c.outside, ex, c)]
     first = min(f[2] for f in ex.failed)
     top = min(min((f[3] for f in ex.failed if f[2] == first), default=hi), hi)
@@ -344,7 +376,7 @@ def prove(params: dict[str, Any], events: tuple, k0: float, k_top: float,
     Proof
     """
     al = ArbLoop(params)
-    base = count(al, k0)
+    base = count(al, k0, polys=POLY_KERNEL)
     if not full:
         wins = _windows(al, _first_only(events, k0), k0, k_top)
         if base.outside != 0:       # K_max is 0 (or not proved): nothing to exclude
@@ -352,7 +384,7 @@ def prove(params: dict[str, Any], events: tuple, k0: float, k_top: float,
                              [Gap(k0, k0, True, base.outside, Exclusion(), base)], base)
         gaps = _prove_gap(al, k0, wins[0][0] if wins else k_top, base)
         if wins and all(g.proved and g.outside == 0 for g in gaps):
-            after = count(al, wins[0][1])         # instability just above the window
+            after = count(al, wins[0][1], polys=POLY_KERNEL)   # unstable above the window
             gaps.append(Gap(wins[0][1], wins[0][1], True, after.outside, Exclusion(), after))
         return _assemble(al, params, k0, k_top, wins, gaps, base)
     wins = _windows(al, events, k0, k_top, _needs_polish(events, hint + unsure, k0))
@@ -378,7 +410,7 @@ def prove(params: dict[str, Any], events: tuple, k0: float, k_top: float,
             hi = b
         else:
             tail = None
-        c = base if g == 0 else count(al, lo, valve)
+        c = base if g == 0 else count(al, lo, valve, polys=POLY_KERNEL)
         if c.outside:       # unstable there: counted, not excluded (see Gap.sampled)
             gaps.append(Gap(lo, hi, False, c.outside, Exclusion(), c, True))
         else:
@@ -429,11 +461,11 @@ def _assemble(al: ArbLoop, params: dict[str, Any], k0: float, k_top: float,
     bottoms = {g.lo for g in stable if g.hi > g.lo}
     uncertain += [(lo, hi) for lo, hi, _t in wins if lo in tops and hi in bottoms]
     return Proof(params, k0, wins, gaps, intervals, kmax, kmax_hi, sorted(set(uncertain)),
-                 theta, al.prec, k_top, base.outside, tail)
+                 theta, al.prec, k_top, base.outside, tail, 4 if POLY_KERNEL else 3)
 
 
 def prove_base(params: dict[str, Any], k0: float) -> tuple[ArbLoop, Count]:
     """The loop in balls and its proved count of poles outside at K_0."""
     al = ArbLoop(params)
-    return al, count(al, k0)
+    return al, count(al, k0, polys=POLY_KERNEL)
 

@@ -19,7 +19,8 @@ from typing import Any
 from hapstab.engine.arb_loop import ArbLoop, poly_k, working_precision
 
 __all__ = ["Count", "count", "root_count", "piece_increment", "start_pieces", "theta_ball",
-           "k_ball", "START_PIECES", "FLOOR", "MAX_PIECES", "ROOTS_MAX_DEGREE"]
+           "k_ball", "START_PIECES", "FLOOR", "MAX_PIECES", "ROOTS_MAX_DEGREE",
+           "subdivision_start", "split_theta", "GEOMETRIC"]
 
 #: Pieces of [0, pi] a search starts from.
 START_PIECES = 8
@@ -34,11 +35,14 @@ MAX_PIECES = 4000
 #: count costs 4-19 ms at any degree (HVE, PEB; 2026-12-02). Not a tolerance: either
 #: count is a proof.
 ROOTS_MAX_DEGREE = 32
-#: The isolating balls' radii :func:`root_count` asks for in turn: Arb's own (None, the
-#: cheapest: wide balls of ~1e-3 near a lightly damped pair), then 1e-20 (a pole within
-#: 1e-20 of the circle is left to the argument principle). Not tolerances of the
-#: answer: a ball that still meets the circle decides nothing.
-ROOT_TOLERANCES = (None, 1e-20)
+#: The isolating balls' radii :func:`root_count` asks for in turn: 1e-20 (a pole within
+#: 1e-20 of the circle is left to the argument principle; about as cheap as Arb's own
+#: radii, and it decides the count just above a crossing's window, |z| - 1 ~ 1e-12,
+#: where Arb's own balls of ~1e-3 did not and a second search followed: measured 0.9 of
+#: 2.5 ms on the paper's PEB at n = 10), then Arb's own (None) when Arb cannot reach
+#: 1e-20 within its precision (a cluster). Not tolerances of the answer: a ball that
+#: still meets the circle decides nothing.
+ROOT_TOLERANCES = (1e-20, None)
 #: Arb's root finder may raise its precision to this multiple of the loop's: two modes
 #: 1e-10 apart (the two ports of a PEB with nearly equal devices) need ~1280 bits where
 #: the default gives up at 320 (measured on mass-peb#1001 of seed 26).
@@ -47,7 +51,8 @@ ROOTS_MAX_PREC_FACTOR = 4
 
 def theta_ball(a: float, b: float) -> Any:
     """The ball holding [a, b]; an end equal to ``math.pi`` stands for pi itself."""
-    from flint import arb
+    import flint
+    arb = flint.arb
     lo = arb.pi() if a == math.pi else arb(a)
     hi = arb.pi() if b == math.pi else arb(b)
     return lo.union(hi)
@@ -55,7 +60,8 @@ def theta_ball(a: float, b: float) -> Any:
 
 def k_ball(a: float, b: float) -> Any:
     """The ball holding [a, b] (N/m)."""
-    from flint import arb
+    import flint
+    arb = flint.arb
     return arb(a).union(arb(b))
 
 
@@ -68,6 +74,30 @@ def start_pieces(n: int = START_PIECES) -> list[tuple[float, float]]:
     return near + [(i * step, math.pi if i == n - 1 else (i + 1) * step) for i in range(1, n)]
 
 
+#: Version 4's subdivisions of [0, pi] (gaps and counts): a piece [a, b] with
+#: 0 < a and b > GEOMETRIC a is halved at its geometric mean, so the pieces near
+#: theta = 0, where a fast-sampled loop's poles crowd z = 1, shrink geometrically only
+#: as far as needed (the start pieces no longer carry the fixed ladder of 40). Where
+#: to cut, not a tolerance: the checker replays every cut.
+GEOMETRIC = 4
+
+
+def subdivision_start(v4: bool) -> list[tuple[float, float]]:
+    """The pieces of [0, pi] a subdivision starts from: version 4 (``v4``),
+    [0, pi/n 2^-40], [pi/n 2^-40, pi/n] and the other n - 1 equal pieces; before,
+    :func:`start_pieces` (the first cut again at pi/n 2^-k, k = 1..40)."""
+    if not v4:
+        return start_pieces()
+    step = math.pi / START_PIECES
+    return [(0.0, step * 2.0 ** -40), (step * 2.0 ** -40, step), *start_pieces()[41:]]
+
+
+def split_theta(a: float, b: float, v4: bool) -> float:
+    """Where a piece [a, b] of angles is halved (:data:`GEOMETRIC`; before version 4
+    the midpoint)."""
+    return math.sqrt(a * b) if v4 and a > 0 and b > GEOMETRIC * a else 0.5 * (a + b)
+
+
 def _point(al: ArbLoop, t: float, K: Any, cache: dict) -> tuple[Any, Any, Any]:
     """P, Q (at K) and w at the exact angle t (cached)."""
     if t not in cache:
@@ -77,16 +107,18 @@ def _point(al: ArbLoop, t: float, K: Any, cache: dict) -> tuple[Any, Any, Any]:
     return cache[t]
 
 
-def piece_increment(al: ArbLoop, a: float, b: float, K: Any, cache: dict) -> tuple[str | None, Any]:
+def piece_increment(al: ArbLoop, a: float, b: float, K: Any, cache: dict,
+                    polys: bool = True) -> tuple[str | None, Any]:
     """The increment of arg det M over [a, b] at K, and how it is proved.
 
     ``"P"``: |P| > |Q| on the piece, arg det M = arg P + arg(1 + w Q / P) with the
     second term in (-pi/2, pi/2); ``"Q"``: |Q| > |P|, arg det M = arg Q - n theta +
     arg(1 + P / (w Q)); ``"F"``: the ball of det M excludes 0. Each principal value is
     the true increment because the function stays in a convex ball excluding 0 (or in
-    the right half-plane). None: no proof on this piece.
+    the right half-plane). None: no proof on this piece. ``polys``: the balls from the
+    kernel of ball polynomials (certificate version 4), else forward-mode derivatives.
     """
-    Pv, Qv, Fv = al.box(theta_ball(a, b), K, key=(a, b))
+    Pv, Qv, Fv = al.box(theta_ball(a, b), K, key=(a, b), polys=polys)
     with working_precision(al.prec):
         Pa, Qa, wa = _point(al, a, K, cache)
         Pb, Qb, wb = _point(al, b, K, cache)
@@ -142,7 +174,8 @@ def root_count(al: ArbLoop, K: float) -> int | None:
     ``acb_poly_validate_roots``); P. Henrici, *Applied and Computational Complex
     Analysis*, vol. 1, Wiley 1974, sec. 6.4 (root inclusion).
     """
-    from flint import acb_poly
+    import flint
+    acb_poly = flint.acb_poly
     with working_precision(al.prec):
         p = al.polynomial(K)
         low = 0
@@ -154,10 +187,10 @@ def root_count(al: ArbLoop, K: float) -> int | None:
         for tol in ROOT_TOLERANCES:
             try:
                 roots = q.roots(tol=tol, maxprec=ROOTS_MAX_PREC_FACTOR * al.prec)
-            except ValueError:          # not isolated: a (nearly) multiple root
-                return None
+            except ValueError:          # not isolated (a nearly multiple root), or not
+                continue                # to these radii: the next tolerance, else None
             if len(roots) != q.degree():
-                return None
+                continue
             out = sum(1 for r in roots if r.abs_lower() > 1)
             inside = sum(1 for r in roots if r.abs_upper() < 1)
             if out + inside == len(roots):
@@ -165,7 +198,8 @@ def root_count(al: ArbLoop, K: float) -> int | None:
     return None
 
 
-def count(al: ArbLoop, K: float, max_pieces: int = MAX_PIECES, roots: bool = True) -> Count:
+def count(al: ArbLoop, K: float, max_pieces: int = MAX_PIECES, roots: bool = True,
+          polys: bool = True) -> Count:
     """Poles of the closed loop outside the unit circle at stiffness K: by root
     isolation (:func:`root_count`) up to :data:`ROOTS_MAX_DEGREE`, else (or when it
     cannot decide) by the argument principle in balls (module doc, 3).
@@ -179,6 +213,9 @@ def count(al: ArbLoop, K: float, max_pieces: int = MAX_PIECES, roots: bool = Tru
         Safety valve on the number of pieces tried.
     roots : bool
         Try root isolation first (default; False: the argument principle alone).
+    polys : bool
+        The pieces' balls from the kernel of ball polynomials (certificate version 4;
+        :meth:`~hapstab.engine.arb_loop.ArbLoop.kernel`), else forward-mode derivatives.
 
     Returns
     -------
@@ -186,7 +223,8 @@ def count(al: ArbLoop, K: float, max_pieces: int = MAX_PIECES, roots: bool = Tru
         ``outside`` None when a piece at the floor keeps 0 in its ball (a pole on
         or within the balls' width of the circle) or the valve closed.
     """
-    from flint import arb
+    import flint
+    arb = flint.arb
     if roots and al.degree <= ROOTS_MAX_DEGREE:
         got = root_count(al, K)
         if got is not None:
@@ -194,7 +232,7 @@ def count(al: ArbLoop, K: float, max_pieces: int = MAX_PIECES, roots: bool = Tru
     Kb = arb(K)
     cache: dict = {}
     res = Count(K, None)
-    stack = start_pieces()[::-1]
+    stack = subdivision_start(polys)[::-1]       # version 4's with its kernel
     total = arb(0)
     tried = 0
     while stack:
@@ -202,7 +240,7 @@ def count(al: ArbLoop, K: float, max_pieces: int = MAX_PIECES, roots: bool = Tru
         tried += 1
         if tried > max_pieces:
             return res
-        how, inc = piece_increment(al, a, b, Kb, cache)
+        how, inc = piece_increment(al, a, b, Kb, cache, polys)
         if how is not None:
             res.pieces.append((a, b, how))
             with working_precision(al.prec):
@@ -210,7 +248,7 @@ def count(al: ArbLoop, K: float, max_pieces: int = MAX_PIECES, roots: bool = Tru
             continue
         if (b - a) <= FLOOR * b:
             return res
-        m = 0.5 * (a + b)
+        m = split_theta(a, b, polys)
         stack += [(m, b), (a, m)]
     with working_precision(al.prec):
         turns = (total / arb.pi()).unique_fmpz()
