@@ -66,8 +66,11 @@ def read_chunk(path: str, columns: list[str] | None = None) -> Any:
     """
     import pyarrow.parquet as pq
 
+    # one chunk is small: read it on this thread. pyarrow's thread pools, once started,
+    # can abort the interpreter at exit ("terminate called without an active
+    # exception", SIGABRT after the work is done: apache/arrow#34314), seen once in CI
     with open(path, "rb") as fh:
-        return pq.read_table(fh, columns=columns)
+        return pq.read_table(fh, columns=columns, use_threads=False, pre_buffer=False)
 
 
 def arrow_schema(columns: list[tuple[str, str]]) -> Any:
