@@ -81,3 +81,33 @@ def kmax(M: float, b: float, k: float, T: float, delay: float, B: float,
         else:
             a = m
     return math.sqrt(a * c)
+
+
+def kmax_many(M: float, b: float, k: float, T: float, delays, B: float, lo: float = 1e-6,
+              hi: float = 1e8, per_decade: int = 16, rtol: float = 1e-11) -> np.ndarray:
+    """:func:`kmax` at every delay of ``delays`` (samples), batched: the delays of one
+    whole part share a matrix size, so their scans and bisections are stacks of
+    ``np.linalg.eigvals``."""
+    delays = np.asarray(delays, float)
+    out = np.empty(delays.size)
+    Ks = np.geomspace(lo, hi, int(per_decade * math.log10(hi / lo)) + 1)
+    whole = np.floor(delays).astype(int)
+    for n in np.unique(whole):
+        idx = np.flatnonzero(whole == n)
+        pairs = [matrices(M, b, k, T, int(n), float(delays[i] - n), B) for i in idx]
+        A0 = np.stack([p[0] for p in pairs])
+        A1 = np.stack([p[1] for p in pairs])
+        rho = np.abs(np.linalg.eigvals(A0[:, None] + Ks[None, :, None, None] * A1[:, None])
+                     ).max(axis=-1)
+        bad = rho >= 1.0
+        first = np.where(bad.any(axis=1), bad.argmax(axis=1), -1)
+        a = np.where(first > 0, Ks[np.maximum(first - 1, 0)], np.nan)
+        c = np.where(first > 0, Ks[np.maximum(first, 0)], np.nan)
+        live = first > 0
+        while live.any() and np.nanmax(c[live] / a[live]) > 1 + rtol:
+            m = np.sqrt(a * c)
+            r = np.abs(np.linalg.eigvals(A0 + np.nan_to_num(m)[:, None, None] * A1)).max(axis=-1)
+            up = (r >= 1.0) & live
+            c, a = np.where(up, m, c), np.where(live & ~up, m, a)
+        out[idx] = np.where(first == 0, 0.0, np.where(first < 0, math.inf, np.sqrt(a * c)))
+    return out

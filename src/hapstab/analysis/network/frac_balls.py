@@ -43,7 +43,8 @@ FRACTION_CACHE = 4096
 @dataclass
 class BoxGain:
     """G over a box: its centre value, its derivatives over the box (acb balls), the
-    box's radii (arb), and ``Nt`` over the box (to tell a pole of G)."""
+    box's radii (arb), and ``d``, ``Nt`` over the box (near a pole of G, where Nt may
+    vanish, det M = d + s z^-(n+1) Nt H has no zero while |d| > |Nt| |H|)."""
 
     centre: Any
     d_theta: Any
@@ -51,6 +52,8 @@ class BoxGain:
     r_theta: Any
     r_f: Any
     nt: Any
+    d: Any
+    beta: Any
 
     def enclosure(self) -> Any:
         """The mean-value enclosure of G over the box (acb)."""
@@ -140,5 +143,5 @@ class FractionBalls:
             g_t = (-self.s * j * w * (self.n1 * d / nt + z * (dd * nt - d * ntp) / (nt * nt))
                    - j * self.beta / z)
             g_f = self.s * w * d * ntf / (nt * nt)
-            return BoxGain(centre, g_t, g_f, theta.rad(), f.rad(), nt)
+            return BoxGain(centre, g_t, g_f, theta.rad(), f.rad(), nt, d, self.beta)
 

@@ -19,7 +19,9 @@ the lower end of the mean-value form of L = Re G - lambda Im G, which equals Re 
 where G is real; chosen so, L is stationary at a constrained minimum and its bound
 is of second order in the box's radii (the "preconditioning" that closes the gap).
 The bound is the smallest lower bound over the boxes left: no real crossing lies below
-it. A box whose Nt_f ball contains 0 (a possible pole of G) gets K_floor and is split.
+it. A box whose Nt_f ball contains 0 (a possible pole of G, where a zero of the modified
+z-transform crosses the circle as f varies) gets |d|_lo / |Nt|_hi - 2 |beta|, since
+|d| = |Nt| |H| <= |Nt| (K + 2 |beta|) at a crossing (and K_floor if that is lower).
 
 **Stability.** The crossing bound alone says no pole meets the circle for K in
 [K_floor, lower) and f in the interval. The roots of chi(z) (monic, degree n + 4 for
@@ -88,6 +90,12 @@ def _box_lower(bx: BoxGain, k_floor: float) -> float | None:
     from flint import arb
     if bx.nt.contains(0) or not (bx.centre.is_finite() and bx.d_theta.is_finite()
                                  and bx.d_f.is_finite()):
+        # |d| = |Nt| |H| <= |Nt| (K + 2 |beta|) at a crossing
+        nt_hi = bx.nt.abs_upper()
+        if not nt_hi.is_zero() and nt_hi.is_finite():
+            bound = bx.d.abs_lower() / nt_hi - 2 * bx.beta.abs_upper()
+            if bound.is_finite():
+                return max(k_floor, _down(bound.lower()))
         return k_floor
     enc = bx.enclosure()
     if not enc.imag.contains(0) or enc.real < k_floor:

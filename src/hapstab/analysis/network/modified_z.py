@@ -49,6 +49,7 @@ multiple of the period: the modified z-transform).
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 from typing import Any
@@ -95,21 +96,19 @@ class FractionalPlant:
         """(d, Nt_f): ascending coefficients in y = z - 1 (doubles, for the float
         search and the point checks; the proof uses balls)."""
         from scipy.linalg import expm
-        X = expm(self.aug(self.period_s))
-        E = X[:2, :2] - np.eye(2)
-        g = X[:2, 2]
+        d, a0, a1 = _full_period(self)
         Xf = expm(self.aug((1.0 - f) * self.period_s))
-        c, gf = Xf[0, :2], Xf[0, 2]
-        d = np.array([E[0, 0] * E[1, 1] - E[0, 1] * E[1, 0], -(E[0, 0] + E[1, 1]), 1.0])
-        a0 = np.array([E[0, 1] * g[1] - E[1, 1] * g[0], g[0], 0.0])
-        a1 = np.array([E[1, 0] * g[0] - E[0, 0] * g[1], g[1], 0.0])
-        return d, c[0] * a0 + c[1] * a1 + gf * d
+        return d, Xf[0, 0] * a0 + Xf[0, 1] * a1 + Xf[0, 2] * d
 
     def gain(self, theta: np.ndarray, f: float) -> np.ndarray:
         """G(theta, f) (module docstring) at each angle of ``theta`` (rad/sample)."""
-        d, nt = self.coefficients(f)
-        z = np.exp(1j * np.asarray(theta, float))
-        y = np.expm1(1j * np.asarray(theta, float))
+        return self._gain(self.coefficients(f), theta)
+
+    def _gain(self, coef: tuple[np.ndarray, np.ndarray], theta: np.ndarray) -> np.ndarray:
+        """G at the angles from the coefficients (d, Nt_f) of one fraction."""
+        d, nt = coef
+        th = np.asarray(theta, float)
+        z, y = np.exp(1j * th), np.expm1(1j * th)
         with np.errstate(all="ignore"):
             return (-self.sign * z ** (self.whole + 1) * np.polyval(d[::-1], y)
                     / np.polyval(nt[::-1], y) - self.beta_N_per_m * (1.0 - 1.0 / z))
@@ -145,7 +144,8 @@ class FractionalPlant:
         from scipy.optimize import brentq
         m = points or max(2049, 64 * (self.whole + 1))
         th = np.linspace(0.0, math.pi, m)
-        G = self.gain(th, f)
+        coef = self.coefficients(f)
+        G = self._gain(coef, th)
         best = (math.inf, math.nan)
         for t in (0, m - 1):                      # z = 1 and z = -1: G is real there
             if np.isfinite(G[t]) and k_floor < G[t].real < best[0]:
@@ -153,13 +153,25 @@ class FractionalPlant:
         im = G.imag
         for i in np.flatnonzero((np.sign(im[:-1]) * np.sign(im[1:]) < 0)
                                 & np.isfinite(im[:-1]) & np.isfinite(im[1:])):
-            r = brentq(lambda x: float(self.gain(np.array([x]), f)[0].imag), th[i], th[i + 1],
+            r = brentq(lambda x: float(self._gain(coef, np.array([x]))[0].imag), th[i], th[i + 1],
                        xtol=1e-15, rtol=4 * np.finfo(float).eps)   # 1e-15: the angle to rounding
-            g = complex(self.gain(np.array([r]), f)[0])
+            g = complex(self._gain(coef, np.array([r]))[0])
             # a sign change through a pole of G (Nt_f = 0) is no crossing
             if abs(g.imag) <= 1e-6 * max(1.0, abs(g)) and k_floor < g.real < best[0]:  # 1e-6: root's
                 best = (g.real, float(r))                                            # imag, relative
         return best
+
+
+@functools.lru_cache(maxsize=256)
+def _full_period(plant: FractionalPlant) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(d, a_0, a_1) of the module docstring, ascending in y, from the ZOH over T."""
+    from scipy.linalg import expm
+    X = expm(plant.aug(plant.period_s))
+    E, g = X[:2, :2] - np.eye(2), X[:2, 2]
+    d = np.array([E[0, 0] * E[1, 1] - E[0, 1] * E[1, 0], -(E[0, 0] + E[1, 1]), 1.0])
+    a0 = np.array([E[0, 1] * g[1] - E[1, 1] * g[0], g[0], 0.0])
+    a1 = np.array([E[1, 0] * g[0] - E[0, 0] * g[1], g[1], 0.0])
+    return d, a0, a1
 
 
 def fractional_plant(loop: Any, whole: int) -> FractionalPlant:

@@ -1,0 +1,102 @@
+"""Unknown constant delay in a range, acting between the samples (issue 30, item 1):
+the proved enclosure of min K_max over the continuum against an independent brute-force
+grid of >= 1000 delays per range (tests/references/brute_fractional.py: its own
+fractional-delay closed loop, eigenvalues and bisection; no hapstab code)."""
+
+import math
+
+import numpy as np
+import pytest
+from tests.lanes import draw
+from tests.references import brute_fractional as bf
+
+from hapstab import Device, HapticLoop, SpringDamper, TeleoperationLoop, paper_hve
+from hapstab.analysis.network import delay_range_critical_stiffness
+from hapstab.analysis.network.frac_range import segments_of
+from hapstab.analysis.network.frac_result import fractional_range_critical_stiffness
+from hapstab.errors import AnalysisError, ModelError
+
+#: the acceptance: within 1e-6 of the grid's minimum
+RTOL = 1e-6
+#: the reference bisects to 1e-11: "never above" allows that much
+REF_TOL = 1e-10
+GRID = 1000
+
+
+def _case(seed: int):
+    rng = np.random.default_rng(40_000 + seed)
+    T = float(rng.uniform(5e-4, 3e-3))
+    lo = float(rng.uniform(0, 4))
+    hi = lo + float(rng.uniform(0.5, 4))
+    m, b, B = rng.uniform(0.05, 1), rng.uniform(0.05, 2), rng.uniform(0, 3)
+    om, ob, ok = rng.uniform(0.01, 0.5), rng.uniform(0, 2), rng.uniform(1, 400)
+    loop = HapticLoop(Device(m, b), SpringDamper(1.0, B), f"msd:{om!r},{ob!r},{ok!r}", T, 0)
+    return loop, (m + om, b + ob, ok, T, B), lo * T, hi * T
+
+
+def _check(seed: int) -> None:
+    loop, phys, lo, hi = _case(seed)
+    res = delay_range_critical_stiffness(loop, lo, hi)
+    assert res.certified, res.reason
+    T = loop.period
+    # the grid, and the reported worst delay among its points (so the grid resolves it)
+    delays = np.append(np.linspace(lo / T, hi / T, GRID), res.worst_delay_samples)
+    kref = bf.kmax_many(phys[0], phys[1], phys[2], T, delays, phys[4])
+    assert np.all(np.isfinite(kref))
+    assert res.critical_stiffness <= kref.min() * (1 + REF_TOL)       # never above
+    assert res.critical_stiffness == pytest.approx(kref.min(), rel=RTOL)
+    assert res.upper_bound >= kref.min() * (1 - REF_TOL)
+    assert kref[-1] == pytest.approx(res.upper_bound, rel=RTOL)
+
+
+@pytest.mark.parametrize("seed", draw(range(50), 2))
+def test_range_minimum_against_the_brute_force_grid(seed):
+    _check(seed)
+
+
+def test_uncertain_when_the_budget_cannot_close_the_gap():
+    loop, phys, lo, hi = _case(3)
+    res = fractional_range_critical_stiffness(loop, lo, hi, max_boxes=40)
+    assert not res.certified and "uncertain" in res.reason
+    T = loop.period
+    kref = bf.kmax_many(phys[0], phys[1], phys[2], T, np.linspace(lo / T, hi / T, 200), phys[4])
+    assert res.critical_stiffness <= kref.min()
+    assert res.to_dict()["certified"] is False
+
+
+def test_whole_sample_range_equals_the_whole_delays_minimum():
+    # the paper's HVE at 1 kHz, 5-15 ms: K_max falls with the delay, the worst is 15 ms
+    res = delay_range_critical_stiffness(paper_hve(1e-3), 5e-3, 15e-3)
+    whole = delay_range_critical_stiffness(paper_hve(1e-3), 5, 15, seconds=False)
+    assert res.certified and res.worst_delay_samples == pytest.approx(15.0)
+    assert res.critical_stiffness <= whole.critical_stiffness
+    assert res.critical_stiffness == pytest.approx(whole.critical_stiffness, rel=1e-8)
+
+
+def test_segments_cut_at_the_whole_samples():
+    assert segments_of(2.5, 4.25) == [(2, 0.5, 1.0), (3, 0.0, 1.0), (4, 0.0, 0.25)]
+    assert segments_of(2.0, 4.0) == [(2, 0.0, 1.0), (3, 0.0, 1.0)]
+    assert segments_of(3.3, 3.3) == [(3, pytest.approx(0.3), pytest.approx(0.3))]
+
+
+def test_peb_between_the_samples_is_refused_by_name_and_sampled_is_kept():
+    peb = TeleoperationLoop(Device(0.02, 0.05), Device(0.05, 0.1), SpringDamper(1.0, 0.05),
+                            SpringDamper(1.0, 0.05), "spring:1", "msd:0.01,0.1,200", 1e-3, 0)
+    with pytest.raises(AnalysisError, match=r"peb.*2-D family"):
+        delay_range_critical_stiffness(peb, 1e-3, 3e-3)
+    got = delay_range_critical_stiffness(peb, 1e-3, 3e-3, receiver="sampled")
+    assert got.delays_samples == (2, 3, 4, 5, 6)
+    with pytest.raises(ModelError, match="receiver"):
+        delay_range_critical_stiffness(peb, 1e-3, 3e-3, receiver="late")
+
+
+def test_result_outputs(tmp_path):
+    loop, _, lo, hi = _case(0)
+    res = delay_range_critical_stiffness(loop, lo, hi)
+    d = res.to_dict()
+    assert d["fractional"] and d["critical_stiffness"] <= d["upper_bound_N_per_m"]
+    assert d["delay_range_s"] == pytest.approx([lo, hi])
+    res.to_csv(tmp_path / "r.csv")
+    assert len((tmp_path / "r.csv").read_text().splitlines()) == len(res.segments) + 1
+    assert math.isfinite(res.kmax_at_worst)
+    assert res.kmax_at_worst == pytest.approx(res.upper_bound, rel=1e-8)
