@@ -21,15 +21,21 @@ RTOL = 1e-6
 #: the reference bisects to 1e-11: "never above" allows that much
 REF_TOL = 1e-10
 GRID = 1000
+#: the brute force's lowest K (N/m): a K_max below it reads 0 there
+BELOW_SCAN = 1e-6
 
 
 def _case(seed: int):
+    """A random HVE and range; every other seed holds a stiff hand (1e3-3e4 N/m), where
+    K_max rises and falls with the delay (interior minima, dips towards 0)."""
     rng = np.random.default_rng(40_000 + seed)
     T = float(rng.uniform(5e-4, 3e-3))
-    lo = float(rng.uniform(0, 4))
+    lo = float(rng.uniform(0, 4 if seed % 2 == 0 else 8))
     hi = lo + float(rng.uniform(0.5, 4))
     m, b, B = rng.uniform(0.05, 1), rng.uniform(0.05, 2), rng.uniform(0, 3)
     om, ob, ok = rng.uniform(0.01, 0.5), rng.uniform(0, 2), rng.uniform(1, 400)
+    if seed % 2:
+        ok = 10 ** rng.uniform(3, 4.5)
     loop = HapticLoop(Device(m, b), SpringDamper(1.0, B), f"msd:{om!r},{ob!r},{ok!r}", T, 0)
     return loop, (m + om, b + ob, ok, T, B), lo * T, hi * T
 
@@ -37,16 +43,19 @@ def _case(seed: int):
 def _check(seed: int) -> None:
     loop, phys, lo, hi = _case(seed)
     res = delay_range_critical_stiffness(loop, lo, hi)
-    assert res.certified, res.reason
     T = loop.period
     # the grid, and the reported worst delay among its points (so the grid resolves it)
     delays = np.append(np.linspace(lo / T, hi / T, GRID), res.worst_delay_samples)
     kref = bf.kmax_many(phys[0], phys[1], phys[2], T, delays, phys[4])
     assert np.all(np.isfinite(kref))
     assert res.critical_stiffness <= kref.min() * (1 + REF_TOL)       # never above
-    assert res.critical_stiffness == pytest.approx(kref.min(), rel=RTOL)
+    # within 1e-6 of the grid's minimum; the reference's scan starts at K = 1e-6 N/m (a
+    # K_max below it reads 0): the grid does not resolve the minimum below that
+    assert res.critical_stiffness == pytest.approx(kref.min(), rel=RTOL, abs=BELOW_SCAN)
     assert res.upper_bound >= kref.min() * (1 - REF_TOL)
-    assert kref[-1] == pytest.approx(res.upper_bound, rel=RTOL)
+    assert kref[-1] == pytest.approx(res.upper_bound, rel=RTOL, abs=BELOW_SCAN)
+    # open only where the minimum is (next to) 0: no K above the base point is proved
+    assert res.certified or (res.critical_stiffness == 0.0 and kref.min() <= BELOW_SCAN)
 
 
 @pytest.mark.parametrize("seed", draw(range(50), 2))

@@ -207,12 +207,12 @@ def proved_crossing(balls: FractionBalls, theta: float, f: float) -> float:
     fb = arb(f)
     if theta in (0.0, math.pi):
         g = balls.value(arb.pi() if theta else arb(0), fb)
-        return _up(g.real.upper()) if g.is_finite() else math.inf
+        return _up(g.real.upper()) if g.is_finite() and g.real > 0 else math.inf
     for rel in (1e-12, 1e-10, 1e-8):       # 1e-12..1e-8: brackets around a float root
         a, b = theta * (1 - rel), min(theta * (1 + rel), math.pi)
         ia, ib = balls.value(arb(a), fb).imag, balls.value(arb(b), fb).imag
         if (ia < 0 < ib) or (ib < 0 < ia):
             g = balls.value(arb((a + b) / 2, (b - a) / 2).union(arb(a)).union(arb(b)), fb)
-            if g.is_finite():
+            if g.is_finite() and g.real > 0:          # a crossing at a K > 0
                 return _up(g.real.upper())
     return math.inf

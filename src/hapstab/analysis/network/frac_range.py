@@ -211,7 +211,8 @@ def _bound(loop: Any, w: _Work, k0: float, target: float, max_boxes: int) -> flo
 
 
 def fraction_range_minimum(loop: Any, lo: float, hi: float, *, rtol: float = RTOL,
-                           max_boxes: int = MAX_BOXES) -> tuple[list[Segment], float, float]:
+                           max_boxes: int = MAX_BOXES
+                           ) -> tuple[list[Segment], float, float, float]:
     """Proved enclosure of min K_max over every delay n + f of [lo, hi] samples (HVE,
     module docstring).
 
@@ -228,9 +229,10 @@ def fraction_range_minimum(loop: Any, lo: float, hi: float, *, rtol: float = RTO
 
     Returns
     -------
-    (segments, lower, upper)
+    (segments, lower, upper, K_0)
         Each :class:`Segment`; ``lower``: proved, every delay of the range is stable for
-        K in [K_0, lower); ``upper``: proved, some delay of the range has K_max <= upper.
+        K in [K_0, lower); ``upper``: proved, some delay of the range has K_max <= upper;
+        the base point K_0 (N/m).
     """
     from hapstab.engine.arb_loop import arb_parameters, base_point
     segs = segments_of(lo, hi)
@@ -246,7 +248,7 @@ def fraction_range_minimum(loop: Any, lo: float, hi: float, *, rtol: float = RTO
         lower = min(_bound(loop, w, k0, target, max_boxes), upper)
         core = _core_kmax(loop, w.whole, w.worst[2]) if w is best else math.nan
         out.append(Segment(w.whole, w.f_lo, w.f_hi, lower, w.upper, w.worst[2], core, w.boxes))
-    return out, min(s.lower for s in out), upper
+    return out, min(s.lower for s in out), upper, k0
 
 
 def _check_cost(segs: list[tuple[int, float, float]]) -> None:

@@ -13,6 +13,9 @@ from hapstab.results import Result, jsonable, write_csv
 
 __all__ = ["FractionalRangeResult", "REPORT_RTOL"]
 
+#: A lower end within this (relative) of the base point K_0 proves nothing above it
+#: (the branch and bound's boxes at K_0 itself report K_0; rounding of its doubles)
+BASE_ROUNDING = 1e-6
 #: The relative gap between the proved ends above which the answer is reported
 #: *uncertain* (the acceptance's 1e-6, with margin for the float worst point)
 REPORT_RTOL = 1e-7
@@ -75,6 +78,10 @@ class FractionalRangeResult(Result):
     def reason(self) -> str:
         """The answer in words."""
         lo, hi = (v * self.period * 1e3 for v in self.range_samples)
+        if self.critical_stiffness == 0.0:
+            return (f"no K > 0 is proved stable at every constant delay of [{lo:g}, {hi:g}] ms "
+                    f"acting between the samples: at {self.worst_delay_s * 1e3:.6g} ms a pole "
+                    f"reaches |z| = 1 by K = {self.upper_bound:.4g} N/m (uncertain below it)")
         head = (f"stable for K in (0, {self.critical_stiffness:.10g}] N/m at every constant "
                 f"delay of [{lo:g}, {hi:g}] ms, acting between the samples (proved over the "
                 f"continuum: {len(self.segments)} segment(s), branch and bound on the modified "
@@ -178,10 +185,13 @@ def fractional_range_critical_stiffness(loop: Any, lo_s: float, hi_s: float, *,
     from hapstab.analysis.network.frac_range import MAX_BOXES, fraction_range_minimum
     whole_delays(lo_s, hi_s, loop.period)            # validates the range and its length
     lo, hi = lo_s / loop.period, hi_s / loop.period
-    segs, lower, upper = fraction_range_minimum(loop, lo, hi, max_boxes=max_boxes or MAX_BOXES)
+    segs, lower, upper, k0 = fraction_range_minimum(loop, lo, hi,
+                                                    max_boxes=max_boxes or MAX_BOXES)
     worst = min(segs, key=lambda s: s.upper)
-    # the bound holds on [K_0, lower): the double below it is a closed end
-    safe = max(0.0, math.nextafter(lower, -math.inf)) if lower > 0 else 0.0
+    # the bound holds on [K_0, lower): the double below it is a closed end; a bound no
+    # higher than K_0 (to rounding) proves nothing: 0, as the exact core says for a loop
+    # it cannot prove stable above its base point
+    safe = math.nextafter(lower, -math.inf) if lower > k0 * (1 + BASE_ROUNDING) else 0.0
     core = next((s.kmax_at_worst for s in segs if not math.isnan(s.kmax_at_worst)), math.nan)
     return FractionalRangeResult(safe, upper, core, worst.whole + worst.worst_fraction,
                                  (lo, hi), loop.period, tuple(segs), loop.to_dict())

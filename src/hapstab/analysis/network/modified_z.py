@@ -95,9 +95,9 @@ class FractionalPlant:
     def coefficients(self, f: float) -> tuple[np.ndarray, np.ndarray]:
         """(d, Nt_f): ascending coefficients in y = z - 1 (doubles, for the float
         search and the point checks; the proof uses balls)."""
-        from scipy.linalg import expm
+        from hapstab.engine.zoh import expm_batched
         d, a0, a1 = _full_period(self)
-        Xf = expm(self.aug((1.0 - f) * self.period_s))
+        Xf = expm_batched(self.aug((1.0 - f) * self.period_s)[None])[0]
         return d, Xf[0, 0] * a0 + Xf[0, 1] * a1 + Xf[0, 2] * d
 
     def gain(self, theta: np.ndarray, f: float) -> np.ndarray:
@@ -150,9 +150,17 @@ class FractionalPlant:
         for t in (0, m - 1):                      # z = 1 and z = -1: G is real there
             if np.isfinite(G[t]) and k_floor < G[t].real < best[0]:
                 best = (float(G[t].real), float(th[t]))
-        im = G.imag
-        for i in np.flatnonzero((np.sign(im[:-1]) * np.sign(im[1:]) < 0)
-                                & np.isfinite(im[:-1]) & np.isfinite(im[1:])):
+        im, re = G.imag, G.real
+        brackets = np.flatnonzero((np.sign(im[:-1]) * np.sign(im[1:]) < 0)
+                                  & np.isfinite(im[:-1]) & np.isfinite(im[1:]))
+        # Re G within a bracket stays near its ends: the lowest first, and none that
+        # cannot beat the best
+        spread = np.abs(np.diff(re)[brackets])
+        low = np.minimum(re[brackets], re[brackets + 1]) - spread
+        high = np.maximum(re[brackets], re[brackets + 1]) + spread
+        for i in brackets[np.argsort(low)][high[np.argsort(low)] > k_floor]:
+            if min(re[i], re[i + 1]) - abs(re[i] - re[i + 1]) >= best[0]:
+                break
             r = brentq(lambda x: float(self._gain(coef, np.array([x]))[0].imag), th[i], th[i + 1],
                        xtol=1e-15, rtol=4 * np.finfo(float).eps)   # 1e-15: the angle to rounding
             g = complex(self._gain(coef, np.array([r]))[0])
@@ -165,8 +173,8 @@ class FractionalPlant:
 @functools.lru_cache(maxsize=256)
 def _full_period(plant: FractionalPlant) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(d, a_0, a_1) of the module docstring, ascending in y, from the ZOH over T."""
-    from scipy.linalg import expm
-    X = expm(plant.aug(plant.period_s))
+    from hapstab.engine.zoh import expm_batched
+    X = expm_batched(plant.aug(plant.period_s)[None])[0]
     E, g = X[:2, :2] - np.eye(2), X[:2, 2]
     d = np.array([E[0, 0] * E[1, 1] - E[0, 1] * E[1, 0], -(E[0, 0] + E[1, 1]), 1.0])
     a0 = np.array([E[0, 1] * g[1] - E[1, 1] * g[0], g[0], 0.0])
