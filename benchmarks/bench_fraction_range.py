@@ -27,10 +27,10 @@ import time
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 import numpy as np
+from tests.references import brute_fractional as bf
 
 import hapstab as h
 from hapstab.analysis.network import delay_range_critical_stiffness
-from tests.references import brute_fractional as bf
 
 REPEATS = 3
 
