@@ -57,9 +57,9 @@ def main() -> None:
     print("|---|---|---|---|---|---|---|---|---|")
     for name, loop, (M, b, k, B), lo, hi in cases():
         T = loop.period
-        res, t1 = median_time(lambda: delay_range_critical_stiffness(loop, lo, hi))
+        res, t1 = median_time(delay_range_critical_stiffness, loop, lo, hi)
         ds = np.linspace(lo / T, hi / T, 1000)
-        ref, t2 = median_time(lambda: bf.kmax_many(M, b, k, T, ds, B))
+        ref, t2 = median_time(bf.kmax_many, M, b, k, T, ds, B)
         assert res.critical_stiffness <= ref.min() * (1 + 1e-10)
         t = time.perf_counter()
         core = min(h.critical_stiffness(loop.with_delay_s(float(d) * T)).critical_stiffness
