@@ -66,12 +66,15 @@ class CrossingBound:
     worst : tuple of (float, float, float)
         (lower bound, theta, f) of the box with the smallest lower bound at the end:
         where the minimum lies.
+    worst_fractions : tuple of (float, float)
+        That box's fractions.
     """
 
     lower: float
     closed: bool
     boxes: int
     worst: tuple[float, float, float]
+    worst_fractions: tuple[float, float] = (math.nan, math.nan)
 
 
 def _down(x: Any) -> float:
@@ -182,14 +185,15 @@ def crossing_lower_bound(balls: FractionBalls, f_lo: float, f_hi: float, k_floor
     lower = min(lowest_settled, heap[0][0] if heap else math.inf)
     worst = ((heap[0][0], (heap[0][1] + heap[0][2]) / 2, (heap[0][3] + heap[0][4]) / 2)
              if heap else (lower, math.nan, math.nan))
-    return CrossingBound(lower, not heap, count, worst)
+    return CrossingBound(lower, not heap, count, worst,
+                         (heap[0][3], heap[0][4]) if heap else (math.nan, math.nan))
 
 
 def proved_crossing(balls: FractionBalls, theta: float, f: float) -> float:
     """An upper bound, proved, of a real crossing of G at the fraction ``f`` near the
     angle ``theta`` (a float root of Im G): G's ball at theta = 0 or pi (real there),
-    else Im G of opposite signs at theta (1 -/+ 1e-9) (so G is real in between) and the
-    upper end of Re G over that interval. At that K a pole of the loop with fraction f
+    else Im G of opposite signs at theta (1 -/+ rel), rel = 1e-12 ... 1e-4 (so G is real in
+    between) and the upper end of Re G over that interval (its mean-value form). At that K a pole of the loop with fraction f
     lies on the unit circle, so K_max(f) is at most it. inf when not proved.
 
     Parameters
@@ -208,11 +212,14 @@ def proved_crossing(balls: FractionBalls, theta: float, f: float) -> float:
     if theta in (0.0, math.pi):
         g = balls.value(arb.pi() if theta else arb(0), fb)
         return _up(g.real.upper()) if g.is_finite() and g.real > 0 else math.inf
-    for rel in (1e-12, 1e-10, 1e-8):       # 1e-12..1e-8: brackets around a float root
+    for rel in (1e-12, 1e-10, 1e-8, 1e-6, 1e-4):    # 1e-12..1e-4: brackets around a
+        # float root (wider where G is a small difference of large terms, near K = 0)
         a, b = theta * (1 - rel), min(theta * (1 + rel), math.pi)
         ia, ib = balls.value(arb(a), fb).imag, balls.value(arb(b), fb).imag
         if (ia < 0 < ib) or (ib < 0 < ia):
-            g = balls.value(arb((a + b) / 2, (b - a) / 2).union(arb(a)).union(arb(b)), fb)
+            span = arb((a + b) / 2, (b - a) / 2).union(arb(a)).union(arb(b))
+            bx = balls.box(span, fb)
+            g = bx.enclosure() if not bx.nt.contains(0) else balls.value(span, fb)
             if g.is_finite() and g.real > 0:          # a crossing at a K > 0
                 return _up(g.real.upper())
     return math.inf

@@ -58,6 +58,9 @@ RTOL = 1e-9
 MAX_BOXES = 40000
 #: Fractions of the float scan of a segment (plus the bounded search after it).
 SCAN_FRACTIONS = 33
+#: Searches of the float model where the branch and bound's lowest box is, when a gap
+#: stays open (the scan may step over a narrow dip of K_max)
+RESEEDS = 2
 #: Seconds a segment costs besides the exact core's K_max at its whole delay, measured
 #: on the paper's HVE (0.3-1 s a segment on the shared 2-core machine), and per sample
 #: of delay (the angle pieces 8 (n + 1) of the branch and bound, ~1 ms each with their
@@ -194,20 +197,43 @@ def _prepare(loop: Any, segs: list[tuple[int, float, float]], k0: float) -> list
     return out
 
 
-def _bound(loop: Any, w: _Work, k0: float, target: float, max_boxes: int) -> float:
-    """The segment's proved lower end (module docstring, steps 3 and 4); 0 when the
-    stability below it cannot be proved."""
+def _base(loop: Any, w: _Work, k0: float, max_boxes: int) -> bool:
+    """Step 4 of the module docstring: the whole delay n proved stable at K_0 and no
+    crossing at K_0 for f in [0, f_a]."""
     from hapstab.analysis.network.frac_bound import crossing_lower_bound
     if not _base_is_stable(loop, w.whole, k0):
-        return 0.0
+        return False
     if w.f_lo > 0.0:
         path = crossing_lower_bound(w.balls, 0.0, w.f_lo, k0, 2.0 * k0, max_boxes)
         w.boxes += path.boxes
-        if not path.closed:
-            return 0.0
+        return path.closed
+    return True
+
+
+def _reseed(w: _Work, box: tuple[float, float], k0: float) -> bool:
+    """Search the float model on the fractions ``box`` of the branch and bound's lowest
+    box (widened by a scan step); True, with the segment's worst point and proved
+    crossing updated, if it finds a lower crossing than the one it had."""
+    from hapstab.analysis.network.frac_bound import proved_crossing
+    half = (w.f_hi - w.f_lo) / (2 * SCAN_FRACTIONS)
+    got = _float_worst(w.plant, max(w.f_lo, box[0] - half), min(w.f_hi, box[1] + half), k0)
+    if not got[0] < w.worst[0]:
+        return False
+    up = proved_crossing(w.balls, got[1], got[2])
+    if not up < w.upper:
+        return False
+    w.worst, w.upper = got, up
+    return True
+
+
+def _bound(w: _Work, k0: float, target: float, max_boxes: int
+           ) -> tuple[float, tuple[float, float] | None]:
+    """Step 3 of the module docstring: (the segment's proved lower end, the fractions
+    of its lowest box left: None when closed)."""
+    from hapstab.analysis.network.frac_bound import crossing_lower_bound
     got = crossing_lower_bound(w.balls, w.f_lo, w.f_hi, k0, target, max_boxes)
     w.boxes += got.boxes
-    return got.lower
+    return got.lower, (None if got.closed else got.worst_fractions)
 
 
 def fraction_range_minimum(loop: Any, lo: float, hi: float, *, rtol: float = RTOL,
@@ -240,12 +266,21 @@ def fraction_range_minimum(loop: Any, lo: float, hi: float, *, rtol: float = RTO
     _check_cost(segs)
     k0 = base_point(arb_parameters(loop.with_whole_delay(segs[0][0])))   # type: ignore[arg-type]
     work = _prepare(loop, segs, k0)
-    best = min(work, key=lambda w: min(w.upper, w.worst[0]))
     upper = min(w.upper for w in work)
-    out = []
+    lowers = []
     for w in work:
-        target = upper * (1.0 - rtol) if math.isfinite(upper) else math.inf
-        lower = min(_bound(loop, w, k0, target, max_boxes), upper)
+        lower = 0.0
+        for _ in range(RESEEDS + 1) if _base(loop, w, k0, max_boxes) else ():
+            target = upper * (1.0 - rtol) if math.isfinite(upper) else math.inf
+            lower, box = _bound(w, k0, target, max_boxes)
+            # a gap left open: the float search may have missed where the minimum is
+            if box is None or not _reseed(w, box, k0):
+                break
+            upper = min(upper, w.upper)
+        lowers.append(min(lower, upper))
+    best = min(work, key=lambda w: w.upper)
+    out = []
+    for w, lower in zip(work, lowers, strict=True):
         core = _core_kmax(loop, w.whole, w.worst[2]) if w is best else math.nan
         out.append(Segment(w.whole, w.f_lo, w.f_hi, lower, w.upper, w.worst[2], core, w.boxes))
     return out, min(s.lower for s in out), upper, k0

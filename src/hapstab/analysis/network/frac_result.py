@@ -79,9 +79,11 @@ class FractionalRangeResult(Result):
         """The answer in words."""
         lo, hi = (v * self.period * 1e3 for v in self.range_samples)
         if self.critical_stiffness == 0.0:
+            where = (f"a pole reaches |z| = 1 by K = {self.upper_bound:.4g} N/m"
+                     if math.isfinite(self.upper_bound) else "K_max is near 0")
             return (f"no K > 0 is proved stable at every constant delay of [{lo:g}, {hi:g}] ms "
-                    f"acting between the samples: at {self.worst_delay_s * 1e3:.6g} ms a pole "
-                    f"reaches |z| = 1 by K = {self.upper_bound:.4g} N/m (uncertain below it)")
+                    f"acting between the samples: at {self.worst_delay_s * 1e3:.6g} ms {where} "
+                    "(uncertain below it)")
         head = (f"stable for K in (0, {self.critical_stiffness:.10g}] N/m at every constant "
                 f"delay of [{lo:g}, {hi:g}] ms, acting between the samples (proved over the "
                 f"continuum: {len(self.segments)} segment(s), branch and bound on the modified "
