@@ -192,9 +192,10 @@ def crossing_lower_bound(balls: FractionBalls, f_lo: float, f_hi: float, k_floor
 def proved_crossing(balls: FractionBalls, theta: float, f: float) -> float:
     """An upper bound, proved, of a real crossing of G at the fraction ``f`` near the
     angle ``theta`` (a float root of Im G): G's ball at theta = 0 or pi (real there),
-    else Im G of opposite signs at theta (1 -/+ rel), rel = 1e-12 ... 1e-4 (so G is real in
-    between) and the upper end of Re G over that interval (its mean-value form). At that K a pole of the loop with fraction f
-    lies on the unit circle, so K_max(f) is at most it. inf when not proved.
+    else Im G of opposite signs at theta (1 -/+ rel), rel = 1e-12 ... 1e-4 (so G is real
+    in between) and the upper end of Re G over that interval (its mean-value form). At
+    that K a pole of the loop with fraction f lies on the unit circle, so K_max(f) is at
+    most it. inf when not proved.
 
     Parameters
     ----------
