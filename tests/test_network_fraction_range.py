@@ -130,3 +130,20 @@ def test_an_open_gap_is_searched_again_where_the_lowest_box_is():
     assert fr._reseed(w, box, k0) and w.upper == pytest.approx(right, rel=1e-9)
     ref = bf.kmax_many(m + om, b + ob, ok, T, [4 + w.worst[2]], 0.0)[0]
     assert w.upper == pytest.approx(ref, rel=1e-6)
+
+
+@pytest.mark.parametrize("lo, hi, words", [
+    (float("nan"), 1e-3, "delay range start"),
+    (-1e-3, 1e-3, "delay range start"),
+    (2e-3, 1e-3, "end must not be below"),
+    (0.0, math.inf, "delay range end"),
+])
+def test_hostile_ranges_are_refused_by_name(lo, hi, words):
+    with pytest.raises(ModelError, match=words):
+        delay_range_critical_stiffness(paper_hve(1e-3), lo, hi)
+
+
+def test_a_long_range_is_refused_before_any_work():
+    from hapstab.budget import BudgetError
+    with pytest.raises(BudgetError, match="between the samples"):
+        delay_range_critical_stiffness(paper_hve(1e-3), 0.0, 0.5)
