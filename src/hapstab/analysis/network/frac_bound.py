@@ -153,6 +153,8 @@ def crossing_lower_bound(balls: FractionBalls, f_lo: float, f_hi: float, k_floor
         fr = arb((fa + fb) / 2, (fb - fa) / 2)
         # the balls' centres and radii are rounded: widen to cover [ta, tb] x [fa, fb]
         th, fr = th.union(arb(ta)).union(arb(tb)), fr.union(arb(fa)).union(arb(fb))
+        if tb == math.pi:                # the double pi is below pi: cover up to pi itself
+            th = th.union(arb.pi())
         lb = _box_lower(balls.box(th, fr, key=(fa, fb)), k_floor)
         if lb is None:
             return
