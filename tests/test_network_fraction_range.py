@@ -147,3 +147,16 @@ def test_a_long_range_is_refused_before_any_work():
     from hapstab.budget import BudgetError
     with pytest.raises(BudgetError, match="between the samples"):
         delay_range_critical_stiffness(paper_hve(1e-3), 0.0, 0.5)
+
+
+def test_the_answer_does_not_depend_on_arbs_global_precision():
+    # the explorer's workers and the CLI may leave flint's ctx.prec differently
+    from flint import ctx
+    old = ctx.prec
+    try:
+        a = delay_range_critical_stiffness(paper_hve(1e-3), 5e-3, 7e-3).to_dict()
+        ctx.prec = 100
+        b = delay_range_critical_stiffness(paper_hve(1e-3), 5e-3, 7e-3).to_dict()
+    finally:
+        ctx.prec = old
+    assert a == b

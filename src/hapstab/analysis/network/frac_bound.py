@@ -46,6 +46,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from hapstab.analysis.network.frac_balls import BoxGain, FractionBalls
+from hapstab.engine.arb_loop import working_precision
 
 __all__ = ["CrossingBound", "crossing_lower_bound", "proved_crossing"]
 
@@ -141,6 +142,13 @@ def crossing_lower_bound(balls: FractionBalls, f_lo: float, f_hi: float, k_floor
     -------
     CrossingBound
     """
+    with working_precision(balls.prec):      # the same answer whatever Arb's global precision
+        return _lower_bound(balls, f_lo, f_hi, k_floor, target, max_boxes)
+
+
+def _lower_bound(balls: FractionBalls, f_lo: float, f_hi: float, k_floor: float,
+                 target: float, max_boxes: int) -> CrossingBound:
+    """:func:`crossing_lower_bound` at the precision already set."""
     from flint import arb
     pieces = max(32, 8 * balls.n1)
     heap: list[tuple[float, float, float, float, float]] = []
@@ -210,6 +218,12 @@ def proved_crossing(balls: FractionBalls, theta: float, f: float) -> float:
     -------
     float
     """
+    with working_precision(balls.prec):
+        return _proved_crossing(balls, theta, f)
+
+
+def _proved_crossing(balls: FractionBalls, theta: float, f: float) -> float:
+    """:func:`proved_crossing` at the precision already set."""
     from flint import arb
     fb = arb(f)
     if theta in (0.0, math.pi):
