@@ -25,8 +25,11 @@ set of delays answers; the range is cut at the whole samples into segments
    connected to that path. Every delay of the segment is stable for K in [K_0, K_low).
 
 The range's answer is the smallest K_low over its segments (a proved lower bound of
-min K_max) with the smallest upper end as the enclosure's top; when the gap stays above
-the tolerance within the budget the lower end is reported with the gap, *uncertain*.
+min K_max) with the smallest upper end as the enclosure's top. When a segment's gap stays
+open, the float search is run again on the fractions of the branch and bound's lowest box
+(up to :data:`RESEEDS` times: the scan may have stepped over a narrow dip) and the bound
+redone with the lower target; a gap still open within the budget is reported with the
+lower end, *uncertain*.
 K_0 is the exact core's base point (:func:`hapstab.engine.arb_loop.base_point`): what
 holds for K in (0, K_0) is not proved, as for every certified K_max.
 
