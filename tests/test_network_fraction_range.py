@@ -110,6 +110,9 @@ def test_result_outputs(tmp_path):
     assert len((tmp_path / "r.csv").read_text().splitlines()) == len(res.segments) + 1
     assert math.isfinite(res.kmax_at_worst)
     assert res.kmax_at_worst == pytest.approx(res.upper_bound, rel=1e-8)
+    ax = res.plot()
+    assert ax.get_xlabel() == "delay (samples)" and len(ax.lines) >= 2
+    assert "FractionalRangeResult" in res._repr_html_()
 
 
 def test_an_open_gap_is_searched_again_where_the_lowest_box_is():
