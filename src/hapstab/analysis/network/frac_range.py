@@ -64,11 +64,12 @@ SCAN_FRACTIONS = 33
 #: Searches of the float model where the branch and bound's lowest box is, when a gap
 #: stays open (the scan may step over a narrow dip of K_max)
 RESEEDS = 2
-#: Seconds a segment costs besides the exact core's K_max at its whole delay, measured
-#: on the paper's HVE (0.3-1 s a segment on the shared 2-core machine), and per sample
-#: of delay (the angle pieces 8 (n + 1) of the branch and bound, ~1 ms each with their
-#: splits)
-SEGMENT_SECONDS, SEGMENT_SECONDS_PER_SAMPLE = 1.0, 1e-3
+#: Seconds a segment costs besides the exact core's K_max at its whole delay, and per
+#: sample of delay (the angle pieces 8 (n + 1) of the branch and bound and the float
+#: scan's 64 (n + 1) angles). Measured on the shared 2-core machine (load 3-6): the
+#: paper's HVE over 5-15 ms 0.67-1.8 s (estimate 2.4 s), 95-100 ms 1.8 s (2.3 s), a
+#: hand-held device over 998-1000 ms 4.9 s (5.6 s)
+SEGMENT_SECONDS, SEGMENT_SECONDS_PER_SAMPLE = 0.2, 2.5e-3
 
 
 @dataclass(frozen=True)
