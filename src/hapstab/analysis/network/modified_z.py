@@ -204,10 +204,10 @@ def fractional_plant(loop: Any, whole: int) -> FractionalPlant:
         A loop outside this model, naming what.
     """
     from hapstab.engine.arb_loop import arb_parameters
-    if getattr(loop, "kind", None) != "hve":
+    if tuple(getattr(loop, "port_names", ())) != ("device",):
         raise AnalysisError(f"loop kind = {getattr(loop, 'kind', type(loop).__name__)!r}: the "
-                            "fractional delay range is modelled for the hve loop (peb: each "
-                            "direction's fraction is a 2-D family not covered)")
+                            "fractional delay range is modelled for the hve loop (one port; "
+                            "peb: each direction's fraction is a 2-D family not covered)")
     params = arb_parameters(loop.with_whole_delay(whole))
     if params is None:
         raise AnalysisError("delay range with fractional delays: covered for a spring-damper "
