@@ -1,7 +1,7 @@
 """Benchmark (issue 30, item 1): the proved minimum of K_max over a continuum of delays
 acting between the samples, against the grids one would otherwise compute.
 
-- hapstab: ``delay_range_critical_stiffness(loop, lo_s, hi_s)`` (a proved enclosure over
+- hapstab: ``fractional_range_critical_stiffness(loop, lo_s, hi_s)`` (a proved enclosure over
   the continuum, the worst delay);
 - grid 1: the tests' independent brute force (tests/references/brute_fractional.py:
   closed-loop matrix eigenvalues and bisection, batched) at 1000 delays of the range:
@@ -30,7 +30,7 @@ import numpy as np
 from tests.references import brute_fractional as bf
 
 import hapstab as h
-from hapstab.analysis.network import delay_range_critical_stiffness
+from hapstab.analysis.network import fractional_range_critical_stiffness
 
 REPEATS = 3
 
@@ -57,7 +57,7 @@ def main() -> None:
     print("|---|---|---|---|---|---|---|---|---|")
     for name, loop, (M, b, k, B), lo, hi in cases():
         T = loop.period
-        res, t1 = median_time(delay_range_critical_stiffness, loop, lo, hi)
+        res, t1 = median_time(fractional_range_critical_stiffness, loop, lo, hi)
         ds = np.linspace(lo / T, hi / T, 1000)
         ref, t2 = median_time(bf.kmax_many, M, b, k, T, ds, B)
         assert res.critical_stiffness <= ref.min() * (1 + 1e-10)

@@ -48,12 +48,12 @@ def test_refusals_are_one_line_and_exit_2(args, words):
 
 
 def test_kmax_delay_range_is_the_librarys():
-    from hapstab.analysis.network.delay_range import delay_range_critical_stiffness
+    from hapstab.analysis.network import fractional_range_critical_stiffness
 
     r = _run("kmax", "hve", "--delay-range", "5ms:15ms", "--json")
     assert r.exit_code == 0, r.stderr
     d = json.loads(r.stdout)
-    want = delay_range_critical_stiffness(paper_hve(), 5e-3, 15e-3)
+    want = fractional_range_critical_stiffness(paper_hve(), 5e-3, 15e-3)
     assert d["critical_stiffness"] == want.critical_stiffness
     assert d["worst_delay_samples"] == pytest.approx(15) and d["fractional"] and d["certified"]
     r = _run("kmax", "hve", "--delay-range", "5ms:6ms")

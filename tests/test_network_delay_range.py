@@ -1,5 +1,5 @@
 """Unknown constant delay in a range (issue 30, item 1), sample-synchronous receiver
-(``receiver="sampled"``; a delay acting between the samples: test_network_fraction_range.py):
+(a delay acting between the samples: test_network_fraction_range.py):
 the certified minimum over the range against the brute-force reference at every delay
 of a >= 1000-point grid of transport delays (tests/references/brute.py, no hapstab)."""
 
@@ -40,7 +40,7 @@ def _case(seed: int):
 
 def _check(seed: int) -> None:
     loop, ref, lo, hi = _case(seed)
-    res = delay_range_critical_stiffness(loop, lo, hi, receiver="sampled")
+    res = delay_range_critical_stiffness(loop, lo, hi)
     grid = np.linspace(lo, hi, 1000)
     # the receiver uses a sample from the first instant at or after its arrival
     ns = sorted({max(0, math.ceil(t / loop.period - 1e-9)) for t in grid})

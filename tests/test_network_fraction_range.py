@@ -11,9 +11,11 @@ from tests.lanes import draw
 from tests.references import brute_fractional as bf
 
 from hapstab import Device, HapticLoop, SpringDamper, TeleoperationLoop, paper_hve
-from hapstab.analysis.network import delay_range_critical_stiffness
+from hapstab.analysis.network import (
+    delay_range_critical_stiffness,
+    fractional_range_critical_stiffness,
+)
 from hapstab.analysis.network.frac_range import segments_of
-from hapstab.analysis.network.frac_result import fractional_range_critical_stiffness
 from hapstab.errors import AnalysisError, ModelError
 
 #: the acceptance: within 1e-6 of the grid's minimum
@@ -42,7 +44,7 @@ def _case(seed: int):
 
 def _check(seed: int) -> None:
     loop, phys, lo, hi = _case(seed)
-    res = delay_range_critical_stiffness(loop, lo, hi)
+    res = fractional_range_critical_stiffness(loop, lo, hi)
     T = loop.period
     # the grid, and the reported worst delay among its points (so the grid resolves it)
     delays = np.append(np.linspace(lo / T, hi / T, GRID), res.worst_delay_samples)
@@ -76,7 +78,7 @@ def test_uncertain_when_the_budget_cannot_close_the_gap():
 
 def test_whole_sample_range_equals_the_whole_delays_minimum():
     # the paper's HVE at 1 kHz, 5-15 ms: K_max falls with the delay, the worst is 15 ms
-    res = delay_range_critical_stiffness(paper_hve(1e-3), 5e-3, 15e-3)
+    res = fractional_range_critical_stiffness(paper_hve(1e-3), 5e-3, 15e-3)
     whole = delay_range_critical_stiffness(paper_hve(1e-3), 5, 15, seconds=False)
     assert res.certified and res.worst_delay_samples == pytest.approx(15.0)
     assert res.critical_stiffness <= whole.critical_stiffness
@@ -92,17 +94,15 @@ def test_segments_cut_at_the_whole_samples():
 def test_peb_between_the_samples_is_refused_by_name_and_sampled_is_kept():
     peb = TeleoperationLoop(Device(0.02, 0.05), Device(0.05, 0.1), SpringDamper(1.0, 0.05),
                             SpringDamper(1.0, 0.05), "spring:1", "msd:0.01,0.1,200", 1e-3, 0)
-    with pytest.raises(AnalysisError, match=r"peb.*2-D family"):
-        delay_range_critical_stiffness(peb, 1e-3, 3e-3)
-    got = delay_range_critical_stiffness(peb, 1e-3, 3e-3, receiver="sampled")
+    with pytest.raises(AnalysisError, match=r"teleoperator.*2-D family"):
+        fractional_range_critical_stiffness(peb, 1e-3, 3e-3)
+    got = delay_range_critical_stiffness(peb, 1e-3, 3e-3)       # a sample-synchronous receiver
     assert got.delays_samples == (2, 3, 4, 5, 6)
-    with pytest.raises(ModelError, match="receiver"):
-        delay_range_critical_stiffness(peb, 1e-3, 3e-3, receiver="late")
 
 
 def test_result_outputs(tmp_path):
     loop, _, lo, hi = _case(0)
-    res = delay_range_critical_stiffness(loop, lo, hi)
+    res = fractional_range_critical_stiffness(loop, lo, hi)
     d = res.to_dict()
     assert d["fractional"] and d["critical_stiffness"] <= d["upper_bound_N_per_m"]
     assert d["delay_range_s"] == pytest.approx([lo, hi])
@@ -143,13 +143,13 @@ def test_an_open_gap_is_searched_again_where_the_lowest_box_is():
 ])
 def test_hostile_ranges_are_refused_by_name(lo, hi, words):
     with pytest.raises(ModelError, match=words):
-        delay_range_critical_stiffness(paper_hve(1e-3), lo, hi)
+        fractional_range_critical_stiffness(paper_hve(1e-3), lo, hi)
 
 
 def test_a_long_range_is_refused_before_any_work():
     from hapstab.budget import BudgetError
     with pytest.raises(BudgetError, match="between the samples"):
-        delay_range_critical_stiffness(paper_hve(1e-3), 0.0, 0.5)
+        fractional_range_critical_stiffness(paper_hve(1e-3), 0.0, 0.5)
 
 
 def test_the_answer_does_not_depend_on_arbs_global_precision():
@@ -157,9 +157,9 @@ def test_the_answer_does_not_depend_on_arbs_global_precision():
     from flint import ctx
     old = ctx.prec
     try:
-        a = delay_range_critical_stiffness(paper_hve(1e-3), 5e-3, 7e-3).to_dict()
+        a = fractional_range_critical_stiffness(paper_hve(1e-3), 5e-3, 7e-3).to_dict()
         ctx.prec = 100
-        b = delay_range_critical_stiffness(paper_hve(1e-3), 5e-3, 7e-3).to_dict()
+        b = fractional_range_critical_stiffness(paper_hve(1e-3), 5e-3, 7e-3).to_dict()
     finally:
         ctx.prec = old
     assert a == b

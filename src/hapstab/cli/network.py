@@ -131,10 +131,11 @@ def range_kmax(kind: str, spec: str, loop: Any, method: str, as_json: bool) -> N
         raise HapstabError(f"--delay-range = {spec!r} for {kind}: a delay in seconds acts between "
                            "the samples, and each direction's fraction is a 2-D family not "
                            "covered for peb; give whole samples (e.g. 5:15)")
-    res = delay_range_critical_stiffness(loop, lo, hi, seconds=seconds)
     if seconds:
-        _fraction_table(kind, res, loop, as_json)
+        from hapstab.analysis.network.frac_result import fractional_range_critical_stiffness
+        _fraction_table(kind, fractional_range_critical_stiffness(loop, lo, hi), loop, as_json)
         return
+    res = delay_range_critical_stiffness(loop, lo, hi, seconds=False)
     rows = [("critical stiffness", f"{fmt(res.critical_stiffness)} N/m"),
             ("worst delay", f"{res.worst_delay_samples} samples"
              + (" (round trip)" if res.round_trip else "")),

@@ -7,8 +7,9 @@ between the samples, proved over the continuum
 sample, bracketed (:mod:`~hapstab.analysis.network.jitter`)."""
 
 from hapstab.analysis.network.delay_range import delay_range_critical_stiffness
+from hapstab.analysis.network.frac_result import fractional_range_critical_stiffness
 from hapstab.analysis.network.jitter import jitter
 from hapstab.analysis.network.loss import kmax_against_loss, loss_critical_stiffness
 
 __all__ = ["loss_critical_stiffness", "kmax_against_loss", "delay_range_critical_stiffness",
-           "jitter"]
+           "fractional_range_critical_stiffness", "jitter"]

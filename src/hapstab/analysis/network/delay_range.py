@@ -16,10 +16,11 @@ determinant is (1 + C_m G_m)(1 + C_s G_s) - C_m C_s G_m G_s z^-(n_f + n_b), the 
 appearing only in the cross term), so the round trips 2 n_lo ... 2 n_hi are analysed.
 
 A delay that acts *between* the sampling instants (the engine's fractional delay,
-e.g. a sensor sampled off the controller's clock; the default for a range in seconds,
-``receiver="between"``) is proved over its continuum by
-:mod:`~hapstab.analysis.network.frac_range` for the HVE; for PEB each direction's
-fraction is a 2-D family that is not covered (refused, by name).
+e.g. a sensor sampled off the controller's clock; what ``kmax --delay-range`` in seconds
+answers for the HVE) is proved over its continuum by
+:func:`~hapstab.analysis.network.frac_result.fractional_range_critical_stiffness`
+(:mod:`~hapstab.analysis.network.frac_range`); for PEB each direction's fraction is a
+2-D family that is not covered (refused, by name).
 
 References
 ----------
@@ -164,8 +165,8 @@ class DelayRangeResult(Result):
         return ax
 
 
-def delay_range_critical_stiffness(loop: Any, lo: float, hi: float, *, seconds: bool = True,
-                                   receiver: str = "between") -> Any:
+def delay_range_critical_stiffness(loop: Any, lo: float, hi: float, *, seconds: bool = True
+                                   ) -> DelayRangeResult:
     """Certified minimum of K_max over every constant delay of a range.
 
     Parameters
@@ -173,20 +174,16 @@ def delay_range_critical_stiffness(loop: Any, lo: float, hi: float, *, seconds: 
     loop : HapticLoop or TeleoperationLoop
         The loop (its own delay is replaced); spring-damper controllers.
     lo, hi : float
-        The range: transport delays in s (``seconds=True``), or whole samples
-        (``seconds=False``).
+        The range: transport delays in s (``seconds=True``; the sample-synchronous
+        receiver of the module docstring; a delay acting between the samples:
+        :func:`~hapstab.analysis.network.frac_result.fractional_range_critical_stiffness`),
+        or whole samples (``seconds=False``).
     seconds : bool
         Whether ``lo`` and ``hi`` are seconds.
-    receiver : {"between", "sampled"}
-        For a range in seconds: ``"between"`` (default), the delay acts between the
-        samples, e[k] = x(kT - tau), proved over the continuum of tau (HVE;
-        :func:`~hapstab.analysis.network.frac_result.fractional_range_critical_stiffness`);
-        ``"sampled"``, the sample-synchronous receiver of the module docstring.
 
     Returns
     -------
-    DelayRangeResult or FractionalRangeResult
-        The latter for a range in seconds with ``receiver="between"``.
+    DelayRangeResult
     """
     from hapstab.analysis.methods import critical_stiffness
 
@@ -194,17 +191,6 @@ def delay_range_critical_stiffness(loop: Any, lo: float, hi: float, *, seconds: 
     if getattr(loop, "force_gains", None) is not None:
         raise AnalysisError("delay range: modelled for hve and peb (the 4-channel loop's "
                             "delays do not enter only as a round trip)")
-    if receiver not in ("between", "sampled"):
-        raise ModelError(f"receiver = {receiver!r}: allowed: 'between' (the delay acts between "
-                         "the samples) or 'sampled' (a receiver acting at the sampling instants)")
-    if seconds and receiver == "between":
-        if len(loop.controllers) == 2:
-            raise AnalysisError(
-                "delay range in seconds for peb: a delay acting between the samples makes each "
-                "direction's fraction a 2-D family, not covered; give receiver='sampled' (a "
-                "receiver acting at the sampling instants) or the range in whole samples")
-        from hapstab.analysis.network.frac_result import fractional_range_critical_stiffness
-        return fractional_range_critical_stiffness(loop, lo, hi)
     if seconds:
         n_lo, n_hi = whole_delays(lo, hi, loop.period)
     else:

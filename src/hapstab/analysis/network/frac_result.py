@@ -9,6 +9,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from hapstab.analysis.network.frac_range import Segment
+from hapstab.errors import AnalysisError
 from hapstab.results import Result, jsonable, write_csv
 
 __all__ = ["FractionalRangeResult", "REPORT_RTOL"]
@@ -181,10 +182,19 @@ def fractional_range_critical_stiffness(loop: Any, lo_s: float, hi_s: float, *,
     ModelError
         A range with its end below its start, or longer than the delay limit.
     AnalysisError
-        A loop outside the model (peb, a filtered damper, an operator with states).
+        A loop outside the model (a teleoperator, a filtered damper, an operator with
+        states).
     """
     from hapstab.analysis.network.delay_range import whole_delays
     from hapstab.analysis.network.frac_range import MAX_BOXES, fraction_range_minimum
+    from hapstab.models.loops import require_loop
+    require_loop(loop)
+    if len(loop.controllers) != 1:
+        raise AnalysisError(
+            "delay range between the samples for a teleoperator: each direction's fraction "
+            "is a 2-D family, not covered; give the range in whole samples "
+            "(delay_range_critical_stiffness(loop, lo, hi, seconds=False)) or at a "
+            "sample-synchronous receiver (delay_range_critical_stiffness in seconds)")
     whole_delays(lo_s, hi_s, loop.period)            # validates the range and its length
     lo, hi = lo_s / loop.period, hi_s / loop.period
     segs, lower, upper, k0 = fraction_range_minimum(loop, lo, hi,
