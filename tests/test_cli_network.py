@@ -48,19 +48,24 @@ def test_refusals_are_one_line_and_exit_2(args, words):
 
 
 def test_kmax_delay_range_is_the_librarys():
-    from hapstab.analysis.network.delay_range import delay_range_critical_stiffness
+    from hapstab.analysis.network import fractional_range_critical_stiffness
 
     r = _run("kmax", "hve", "--delay-range", "5ms:15ms", "--json")
     assert r.exit_code == 0, r.stderr
     d = json.loads(r.stdout)
-    want = delay_range_critical_stiffness(paper_hve(), 5e-3, 15e-3)
-    assert d["critical_stiffness"] == want.critical_stiffness and d["worst_delay_samples"] == 15
+    want = fractional_range_critical_stiffness(paper_hve(), 5e-3, 15e-3)
+    assert d["critical_stiffness"] == want.critical_stiffness
+    assert d["worst_delay_samples"] == pytest.approx(15) and d["fractional"] and d["certified"]
+    r = _run("kmax", "hve", "--delay-range", "5ms:6ms")
+    assert r.exit_code == 0 and "proved enclosure" in r.stdout, r.stderr
     r = _run("kmax", "peb", "--delay-range", "1:3", "--json")
     assert json.loads(r.stdout)["delays_samples"] == [2.0, 3.0, 4.0, 5.0, 6.0]
     for bad in (["--delay-range", "5"], ["--delay-range", "5:x"],
                 ["--delay-range", "1:2", "--loss", "0.1"]):
         r = _run("kmax", "hve", *bad)
         assert r.exit_code == 2 and r.stderr.count("\n") == 1, r.stderr
+    r = _run("kmax", "peb", "--delay-range", "1ms:2ms")
+    assert r.exit_code == 2 and "2-D family" in r.stderr and r.stderr.count("\n") == 1, r.stderr
 
 
 def test_jitter_is_the_librarys(tmp_path):

@@ -314,7 +314,10 @@ def test_network_card_answers_are_the_librarys(page):
     point, each says its model with "exact" / "sufficient", and compares with the
     constant-delay K_max the page shows; the network requests wait for the verdict."""
     import hapstab as h
-    from hapstab.analysis.network import delay_range_critical_stiffness, loss_critical_stiffness
+    from hapstab.analysis.network import (
+        fractional_range_critical_stiffness,
+        loss_critical_stiffness,
+    )
 
     order: list[str] = []
     page.on("request", lambda r: order.append("ask " + r.url.rsplit("/", 1)[-1])
@@ -328,7 +331,7 @@ def test_network_card_answers_are_the_librarys(page):
     set_field(page, "_jitter", "1:3")
     set_field(page, "_burst", "2")
     loop = h.paper_hve(1e-3, delay_samples=2, damping=0.05)
-    rng = delay_range_critical_stiffness(loop, 1e-3, 3e-3)
+    rng = fractional_range_critical_stiffness(loop, 1e-3, 3e-3)     # seconds: between the samples
     assert network_shown(page, "net-range") == {"kmax": rng.critical_stiffness,
                                                 "worst": rng.worst_delay_samples}
     jit = h.jitter(loop, (1, 3))

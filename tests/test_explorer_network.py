@@ -63,6 +63,7 @@ def test_the_readings_are_the_answers_own():
     r, j, s = out
     assert r["values"] == {"kmax": rng["critical_stiffness"], "worst": rng["worst_delay_samples"]}
     assert r["model"].startswith("exact: the certified minimum") and "5\u201315 ms" in r["model"]
+    assert "between the samples" in r["model"] and "minimum in [" in r["detail"]   # seconds
     assert j["values"]["stable"] == jit["stable_up_to_N_per_m"]
     assert j["values"]["unstable"] == jit["unstable_from_N_per_m"]
     assert "sufficient" in j["model"] and "exact for its pattern" in j["model"]

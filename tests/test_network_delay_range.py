@@ -1,4 +1,5 @@
-"""Unknown constant delay in a range (issue 30, item 1), sample-synchronous receiver:
+"""Unknown constant delay in a range (issue 30, item 1), sample-synchronous receiver
+(a delay acting between the samples: test_network_fraction_range.py):
 the certified minimum over the range against the brute-force reference at every delay
 of a >= 1000-point grid of transport delays (tests/references/brute.py, no hapstab)."""
 

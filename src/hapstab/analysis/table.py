@@ -105,6 +105,11 @@ TABLE: tuple[Analysis, ...] = (
              A + "network.delay_range:DelayRangeResult.plot", "kmax", "--delay-range",
              KINDS_ALL, None, "delay-range-kmax",
              (("delay_range_kmax_N_per_m", "float64"), ("worst_delay_samples", "float64"))),
+    # kmax --delay-range in seconds for the hve answers it (the row above: whole samples)
+    Analysis("delay-range-between", "network",
+             A + "network.frac_result:fractional_range_critical_stiffness",
+             A + "network.frac_result:FractionalRangeResult",
+             A + "network.frac_result:FractionalRangeResult.plot"),
     Analysis("jitter", "network", A + "network.jitter:jitter",
              A + "network.jitter_result:JitterResult",
              A + "network.jitter_result:JitterResult.plot", "jitter", None, PAPER_KINDS,

@@ -48,10 +48,10 @@ def parse_delay_range(spec: str, option: str) -> tuple[float, float, bool]:
 def network_options(f: Callable) -> Callable:
     """The --loss, --burst and --delay-range options of ``kmax``."""
     f = click.option("--delay-range", "delay_range", default=None, metavar="A:B",
-                     help="An unknown constant delay anywhere in A:B (seconds with a unit, "
-                          "e.g. 5ms:15ms, at a receiver acting at the sampling instants; or "
-                          "whole samples, e.g. 5:15): the certified minimum K_max over the "
-                          "range and the worst delay.")(f)
+                     help="An unknown constant delay anywhere in A:B: seconds with a unit "
+                          "(e.g. 5ms:15ms; hve: the delay acts between the samples, proved "
+                          "over the continuum) or whole samples (e.g. 5:15, hve and peb): the "
+                          "certified minimum K_max over the range and the worst delay.")(f)
     f = click.option("--burst", type=float, default=None, metavar="L",
                      help="With --loss: losses come in bursts, a Gilbert-Elliott chain per "
                           "networked term with mean burst length L samples (L >= 1).")(f)
@@ -127,12 +127,33 @@ def range_kmax(kind: str, spec: str, loop: Any, method: str, as_json: bool) -> N
         raise HapstabError(f"--delay-range with --method {method}: the range's minimum uses the "
                            "exact core; leave --method at exact")
     lo, hi, seconds = parse_delay_range(spec, "--delay-range")
-    res = delay_range_critical_stiffness(loop, lo, hi, seconds=seconds)
+    if seconds and kind != "hve":
+        raise HapstabError(f"--delay-range = {spec!r} for {kind}: a delay in seconds acts between "
+                           "the samples, and each direction's fraction is a 2-D family not "
+                           "covered for peb; give whole samples (e.g. 5:15)")
+    if seconds:
+        from hapstab.analysis.network.frac_result import fractional_range_critical_stiffness
+        _fraction_table(kind, fractional_range_critical_stiffness(loop, lo, hi), loop, as_json)
+        return
+    res = delay_range_critical_stiffness(loop, lo, hi, seconds=False)
     rows = [("critical stiffness", f"{fmt(res.critical_stiffness)} N/m"),
             ("worst delay", f"{res.worst_delay_samples} samples"
              + (" (round trip)" if res.round_trip else "")),
             ("delays analysed", f"{res.delays_samples[0]}..{res.delays_samples[-1]}"),
             ("why", res.reason)]
     # the table names no loop: its own delay is not the one analysed (the range is)
+    emit(res.to_dict(), as_json, lambda: rich_table(f"K_max over a delay range, {kind}", rows),
+         loop)
+
+
+def _fraction_table(kind: str, res: Any, loop: Any, as_json: bool) -> None:
+    """Print a :class:`~hapstab.analysis.network.frac_result.FractionalRangeResult`."""
+    state = "certified" if res.certified else "uncertain above the lower end"
+    rows = [("critical stiffness", f"{fmt(res.critical_stiffness)} N/m ({state})"),
+            ("proved enclosure", f"[{fmt(res.critical_stiffness)}, {fmt(res.upper_bound)}] N/m"),
+            ("worst delay", f"{fmt(res.worst_delay_s * 1e3)} ms "
+                            f"({fmt(res.worst_delay_samples)} samples)"),
+            ("exact core there", f"{fmt(res.kmax_at_worst)} N/m"),
+            ("why", res.reason)]
     emit(res.to_dict(), as_json, lambda: rich_table(f"K_max over a delay range, {kind}", rows),
          loop)

@@ -15,9 +15,12 @@ the round trip n_f + n_b enters the characteristic function (the return differen
 determinant is (1 + C_m G_m)(1 + C_s G_s) - C_m C_s G_m G_s z^-(n_f + n_b), the delays
 appearing only in the cross term), so the round trips 2 n_lo ... 2 n_hi are analysed.
 
-Not covered: a delay that acts *between* sampling instants (the engine's fractional
-delay, e.g. a sensor sampled off the controller's clock); its continuum needs a
-certificate over the fractional part that this module does not give.
+A delay that acts *between* the sampling instants (the engine's fractional delay,
+e.g. a sensor sampled off the controller's clock; what ``kmax --delay-range`` in seconds
+answers for the HVE) is proved over its continuum by
+:func:`~hapstab.analysis.network.frac_result.fractional_range_critical_stiffness`
+(:mod:`~hapstab.analysis.network.frac_range`); for PEB each direction's fraction is a
+2-D family that is not covered (refused, by name).
 
 References
 ----------
@@ -172,7 +175,9 @@ def delay_range_critical_stiffness(loop: Any, lo: float, hi: float, *, seconds: 
         The loop (its own delay is replaced); spring-damper controllers.
     lo, hi : float
         The range: transport delays in s (``seconds=True``; the sample-synchronous
-        receiver of the module docstring), or whole samples (``seconds=False``).
+        receiver of the module docstring; a delay acting between the samples:
+        :func:`~hapstab.analysis.network.frac_result.fractional_range_critical_stiffness`),
+        or whole samples (``seconds=False``).
     seconds : bool
         Whether ``lo`` and ``hi`` are seconds.
 

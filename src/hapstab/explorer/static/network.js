@@ -3,6 +3,7 @@
  *
  * Three questions about the loop on the page, each one request to the API the CLI answers:
  *   delay range  POST kmax   {"delay-range": "5ms:15ms"}   the certified minimum K_max
+ *                (seconds: the delay acts between the samples, proved over the continuum)
  *   jitter       POST jitter {"delay": "5:15"}             the bracket [stable_up_to, unstable_from]
  *   loss         POST kmax   {"loss": P, "burst": L}       the mean-square K_max
  * The range and the jitter replace the loop's one constant delay (its delay options are
@@ -55,13 +56,20 @@ const HapstabNetwork = (() => {
     const d = a.delays_samples || [];
     const s = a.delay_range_s ? `${fmt(a.delay_range_s[0] * 1e3, 4)}–${fmt(a.delay_range_s[1] * 1e3, 4)} ms`
       : "the range";
+    // a range in seconds: the delay acts between the samples, proved over the continuum
+    const between = a.fractional === true;
     return {
       values: { kmax: a.critical_stiffness, worst: a.worst_delay_samples },
       big: fmt(a.critical_stiffness),
-      detail: `worst delay ${fmt(a.worst_delay_samples)} samples${a.round_trip ? " (round trip)" : ""}` +
-        (d.length ? ` of ${fmt(d[0])}…${fmt(d[d.length - 1])}` : ""),
-      model: (a.certified ? "exact: the certified minimum" : "exact criterion, not certified") +
-        ` · one constant delay, unknown in ${s}, used from the next sampling instant`,
+      detail: between
+        ? `worst delay ${fmt(a.worst_delay_s * 1e3, 4)} ms · minimum in [${fmt(a.critical_stiffness)}, ` +
+          `${fmt(a.upper_bound_N_per_m)}] N/m`
+        : `worst delay ${fmt(a.worst_delay_samples)} samples${a.round_trip ? " (round trip)" : ""}` +
+          (d.length ? ` of ${fmt(d[0])}…${fmt(d[d.length - 1])}` : ""),
+      model: (a.certified ? "exact: the certified minimum"
+        : between ? "exact: a proved lower end, uncertain above it" : "exact criterion, not certified") +
+        (between ? ` · one constant delay, unknown in ${s}, acting between the samples (every delay of the continuum)`
+          : ` · one constant delay, unknown in ${s}, used from the next sampling instant`),
       cmp: compared(a.critical_stiffness, ref),
     };
   }

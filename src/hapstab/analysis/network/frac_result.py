@@ -1,0 +1,209 @@
+"""The answer for a range of constant delays that act between the sampling instants
+(:mod:`~hapstab.analysis.network.frac_range`): a proved enclosure of min K_max, the worst
+delay, and the segments it was proved on."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+from hapstab.analysis.network.frac_range import Segment
+from hapstab.errors import AnalysisError
+from hapstab.results import Result, jsonable, write_csv
+
+__all__ = ["FractionalRangeResult", "REPORT_RTOL"]
+
+#: A lower end within this (relative) of the base point K_0 proves nothing above it
+#: (the branch and bound's boxes at K_0 itself report K_0; rounding of its doubles)
+BASE_ROUNDING = 1e-6
+#: The relative gap between the proved ends above which the answer is reported
+#: *uncertain* (the acceptance's 1e-6, with margin for the float worst point)
+REPORT_RTOL = 1e-7
+
+
+@dataclass(frozen=True)
+class FractionalRangeResult(Result):
+    """Certified minimum of K_max over every constant delay tau in [tau_lo, tau_hi],
+    the delay acting between the sampling instants (e[k] = x(kT - tau)).
+
+    Parameters
+    ----------
+    critical_stiffness : float
+        The proved lower end, N/m: every delay of the range is stable for K in
+        [K_0, critical_stiffness) (the exact core's base point K_0).
+    upper_bound : float
+        The proved upper end, N/m: at the worst delay a pole is on the unit circle at
+        some K <= upper_bound, so min K_max over the range lies in
+        [critical_stiffness, upper_bound].
+    kmax_at_worst : float
+        The exact core's K_max at the worst delay, N/m (beside the proof).
+    worst_delay_samples : float
+        The worst delay found, n + f samples.
+    range_samples : (float, float)
+        The range in samples.
+    period : float
+        T in s.
+    segments : tuple of Segment
+        Each whole part of the range with its proved ends.
+    loop_dict : dict
+        The loop analysed.
+    """
+
+    critical_stiffness: float
+    upper_bound: float
+    kmax_at_worst: float
+    worst_delay_samples: float
+    range_samples: tuple[float, float]
+    period: float
+    segments: tuple[Segment, ...]
+    loop_dict: dict[str, Any] = field(default_factory=dict, repr=False, compare=False)
+
+    @property
+    def gap(self) -> float:
+        """upper_bound - critical_stiffness, N/m."""
+        return self.upper_bound - self.critical_stiffness
+
+    @property
+    def certified(self) -> bool:
+        """The enclosure is closed to :data:`REPORT_RTOL` (else the lower end is safe but
+        the gap is *uncertain*)."""
+        return (math.isfinite(self.upper_bound)
+                and self.gap <= REPORT_RTOL * abs(self.upper_bound))
+
+    @property
+    def worst_delay_s(self) -> float:
+        return self.worst_delay_samples * self.period
+
+    @property
+    def reason(self) -> str:
+        """The answer in words."""
+        lo, hi = (v * self.period * 1e3 for v in self.range_samples)
+        if self.critical_stiffness == 0.0:
+            where = (f"a pole reaches |z| = 1 by K = {self.upper_bound:.4g} N/m"
+                     if math.isfinite(self.upper_bound) else "K_max is near 0")
+            return (f"no K > 0 is proved stable at every constant delay of [{lo:g}, {hi:g}] ms "
+                    f"acting between the samples: at {self.worst_delay_s * 1e3:.6g} ms {where} "
+                    "(uncertain below it)")
+        head = (f"stable for K in (0, {self.critical_stiffness:.10g}] N/m at every constant "
+                f"delay of [{lo:g}, {hi:g}] ms, acting between the samples (proved over the "
+                f"continuum: {len(self.segments)} segment(s), branch and bound on the modified "
+                "z-transform)")
+        if self.certified:
+            return (f"{head}; the worst delay is {self.worst_delay_s * 1e3:.6g} ms, where a pole "
+                    f"reaches |z| = 1 by K = {self.upper_bound:.10g} N/m")
+        return (f"{head}; uncertain above it: the minimum lies in [{self.critical_stiffness:.10g}, "
+                f"{self.upper_bound:.10g}] N/m (gap {self.gap:.3g} N/m not closed within the "
+                "budget), the worst delay found "
+                f"{self.worst_delay_s * 1e3:.6g} ms")
+
+    def to_dict(self) -> dict[str, Any]:
+        return jsonable({
+            "critical_stiffness": self.critical_stiffness, "method": "exact",
+            "upper_bound_N_per_m": self.upper_bound, "kmax_at_worst_delay": self.kmax_at_worst,
+            "gap_N_per_m": self.gap, "worst_delay_samples": self.worst_delay_samples,
+            "worst_delay_s": self.worst_delay_s,
+            "delay_range_s": [v * self.period for v in self.range_samples],
+            "delay_range_samples": list(self.range_samples), "fractional": True,
+            "round_trip": False, "period_s": self.period, "certified": self.certified,
+            "segments": [{"whole_samples": s.whole, "fractions": [s.f_lo, s.f_hi],
+                          "lower_N_per_m": s.lower, "upper_N_per_m": s.upper,
+                          "worst_fraction": s.worst_fraction, "boxes": s.boxes}
+                         for s in self.segments],
+            "reason": self.reason})
+
+    def to_csv(self, path: Any) -> None:
+        """Write one row per segment: whole_samples, f_lo, f_hi, lower, upper (N/m),
+        worst_fraction.
+
+        Parameters
+        ----------
+        path : str, os.PathLike or file object
+            Where to write.
+        """
+        write_csv(path, ["whole_samples", "f_lo", "f_hi", "lower_N_per_m", "upper_N_per_m",
+                         "worst_fraction"],
+                  [[str(s.whole), repr(s.f_lo), repr(s.f_hi), repr(s.lower), repr(s.upper),
+                    repr(s.worst_fraction)] for s in self.segments])
+
+    def plot(self, ax: Any = None) -> Any:
+        """Each segment's proved lower end and upper end at its worst fraction, against
+        the delay in samples; the range's minimum marked.
+
+        Parameters
+        ----------
+        ax : matplotlib Axes, optional
+            Where to draw.
+
+        Returns
+        -------
+        matplotlib Axes
+        """
+        from hapstab.plotting import _axes
+
+        ax = _axes(ax)
+        for i, s in enumerate(self.segments):
+            ax.hlines(s.lower, s.whole + s.f_lo, s.whole + s.f_hi, colors="C0",
+                      label="proved lower end" if i == 0 else None)
+            if math.isfinite(s.upper):
+                ax.plot([s.whole + s.worst_fraction], [s.upper], "C1o",
+                        label="proved crossing" if i == 0 else None)
+        ax.plot([self.worst_delay_samples], [self.critical_stiffness], "r*", ms=12,
+                label="worst delay")
+        ax.set_xlabel("delay (samples)")
+        ax.set_ylabel("K (N/m)")
+        ax.legend(loc="best")
+        return ax
+
+
+def fractional_range_critical_stiffness(loop: Any, lo_s: float, hi_s: float, *,
+                                        max_boxes: int | None = None) -> FractionalRangeResult:
+    """Certified minimum of K_max over every constant delay tau in [lo_s, hi_s] seconds
+    acting between the sampling instants (HVE; :mod:`~hapstab.analysis.network.frac_range`).
+
+    Parameters
+    ----------
+    loop : HapticLoop
+        The loop (its delay is replaced): a spring-damper controller and an operator
+        without internal states.
+    lo_s, hi_s : float
+        The range, s (0 <= lo_s <= hi_s).
+    max_boxes : int, optional
+        Boxes per segment and proof (default
+        :data:`~hapstab.analysis.network.frac_range.MAX_BOXES`); a gap left open is
+        reported *uncertain*.
+
+    Returns
+    -------
+    FractionalRangeResult
+
+    Raises
+    ------
+    ModelError
+        A range with its end below its start, or longer than the delay limit.
+    AnalysisError
+        A loop outside the model (a teleoperator, a filtered damper, an operator with
+        states).
+    """
+    from hapstab.analysis.network.delay_range import whole_delays
+    from hapstab.analysis.network.frac_range import MAX_BOXES, fraction_range_minimum
+    from hapstab.models.loops import require_loop
+    require_loop(loop)
+    if len(loop.controllers) != 1:
+        raise AnalysisError(
+            "delay range between the samples for a teleoperator: each direction's fraction "
+            "is a 2-D family, not covered; give the range in whole samples "
+            "(delay_range_critical_stiffness(loop, lo, hi, seconds=False)) or at a "
+            "sample-synchronous receiver (delay_range_critical_stiffness in seconds)")
+    whole_delays(lo_s, hi_s, loop.period)            # validates the range and its length
+    lo, hi = lo_s / loop.period, hi_s / loop.period
+    segs, lower, upper, k0 = fraction_range_minimum(loop, lo, hi,
+                                                    max_boxes=max_boxes or MAX_BOXES)
+    worst = min(segs, key=lambda s: s.upper)
+    # the bound holds on [K_0, lower): the double below it is a closed end; a bound no
+    # higher than K_0 (to rounding) proves nothing: 0, as the exact core says for a loop
+    # it cannot prove stable above its base point
+    safe = math.nextafter(lower, -math.inf) if lower > k0 * (1 + BASE_ROUNDING) else 0.0
+    core = next((s.kmax_at_worst for s in segs if not math.isnan(s.kmax_at_worst)), math.nan)
+    return FractionalRangeResult(safe, upper, core, worst.whole + worst.worst_fraction,
+                                 (lo, hi), loop.period, tuple(segs), loop.to_dict())
