@@ -103,3 +103,13 @@ def test_jitter_is_the_librarys(tmp_path):
 def test_jitter_refusals_are_one_line(args, words):
     r = _run("jitter", "hve", *args)
     assert r.exit_code == 2 and words in r.stderr and r.stderr.count("\n") == 1, r.stderr
+
+
+@pytest.mark.parametrize("kind,extra", [("hve", ["--delay", "3"]), ("hve", ["--delay-s", "3ms"]),
+                                        ("peb", ["--delay-forward", "3"])])
+def test_a_delay_beside_delay_range_is_refused_by_name(kind, extra):
+    # the range replaces the loop's delay: a typed delay was silently ignored
+    r = CliRunner().invoke(cli, ["kmax", kind, "--delay-range", "2:4", *extra])
+    assert r.exit_code == 2
+    assert f"--delay-range = '2:4' with {extra[0]}" in r.stderr
+    assert "\n" not in r.stderr.strip()
