@@ -165,6 +165,7 @@ def test_certificate_with_an_n_piece_verifies_whatever_the_balls_precision(monke
     # the certificate of the pinned bug: counts by the argument principle alone
     from hapstab.analysis.exact import winding
     monkeypatch.setattr(winding, "ROOTS_MAX_DEGREE", -1)
+    monkeypatch.setattr(winding, "ROOTS_FALLBACK_DEGREE", -1)
     res = h.critical_stiffness(loop, certify=True)
     assert res.critical_stiffness == 0.0
     assert any(p[4] == "N" for g in res.certificate["gaps"] for p in g["pieces"])
@@ -209,3 +210,18 @@ def test_kt2m_of_walls_spans_the_issue_range(seed):
         assert 1e5 * (1 - 1e-12) <= k <= 1e7 * (1 + 1e-12)
         assert 5e-4 <= s.T <= 2e-3
         assert all(1e-3 <= m <= 5e-2 for m in ((s.m,) if s.kind == "hve" else (s.m, s.ms)))
+
+
+def test_a_count_the_argument_principle_cannot_decide_is_decided_by_the_roots():
+    # marginal-peb#300010 of seed 1631425580 (undamped ports, degree 58): at the base
+    # point a pole lies ~1e-14 from the circle and a piece of version 4's subdivision ends
+    # next to it; the count was undecided, the loop reported marginal with no certificate
+    # (version 3's pieces happened to miss it: 4 poles outside). Root isolation decides
+    # it above ROOTS_MAX_DEGREE when the winding cannot, and the checker replays it
+    s = certified.scenario("marginal", 300010, seed=1631425580)
+    res = h.critical_stiffness(s.hapstab_loop(), certify=True)
+    assert res.critical_stiffness == 0.0 and "4 closed-loop pole(s)" in res.reason
+    assert res.certificate["gaps"][0]["count"]["method"] == "roots"
+    chk = h.verify_certificate(json.loads(json.dumps(res.certificate)), s.hapstab_loop())
+    assert chk.valid, chk.reason
+    _run("marginal", s)

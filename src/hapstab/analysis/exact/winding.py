@@ -35,6 +35,12 @@ MAX_PIECES = 4000
 #: count costs 4-19 ms at any degree (HVE, PEB; 2026-12-02). Not a tolerance: either
 #: count is a proof.
 ROOTS_MAX_DEGREE = 32
+#: Highest degree at which root isolation is tried after the argument principle could not
+#: decide a count (a pole within ~1e-14 of the circle, where a piece's end lands next to
+#: it: marginal-peb#300010 of seed 1631425580, degree 58, undamped ports, at the base
+#: point): ~30 ms at degree 68, ~1 s at 300 (measured 2026-12-02), on that failure path
+#: only. Not a tolerance: either count is a proof.
+ROOTS_FALLBACK_DEGREE = 300
 #: The isolating balls' radii :func:`root_count` asks for in turn: 1e-20 (a pole within
 #: 1e-20 of the circle is left to the argument principle; about as cheap as Arb's own
 #: radii, and it decides the count just above a crossing's window, |z| - 1 ~ 1e-12,
@@ -223,12 +229,24 @@ def count(al: ArbLoop, K: float, max_pieces: int = MAX_PIECES, roots: bool = Tru
         ``outside`` None when a piece at the floor keeps 0 in its ball (a pole on
         or within the balls' width of the circle) or the valve closed.
     """
-    import flint
-    arb = flint.arb
     if roots and al.degree <= ROOTS_MAX_DEGREE:
         got = root_count(al, K)
         if got is not None:
             return Count(K, got, [], "roots")
+    res = _winding_count(al, K, max_pieces, polys)
+    if res.outside is None and roots and ROOTS_MAX_DEGREE < al.degree <= ROOTS_FALLBACK_DEGREE:
+        # the argument principle could not decide (a pole within the pieces' reach of
+        # the circle): the roots may, at a degree higher than is worth trying first
+        got = root_count(al, K)
+        if got is not None:
+            return Count(K, got, [], "roots")
+    return res
+
+
+def _winding_count(al: ArbLoop, K: float, max_pieces: int, polys: bool) -> Count:
+    """:func:`count` by the argument principle alone."""
+    import flint
+    arb = flint.arb
     Kb = arb(K)
     cache: dict = {}
     res = Count(K, None)
