@@ -114,3 +114,43 @@ def test_values_only_jets_have_the_enclosing_jets_centres(name):
     fast = resp.coefficients(idx, th, np.zeros(th.size), values_only=True)
     for a, b in zip(full, fast, strict=True):
         assert np.array_equal(a.vc, b.vc) and np.array_equal(a.dc, b.dc)
+
+
+def _stale_case():
+    # found by the review of certificate version 4: an HVE without virtual damper at 40
+    # samples whose crossing (50-digit referee: theta = 0.01074971441827977512,
+    # K = 12.74454305395425689) lies 7.7e-19 inside a piece of version 4's subdivision
+    loop = HapticLoop(Device(0.1, 0.5000000000000329), SpringDamper(0, 0.0), None, 1e-3, 40)
+    return arb_parameters(loop), (0.010749714418279764, 0.010749714418279776), \
+        (12.744543053952981, 12.74454305395553)
+
+
+def test_a_kernel_is_served_only_for_the_ball_it_was_made_for():
+    # a count formed the piece's ball at 53 bits and cached its kernel under the piece's
+    # ends; the exclusion then asked with the ball at 320 bits and took the 53-bit centre
+    # with the 320-bit radius: the box holding the crossing was excluded ('N')
+    import mpmath
+    from flint import arb
+
+    from hapstab.analysis.exact.proof import box_status
+    from hapstab.analysis.exact.winding import piece_increment, theta_ball
+
+    params, (a, b), (k0, k1) = _stale_case()
+    ref = brute.hve_loop(0.1, 0.5000000000000329, 1e-3, 40)
+    mpmath.mp.dps = 50
+
+    def eqs(t, K):
+        g, _ = brute.char_fn(ref, K, mpmath.exp(mpmath.mpc(0, 1) * t), dps=50)
+        return [mpmath.re(g), mpmath.im(g)]
+
+    tc, Kc = mpmath.findroot(eqs, (mpmath.mpf("0.0107497144182797751"),
+                                   mpmath.mpf("12.7445430539542569")))
+    assert a < tc < b and k0 < Kc < k1                   # the box holds a crossing
+    al = ArbLoop(params)
+    with working_precision(53):                          # a count's ball, another precision
+        piece_increment(al, a, b, arb(k0), {}, True)
+        al.box(theta_ball(a, b), arb(k0), key=(a, b), polys=True)
+    with working_precision(al.prec):
+        assert box_status(al, a, b, k0, k1)[0] is None   # never excluded
+        fresh = ArbLoop(params)
+        assert box_status(fresh, a, b, k0, k1)[0] is None

@@ -218,10 +218,25 @@ def test_a_count_the_argument_principle_cannot_decide_is_decided_by_the_roots():
     # next to it; the count was undecided, the loop reported marginal with no certificate
     # (version 3's pieces happened to miss it: 4 poles outside). Root isolation decides
     # it above ROOTS_MAX_DEGREE when the winding cannot, and the checker replays it
+    # (since the count forms its pieces' balls at the proof's precision the winding
+    # decides it too; the fallback is checked below with the winding made to fail)
+    from hapstab.analysis.exact import winding
+    from hapstab.engine.arb_loop import ArbLoop, arb_parameters
     s = certified.scenario("marginal", 300010, seed=1631425580)
     res = h.critical_stiffness(s.hapstab_loop(), certify=True)
     assert res.critical_stiffness == 0.0 and "4 closed-loop pole(s)" in res.reason
-    assert res.certificate["gaps"][0]["count"]["method"] == "roots"
     chk = h.verify_certificate(json.loads(json.dumps(res.certificate)), s.hapstab_loop())
     assert chk.valid, chk.reason
     _run("marginal", s)
+    al = ArbLoop(arb_parameters(s.hapstab_loop()))
+    assert winding.ROOTS_MAX_DEGREE < al.degree <= winding.ROOTS_FALLBACK_DEGREE
+    K0 = res.details["base_point_N_per_m"]
+    undecided = winding.Count(K0, None)
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(winding, "_winding_count", lambda *a, **k: undecided)
+        got = winding.count(al, K0)
+    assert (got.outside, got.method) == (4, "roots")
+    with pytest.MonkeyPatch.context() as mp:    # and without the fallback, undecided
+        mp.setattr(winding, "_winding_count", lambda *a, **k: undecided)
+        mp.setattr(winding, "ROOTS_FALLBACK_DEGREE", -1)
+        assert winding.count(al, K0).outside is None

@@ -87,7 +87,7 @@ def test_the_issues_long_haul_command_is_answered():
     (["kmax", "peb", "--delay", "100000"], "exact K_max: a delay power of"),
     (["kmax", "peb", "--delay", "30000", "--method", "llewellyn"], "Llewellyn's K_max"),
     (["kmax", "peb", "--delay", "100000", "--method", "passivity"], "a frequency grid of"),
-    (["kmax", "hve", "-n", "10000", "--delay-range", "9000:10000"], "delay range: K_max at"),
+    (["kmax", "hve", "--delay-range", "9000:10000"], "delay range: K_max at"),
     (["limit-cycle", "hve", "-n", "100000", "-K", "0.2", "--resolution", "1e-4"], "build:"),
     (["check", "hve", "-n", "100000", "-K", "0.2"], "build:"),
     (["simulate", "hve", "-n", "100000", "-K", "0.2", "--duration", "1"], "build:"),

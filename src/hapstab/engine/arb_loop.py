@@ -311,7 +311,7 @@ class ArbLoop:
         -- the K^2 terms of a two-port loop without delay -- cancel in the
         coefficients, not in the balls). None of it depends on K, so the boxes of one
         theta piece at many K-ranges share it (cached by ``key``, the piece's ends as
-        the caller names them; None: not cached).
+        the caller names them, and served only for the same ball; None: not cached).
 
         Parameters
         ----------
@@ -334,8 +334,11 @@ class ArbLoop:
         cache = self._skernels if polys else self._kernels
         if key is not None:
             got = cache.get(key)
-            if got is not None:
-                return got
+            # the kernel holds the ball's centre: it serves only the very ball it was made
+            # for (the same ends formed at another precision have another centre, and a
+            # centre of one with the radius of the other misses a sliver of the piece)
+            if got is not None and got[0].mid() == theta.mid() and got[0].rad() == theta.rad():
+                return got[1]
         import flint
         arb = flint.arb
         with working_precision(self.prec):
@@ -351,7 +354,7 @@ class ArbLoop:
         if key is not None:
             if len(cache) >= KERNEL_CACHE:
                 cache.clear()
-            cache[key] = kern
+            cache[key] = (theta, kern)
         return kern
 
     @property

@@ -124,8 +124,8 @@ def piece_increment(al: ArbLoop, a: float, b: float, K: Any, cache: dict,
     the right half-plane). None: no proof on this piece. ``polys``: the balls from the
     kernel of ball polynomials (certificate version 4), else forward-mode derivatives.
     """
-    Pv, Qv, Fv = al.box(theta_ball(a, b), K, key=(a, b), polys=polys)
-    with working_precision(al.prec):
+    with working_precision(al.prec):       # the ball as the exclusion forms it: one kernel
+        Pv, Qv, Fv = al.box(theta_ball(a, b), K, key=(a, b), polys=polys)
         Pa, Qa, wa = _point(al, a, K, cache)
         Pb, Qb, wb = _point(al, b, K, cache)
         if Pv.abs_lower() > Qv.abs_upper():

@@ -179,7 +179,9 @@ def _lower_bound(balls: FractionBalls, f_lo: float, f_hi: float, k_floor: float,
         if wt <= 4 * math.ulp(tb) and wf <= 4 * math.ulp(max(fb, 1.0)):
             break                                    # nothing left to split
         heapq.heappop(heap)
-        bx = balls.box(arb((ta + tb) / 2, wt / 2), arb((fa + fb) / 2, wf / 2), key=(fa, fb))
+        # which side to split (a heuristic, not a proof): its rounded ball is not cached
+        # under the piece's key, which must name only the balls push() widens over it
+        bx = balls.box(arb((ta + tb) / 2, wt / 2), arb((fa + fb) / 2, wf / 2))
         sf, st = float(bx.d_f.abs_upper()) * wf, float(bx.d_theta.abs_upper()) * wt
         if not (math.isfinite(sf) and math.isfinite(st)):
             sf, st = wf, wt / math.pi          # no derivatives: the wider side, relatively
