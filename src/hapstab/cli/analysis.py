@@ -74,7 +74,6 @@ def _kmax_command(kind: str) -> None:
         if net["delay_range"] is not None:
             if net["loss"] is not None:
                 raise HapstabError("--delay-range and --loss: give one of them, not both")
-            refuse_loop_delay(net["delay_range"])
             return range_kmax(kind, net["delay_range"], make(kw, stiffness=1.0), method, as_json)
         if net["loss"] is not None:
             return network_kmax(kind, net, make(kw, stiffness=1.0), method, as_json)
@@ -375,15 +374,3 @@ def verify_cmd(path: str, as_json: bool) -> None:
     if not chk.valid:
         raise SystemExit(1)
 
-
-def refuse_loop_delay(spec: str) -> None:
-    """``--delay-range`` replaces the loop's delay: a delay option typed beside it is
-    refused by name (it was silently ignored)."""
-    from hapstab.cli.options import given
-
-    typed = [o for o, name in (("--delay", "delay"), ("--delay-s", "delay_s"),
-                               ("--delay-forward", "delay_forward"),
-                               ("--delay-backward", "delay_backward")) if given(name)]
-    if typed:
-        raise HapstabError(f"--delay-range = {spec!r} with {', '.join(typed)}: the range replaces "
-                           "the loop's delay; give the range alone")

@@ -13,7 +13,8 @@ from hapstab.cli.options import emit, fmt, rich_table
 from hapstab.cli.ranges import parse_range
 from hapstab.errors import HapstabError
 
-__all__ = ["network_options", "network_kmax", "range_kmax", "parse_delay_range"]
+__all__ = ["network_options", "network_kmax", "range_kmax", "parse_delay_range",
+           "refuse_loop_delay"]
 
 
 def parse_delay_range(spec: str, option: str) -> tuple[float, float, bool]:
@@ -126,6 +127,7 @@ def range_kmax(kind: str, spec: str, loop: Any, method: str, as_json: bool) -> N
     if method != "exact":
         raise HapstabError(f"--delay-range with --method {method}: the range's minimum uses the "
                            "exact core; leave --method at exact")
+    refuse_loop_delay(spec)
     lo, hi, seconds = parse_delay_range(spec, "--delay-range")
     if seconds and kind != "hve":
         raise HapstabError(f"--delay-range = {spec!r} for {kind}: a delay in seconds acts between "
@@ -157,3 +159,15 @@ def _fraction_table(kind: str, res: Any, loop: Any, as_json: bool) -> None:
             ("why", res.reason)]
     emit(res.to_dict(), as_json, lambda: rich_table(f"K_max over a delay range, {kind}", rows),
          loop)
+
+def refuse_loop_delay(spec: str) -> None:
+    """``--delay-range`` replaces the loop's delay: a delay option typed beside it is
+    refused by name (it was silently ignored)."""
+    from hapstab.cli.options import given
+
+    typed = [o for o, name in (("--delay", "delay"), ("--delay-s", "delay_s"),
+                               ("--delay-forward", "delay_forward"),
+                               ("--delay-backward", "delay_backward")) if given(name)]
+    if typed:
+        raise HapstabError(f"--delay-range = {spec!r} with {', '.join(typed)}: the range replaces "
+                           "the loop's delay; give the range alone")
