@@ -15,7 +15,7 @@ to see what random sequences find and what it
 costs.
 
 Loops: the paper's HVE (m = 0.15 kg, b = 0.1 N s/m, operator 1/s, B = 0) at T = 1 ms,
-ranges 0:2, 0:10, 5:15; one resonant-hand draw of tests/test_network_jitter.py where a
+ranges 0:2, 0:10, 5:15; one resonant-hand draw of tests/network/test_network_jitter.py where a
 non-constant pattern destabilises. One core: ``python benchmarks/bench_jitter.py``.
 """
 

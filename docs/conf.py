@@ -39,7 +39,7 @@ autodoc_default_options = {"members": False}
 # members are listed by the class template (reference/_templates), not by numpydoc
 numpydoc_show_class_members = False
 numpydoc_xref_param_type = False
-# numpydoc's validation is tests/test_docs.py's job; here only the rendering
+# numpydoc's validation is tests/project/test_docs.py's job; here only the rendering
 numpydoc_validation_checks: set[str] = set()
 templates_path = ["reference/_templates"]
 

@@ -38,7 +38,7 @@ print("2. K_max (N/m) at one-way delays of " + ", ".join(f"{d * 1e3:g} ms" for d
       + ": " + ", ".join(f"{k:.0f}" for k in by_delay.critical_stiffness[:, 0]))
 print("   not monotone: a longer delay can move the crossing past the environment's "
       "resonance (each value checked against a scan of the closed loop's eigenvalues in "
-      "tests/test_examples.py)")
+      "tests/cli/test_examples.py)")
 rates = h.boundary(loop, [2.5e-4, 5e-4, 1e-3, 2e-3], delays_s=[0.005], axis="rate")
 save_plot(rates, os.path.join(out, "teleoperation_kmax_vs_rate.png"))
 

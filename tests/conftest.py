@@ -61,7 +61,7 @@ def pytest_terminal_summary(terminalreporter, exitstatus, config):
 
 @pytest.fixture(scope="module")
 def client():
-    """The explorer's app behind starlette's TestClient (tests/test_explorer_*.py; they
+    """The explorer's app behind starlette's TestClient (tests/explorer/test_explorer_*.py; they
     skip without starlette and httpx before asking for it)."""
     import warnings
 

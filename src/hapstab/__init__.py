@@ -74,7 +74,7 @@ __version__ = "0.1.0"
 #: where each public name lives: ``import hapstab`` imports none of these modules (no
 #: numpy, scipy or matplotlib: ``hapstab --version`` stays light); the first use of a
 #: name imports its module (:func:`__getattr__`). Keep it equal to the imports above
-#: (tests/test_light_import.py checks).
+#: (tests/cli/test_light_import.py checks).
 _LAZY = {
     "hapstab.analysis.conditions.audit": ("AuditResult", "audit"),
     "hapstab.analysis.conditions.circle": ("circle_test", "loop_inverse"),

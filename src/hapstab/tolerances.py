@@ -1,7 +1,7 @@
 """The numerical tolerances that more than one part of hapstab relies on, named,
 each with its reason. (Tolerances that belong to one algorithm stay beside it,
 with their reasons, e.g. the floors of :mod:`hapstab.analysis.exact.boxes`;
-tests/test_tolerances.py checks that every small literal has its reason beside it.)"""
+tests/project/test_tolerances.py checks that every small literal has its reason beside it.)"""
 
 from __future__ import annotations
 

@@ -3,7 +3,7 @@ its command, its explorer endpoint and its sweep quantity.
 
 The command line registers the analyses' commands in this table's order
 (``hapstab.cli.main``), the design sweep takes its quantities and their columns from it
-(``hapstab.sweep.evaluate.QUANTITIES``), and ``tests/test_analysis_table.py`` checks that
+(``hapstab.sweep.evaluate.QUANTITIES``), and ``tests/project/test_analysis_table.py`` checks that
 every name in a row exists and that the row agrees with it (the function returns the
 result, the result draws with the plot named, the command takes the loop kinds named, the
 sweep's quantity has its columns). Adding an analysis is its module, its row, and its

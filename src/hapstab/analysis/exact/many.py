@@ -122,7 +122,7 @@ def critical_stiffness_many(loops: Sequence[HapticLoop | TeleoperationLoop], *,
     converged (it ran until all had, so a loop could take one step more in a batch
     and move K_max by an ulp), the search's safety valve on rounds counts each
     loop's own rounds, and a winding that runs out of splits marks only the loops
-    still splitting. Checked bitwise on seeded mixed campaigns (tests/test_exact_many.py).
+    still splitting. Checked bitwise on seeded mixed campaigns (tests/exact/test_exact_many.py).
 
     References
     ----------

@@ -52,7 +52,7 @@ What it neglects, and when to trust it (each cycle says so, ``trusted`` and ``no
   to 31 in the cases tried).
 
 The simulator (:func:`hapstab.simulate` with ``resolution``, ``quantizer`` and a device's
-``coulomb_friction``) checks it, ``tests/test_limit_cycles.py`` (see the README for the
+``coulomb_friction``) checks it, ``tests/nonlinear/test_limit_cycles.py`` (see the README for the
 campaign's numbers).
 
 References

@@ -20,7 +20,7 @@ staircase potential V(x) = ∫_0^x K x̃ ds as storage, the energy a sample can 
 at most K (δ²/2 + Δ |δ|/2) for a displacement δ, against at least b δ²/T + f_c |δ|
 dissipated (sufficiency); a back-and-forth across one line and a fast two-sample
 oscillation break each condition as soon as it fails (necessity; both constructions are
-tests, ``tests/test_nonlinear_passivity.py``, which measure the energy on the
+tests, ``tests/nonlinear/test_nonlinear_passivity.py``, which measure the energy on the
 trajectories themselves). The condition is the same for a floor and a nearest encoder:
 every reading jumps by Δ at a line either way.
 

@@ -8,7 +8,7 @@
  * K_max falls back to 0 on both sides), the window follows it: B covers every damping with
  * a stable K (the best-damping curve's K > 0) and B* with a margin, and K goes up to 1.2 K*
  * (K* is the largest K_max over every B searched, so the whole stable region fits).
- * Pure and without the page: tests/test_explorer_window.py runs it under node.
+ * Pure and without the page: tests/explorer/test_explorer_window.py runs it under node.
  */
 "use strict";
 
