@@ -24,12 +24,13 @@ from typing import Any
 
 import numpy as np
 
-from hapstab.analysis.exact.boxes import THETA_FLOOR, U_HI, U_LO, _dpoly
+from hapstab.analysis.exact.boxes import THETA_FLOOR, U_HI, U_LO, disc_quadratic
 from hapstab.analysis.exact.stable_set import StableSet, first_only, stable_set
 from hapstab.engine.frequency import LoopResponse
 from hapstab.errors import AnalysisError
 
-__all__ = ["winding", "gap_counts"]
+__all__ = ["winding", "gap_counts", "crossing_events", "item_stable_set",
+           "dedupe_crossings"]
 
 #: Rows (requested counts times the cells of [0, pi]) per call of :func:`winding` when
 #: the counts of many items are gathered: a call holds some tens of complex arrays of
@@ -58,7 +59,7 @@ def winding(resp: LoopResponse, items: np.ndarray, u: np.ndarray) -> np.ndarray:
         pts = _coefficients(resp, items[row], mid, np.zeros_like(mid))
         cel = _coefficients(resp, items[row], mid, rho)
         vd = [cc.value_disc(rho, p) for cc, p in zip(cel, pts, strict=True)]
-        fc, fr = _dpoly(np.array([v[0] for v in vd]), np.array([v[1] for v in vd]), u[row],
+        fc, fr = disc_quadratic(np.array([v[0] for v in vd]), np.array([v[1] for v in vd]), u[row],
                         np.zeros(row.size))
         ok = np.abs(fc) > fr
         done_a.append(a[ok])
@@ -83,7 +84,7 @@ def winding(resp: LoopResponse, items: np.ndarray, u: np.ndarray) -> np.ndarray:
     np.add.at(total, R, inc)
     turns = total / np.pi
     out = resp.q - np.round(turns).astype(int)
-    bad = bad_rows | (np.abs(turns - np.round(turns)) > 1e-6)   # whole to ~1e-15: _winding_cells
+    bad = bad_rows | (np.abs(turns - np.round(turns)) > 1e-6)  # whole to ~1e-15: winding_on_cells
     return np.where(bad, -1, out)
 
 
@@ -116,7 +117,7 @@ def gap_counts(resp: LoopResponse, anchor: np.ndarray, events: Sequence[list[Any
     anchor : (L,) array of int
         Poles outside at U_LO per item (-1: not certified; such an item needs none).
     events : list of list
-        Each item's events (:func:`_events`).
+        Each item's events (:func:`crossing_events`).
     check : (L,) array of bool, optional
         Items whose counts :func:`_verify` cross-checks (default all).
 
@@ -174,7 +175,7 @@ def _verify_points(events: list[Any]) -> tuple[list[int], list[float]]:
     return gaps, us
 
 
-def _events(cross, unsure) -> tuple[list[tuple[float, float]], list[Any]]:
+def crossing_events(cross, unsure) -> tuple[list[tuple[float, float]], list[Any]]:
     """The merged unresolved zones and the sorted events: crossings outside the zones
     (a crossing inside one is part of it: the count after the zone comes from the
     argument principle above it, which accounts for all it holds) and the zones."""
@@ -185,14 +186,14 @@ def _events(cross, unsure) -> tuple[list[tuple[float, float]], list[Any]]:
     return unc, events
 
 
-def _classify(resp: LoopResponse, i: int, anchor: int, cross, unsure, full: bool,
+def item_stable_set(resp: LoopResponse, i: int, anchor: int, cross, unsure, full: bool,
               known: Known | None = None, check: bool = True) -> StableSet:
     """Item i's stable set from the count of poles outside at U_LO (``anchor``, -1:
     not certified), its crossings and its unresolved zones; ``known``: counts
     already computed (:func:`gap_counts`); ``check``: cross-check the counts from
     the crossings' directions by the argument principle (:func:`_verify`)."""
     s = float(resp.scale[i])
-    _unc, events = _events(cross, unsure)
+    _unc, events = crossing_events(cross, unsure)
     base: dict[str, Any] = {"rigid": resp.rigid, "outside_small_K": anchor,
                             "events": tuple((a * s, b * s, t, d, m) for a, b, t, d, m in events)}
     if anchor < 0:
@@ -244,7 +245,8 @@ def _verify(resp: LoopResponse, i: int, events, counts, known: Known | None = No
                                 f"K = {us[gaps.index(g)] * resp.scale[i]:.6g}; please report this loop")
 
 
-def _dedupe(cross: list[tuple[float, float, int, int]]) -> list[tuple[float, float, int, int]]:
+def dedupe_crossings(cross: list[tuple[float, float, int, int]]
+                     ) -> list[tuple[float, float, int, int]]:
     """A safety net: one zero proved in two boxes would be polished by Newton's method
     to the same point (to rounding), and is one crossing. Two distinct crossings are
     never this close (the Krawczyk boxes that isolate them are disjoint)."""
