@@ -91,8 +91,8 @@ def test_a_crossing_inside_an_unresolved_zone_is_not_counted_twice():
     # crossing proved in another cell: the stable set must end at the zone, safely,
     # and the intervals above must survive
     from hapstab.analysis.exact.boxes import Cells, initial_cells
-    from hapstab.analysis.exact.counts import dedupe_crossings, item_stable_set
-    from hapstab.analysis.exact.crossings import branch_and_prune, winding_on_cells
+    from hapstab.analysis.exact.counts import dedupe_crossings, item_stable_set, winding_on_cells
+    from hapstab.analysis.exact.crossings import branch_and_prune
     resp = loop_response(ISSUE1B)
     c = Cells()
     first = c.add(resp, *initial_cells(resp, np.arange(1)))

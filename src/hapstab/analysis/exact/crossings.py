@@ -55,7 +55,6 @@ from hapstab.analysis.exact.boxes import (
     Found,
     at_theta_floor,
     classify_boxes,
-    disc_quadratic,
     estimate_lowest,
     initial_cells,
     polish_boxes,
@@ -68,12 +67,13 @@ from hapstab.analysis.exact.counts import (
     gap_counts,
     item_stable_set,
     winding,
+    winding_on_cells,
 )
 from hapstab.analysis.exact.stable_set import StableSet
 from hapstab.engine.frequency import LoopResponse
 from hapstab.errors import AnalysisError
 
-__all__ = ["analyse", "winding", "winding_on_cells", "branch_and_prune", "U_LO", "U_HI"]
+__all__ = ["analyse", "winding", "branch_and_prune", "U_LO", "U_HI"]
 
 #: Phase turn of the delay per first cell (rad): the full analysis needs every crossing
 #: and starts fine; for K_max alone (small K, where the delayed part of F is small)
@@ -267,58 +267,6 @@ def _split(srch: _Search, cell: np.ndarray, ua: np.ndarray, ub: np.ndarray,
         new_ua += [ua[st], ua[st]]
         new_ub += [ub[st], ub[st]]
     return np.concatenate(new_cell), np.concatenate(new_ua), np.concatenate(new_ub)
-
-
-# ------------------------------------------------------------------ the winding
-def winding_on_cells(resp: LoopResponse, c: Cells, leaves: np.ndarray, u: np.ndarray,
-                   robust: bool = False) -> np.ndarray:
-    """:func:`winding` at u[item] on cells already built (a partition of [0, pi] per
-    item, centred cells, the ends centred on 0 and pi): cells whose disc holds 0 at u
-    are split. Between the centres of neighbouring cells the argument changes by
-    Arg(w / F_i) + Arg(F_(i+1) / w) for any w in both discs (each disc excludes 0 and
-    holds the value at the shared edge), so no further evaluation is needed. ``robust``
-    (a family of loops): a cell whose centre's own enclosure holds 0 is not split (no
-    split can exclude 0 there), and its item's count is not certified."""
-    L = resp.size
-    bad_item = np.zeros(L, bool)
-    kids = leaves[:0]
-    for _ in range(200):
-        it = c.item[leaves]
-        fc, fr = disc_quadratic(c.vc[:, leaves], c.vr[:, leaves], u[it], np.zeros(leaves.size))
-        holds0 = ~(np.abs(fc) > fr)
-        if not holds0.any():
-            break
-        floor = holds0 & at_theta_floor(c, leaves)
-        if robust:
-            pc, pr = disc_quadratic(c.pc[:, leaves], c.pr[:, leaves], u[it], np.zeros(leaves.size))
-            floor |= holds0 & ~(np.abs(pc) > pr)
-        bad_item[it[floor]] = True
-        split = leaves[holds0 & ~floor]
-        keep = leaves[~holds0 | floor]
-        if not split.size:
-            break
-        kids = c.add(resp, *split_cells(c, split))
-        leaves = np.concatenate([keep, kids])
-    else:       # the items still splitting (not every item of a batch)
-        bad_item[c.item[kids]] = True
-    it = c.item[leaves]
-    order = np.lexsort((c.th[leaves], it))
-    leaves, it = leaves[order], it[order]
-    fc, fr = disc_quadratic(c.vc[:, leaves], c.vr[:, leaves], u[it], np.zeros(leaves.size))
-    F, _ = disc_quadratic(c.pc[:, leaves], c.pr[:, leaves], u[it], np.zeros(leaves.size))
-    same = it[1:] == it[:-1]
-    ri, rj = fr[:-1], fr[1:]
-    with np.errstate(all="ignore"):
-        t = np.where(ri + rj > 0, ri / (ri + rj), 0.5)
-        w = fc[:-1] + (fc[1:] - fc[:-1]) * t
-        inc = np.angle(w / F[:-1]) + np.angle(F[1:] / w)
-    total = np.zeros(L)
-    np.add.at(total, it[:-1][same], inc[same])
-    turns = total / np.pi
-    # F is real at theta = 0 and pi, so the turns are whole up to the rounding of the
-    # end values' arguments (~1e-15); 1e-6 off means something is wrong: not certified
-    bad = bad_item | ~np.isfinite(turns) | (np.abs(turns - np.round(turns)) > 1e-6)
-    return np.where(bad, -1, resp.q - np.round(np.where(np.isfinite(turns), turns, 0)).astype(int))
 
 
 # ------------------------------------------------------------------ the analysis

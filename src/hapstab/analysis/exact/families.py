@@ -39,7 +39,8 @@ from hapstab.analysis.exact.boxes import (
     initial_cells,
     krawczyk,
 )
-from hapstab.analysis.exact.crossings import TURN_KMAX, branch_and_prune, winding_on_cells
+from hapstab.analysis.exact.counts import winding_on_cells
+from hapstab.analysis.exact.crossings import TURN_KMAX, branch_and_prune
 from hapstab.engine.discs import EPS_OP
 from hapstab.engine.frequency import LoopResponse
 
