@@ -1,6 +1,6 @@
 """Re-check a K_max certificate from the loop's numbers alone, in ball arithmetic.
 
-A certificate (:func:`hapstab.analysis.exact.proof.certificate`, ``hapstab kmax ...
+A certificate (:func:`hapstab.analysis.exact.certificate.certificate`, ``hapstab kmax ...
 --certificate FILE``) claims: the closed loop is stable for every K in each listed
 interval [K_a, K_b], K_max is the upper end of the one from the base point K_0, and
 (when given) it is unstable at ``kmax_upper``. This module does not import the search

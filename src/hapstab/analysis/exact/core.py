@@ -1,8 +1,9 @@
 """Exact stability and exact critical stiffness of the sampled-data loop.
 
 ``exact_critical_stiffness(loop)`` finds every K at which a pole reaches |z| = 1
-(:mod:`hapstab.crossings`: certified branch and prune on the loop's characteristic
-function with the delays as exact phases, :mod:`hapstab.loopfreq`) and the stable
+(:mod:`~hapstab.analysis.exact.crossings`: certified branch and prune on the loop's
+characteristic function with the delays as exact phases,
+:mod:`~hapstab.engine.frequency`) and the stable
 set in K. ``stability(loop)`` counts the poles outside the circle by the argument
 principle, certified the same way, and reports the dominant pole (eigenvalues of
 the closed-loop matrix, polished on the characteristic function). Rigid-body modes

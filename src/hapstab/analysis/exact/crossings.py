@@ -3,9 +3,9 @@ which a closed-loop pole is on |z| = 1, and the stable set in K.
 
 A pole is on the unit circle at (theta, K) exactly where the characteristic
 function det M(e^{j theta}, K) = F0 + u F1 + u^2 F2 vanishes (u = K / scale; see
-:mod:`hapstab.loopfreq`). The set of such points in the box
+:mod:`~hapstab.engine.frequency`). The set of such points in the box
 theta in [0, pi] x u in [U_LO, U_HI] is found by branch and prune on
-boxes (theta-cell x u-interval) with verified enclosures (:mod:`hapstab.discs`):
+boxes (theta-cell x u-interval) with verified enclosures (:mod:`~hapstab.engine.discs`):
 
 * **exclusion** -- if the enclosure of F over a box does not contain 0, no
   crossing is in the box;
