@@ -90,16 +90,18 @@ def test_a_crossing_inside_an_unresolved_zone_is_not_counted_twice():
     # (from the independent review) an unresolved box of one theta-cell can span a
     # crossing proved in another cell: the stable set must end at the zone, safely,
     # and the intervals above must survive
-    from hapstab.analysis.exact.boxes import Cells, _initial_cells
-    from hapstab.analysis.exact.crossings import _boxes, _classify, _dedupe, _winding_cells
+    from hapstab.analysis.exact.boxes import Cells, initial_cells
+    from hapstab.analysis.exact.counts import dedupe_crossings, item_stable_set, winding_on_cells
+    from hapstab.analysis.exact.crossings import branch_and_prune
     resp = loop_response(ISSUE1B)
     c = Cells()
-    first = c.add(resp, *_initial_cells(resp, np.arange(1)))
-    anchor = int(_winding_cells(resp, c, first, np.full(1, U_LO))[0])
-    cross = _dedupe(_boxes(resp, np.arange(1), np.full(1, np.inf), start=(c, first)).cross[0])
+    first = c.add(resp, *initial_cells(resp, np.arange(1)))
+    anchor = int(winding_on_cells(resp, c, first, np.full(1, U_LO))[0])
+    found = branch_and_prune(resp, np.arange(1), np.full(1, np.inf), start=(c, first))
+    cross = dedupe_crossings(found.cross[0])
     s = resp.scale[0]
     u1 = next(u for u, *_ in cross if abs(u * s - 45.69) < 0.1)
-    res = _classify(resp, 0, anchor, cross, [(0.99 * u1, 1.01 * u1)], True)
+    res = item_stable_set(resp, 0, anchor, cross, [(0.99 * u1, 1.01 * u1)], True)
     ivs = res.intervals
     assert len(ivs) == 3 and ivs[1][1] == pytest.approx(0.99 * u1 * s, rel=1e-12)
     assert ivs[2][0] == pytest.approx(127.345, rel=1e-5) and res.uncertain

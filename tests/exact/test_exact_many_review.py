@@ -16,7 +16,7 @@ import pytest
 
 import hapstab as h
 from hapstab.analysis.exact import many
-from hapstab.analysis.exact.boxes import Cells, _trim
+from hapstab.analysis.exact.boxes import Cells, trim_boxes
 from hapstab.analysis.exact.many import critical_stiffness_many
 from hapstab.engine.frequency import build_responses, loop_response, plan_response
 from hapstab.errors import HapstabError
@@ -174,8 +174,8 @@ def test_trim_of_one_box_does_not_depend_on_other_items_boxes():
     cells = c.add(resp, np.array([0, 1]), np.array([0.0, th]), np.array([rho, rho]),
                   np.array([1, 0]))
     lo, hi = np.full(2, 1e-14), np.full(2, 1e10)
-    alone = _trim(c, cells[1:], lo[1:], hi[1:])
-    together = _trim(c, cells, lo, hi)
+    alone = trim_boxes(c, cells[1:], lo[1:], hi[1:])
+    together = trim_boxes(c, cells, lo, hi)
     assert alone[1].size == 2                    # two pieces when trimmed alone
     mine = together[0] == cells[1]
     assert together[1][mine].tolist() == alone[1].tolist()

@@ -4,7 +4,10 @@ engine's builder, no registry is built from strings, and modules and functions s
 short enough to hold in the head."""
 
 import ast
+import importlib
 import pathlib
+import re
+import types
 
 import pytest
 
@@ -217,3 +220,229 @@ def test_the_cli_imports_the_explorer_only_inside_a_command():
                     [a.name for a in node.names]
                 assert not any(m.startswith("hapstab.explorer") for m in mods), \
                     f"cli/{path.name}:{node.lineno} imports the explorer at import time"
+
+
+# ------------------------------------------------------------ seams (issue 28)
+#: private-looking names that are another library's public API, each with its reason
+FOREIGN_PUBLIC = {
+    "os._exit",     # the standard library's documented exit without clean-up (cli/__init__)
+}
+
+
+def _private_seams(tree: ast.AST) -> list[tuple[int, str]]:
+    """(line, name) of each private name (one leading underscore, not a dunder) that a
+    module takes from another: ``from m import _x``, ``import m._x``, and each read of
+    ``obj._x`` through anything but ``self`` or ``cls`` (another object's insides)."""
+    found = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom):
+            mod = "." * node.level + (node.module or "")
+            names = [mod + ("" if mod.endswith(".") else ".") + a.name for a in node.names]
+            found += [(node.lineno, name) for name in names if _private(name)]
+        elif isinstance(node, ast.Import):
+            found += [(node.lineno, a.name) for a in node.names if _private(a.name)]
+        elif isinstance(node, ast.Attribute) and _private(node.attr) and not (
+                isinstance(node.value, ast.Name) and node.value.id in ("self", "cls")):
+            found.append((node.lineno, f"{ast.unparse(node.value)}.{node.attr}"))
+    return sorted((line, name) for line, name in found if name not in FOREIGN_PUBLIC)
+
+
+@pytest.mark.parametrize("path", MODULES, ids=lambda p: str(p.relative_to(SRC)))
+def test_no_private_name_crosses_a_module_seam(path):
+    """Issue 28: what one module uses of another is that module's public seam; a private
+    name (``_x``) may change without notice, so no module imports one from another, nor
+    reads one of another object."""
+    rel = path.relative_to(SRC)
+    for line, name in _private_seams(ast.parse(path.read_text())):
+        raise AssertionError(f"{rel}:{line} uses the private {name}: make it a public seam")
+
+
+def test_the_seam_finder_sees_a_private_name():
+    tree = ast.parse("from hapstab.analysis.exact.boxes import Cells, _dpoly\n"
+                     "import hapstab.engine._hidden\n"
+                     "x = out._va\n"
+                     "y = self._va + cls._cache + obj.__class__.__name__\n"
+                     "from . import _mine\n"
+                     "os._exit(1)\n")
+    assert _private_seams(tree) == [(1, "hapstab.analysis.exact.boxes._dpoly"),
+                                    (2, "hapstab.engine._hidden"), (3, "out._va"),
+                                    (5, "._mine")]
+
+
+#: a dotted path into the package, in a Sphinx role (:mod:`~hapstab.engine.zoh`,
+#: :func:`hapstab.analysis.exact.core.stability`) or bare
+_DOTTED = re.compile(r"(?::(\w+):`~?)?(?<![\w.])(hapstab(?:\.[A-Za-z_]\w*)+)")
+
+
+def _docstrings(tree: ast.AST):
+    """(line, text) of the module's, each class's and each function's docstring."""
+    for node in ast.walk(tree):
+        if isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)):
+            text = ast.get_docstring(node, clean=False)
+            if text:
+                yield getattr(node, "lineno", 1), text
+
+
+def _target(dotted: str) -> object | None:
+    """What ``dotted`` names: the longest importable module, then attributes (a
+    dataclass's field or an annotated attribute counts); None if it names nothing."""
+    parts = dotted.split(".")
+    for i in range(len(parts), 0, -1):
+        name = ".".join(parts[:i])
+        try:
+            obj: object = importlib.import_module(name)
+        except ModuleNotFoundError as e:
+            if e.name is None or not (name == e.name or name.startswith(f"{e.name}.")):
+                raise       # an optional dependency missing, not a wrong path
+            continue
+        for p in parts[i:]:
+            fields = {**getattr(obj, "__dataclass_fields__", {}),
+                      **getattr(obj, "__annotations__", {})}
+            if not hasattr(obj, p) and p not in fields:
+                return None
+            obj = getattr(obj, p, fields.get(p))
+        return obj
+    return None
+
+
+def _missing_names(source: str) -> list[tuple[int, str]]:
+    """(line of the docstring's owner, path) of each ``hapstab.x.y`` a docstring names
+    that does not exist, or that a :mod: role names and is not a module."""
+    out = []
+    for line, text in _docstrings(ast.parse(source)):
+        for role, dotted in _DOTTED.findall(text):
+            obj = _target(dotted)
+            if obj is None or (role == "mod" and not isinstance(obj, types.ModuleType)):
+                out.append((line, f":{role}:`{dotted}`" if role else dotted))
+    return out
+
+
+@pytest.mark.parametrize("path", MODULES, ids=lambda p: str(p.relative_to(SRC)))
+def test_docstrings_name_only_what_exists(path):
+    """Issue 28: a docstring that points at ``hapstab.x.y`` (a module, a function, a
+    class or one of its attributes) points at something that exists under that name:
+    renames and moves take the prose along."""
+    rel = path.relative_to(SRC)
+    missing = _missing_names(path.read_text())
+    assert not missing, f"{rel}: " + "; ".join(f"line {ln}: {n}" for ln, n in missing)
+
+
+def test_the_docstring_check_sees_a_missing_name():
+    source = ('"""See :mod:`~hapstab.engine.zoh` and :func:`hapstab.analysis.exact.core.nothing`;\n'
+              'not :mod:`hapstab.loopfreq` nor hapstab.engine.nowhere.expm."""\n'
+              'def f():\n'
+              '    """:mod:`hapstab.paper_hve` is a function; '
+              ':attr:`hapstab.results.CriticalStiffnessResult.critical_stiffness` a field."""\n')
+    assert _missing_names(source) == [
+        (1, ":func:`hapstab.analysis.exact.core.nothing`"), (1, ":mod:`hapstab.loopfreq`"),
+        (1, "hapstab.engine.nowhere.expm"), (3, ":mod:`hapstab.paper_hve`")]
+
+
+def _module_name(path: pathlib.Path, root: pathlib.Path) -> str:
+    parts = list(path.relative_to(root.parent).with_suffix("").parts)
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def _import_time_imports(tree: ast.Module):
+    """The imports a module runs when it is imported: at module level, including under
+    ``if``/``try``/``with``, but not inside a function or class body, nor under
+    ``if TYPE_CHECKING:`` (for type checkers only: it never runs)."""
+    todo = list(tree.body)
+    while todo:
+        node = todo.pop()
+        if isinstance(node, (ast.Import, ast.ImportFrom)):
+            yield node
+        elif isinstance(node, ast.If):
+            if "TYPE_CHECKING" not in ast.unparse(node.test):
+                todo += node.body
+            todo += node.orelse
+        elif isinstance(node, ast.Try):
+            todo += node.body + node.orelse + node.finalbody + \
+                [s for h in node.handlers for s in h.body]
+        elif isinstance(node, (ast.With, ast.AsyncWith)):
+            todo += node.body
+
+
+def _import_graph(root: pathlib.Path) -> dict[str, set[str]]:
+    """Module -> the package's modules it imports at import time (``from p import m``
+    counts ``p`` and, when it is a module, ``p.m``; relative imports resolved). A parent
+    package a dotted import runs on the way is not counted: it is never part of a cycle
+    that the modules themselves do not make."""
+    files = {_module_name(p, root): p for p in sorted(root.rglob("*.py"))}
+    graph: dict[str, set[str]] = {}
+    for name, path in files.items():
+        here = name.split(".") if path.name == "__init__.py" else name.split(".")[:-1]
+        out: set[str] = set()
+        for node in _import_time_imports(ast.parse(path.read_text())):
+            if isinstance(node, ast.Import):
+                out |= {a.name for a in node.names}
+                continue
+            base = here[:len(here) - node.level + 1] if node.level else []
+            mod = ".".join(base + ([node.module] if node.module else []))
+            out |= {mod} | {f"{mod}.{a.name}" for a in node.names}
+        graph[name] = {m for m in out if m in files and m != name}
+    return graph
+
+
+def _cycles(graph: dict[str, set[str]]) -> set[frozenset[str]]:
+    """The strongly connected components of more than one module (Tarjan)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    found: set[frozenset[str]] = set()
+
+    def visit(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        for w in sorted(graph[v]):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            comp = {stack.pop()}
+            while v not in comp:
+                comp.add(stack.pop())
+            if len(comp) > 1:
+                found.add(frozenset(comp))
+
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    return found
+
+
+#: Import cycles the package has today (none): a new one fails the test below
+KNOWN_CYCLES: set[frozenset[str]] = set()
+
+
+def test_no_import_cycles():
+    """Issue 28: the package's modules import each other at import time without a cycle
+    (a cycle makes the import order matter and half-initialised modules possible);
+    an import inside a function, run later, is the way to reach upwards when needed."""
+    graph = _import_graph(SRC)
+    assert len(graph) == len(MODULES) and sum(map(len, graph.values())) > 300
+    found = _cycles(graph)
+    assert found == KNOWN_CYCLES, "import cycles: " + "; ".join(
+        " <-> ".join(sorted(c)) for c in found ^ KNOWN_CYCLES)
+
+
+def test_the_cycle_finder_sees_a_cycle(tmp_path):
+    pkg = tmp_path / "pkg"
+    (pkg / "sub").mkdir(parents=True)
+    files = {"__init__.py": "", "a.py": "from pkg.b import x\n",
+             "b.py": "from . import c\nx = 1\n",
+             "c.py": "from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    import pkg.b\n"
+                     "def f():\n    import pkg.a\n",
+             "sub/__init__.py": "", "sub/d.py": "from ..sub import e\n",
+             "sub/e.py": "try:\n    import pkg.sub.d\nexcept ImportError:\n    pass\n"}
+    for name, text in files.items():
+        (pkg / name).write_text(text)
+    graph = _import_graph(pkg)
+    assert graph["pkg.a"] == {"pkg.b"} and graph["pkg.b"] == {"pkg", "pkg.c"}
+    assert graph["pkg.c"] == set()        # under TYPE_CHECKING, inside a function: not run
+    assert _cycles(graph) == {frozenset({"pkg.sub.d", "pkg.sub.e"})}
+    (pkg / "c.py").write_text("import pkg.a\n")
+    assert _cycles(_import_graph(pkg)) == {frozenset({"pkg.sub.d", "pkg.sub.e"}),
+                                           frozenset({"pkg.a", "pkg.b", "pkg.c"})}

@@ -22,7 +22,7 @@ import hapstab as h
 from hapstab.analysis.exact.core import exact_critical_stiffness
 from hapstab.analysis.exact.crossings import analyse
 from hapstab.engine.balls import Ball, ball_expm
-from hapstab.engine.frequency import _port_poly, loop_response, stack_responses
+from hapstab.engine.frequency import loop_response, port_polynomials, stack_responses
 from hapstab.engine.operator_family import box_port_polynomials
 from hapstab.errors import AnalysisError, ModelError
 from lanes import costly
@@ -128,7 +128,7 @@ def test_port_enclosures_contain_float_and_50_digits(seed):
         ref = _mp_port(md, bd, *p, T, f)
         M = md + p[0]
         A = np.array([[0.0, 1.0], [-p[2] / M, -(bd + p[1]) / M]])
-        flo = _port_poly(A, np.array([[0.0], [1.0 / M]]), False, np.array([T]), [f])
+        flo = port_polynomials(A, np.array([[0.0], [1.0 / M]]), False, np.array([T]), [f])
         fl = {"d": flo.d, "N": flo.N, f"Nt{f}": flo.Nt[f], f"D{f}": flo.D[f]}
         for name, coefs in ref.items():
             exact = np.array([float(x) for x in coefs])

@@ -1,6 +1,6 @@
 """Re-check a K_max certificate from the loop's numbers alone, in ball arithmetic.
 
-A certificate (:func:`hapstab.analysis.exact.proof.certificate`, ``hapstab kmax ...
+A certificate (:func:`hapstab.analysis.exact.certificate.certificate`, ``hapstab kmax ...
 --certificate FILE``) claims: the closed loop is stable for every K in each listed
 interval [K_a, K_b], K_max is the upper end of the one from the base point K_0, and
 (when given) it is unstable at ``kmax_upper``. This module does not import the search
@@ -55,8 +55,8 @@ from typing import Any
 from hapstab.analysis.certificate_shape import (
     FORMAT,
     VERSIONS,
-    _check_shape,
-    _Invalid,
+    Invalid,
+    check_shape,
 )
 from hapstab.engine.arb_loop import (
     ArbLoop,
@@ -146,7 +146,7 @@ def _excludes_with(al: ArbLoop, a: float, b: float, ka: float, kb: float, how: s
 
 
 def _increment(al: ArbLoop, a: float, b: float, K: Any, how: str, version: int) -> Any:
-    """The proved increment of arg det M over [a, b] at K (raises _Invalid), the piece's
+    """The proved increment of arg det M over [a, b] at K (raises Invalid), the piece's
     balls by the kernel of the certificate's ``version`` (as :func:`_excludes`)."""
     with working_precision(al.prec):      # pi at the proof's precision (_ball)
         P, Q, F = al.box(_ball(a, b), K, key=(a, b), polys=version >= 4)
@@ -160,7 +160,7 @@ def _increment(al: ArbLoop, a: float, b: float, K: Any, how: str, version: int) 
                     + (1 + Pb / (wb * Qb)).arg() - (1 + Pa / (wa * Qa)).arg())
         if how == "F" and not F.contains(0):
             return ((Pb + wb * Qb) / (Pa + wa * Qa)).arg()
-    raise _Invalid(f"piece theta in [{a!r}, {b!r}] at K = {float(K.mid())!r}: '{how}' does not "
+    raise Invalid(f"piece theta in [{a!r}, {b!r}] at K = {float(K.mid())!r}: '{how}' does not "
                    "hold in ball arithmetic")
 
 
@@ -204,10 +204,10 @@ def _check_count(al: ArbLoop, c: dict[str, Any], n0: int, version: int) -> int:
     if c.get("method") == "roots":
         out = _root_count(al, c["K_N_per_m"])
         if out is None:
-            raise _Invalid(f"count at K = {c['K_N_per_m']!r}: the roots are not isolated "
+            raise Invalid(f"count at K = {c['K_N_per_m']!r}: the roots are not isolated "
                            "clear of the unit circle")
         if out != c["outside"]:
-            raise _Invalid(f"count at K = {c['K_N_per_m']!r}: {out} poles outside, not "
+            raise Invalid(f"count at K = {c['K_N_per_m']!r}: {out} poles outside, not "
                            f"{c['outside']} as claimed")
         return out
     K = arb(c["K_N_per_m"])
@@ -217,7 +217,7 @@ def _check_count(al: ArbLoop, c: dict[str, Any], n0: int, version: int) -> int:
     while stack:
         a, b = stack.pop()
         if i >= len(pieces):
-            raise _Invalid(f"count at K = {c['K_N_per_m']!r}: pieces missing (theta in "
+            raise Invalid(f"count at K = {c['K_N_per_m']!r}: pieces missing (theta in "
                            f"[{a!r}, {b!r}] not covered)")
         pa, pb, how = pieces[i]
         if (pa, pb) == (a, b):
@@ -228,21 +228,21 @@ def _check_count(al: ArbLoop, c: dict[str, Any], n0: int, version: int) -> int:
         elif a <= pa and pb <= b and (pa, pb) != (a, b):
             m = _split_theta(a, b, version)
             if not a < m < b:
-                raise _Invalid(f"count at K = {c['K_N_per_m']!r}: halving [{a!r}, {b!r}] does "
+                raise Invalid(f"count at K = {c['K_N_per_m']!r}: halving [{a!r}, {b!r}] does "
                                "not advance (its ends are adjacent doubles)")
             stack += [(m, b), (a, m)]
         else:
-            raise _Invalid(f"count at K = {c['K_N_per_m']!r}: piece [{pa!r}, {pb!r}] is not "
+            raise Invalid(f"count at K = {c['K_N_per_m']!r}: piece [{pa!r}, {pb!r}] is not "
                            f"part of [{a!r}, {b!r}]")
     if i != len(pieces):
-        raise _Invalid(f"count at K = {c['K_N_per_m']!r}: pieces beyond [0, pi]")
+        raise Invalid(f"count at K = {c['K_N_per_m']!r}: pieces beyond [0, pi]")
     with working_precision(al.prec):
         turns = (total / arb.pi()).unique_fmpz()
     if turns is None:
-        raise _Invalid(f"count at K = {c['K_N_per_m']!r}: the winding is not a whole number")
+        raise Invalid(f"count at K = {c['K_N_per_m']!r}: the winding is not a whole number")
     out = al.q - int(turns)
     if out != c["outside"]:
-        raise _Invalid(f"count at K = {c['K_N_per_m']!r}: {out} poles outside, not "
+        raise Invalid(f"count at K = {c['K_N_per_m']!r}: {out} poles outside, not "
                        f"{c['outside']} as claimed")
     return out
 
@@ -282,13 +282,13 @@ def _check_gap(al: ArbLoop, g: dict[str, Any], n0: int, version: int) -> None:
     i = 0
     for step in g["splits"]:
         if not heap:
-            raise _Invalid(f"gap [{lo!r}, {hi!r}]: more steps than boxes")
+            raise Invalid(f"gap [{lo!r}, {hi!r}]: more steps than boxes")
         k0, a, b, k1 = heapq.heappop(heap)
         box = (a, b, k0, k1)
         if step in "tk":
             m = _split_theta(a, b, version) if step == "t" else _split_k(k0, k1, version)
             if not ((a < m < b) if step == "t" else (k0 < m < k1)):
-                raise _Invalid(f"gap [{lo!r}, {hi!r}]: splitting the box theta in [{a!r}, "
+                raise Invalid(f"gap [{lo!r}, {hi!r}]: splitting the box theta in [{a!r}, "
                                f"{b!r}], K in [{k0!r}, {k1!r}] ('{step}') does not advance")
         if step == "t":
             heapq.heappush(heap, (k0, a, m, k1))
@@ -298,20 +298,20 @@ def _check_gap(al: ArbLoop, g: dict[str, Any], n0: int, version: int) -> None:
             heapq.heappush(heap, (m, a, b, k1))
         elif step == "x":
             if i >= len(pieces) or pieces[i][:4] != box:
-                raise _Invalid(f"gap [{lo!r}, {hi!r}]: the box theta in [{a!r}, {b!r}], K in "
+                raise Invalid(f"gap [{lo!r}, {hi!r}]: the box theta in [{a!r}, {b!r}], K in "
                                f"[{k0!r}, {k1!r}] has no piece of its own")
             if not _excludes(al, *box, pieces[i][4], version >= 4):
-                raise _Invalid(f"gap [{lo!r}, {hi!r}]: the piece theta in [{a!r}, {b!r}], K in "
+                raise Invalid(f"gap [{lo!r}, {hi!r}]: the piece theta in [{a!r}, {b!r}], K in "
                                f"[{k0!r}, {k1!r}] is not excluded by '{pieces[i][4]}'")
             i += 1
         else:
-            raise _Invalid(f"gap [{lo!r}, {hi!r}]: a box is not excluded ('{step}')")
+            raise Invalid(f"gap [{lo!r}, {hi!r}]: a box is not excluded ('{step}')")
     if heap:
         k0, a, b, k1 = heap[0]
-        raise _Invalid(f"gap [{lo!r}, {hi!r}]: pieces missing (theta in [{a!r}, {b!r}], K in "
+        raise Invalid(f"gap [{lo!r}, {hi!r}]: pieces missing (theta in [{a!r}, {b!r}], K in "
                        f"[{k0!r}, {k1!r}] not covered)")
     if i != len(pieces):
-        raise _Invalid(f"gap [{lo!r}, {hi!r}]: pieces beyond the gap")
+        raise Invalid(f"gap [{lo!r}, {hi!r}]: pieces beyond the gap")
 
 
 def _check_claim(cert: dict[str, Any], counts: dict[float, int]) -> float:
@@ -324,30 +324,30 @@ def _check_claim(cert: dict[str, Any], counts: dict[float, int]) -> float:
             g = next((g for g in gaps if g["lo_N_per_m"] == edge and g["hi_N_per_m"] <= hi),
                      None)
             if g is None:
-                raise _Invalid(f"stable interval [{lo!r}, {hi!r}]: K = {edge!r} is not the "
+                raise Invalid(f"stable interval [{lo!r}, {hi!r}]: K = {edge!r} is not the "
                                "start of an excluded gap")
             c = g["count"]
             if c is None or counts.get(c["K_N_per_m"]) != 0:
-                raise _Invalid(f"stable interval [{lo!r}, {hi!r}]: the gap from {edge!r} has no "
+                raise Invalid(f"stable interval [{lo!r}, {hi!r}]: the gap from {edge!r} has no "
                                "verified count 0 inside it")
             edge = g["hi_N_per_m"]
     ivs = claim["stable_intervals_N_per_m"]
     kmax = claim["kmax_N_per_m"]
     first = ivs[0][1] if ivs and ivs[0][0] == k0 else 0.0
     if kmax != first:
-        raise _Invalid(f"K_max = {kmax!r} is not the end of the stable interval from "
+        raise Invalid(f"K_max = {kmax!r} is not the end of the stable interval from "
                        f"K_0 = {k0!r} ({first!r})")
     if kmax == 0 and not counts.get(k0, 0) > 0:
-        raise _Invalid(f"K_max = 0 claims instability already at K_0 = {k0!r}, but there is no "
+        raise Invalid(f"K_max = 0 claims instability already at K_0 = {k0!r}, but there is no "
                        "verified count > 0 there")
     up = claim["kmax_upper_N_per_m"]
     if up is not None and not counts.get(up, 0) > 0:
-        raise _Invalid(f"K_max's upper bound {up!r}: no verified count > 0 there")
+        raise Invalid(f"K_max's upper bound {up!r}: no verified count > 0 there")
     for cr in cert["crossings"]:
         below, above = cr["poles_outside_below"], cr["poles_outside_above"]
         d = "outwards" if above > below else "inwards" if above < below else "touching"
         if cr["direction"] != d:
-            raise _Invalid(f"crossing in [{cr['K_lo_N_per_m']!r}, {cr['K_hi_N_per_m']!r}]: "
+            raise Invalid(f"crossing in [{cr['K_lo_N_per_m']!r}, {cr['K_hi_N_per_m']!r}]: "
                            f"direction '{cr['direction']}' but the counts say '{d}'")
     return float(kmax)
 
@@ -363,18 +363,18 @@ def _check_crossings(cert: dict[str, Any], counts: dict[float, int]) -> None:
                 (g["lo_N_per_m"] == cr[at] and
                  (g["excluded"] or g["count"]["K_N_per_m"] == cr[at])))]
             if not near or any(counts[g["count"]["K_N_per_m"]] != cr[key] for g in near):
-                raise _Invalid(f"crossing at [{cr['K_lo_N_per_m']!r}, "
+                raise Invalid(f"crossing at [{cr['K_lo_N_per_m']!r}, "
                                f"{cr['K_hi_N_per_m']!r}]: '{key}' not verified")
 
 
 def _check(cert: dict[str, Any], loop: Any) -> CertificateCheck:
-    """Every check in order (module doc); raises _Invalid at the first that fails."""
-    _check_shape(cert)
+    """Every check in order (module doc); raises Invalid at the first that fails."""
+    check_shape(cert)
     params = cert["loop"]
     if loop is not None:
         from hapstab.engine.arb_loop import arb_parameters
         if arb_parameters(loop) != params:
-            raise _Invalid("the certificate is about another loop")
+            raise Invalid("the certificate is about another loop")
     k0 = base_point(params)         # re-derived, and equal to the certificate's (shape)
     al = ArbLoop(params, cert["precision_bits"])
     n0 = cert["start_pieces"]
@@ -388,7 +388,7 @@ def _check(cert: dict[str, Any], loop: Any) -> CertificateCheck:
     kmax = _check_claim(cert, counts)
     said = cert.get("proved_range_N_per_m", [k0, kmax] if kmax > 0 else None)
     if said != ([k0, kmax] if kmax > 0 else None):
-        raise _Invalid(f"proved_range_N_per_m = {said!r}: the proved range is [K_0, K_max] = "
+        raise Invalid(f"proved_range_N_per_m = {said!r}: the proved range is [K_0, K_max] = "
                        f"[{k0!r}, {kmax!r}]" if kmax > 0 else "K_max = 0: no range is proved stable")
     n_pieces = sum(len(g["pieces"]) for g in cert["gaps"])
     what = (f"proved stable for K in [K_0, K_max] = [{k0!r}, {kmax!r}] N/m, K_0 the base point "
@@ -423,7 +423,7 @@ def verify_certificate(cert: dict[str, Any], loop: Any = None) -> CertificateChe
     """
     try:
         return _check(cert, loop)
-    except _Invalid as e:
+    except Invalid as e:
         return CertificateCheck(False, str(e))
     except Exception as e:      # a bad certificate is a verdict, never a crash
         return CertificateCheck(False, f"malformed certificate: {type(e).__name__}: {e}")

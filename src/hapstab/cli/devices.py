@@ -17,7 +17,7 @@ from hapstab.cli.options import (
     loop_options,
     rich_table,
 )
-from hapstab.cli.regions import _range
+from hapstab.cli.regions import region_range
 from hapstab.errors import HapstabError, ascii_float
 from hapstab.models.loops import HapticLoop
 
@@ -65,7 +65,7 @@ def zwidth_hve(K_spec: str, B_spec: str, rows: int, at_spec: str | None, stiffne
 
     check_files(csv_path, plot_path, as_json)
     B_at = kw["virtual_damping"]
-    K, B = _range(K_spec, "--K"), _range(B_spec, "--B", signed=True)
+    K, B = region_range(K_spec, "--K"), region_range(B_spec, "--B", signed=True)
     # without --at, -K or -B the wall shown is the passive limit at B = 0 (K = B = 0 would
     # display a flat zero)
     at = _at(at_spec) or ((stiffness, B_at) if stiffness or B_at else None)

@@ -15,7 +15,14 @@ from typing import Any
 
 import click
 
-from hapstab.cli.options import RATIO, REAL, Number, _period, teleoperator_devices, with_delays
+from hapstab.cli.options import (
+    RATIO,
+    REAL,
+    Number,
+    period_option,
+    teleoperator_devices,
+    with_delays,
+)
 from hapstab.errors import HapstabError, ModelError
 from hapstab.models.controllers import SpringDamper
 from hapstab.models.fourchannel import FourChannelLoop
@@ -126,7 +133,7 @@ def four_channel_loop(kw: dict[str, Any], stiffness: float = 0.0) -> FourChannel
                            SpringDamper(rm * stiffness, B), SpringDamper(rs * stiffness, Bs),
                            parse_impedance(kw["operator"], "--operator"),
                            parse_impedance(kw["environment"], "--environment"),
-                           _period(kw), kw["delay"],
+                           period_option(kw), kw["delay"],
                            slave_from_master=SpringDamper(r1 * stiffness, B1),
                            master_from_slave=SpringDamper(r4 * stiffness, B4), **gains)
     try:

@@ -345,7 +345,7 @@ def given(name: str) -> bool:
 PLAUSIBLE_PERIOD_S = 0.1
 
 
-def _period(kw: dict[str, Any]) -> float:
+def period_option(kw: dict[str, Any]) -> float:
     """T from --period or --rate (one of them), with a warning on stderr when it is
     implausibly long for a haptic loop."""
     rate = kw.get("rate")
@@ -378,7 +378,7 @@ def hve_loop(kw: dict[str, Any], stiffness: float = 0.0) -> HapticLoop:
     """Build the HVE from parsed options."""
     loop = HapticLoop(Device(kw["mass"], kw["damping"], kw.get("friction", 0.0)),
                       _spring_damper(stiffness, kw["virtual_damping"], kw),
-                      parse_impedance(kw["operator"], "--operator"), _period(kw), kw["delay"])
+                      parse_impedance(kw["operator"], "--operator"), period_option(kw), kw["delay"])
     if kw.get("delay_s") is not None:
         if given("delay"):
             raise HapstabError("--delay and --delay-s: give one of them, not both")
@@ -399,7 +399,7 @@ def peb_loop(kw: dict[str, Any], stiffness: float = 0.0) -> TeleoperationLoop:
     loop = TeleoperationLoop(*teleoperator_devices(kw), cm, cs,
                              parse_impedance(kw["operator"], "--operator"),
                              parse_impedance(kw["environment"], "--environment"),
-                             _period(kw), kw["delay"],
+                             period_option(kw), kw["delay"],
                              position_scale=kw.get("position_scale", 1.0),
                              force_scale=kw.get("force_scale", 1.0))
     return with_delays(loop, kw)

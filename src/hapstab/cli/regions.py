@@ -23,7 +23,7 @@ from hapstab.cli.robust import box_from, operator_box_options
 from hapstab.errors import HapstabError
 
 
-def _range(spec: str, name: str, signed: bool = False) -> tuple[float, float]:
+def region_range(spec: str, name: str, signed: bool = False) -> tuple[float, float]:
     """``start:stop`` (the one range syntax, without a count: the grid's size is
     ``--resolution``); ``start >= 0`` unless ``signed`` (virtual damping)."""
     unit = "N*s/m" if signed else "N/m"
@@ -94,7 +94,7 @@ def _region_command(kind: str) -> None:
 
         check_files(csv_path, plot_path, as_json)
         _equal_controllers(kw)
-        K, B = _range(K_spec, "--K"), _range(B_spec, "--B", signed=True)
+        K, B = region_range(K_spec, "--K"), region_range(B_spec, "--B", signed=True)
         names = [o.strip() for o in overlays.split(",") if o.strip() and o.strip() != "none"]
         for o in names:
             if o not in _overlays(kind) or (o != "paper" and o not in METHODS):

@@ -42,10 +42,12 @@ class Jet:
 
     __slots__ = ("_da", "_va", "dc", "dr", "vc", "vr")
 
-    def __init__(self, vc: np.ndarray, vr: np.ndarray, dc: np.ndarray, dr: np.ndarray) -> None:
+    def __init__(self, vc: np.ndarray, vr: np.ndarray, dc: np.ndarray, dr: np.ndarray, *,
+                 va: np.ndarray | None = None, da: np.ndarray | None = None) -> None:
+        """``va``, ``da``: |vc| and |dc| when already known (a negated jet's are its own)."""
         self.vc, self.vr, self.dc, self.dr = vc, vr, dc, dr
-        self._va: np.ndarray | None = None
-        self._da: np.ndarray | None = None
+        self._va: np.ndarray | None = va
+        self._da: np.ndarray | None = da
 
     @property
     def va(self) -> np.ndarray:
@@ -74,9 +76,7 @@ class Jet:
         return Jet(vc, vr, dc, dr)
 
     def __neg__(self) -> Jet:
-        out = Jet(-self.vc, self.vr, -self.dc, self.dr)
-        out._va, out._da = self._va, self._da
-        return out
+        return Jet(-self.vc, self.vr, -self.dc, self.dr, va=self._va, da=self._da)
 
     def __sub__(self, o: Jet) -> Jet:
         return self + (-o)

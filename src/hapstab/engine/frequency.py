@@ -46,7 +46,7 @@ import numpy as np
 from hapstab.engine.arb_loop import arb_parameters
 from hapstab.engine.discs import Jet, base_jets, delay_jet, poly_jet, zero
 from hapstab.engine.expansion import generic_coefficients
-from hapstab.engine.port_poly import COEF_REL, PortPoly, _port_poly
+from hapstab.engine.port_poly import COEF_REL, PortPoly, port_polynomials
 from hapstab.engine.structure import (
     channel_name,
     channel_ratios,
@@ -63,7 +63,7 @@ from hapstab.models.controllers import has_stiffness
 from hapstab.models.loops import HapticLoop, TeleoperationLoop, split_delay
 
 __all__ = ["LoopResponse", "loop_response", "stack_responses", "ResponsePlan", "plan_response",
-           "build_responses", "check_plan", "PortPoly", "COEF_REL", "_port_poly"]
+           "build_responses", "check_plan", "PortPoly", "COEF_REL", "port_polynomials"]
 
 #: Largest ratio of port masses analysed: beyond ~1e12 the certified search's boxes
 #: multiply (measured: 1e15 kg against 15 g took 0.35 GB, 1e20 kg 4.6 GB, 1e30 kg ran
@@ -449,7 +449,7 @@ def _ports(plans: Sequence[ResponsePlan], T: np.ndarray) -> list[PortPoly]:
         A, Bm, mz = (_rows(rows, lambda m, k=k: m[k]) for k in (0, 1, 3))
         force = None if force0 is None else (_rows(rows, lambda m: m[2][0]),
                                              _rows(rows, lambda m: m[2][1]))
-        ports.append(_port_poly(A, Bm, fr, T, fs, force, mz))
+        ports.append(port_polynomials(A, Bm, fr, T, fs, force, mz))
     for j, pp in enumerate(ports):
         arrays = [pp.d, pp.N, *list(pp.Nt.values()), *list(pp.D.values())]
         arrays += [pp.R] if pp.R is not None else []

@@ -6,9 +6,10 @@ balls computed here, and so do their derivatives in m, b and k.
 The port [x, v] of the device (mass m_d, damping b_d) and the operator has
 ``A = [[0, 1], [-k/M, -(b_d + b)/M]]``, ``B = [0, 1/M]`` with M = m_d + m. Its
 entries over the box are enclosed by outward-rounded interval arithmetic (each
-entry separately: a superset), and the pipeline of :func:`frequency._port_poly`
-runs in ball arithmetic (:mod:`hapstab.engine.balls`): the ZOH pair (Phi, S) from
-the exponential of ``tau [[A, I], [0, 0]]``, E = A S, Gamma = S B, the
+entry separately: a superset), and the pipeline of
+:func:`~hapstab.engine.port_poly.port_polynomials` runs in ball arithmetic
+(:mod:`hapstab.engine.balls`): the ZOH pair (Phi, S) from the exponential of
+``tau [[A, I], [0, 0]]``, E = A S, Gamma = S B, the
 Faddeev-LeVerrier recursion (``p_k = -tr(E B_(k-1)) / k``, ``B_k = E B_(k-1) + p_k I``,
 adj(yI - E) Gamma = sum_k y^(q-1-k) B_k Gamma) and the fractional-delay numerators.
 
@@ -34,7 +35,8 @@ from typing import Any
 import numpy as np
 
 from hapstab.engine.balls import Ball, ball_expm, interval_ball
-from hapstab.engine.frequency import LoopResponse, PortPoly, _port_poly, loop_response
+from hapstab.engine.frequency import LoopResponse, PortPoly, loop_response
+from hapstab.engine.port_poly import port_polynomials
 from hapstab.engine.structure import FREE_SPRING, structure_of
 from hapstab.errors import AnalysisError
 from hapstab.models.parts import mass_spring_damper
@@ -320,7 +322,7 @@ def family_response(loop: Any, lo: np.ndarray, hi: np.ndarray) -> tuple[LoopResp
     for m, b, k in centres:              # the exact core's own allowance at each centre
         M = dev.mass + m                 # (engine.zoh.port_matrices of this port)
         A = np.array([[0.0, 1.0], [-k / M, -(dev.damping + b) / M]])
-        errs.append(_port_poly(A, np.array([[0.0], [1.0 / M]]), False, np.array([T]), fr).err)
+        errs.append(port_polynomials(A, np.array([[0.0], [1.0 / M]]), False, np.array([T]), fr).err)
     err = {n: np.maximum(bp.rad[n], np.concatenate([e[n] for e in errs])) for n in bp.mid}
     err["dhat"] = np.zeros((L, 0))
     p0 = PortPoly(bp.mid["d"], np.zeros((L, 0)), bp.mid["N"],

@@ -18,10 +18,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hapstab.engine.zoh import _THETA13, expm_batched
+from hapstab.engine.zoh import THETA13, expm_batched
 from hapstab.tolerances import DIVISOR_FLOOR
 
-__all__ = ["PortPoly", "COEF_REL"]
+__all__ = ["PortPoly", "COEF_REL", "port_polynomials"]
 
 #: Relative error assumed for the discretised coefficients (matrix exponential and
 #: Leverrier recursion on matrices of order <= 8: a few tens of unit round-offs).
@@ -85,7 +85,7 @@ def _leverrier(E: np.ndarray, G: np.ndarray, d_desc: np.ndarray, kappa: np.ndarr
     return np.stack(vs, axis=1), np.stack(mags, axis=1) / w[:, None, :]
 
 
-def _port_poly(A: np.ndarray, Bv: np.ndarray, free: bool, T: np.ndarray,
+def port_polynomials(A: np.ndarray, Bv: np.ndarray, free: bool, T: np.ndarray,
                fractions: Sequence[float], force: tuple[np.ndarray, np.ndarray] | None = None,
                mz_M: float | np.ndarray = 0.0) -> PortPoly:
     """Polynomials of one port (state [x, v, rest...], position = state 0) at each
@@ -116,7 +116,7 @@ def _port_poly(A: np.ndarray, Bv: np.ndarray, free: bool, T: np.ndarray,
     # one rounding per squaring of the scaling-and-squaring exponential (its count as
     # engine.zoh.expm_batched takes it; the augmented matrix's norm is at least A T's)
     norm = np.maximum(T * np.abs(A).sum(axis=1).max(axis=1), DIVISOR_FLOOR)   # (log2 of 0 guarded)
-    squarings = np.maximum(0.0, np.ceil(np.log2(norm / _THETA13)))
+    squarings = np.maximum(0.0, np.ceil(np.log2(norm / THETA13)))
     V, Vmag = _leverrier(E, G[:, :, 0], d_desc, 1.0 + squarings, T)
     N = V[:, ::-1, 0]                                 # ascending: coefficient of y^(q-1-k)
     d = d_desc[:, ::-1].copy()

@@ -9,7 +9,7 @@ from hapstab.engine.structure import Port
 from hapstab.errors import ModelError
 from hapstab.tolerances import DIVISOR_FLOOR
 
-__all__ = ['discretize', 'port_matrices']
+__all__ = ['discretize', 'port_matrices', 'expm_batched', 'THETA13']
 
 
 def port_matrices(port: Port) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -62,7 +62,10 @@ _PADE13 = (64764752532480000.0, 32382376266240000.0, 7771770303897600.0, 1187353
            40840800.0, 960960.0, 16380.0, 182.0, 1.0)
 
 
-_THETA13 = 5.371920351148152
+#: theta_13 (Higham 2005, Table 2.3): the 1-norm up to which the Pade (13, 13)
+#: approximant of exp is accurate to double precision; larger matrices are scaled by
+#: 2^-s below it and squared s times.
+THETA13 = 5.371920351148152
 
 
 def expm_batched(M: np.ndarray) -> np.ndarray:
@@ -84,7 +87,7 @@ def expm_batched(M: np.ndarray) -> np.ndarray:
     n = M.shape[-1]
     norm = np.abs(M).sum(axis=-2).max(axis=-1)                   # 1-norm per matrix
     with np.errstate(divide="ignore"):
-        s = np.maximum(0, np.ceil(np.log2(np.maximum(norm, DIVISOR_FLOOR) / _THETA13))).astype(int)
+        s = np.maximum(0, np.ceil(np.log2(np.maximum(norm, DIVISOR_FLOOR) / THETA13))).astype(int)
     X = M / (2.0 ** s)[:, None, None]
     b = _PADE13
     Id = np.broadcast_to(np.eye(n), X.shape)

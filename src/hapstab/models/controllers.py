@@ -16,8 +16,7 @@ from typing import Any, TypeGuard
 
 import numpy as np
 
-from hapstab.errors import ModelError, check_real
-from hapstab.models.parts import _poly
+from hapstab.errors import ModelError, check_poly, check_real
 from hapstab.models.protocol import check_analysis
 from hapstab.models.realisation import Realisation, realize, replicate, spring_damper_states
 from hapstab.models.velocity_filter import MIN_FILTER_GAIN, VelocityFilter
@@ -224,8 +223,8 @@ class AffineController:
     def __post_init__(self) -> None:
         object.__setattr__(self, "stiffness", check_real("stiffness", self.stiffness, nonnegative=True))
         for name in ("p", "q"):
-            num = _poly(f"controller {name.upper()} numerator", getattr(self, f"{name}_num"))
-            den = _poly(f"controller {name.upper()} denominator", getattr(self, f"{name}_den"))
+            num = check_poly(f"controller {name.upper()} numerator", getattr(self, f"{name}_num"))
+            den = check_poly(f"controller {name.upper()} denominator", getattr(self, f"{name}_den"))
             if not np.any(den) or num.size > np.trim_zeros(den, "f").size:
                 raise ModelError(f"controller {name.upper()} = ({list(num)})/({list(den)}): must "
                                  "have a nonzero denominator and be proper")
@@ -330,7 +329,8 @@ class DiscreteController:
     den: tuple[float, ...]
 
     def __post_init__(self) -> None:
-        num, den = _poly("controller numerator", self.num), _poly("controller denominator", self.den)
+        num = check_poly("controller numerator", self.num)
+        den = check_poly("controller denominator", self.den)
         if not np.any(den):
             raise ModelError(f"controller denominator = {list(self.den)}: must not be zero")
         if num.size > den.size:

@@ -18,7 +18,8 @@ from typing import Any, ClassVar
 
 from hapstab.errors import AnalysisError, ModelError, check_real
 from hapstab.models.controllers import Controller, SpringDamper, spring_damper, stiffness_ratios
-from hapstab.models.loops import FORCE_NAMES, TeleoperationLoop, _check_controller
+from hapstab.models.interop import check_controller
+from hapstab.models.loops import FORCE_NAMES, TeleoperationLoop
 
 __all__ = ["FourChannelLoop", "FORCE_GAINS"]
 
@@ -92,7 +93,7 @@ class FourChannelLoop(TeleoperationLoop):
         super().__post_init__()
         for nm in ("slave_from_master", "master_from_slave"):   # None: follows C_s / C_m
             if getattr(self, nm) is not None:
-                _check_controller(nm, getattr(self, nm))
+                check_controller(nm, getattr(self, nm))
         for nm in FORCE_GAINS:
             object.__setattr__(self, nm, check_real(nm, getattr(self, nm)))
         for nm in ("position_scale", "force_scale"):

@@ -6,7 +6,7 @@ delay (Fig. 5: n = 0 and 10; Fig. 6: n = 0 and 4) this computes
 * ``theory``: the paper's condition, eq. (13) / (18) for the HVE and (29) / (34)
   for PEB (solid lines in the paper's figures);
 * ``simulation``: the paper's procedure, the largest K whose simulated loop stays
-  bounded (:func:`hapstab.simulate.critical_stiffness_simulation`, the stars);
+  bounded (:func:`~hapstab.simulation.search.critical_stiffness_simulation`, the stars);
 * ``exact``: the exact K_max of the sampled-data loop (:mod:`hapstab.analysis.exact`);
 * ``circle``: the circle-criterion K_max, when that method is registered.
 
@@ -142,7 +142,7 @@ def reproduce_figure(name: str, periods: Sequence[float] | None = None, *,
     progress : callable, optional
         Called with 1 after each (period, delay) point.
     simulation_options : dict, optional
-        Passed to :func:`~hapstab.simulate.critical_stiffness_simulation`.
+        Passed to :func:`~hapstab.simulation.search.critical_stiffness_simulation`.
 
     Returns
     -------

@@ -7,7 +7,7 @@ from typing import Any
 import numpy as np
 
 
-def _axes(ax: Any) -> Any:
+def axes_or_new(ax: Any) -> Any:
     """``ax`` itself, or the axes of a new figure on pyplot's current backend (a library
     never switches the user's backend: in a notebook the figure shows inline, in a script
     on screen, and the CLI, which writes files, chooses Agg itself)."""
@@ -62,7 +62,7 @@ def _wrap(text: str, ax: Any, fontsize: float) -> str:
 
 def plot_boundary(res: Any, ax: Any = None) -> Any:
     """K_max against T (ms) or the sampling rate (Hz), one curve per delay (Fig. 5 / 6)."""
-    ax = _axes(ax)
+    ax = axes_or_new(ax)
     colors = ["tab:blue", "tab:red", "tab:green", "tab:purple", "tab:orange", "tab:brown"]
     by_rate = getattr(res, "axis", "period") == "rate"
     x = 1.0 / res.periods if by_rate else res.periods * 1e3
@@ -83,7 +83,7 @@ def plot_boundary(res: Any, ax: Any = None) -> Any:
 
 def plot_poles(res: Any, ax: Any = None) -> Any:
     """Closed-loop poles and the unit circle."""
-    ax = _axes(ax)
+    ax = axes_or_new(ax)
     th = np.linspace(0, 2 * np.pi, 400)
     ax.plot(np.cos(th), np.sin(th), "k-", lw=0.8)
     p = np.array(res.poles)
@@ -97,13 +97,14 @@ def plot_poles(res: Any, ax: Any = None) -> Any:
 
 # ------------------------------------------------ simulation and reproduction (issue 4)
 def _figure(nrows: int = 1, figsize: tuple[float, float] = (7, 4.5)) -> tuple[Any, Any]:
-    """A new figure of ``nrows`` stacked axes on pyplot's current backend (see :func:`_axes`)."""
+    """A new figure of ``nrows`` stacked axes on pyplot's current backend (see
+    :func:`axes_or_new`)."""
     import matplotlib.pyplot as plt
 
     return plt.subplots(nrows, 1, figsize=figsize, sharex=nrows > 1, squeeze=False)
 
 
-def _panels(ax: Any, n: int, figsize: tuple[float, float]) -> np.ndarray:
+def panels_or_new(ax: Any, n: int, figsize: tuple[float, float]) -> np.ndarray:
     """``n`` stacked axes: the ones given (a sequence of n) or a new figure's."""
     if ax is None:
         return _figure(n, figsize)[1][:, 0]
@@ -132,7 +133,7 @@ def plot_simulation(res: Any, ax: Any = None) -> Any:
     array of 3 (with TDPA 4) matplotlib Axes
     """
     rec = getattr(res, "tdpa", None)
-    axs = _panels(ax, 3 if rec is None else 4, (7, 7) if rec is None else (7, 9))
+    axs = panels_or_new(ax, 3 if rec is None else 4, (7, 7) if rec is None else (7, 9))
     ax1, ax2, ax3 = axs[:3]
     # an overflowed run: its values past 1e100 are left out (a gap); matplotlib cannot
     # place ticks on an axis that spans ~1e300
@@ -220,7 +221,7 @@ def plot_reproduction(res: Any, ax: Any = None) -> Any:
     """
     from matplotlib.lines import Line2D
 
-    axs = _panels(ax, 2, (7, 7))
+    axs = panels_or_new(ax, 2, (7, 7))
     top, bottom = axs
     rows, equations = list(res.rows), res.figure.equations
     delays = sorted({r["delay_samples"] for r in rows})
@@ -278,7 +279,7 @@ def plot_audit(res: Any, ax: Any = None) -> Any:
     -------
     matplotlib Axes
     """
-    ax = _axes(ax)
+    ax = axes_or_new(ax)
     rows = [r for r in res.rows if np.isfinite(r.critical_stiffness) and r.critical_stiffness > 0]
     y = np.arange(len(rows))
     ax.barh(y, [r.critical_stiffness for r in rows],
@@ -310,7 +311,7 @@ def plot_best_damping(res: Any, ax: Any = None) -> Any:
     -------
     matplotlib Axes
     """
-    ax = _axes(ax)
+    ax = axes_or_new(ax)
     ax.plot(res.B_curve, res.K_curve, "-", color="tab:blue", lw=1.2)
     ax.plot([res.damping], [res.critical_stiffness], "o", color="k",
             label=f"B* = {res.damping:.6g} N*s/m, K* = {res.critical_stiffness:.6g} N/m")
@@ -356,7 +357,7 @@ def save_plot(res: Any, path: Any, name: str = "plot", **kw: Any) -> str:
 def plot_positive_real(res: Any, ax: Any = None) -> Any:
     """Smallest eigenvalue of G(e^{jw}) + G^H(e^{jw}) against frequency (Definition 1,
     condition iii), with the worst frequency marked."""
-    ax = _axes(ax)
+    ax = axes_or_new(ax)
     f = np.asarray(res.frequencies_rad_s) / (2 * np.pi)
     lam = np.asarray(res.min_eigenvalues, dtype=float)
     ok = np.isfinite(lam)
@@ -376,7 +377,7 @@ def plot_region(res: Any, ax: Any = None) -> Any:
     """K-B chart: the exact stable region shaded, its D-decomposition boundary, the
     cross-check grid's disagreements (if any) and the overlays (passivity, circle
     criterion, the paper's line)."""
-    ax = _axes(ax)
+    ax = axes_or_new(ax)
     K0, K1 = res.K_range
     B0, B1 = res.B_range
     ax.pcolormesh(res.K_grid, res.B_rows, res.stable_exact.astype(float), cmap="Greens",
@@ -425,7 +426,7 @@ def plot_region(res: Any, ax: Any = None) -> Any:
 def plot_twoport(res: Any, ax: Any = None) -> Any:
     """Llewellyn's margin (N*s/m) and eta against frequency: absolutely stable where the
     margin is >= 0 (eta >= 1) at every frequency."""
-    axs = _panels(ax, 2, (7, 5.5))
+    axs = panels_or_new(ax, 2, (7, 5.5))
     top, bottom = axs
     f = res.frequency_rad_s / (2 * np.pi)
     top.semilogx(f, res.margins, "-", lw=1.0, color="tab:blue", label="margin")
@@ -466,7 +467,7 @@ def plot_transparency(res: Any, ax: Any = None) -> Any:
     -------
     array of 3 matplotlib Axes
     """
-    mag, phase, track = _panels(ax, 3, (7, 7.5))
+    mag, phase, track = panels_or_new(ax, 3, (7, 7.5))
     f = res.frequencies_hz
     curves = (("free motion", res.felt_free, "tab:green"),
               ("environment", res.felt_environment, "tab:blue"),

@@ -103,9 +103,9 @@ def plot_limit_cycles(res: Any, ax: Any = None) -> Any:
     -------
     matplotlib Axes
     """
-    from hapstab.plotting import _axes
+    from hapstab.plotting import axes_or_new
 
-    ax = _axes(ax)
+    ax = axes_or_new(ax)
     if res.resolution_m and res.coulomb_friction_N:
         return _balance(res, ax)
     g, inv = res.curves["loop"], res.curves["minus_inverse"]

@@ -6,7 +6,7 @@ from typing import Any
 
 import numpy as np
 
-from hapstab.plotting import _axes, _panels
+from hapstab.plotting import axes_or_new, panels_or_new
 
 
 def _nyquist(view: Any, ax: Any) -> None:
@@ -95,10 +95,10 @@ def plot_frequency_view(view: Any, ax: Any = None, kind: str = "both") -> Any:
     if kind not in ("both", "nyquist", "bode"):
         raise ModelError(f"kind = {kind!r}: allowed: both, nyquist, bode")
     if kind == "nyquist":
-        a = _axes(ax)
+        a = axes_or_new(ax)
         _nyquist(view, a)
         return a
-    axs = _panels(ax, 2, (7, 5.5)) if kind == "bode" else _three(ax)
+    axs = panels_or_new(ax, 2, (7, 5.5)) if kind == "bode" else _three(ax)
     if kind == "both":
         _nyquist(view, axs[0])
     _bode(view, *axs[-2:])
@@ -123,7 +123,7 @@ def plot_margins(res: Any, ax: Any = None) -> Any:
     array of 3 matplotlib Axes, or one Axes
     """
     if res.view is None:
-        a = _axes(ax)
+        a = axes_or_new(ax)
         a.text(0.5, 0.5, "no Nyquist / Bode view:\n" + res.reason, ha="center", va="center",
                wrap=True, fontsize=8, transform=a.transAxes)
         a.set_axis_off()

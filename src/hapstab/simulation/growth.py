@@ -17,7 +17,7 @@ as growth.
 
 A forced trajectory is not fitted: :func:`combine` judges a linear run on its
 free responses (from the initial state, and from an impulse where each force
-enters). Nonlinear runs are judged by :mod:`hapstab.behaviour`.
+enters). Nonlinear runs are judged by :mod:`~hapstab.simulation.behaviour`.
 
 References
 ----------
@@ -235,7 +235,7 @@ def assess(states: np.ndarray, forces: np.ndarray | None, period: float,
     -----
     A forced trajectory can hide its own dynamics: in a sinusoidal steady state
     the input is a linear function of the state, and the fit cannot tell the
-    loop from the input. :func:`hapstab.simulate.simulate` therefore judges a
+    loop from the input. :func:`~hapstab.simulation.run.simulate` therefore judges a
     linear run on its free responses (see :func:`combine`), not on the forced
     trajectory.
     """

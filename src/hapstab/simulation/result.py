@@ -1,4 +1,4 @@
-"""The result of :func:`hapstab.simulate.simulate`: time series at the sampling
+"""The result of :func:`~hapstab.simulation.run.simulate`: time series at the sampling
 instants (and optionally between them), port energies, the boundedness verdict,
 CSV and plot.
 

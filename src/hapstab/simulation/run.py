@@ -30,10 +30,10 @@ position, where a hand holding the device at rest puts it; ``rest_position``
 moves it.
 
 The verdict separates the loop from its input. A linear run is judged on its
-free responses (:func:`hapstab.growth.combine`): from the initial state, and
+free responses (:func:`~hapstab.simulation.growth.combine`): from the initial state, and
 from an impulse where each force enters — a bounded force gives a bounded
 response exactly when these decay. A nonlinear run is judged on its envelope
-(:func:`hapstab.behaviour.assess_nonlinear`): it settles, oscillates in a limit
+(:func:`~hapstab.simulation.behaviour.assess_nonlinear`): it settles, oscillates in a limit
 cycle, grows, drifts, or the run is too short to tell.
 
 References

@@ -2,9 +2,10 @@
 promising minimum, and the largest K keeping an affine Hermitian matrix
 ``A(w) + K C(w)`` positive semidefinite.
 
-Shared by the positive-real test (:mod:`hapstab.positive_real`), the circle
-criterion (:mod:`hapstab.circle`) and sampled-data passivity
-(:mod:`hapstab.analysis.conditions.passivity`). Angles ``theta`` are in rad/sample (theta = w T).
+Shared by the positive-real test (:mod:`~hapstab.analysis.conditions.positive_real`),
+the circle criterion (:mod:`~hapstab.analysis.conditions.circle`) and sampled-data
+passivity (:mod:`~hapstab.analysis.conditions.passivity`). Angles ``theta`` are in
+rad/sample (theta = w T).
 """
 
 from __future__ import annotations

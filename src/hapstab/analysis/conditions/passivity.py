@@ -213,9 +213,9 @@ def critical_stiffness_passivity(loop: HapticLoop | TeleoperationLoop,
     """Largest K for which the sampled-data device + controller is passive.
 
     The passivity matrix is affine in K, so K_max is the minimum over w of its
-    PSD limit (see :func:`hapstab.frequency.psd_limit`), on a dense grid refined
-    by golden section. At n = 0 this is exactly eq. (1): ``K_max = 2(b - |B|)/T``,
-    for either sign of B. Negative virtual damping is handled like any other: for
+    PSD limit (see :func:`~hapstab.analysis.conditions.frequency_grid.psd_limit`), on a
+    dense grid refined by golden section. At n = 0 this is exactly eq. (1):
+    ``K_max = 2(b - |B|)/T``, for either sign of B. Negative virtual damping is handled like any other: for
     B <= 0 the limit binds at w -> 0 and equals eq. (18), ``(b + B)/(T/2 + t_d)``;
     when the device damping does not cover it (e.g. ``B < -b``) K_max = 0 and the
     reason says how much damping is missing at K = 0.

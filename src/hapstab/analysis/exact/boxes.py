@@ -22,7 +22,9 @@ from hapstab.engine.discs import EPS_OP
 from hapstab.engine.frequency import LoopResponse
 from hapstab.tolerances import DIVISOR_FLOOR, NEWTON_ANGLE_STEP
 
-__all__ = ["Cells", "Found", "THETA_FLOOR", "U_FLOOR", "U_LO", "U_HI"]
+__all__ = ["Cells", "Found", "THETA_FLOOR", "U_FLOOR", "U_LO", "U_HI", "initial_cells",
+           "at_theta_floor", "split_cells", "disc_mul", "disc_quadratic", "trim_boxes",
+           "classify_boxes", "krawczyk", "estimate_lowest", "polish_boxes"]
 
 #: The analysed range of the dimensionless stiffness u = K T^2 / m (m the lightest
 #: port's mass): below 1e-14 the loop is the continuous one to 1e-14 and nothing
@@ -113,7 +115,7 @@ def _half(j, sl: slice):
     return type(j)(j.vc[sl], j.vr[sl], j.dc[sl], j.dr[sl])
 
 
-def _initial_cells(resp: LoopResponse, items: np.ndarray, turn: float = 1.2
+def initial_cells(resp: LoopResponse, items: np.ndarray, turn: float = 1.2
                    ) -> tuple[np.ndarray, ...]:
     """A uniform partition of [0, pi] in which the delay's phase turns by at most
     ``turn`` rad per cell; end cells are centred on 0 and pi. Only the cost depends
@@ -131,7 +133,7 @@ def _initial_cells(resp: LoopResponse, items: np.ndarray, turn: float = 1.2
     return it, np.tile(th, items.size), np.tile(rho, items.size), np.tile(kind, items.size)
 
 
-def _theta_floor(c: Cells, cell: np.ndarray) -> np.ndarray:
+def at_theta_floor(c: Cells, cell: np.ndarray) -> np.ndarray:
     """Cells that cannot be split further: theta is stored with a relative error of
     one unit round-off, so inner cells stop at THETA_FLOOR relative to theta; the
     end cell at 0 is exact down to underflow; the one at pi to THETA_FLOOR * pi."""
@@ -142,7 +144,7 @@ def _theta_floor(c: Cells, cell: np.ndarray) -> np.ndarray:
     return rho <= lim
 
 
-def _split_cells(c: Cells, idx: np.ndarray) -> tuple[np.ndarray, ...]:
+def split_cells(c: Cells, idx: np.ndarray) -> tuple[np.ndarray, ...]:
     """Children (item, th, rho, kind) of cells idx: two per cell."""
     th, rho, kind, item = c.th[idx], c.rho[idx], c.kind[idx], c.item[idx]
     h = rho / 2
@@ -160,16 +162,32 @@ def _split_cells(c: Cells, idx: np.ndarray) -> tuple[np.ndarray, ...]:
 
 
 # ------------------------------------------------------------------- disc algebra
-def _dmul(ac, ar, bc, br):
+def disc_mul(ac, ar, bc, br):
+    """Disc enclosure of the product of two complex discs, with the rounding of the
+    product.
+
+    Parameters
+    ----------
+    ac, ar : array_like
+        The first disc's centre (complex) and radius.
+    bc, br : array_like
+        The second disc's centre (complex) and radius.
+
+    Returns
+    -------
+    tuple of ndarray
+        The product's centre ``ac * bc`` and a radius that holds every product of a
+        point of each disc, plus one rounding of the centre (``EPS_OP``).
+    """
     aa, ba = np.abs(ac), np.abs(bc)
     return ac * bc, aa * br + ar * ba + ar * br + EPS_OP * aa * ba
 
 
-def _dpoly(c: np.ndarray, r: np.ndarray, uc: np.ndarray, ur: np.ndarray):
+def disc_quadratic(c: np.ndarray, r: np.ndarray, uc: np.ndarray, ur: np.ndarray):
     """Disc enclosure of c0 + c1 u + c2 u^2 over the real disc (uc, ur)."""
     ac, ar = c[2], r[2]
     for deg in (1, 0):
-        ac, ar = _dmul(ac, ar, uc, ur)
+        ac, ar = disc_mul(ac, ar, uc, ur)
         ar = ar + r[deg] + EPS_OP * (np.abs(ac) + np.abs(c[deg]))
         ac = ac + c[deg]
     return ac, ar
@@ -198,7 +216,7 @@ def _quad_roots(a0: np.ndarray, a1: np.ndarray, a2: np.ndarray) -> tuple[np.ndar
     return r1, r2
 
 
-def _trim(c: Cells, cell: np.ndarray, ua: np.ndarray, ub: np.ndarray
+def trim_boxes(c: Cells, cell: np.ndarray, ua: np.ndarray, ub: np.ndarray
           ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The parts of each box's u-interval where a zero of F may lie, exactly in u.
 
@@ -287,39 +305,39 @@ def _running_max(r: np.ndarray, b: np.ndarray) -> np.ndarray:
     return b[order[key - g * b.size]]
 
 
-def _box_test(c: Cells, cell: np.ndarray, ua: np.ndarray, ub: np.ndarray):
+def classify_boxes(c: Cells, cell: np.ndarray, ua: np.ndarray, ub: np.ndarray):
     """Classify boxes: 0 excluded, 1 one zero (Krawczyk), 2 split. Also returns the
     contributions of theta and u to the enclosure radius (which to split)."""
     uc, ur = 0.5 * (ua + ub), 0.5 * (ub - ua)
     g = lambda a: a[:, cell]  # noqa: E731
     vc, vr, dc, dr = g(c.vc), g(c.vr), g(c.dc), g(c.dr)
-    fc, fr = _dpoly(vc, vr, uc, ur)
+    fc, fr = disc_quadratic(vc, vr, uc, ur)
     status = np.full(cell.size, 2)
     status[np.abs(fc) > fr] = 0
     # Jacobian enclosures over the box
-    tc, tr = _dpoly(dc, dr, uc, ur)                              # F_theta
-    u2c, u2r = _dmul(vc[2], vr[2], 2 * uc, 2 * ur)
+    tc, tr = disc_quadratic(dc, dr, uc, ur)                      # F_theta
+    u2c, u2r = disc_mul(vc[2], vr[2], 2 * uc, 2 * ur)
     kc, kr = vc[1] + u2c, vr[1] + u2r + EPS_OP * (np.abs(vc[1]) + np.abs(u2c))   # F_u
     rho = c.rho[cell]
     w_theta, w_u = rho * (np.abs(tc) + tr), ur * (np.abs(kc) + kr)
     live = np.flatnonzero(status == 2)
     if live.size:
-        status[live] = _krawczyk(c, cell[live], uc[live], ur[live], rho[live],
+        status[live] = krawczyk(c, cell[live], uc[live], ur[live], rho[live],
                                  tc[live], tr[live], kc[live], kr[live])
     # the error of F at the box's centre (rounding and the coefficients' own error):
     # once the box's extent contributes less than that, splitting cannot decide it
-    _, noise = _dpoly(c.pc[:, cell], c.pr[:, cell], uc, np.zeros_like(uc))
+    _, noise = disc_quadratic(c.pc[:, cell], c.pr[:, cell], uc, np.zeros_like(uc))
     return status, w_theta, w_u, np.abs(fc), noise
 
 
-def _krawczyk(c: Cells, cell, uc, ur, rho, tc, tr, kc, kr, image: bool = False) -> Any:
+def krawczyk(c: Cells, cell, uc, ur, rho, tc, tr, kc, kr, image: bool = False) -> Any:
     """1 where the Krawczyk operator maps the box into its interior (exactly one
     zero), 0 where it misses the box (no zero), else 2. With ``image``, also the
     image's shift and half-width per coordinate (theta, u): every zero in the box
     lies in ``centre - shift +- half``."""
     z = np.zeros(uc.shape)
     pc, pr, pd = c.pc[:, cell], c.pr[:, cell], c.pd[:, cell]
-    f, frad = _dpoly(pc, pr, uc, z)                              # F at the centre
+    f, frad = disc_quadratic(pc, pr, uc, z)                      # F at the centre
     ft = pd[0] + uc * (pd[1] + uc * pd[2])                       # F_theta at the centre
     fu = pc[1] + 2 * uc * pc[2]                                  # F_u at the centre
     a, b, cc, d = ft.real, fu.real, ft.imag, fu.imag             # J = [[a, b], [cc, d]]
@@ -352,7 +370,7 @@ def _krawczyk(c: Cells, cell, uc, ur, rho, tc, tr, kc, kr, image: bool = False) 
     return out
 
 
-def _estimate_lowest(c: Cells, cells: np.ndarray, L: int) -> np.ndarray:
+def estimate_lowest(c: Cells, cells: np.ndarray, L: int) -> np.ndarray:
     """Per item, 1.05 times the lowest positive u that is a nearly real root of
     F(theta_m, u) at some cell centre (inf if none): a guess, never trusted."""
     p0, p1, p2 = c.pc[0, cells], c.pc[1, cells], c.pc[2, cells]
@@ -367,7 +385,7 @@ def _estimate_lowest(c: Cells, cells: np.ndarray, L: int) -> np.ndarray:
     return est
 
 
-def _polish(resp: LoopResponse, c: Cells, cell: np.ndarray, ua: np.ndarray, ub: np.ndarray
+def polish_boxes(resp: LoopResponse, c: Cells, cell: np.ndarray, ua: np.ndarray, ub: np.ndarray
             ) -> list[tuple[float, float, int]]:
     """Newton's method inside boxes proved to hold exactly one zero: (u, theta, direction).
 

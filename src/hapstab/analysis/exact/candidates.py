@@ -36,7 +36,7 @@ from typing import Any
 import numpy as np
 
 from hapstab.analysis.exact.boxes import U_HI, U_LO
-from hapstab.analysis.exact.counts import _classify
+from hapstab.analysis.exact.counts import item_stable_set
 from hapstab.analysis.exact.stable_set import StableSet
 from hapstab.engine.frequency import LoopResponse
 from hapstab.errors import AnalysisError
@@ -273,7 +273,7 @@ def candidate_set(resp: LoopResponse, i: int, full: bool) -> StableSet | None:
     if anchor < 0:
         return None
     try:
-        ss = _classify(resp, i, anchor, cross, [], full, None, False)
+        ss = item_stable_set(resp, i, anchor, cross, [], full, None, False)
     except AnalysisError:
         return None
     if full and not _counts_agree(resp, i, th, c, ss):

@@ -1,8 +1,9 @@
 """Exact stability and exact critical stiffness of the sampled-data loop.
 
 ``exact_critical_stiffness(loop)`` finds every K at which a pole reaches |z| = 1
-(:mod:`hapstab.crossings`: certified branch and prune on the loop's characteristic
-function with the delays as exact phases, :mod:`hapstab.loopfreq`) and the stable
+(:mod:`~hapstab.analysis.exact.crossings`: certified branch and prune on the loop's
+characteristic function with the delays as exact phases,
+:mod:`~hapstab.engine.frequency`) and the stable
 set in K. ``stability(loop)`` counts the poles outside the circle by the argument
 principle, certified the same way, and reports the dominant pole (eigenvalues of
 the closed-loop matrix, polished on the characteristic function). Rigid-body modes
@@ -29,7 +30,8 @@ from hapstab.models.parts import friction_note
 from hapstab.results import CriticalStiffnessResult, StabilityResult
 from hapstab.tolerances import NEWTON_ANGLE_STEP, POLE_ON_CIRCLE
 
-__all__ = ["stability", "exact_critical_stiffness", "exact_kmax_batch"]
+__all__ = ["stability", "exact_critical_stiffness", "exact_kmax_batch",
+           "critical_stiffness_result"]
 
 #: A polished dominant pole with ||z| - 1| below this is on the circle
 #: (:data:`hapstab.tolerances.POLE_ON_CIRCLE`, with its reason).
@@ -250,7 +252,7 @@ def exact_critical_stiffness(loop: HapticLoop | TeleoperationLoop, *,
         If the controller is not a spring-damper.
     """
     res = exact_kmax_batch(loop, certify=certify)[0]
-    return _to_result(res, loop.period, loop.delay_in_samples)
+    return critical_stiffness_result(res, loop.period, loop.delay_in_samples)
 
 
 def _zero_reason(res: StableSet) -> str:
@@ -276,7 +278,25 @@ def _zero_reason(res: StableSet) -> str:
             "and terminations alone destabilise the loop)")
 
 
-def _to_result(res: StableSet, T: float, n: int | float) -> CriticalStiffnessResult:
+def critical_stiffness_result(res: StableSet, T: float, n: int | float
+                              ) -> CriticalStiffnessResult:
+    """The exact analysis's answer for one loop, from its stable set.
+
+    Parameters
+    ----------
+    res : StableSet
+        The loop's stable set in K (with its ball proof, if any).
+    T : float
+        The sampling period (s): the crossing's frequency is theta / (2 pi T).
+    n : int or float
+        The delay in samples, reported as given.
+
+    Returns
+    -------
+    CriticalStiffnessResult
+        K_max, the stable intervals, the reason in words and the details (rigid-body
+        modes, uncertain intervals, the proof and its certificate when there is one).
+    """
     kmax, th = res.kmax, res.theta
     freq = th / (2 * math.pi * T) if np.isfinite(th) else math.nan
     if kmax == 0.0:

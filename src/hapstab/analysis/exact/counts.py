@@ -1,6 +1,14 @@
 """The pole counts by the argument principle, and each item's stable set from its
-crossings and unresolved zones: the second half of
-:mod:`~hapstab.analysis.exact.crossings`.
+count at small K, its crossings and its unresolved zones.
+
+The number of poles outside the unit circle at a given K is Z_out = q - wind(det M)
+over [0, pi], certified cell by cell (each cell's enclosure excludes 0):
+:func:`winding` on cells of its own, :func:`winding_on_cells` on the cells a search of
+:mod:`~hapstab.analysis.exact.crossings` already built
+(:class:`~hapstab.analysis.exact.boxes.Cells`). Between counts, each crossing changes
+the count by its direction times its multiplicity: :func:`item_stable_set` turns the
+count at small K, the crossings (:func:`dedupe_crossings`) and the unresolved zones
+(:func:`crossing_events`) into the stable set in K.
 
 The counts a stable set needs besides the one at small K (after every unresolved
 zone, and the cross-checks in a few gaps) are independent per item and per K:
@@ -24,12 +32,21 @@ from typing import Any
 
 import numpy as np
 
-from hapstab.analysis.exact.boxes import THETA_FLOOR, U_HI, U_LO, _dpoly
+from hapstab.analysis.exact.boxes import (
+    THETA_FLOOR,
+    U_HI,
+    U_LO,
+    Cells,
+    at_theta_floor,
+    disc_quadratic,
+    split_cells,
+)
 from hapstab.analysis.exact.stable_set import StableSet, first_only, stable_set
 from hapstab.engine.frequency import LoopResponse
 from hapstab.errors import AnalysisError
 
-__all__ = ["winding", "gap_counts"]
+__all__ = ["winding", "winding_on_cells", "gap_counts", "crossing_events", "item_stable_set",
+           "dedupe_crossings"]
 
 #: Rows (requested counts times the cells of [0, pi]) per call of :func:`winding` when
 #: the counts of many items are gathered: a call holds some tens of complex arrays of
@@ -58,7 +75,7 @@ def winding(resp: LoopResponse, items: np.ndarray, u: np.ndarray) -> np.ndarray:
         pts = _coefficients(resp, items[row], mid, np.zeros_like(mid))
         cel = _coefficients(resp, items[row], mid, rho)
         vd = [cc.value_disc(rho, p) for cc, p in zip(cel, pts, strict=True)]
-        fc, fr = _dpoly(np.array([v[0] for v in vd]), np.array([v[1] for v in vd]), u[row],
+        fc, fr = disc_quadratic(np.array([v[0] for v in vd]), np.array([v[1] for v in vd]), u[row],
                         np.zeros(row.size))
         ok = np.abs(fc) > fr
         done_a.append(a[ok])
@@ -83,8 +100,59 @@ def winding(resp: LoopResponse, items: np.ndarray, u: np.ndarray) -> np.ndarray:
     np.add.at(total, R, inc)
     turns = total / np.pi
     out = resp.q - np.round(turns).astype(int)
-    bad = bad_rows | (np.abs(turns - np.round(turns)) > 1e-6)   # whole to ~1e-15: _winding_cells
+    bad = bad_rows | (np.abs(turns - np.round(turns)) > 1e-6)  # whole to ~1e-15: winding_on_cells
     return np.where(bad, -1, out)
+
+
+def winding_on_cells(resp: LoopResponse, c: Cells, leaves: np.ndarray, u: np.ndarray,
+                   robust: bool = False) -> np.ndarray:
+    """:func:`winding` at u[item] on cells already built (a partition of [0, pi] per
+    item, centred cells, the ends centred on 0 and pi): cells whose disc holds 0 at u
+    are split. Between the centres of neighbouring cells the argument changes by
+    Arg(w / F_i) + Arg(F_(i+1) / w) for any w in both discs (each disc excludes 0 and
+    holds the value at the shared edge), so no further evaluation is needed. ``robust``
+    (a family of loops): a cell whose centre's own enclosure holds 0 is not split (no
+    split can exclude 0 there), and its item's count is not certified."""
+    L = resp.size
+    bad_item = np.zeros(L, bool)
+    kids = leaves[:0]
+    for _ in range(200):
+        it = c.item[leaves]
+        fc, fr = disc_quadratic(c.vc[:, leaves], c.vr[:, leaves], u[it], np.zeros(leaves.size))
+        holds0 = ~(np.abs(fc) > fr)
+        if not holds0.any():
+            break
+        floor = holds0 & at_theta_floor(c, leaves)
+        if robust:
+            pc, pr = disc_quadratic(c.pc[:, leaves], c.pr[:, leaves], u[it], np.zeros(leaves.size))
+            floor |= holds0 & ~(np.abs(pc) > pr)
+        bad_item[it[floor]] = True
+        split = leaves[holds0 & ~floor]
+        keep = leaves[~holds0 | floor]
+        if not split.size:
+            break
+        kids = c.add(resp, *split_cells(c, split))
+        leaves = np.concatenate([keep, kids])
+    else:       # the items still splitting (not every item of a batch)
+        bad_item[c.item[kids]] = True
+    it = c.item[leaves]
+    order = np.lexsort((c.th[leaves], it))
+    leaves, it = leaves[order], it[order]
+    fc, fr = disc_quadratic(c.vc[:, leaves], c.vr[:, leaves], u[it], np.zeros(leaves.size))
+    F, _ = disc_quadratic(c.pc[:, leaves], c.pr[:, leaves], u[it], np.zeros(leaves.size))
+    same = it[1:] == it[:-1]
+    ri, rj = fr[:-1], fr[1:]
+    with np.errstate(all="ignore"):
+        t = np.where(ri + rj > 0, ri / (ri + rj), 0.5)
+        w = fc[:-1] + (fc[1:] - fc[:-1]) * t
+        inc = np.angle(w / F[:-1]) + np.angle(F[1:] / w)
+    total = np.zeros(L)
+    np.add.at(total, it[:-1][same], inc[same])
+    turns = total / np.pi
+    # F is real at theta = 0 and pi, so the turns are whole up to the rounding of the
+    # end values' arguments (~1e-15); 1e-6 off means something is wrong: not certified
+    bad = bad_item | ~np.isfinite(turns) | (np.abs(turns - np.round(turns)) > 1e-6)
+    return np.where(bad, -1, resp.q - np.round(np.where(np.isfinite(turns), turns, 0)).astype(int))
 
 
 def _coefficients(resp: LoopResponse, it: np.ndarray, th: np.ndarray, rho: np.ndarray) -> list:
@@ -116,7 +184,7 @@ def gap_counts(resp: LoopResponse, anchor: np.ndarray, events: Sequence[list[Any
     anchor : (L,) array of int
         Poles outside at U_LO per item (-1: not certified; such an item needs none).
     events : list of list
-        Each item's events (:func:`_events`).
+        Each item's events (:func:`crossing_events`).
     check : (L,) array of bool, optional
         Items whose counts :func:`_verify` cross-checks (default all).
 
@@ -174,7 +242,7 @@ def _verify_points(events: list[Any]) -> tuple[list[int], list[float]]:
     return gaps, us
 
 
-def _events(cross, unsure) -> tuple[list[tuple[float, float]], list[Any]]:
+def crossing_events(cross, unsure) -> tuple[list[tuple[float, float]], list[Any]]:
     """The merged unresolved zones and the sorted events: crossings outside the zones
     (a crossing inside one is part of it: the count after the zone comes from the
     argument principle above it, which accounts for all it holds) and the zones."""
@@ -185,14 +253,14 @@ def _events(cross, unsure) -> tuple[list[tuple[float, float]], list[Any]]:
     return unc, events
 
 
-def _classify(resp: LoopResponse, i: int, anchor: int, cross, unsure, full: bool,
+def item_stable_set(resp: LoopResponse, i: int, anchor: int, cross, unsure, full: bool,
               known: Known | None = None, check: bool = True) -> StableSet:
     """Item i's stable set from the count of poles outside at U_LO (``anchor``, -1:
     not certified), its crossings and its unresolved zones; ``known``: counts
     already computed (:func:`gap_counts`); ``check``: cross-check the counts from
     the crossings' directions by the argument principle (:func:`_verify`)."""
     s = float(resp.scale[i])
-    _unc, events = _events(cross, unsure)
+    _unc, events = crossing_events(cross, unsure)
     base: dict[str, Any] = {"rigid": resp.rigid, "outside_small_K": anchor,
                             "events": tuple((a * s, b * s, t, d, m) for a, b, t, d, m in events)}
     if anchor < 0:
@@ -244,7 +312,8 @@ def _verify(resp: LoopResponse, i: int, events, counts, known: Known | None = No
                                 f"K = {us[gaps.index(g)] * resp.scale[i]:.6g}; please report this loop")
 
 
-def _dedupe(cross: list[tuple[float, float, int, int]]) -> list[tuple[float, float, int, int]]:
+def dedupe_crossings(cross: list[tuple[float, float, int, int]]
+                     ) -> list[tuple[float, float, int, int]]:
     """A safety net: one zero proved in two boxes would be polished by Newton's method
     to the same point (to rounding), and is one crossing. Two distinct crossings are
     never this close (the Krawczyk boxes that isolate them are disjoint)."""

@@ -3,9 +3,9 @@ which a closed-loop pole is on |z| = 1, and the stable set in K.
 
 A pole is on the unit circle at (theta, K) exactly where the characteristic
 function det M(e^{j theta}, K) = F0 + u F1 + u^2 F2 vanishes (u = K / scale; see
-:mod:`hapstab.loopfreq`). The set of such points in the box
+:mod:`~hapstab.engine.frequency`). The set of such points in the box
 theta in [0, pi] x u in [U_LO, U_HI] is found by branch and prune on
-boxes (theta-cell x u-interval) with verified enclosures (:mod:`hapstab.discs`):
+boxes (theta-cell x u-interval) with verified enclosures (:mod:`~hapstab.engine.discs`):
 
 * **exclusion** -- if the enclosure of F over a box does not contain 0, no
   crossing is in the box;
@@ -53,21 +53,27 @@ from hapstab.analysis.exact.boxes import (
     U_LO,
     Cells,
     Found,
-    _box_test,
-    _dpoly,
-    _estimate_lowest,
-    _initial_cells,
-    _polish,
-    _split_cells,
-    _theta_floor,
-    _trim,
+    at_theta_floor,
+    classify_boxes,
+    estimate_lowest,
+    initial_cells,
+    polish_boxes,
+    split_cells,
+    trim_boxes,
 )
-from hapstab.analysis.exact.counts import _classify, _dedupe, _events, gap_counts, winding
+from hapstab.analysis.exact.counts import (
+    crossing_events,
+    dedupe_crossings,
+    gap_counts,
+    item_stable_set,
+    winding,
+    winding_on_cells,
+)
 from hapstab.analysis.exact.stable_set import StableSet
 from hapstab.engine.frequency import LoopResponse
 from hapstab.errors import AnalysisError
 
-__all__ = ["analyse", "winding", "U_LO", "U_HI", "_classify", "_dedupe"]
+__all__ = ["analyse", "winding", "branch_and_prune", "U_LO", "U_HI"]
 
 #: Phase turn of the delay per first cell (rad): the full analysis needs every crossing
 #: and starts fine; for K_max alone (small K, where the delayed part of F is small)
@@ -84,7 +90,7 @@ FAST_PORTS = 2
 
 @dataclass
 class _Search:
-    """The state of one branch-and-prune search (:func:`_boxes`)."""
+    """The state of one branch-and-prune search (:func:`branch_and_prune`)."""
 
     resp: LoopResponse
     c: Cells
@@ -101,7 +107,7 @@ class _Search:
     robust: bool = False
 
 
-def _boxes(resp: LoopResponse, items: np.ndarray, u_cap: np.ndarray, polish: bool = True,
+def branch_and_prune(resp: LoopResponse, items: np.ndarray, u_cap: np.ndarray, polish: bool = True,
            estimate: bool = True, start: tuple[Cells, np.ndarray] | None = None,
            robust: bool = False) -> Found:
     """Branch and prune over (theta, u) for the given items (see module doc).
@@ -115,7 +121,7 @@ def _boxes(resp: LoopResponse, items: np.ndarray, u_cap: np.ndarray, polish: boo
     L = resp.size
     if start is None:
         c = Cells()
-        cells = c.add(resp, *_initial_cells(resp, items))
+        cells = c.add(resp, *initial_cells(resp, items))
     else:
         c, cells = start
         cells = cells[np.isin(c.item[cells], items)]
@@ -130,7 +136,7 @@ def _boxes(resp: LoopResponse, items: np.ndarray, u_cap: np.ndarray, polish: boo
         # high-u boxes are never refined. A cap below the true lowest crossing finds
         # nothing; the boxes above it are then taken up, so the result does not
         # depend on the guess.
-        est = _estimate_lowest(c, cells, L)
+        est = estimate_lowest(c, cells, L)
         srch.guess = lowest_only & np.isfinite(est) & (est < srch.cap)
         srch.cap = np.where(srch.guess, est, srch.cap)
     box: tuple[np.ndarray, np.ndarray, np.ndarray] | None = (
@@ -177,7 +183,7 @@ def _round(srch: _Search, cell: np.ndarray, ua: np.ndarray, ub: np.ndarray,
     crossings and the unresolved boxes; split the rest (the next round's boxes)."""
     cell, ua, ub = _below_caps(srch, cell, ua, ub)
     if cell.size:
-        cell, ua, ub = _trim(srch.c, cell, ua, ub)
+        cell, ua, ub = trim_boxes(srch.c, cell, ua, ub)
     if not cell.size:
         return cell, ua, ub
     if cell.size > MAX_BOXES:
@@ -187,7 +193,7 @@ def _round(srch: _Search, cell: np.ndarray, ua: np.ndarray, ub: np.ndarray,
                             "can certify (a shorter period or delay may be; so may a mass, "
                             "damping or stiffness nearer a device's usual range, when the "
                             "loop's poles crowd z = 1 to within rounding)")
-    status, w_th, w_u, f_abs, noise = _box_test(srch.c, cell, ua, ub)
+    status, w_th, w_u, f_abs, noise = classify_boxes(srch.c, cell, ua, ub)
     one = np.flatnonzero(status == 1)
     if one.size:
         _record(srch, cell[one], ua[one], ub[one], polish)
@@ -203,7 +209,7 @@ def _record(srch: _Search, cell: np.ndarray, ua: np.ndarray, ub: np.ndarray,
             polish: bool) -> None:
     """Boxes proved to hold one crossing each: polish it, record it, lower the cap."""
     c = srch.c
-    res = _polish(srch.resp, c, cell, ua, ub) if polish or srch.robust else None
+    res = polish_boxes(srch.resp, c, cell, ua, ub) if polish or srch.robust else None
     for k in range(cell.size):
         i = int(c.item[cell[k]])
         u, t, dirn = res[k] if res is not None else (0.5 * (ua[k] + ub[k]), c.th[cell[k]], 0)
@@ -222,7 +228,7 @@ def _give_up(srch: _Search, cell: np.ndarray, ua: np.ndarray, ub: np.ndarray,
              ) -> tuple[np.ndarray, np.ndarray]:
     """Record the boxes no split can resolve as unsure; return which go on and,
     of those, which are split in theta."""
-    th_small = _theta_floor(srch.c, cell)
+    th_small = at_theta_floor(srch.c, cell)
     u_small = (ub - ua) <= U_FLOOR * ub
     # at the theta floor, splitting u cannot help once theta alone spans 0; nor
     # can any split once the box adds less than the error of F itself (the
@@ -241,7 +247,7 @@ def _give_up(srch: _Search, cell: np.ndarray, ua: np.ndarray, ub: np.ndarray,
         if srch.lowest_only[i]:
             srch.cap[i] = min(srch.cap[i], ua[k])
     go = ~stuck
-    # u is treated exactly by _trim, so splitting u only helps once theta cannot
+    # u is treated exactly by trim_boxes, so splitting u only helps once theta cannot
     return go, ~th_done[go]
 
 
@@ -255,64 +261,12 @@ def _split(srch: _Search, cell: np.ndarray, ua: np.ndarray, ub: np.ndarray,
     st = np.flatnonzero(split_th)
     if st.size:
         parents, inv = np.unique(cell[st], return_inverse=True)
-        kids = srch.c.add(srch.resp, *_split_cells(srch.c, parents))
+        kids = srch.c.add(srch.resp, *split_cells(srch.c, parents))
         left, right = kids[:parents.size], kids[parents.size:]
         new_cell += [left[inv], right[inv]]
         new_ua += [ua[st], ua[st]]
         new_ub += [ub[st], ub[st]]
     return np.concatenate(new_cell), np.concatenate(new_ua), np.concatenate(new_ub)
-
-
-# ------------------------------------------------------------------ the winding
-def _winding_cells(resp: LoopResponse, c: Cells, leaves: np.ndarray, u: np.ndarray,
-                   robust: bool = False) -> np.ndarray:
-    """:func:`winding` at u[item] on cells already built (a partition of [0, pi] per
-    item, centred cells, the ends centred on 0 and pi): cells whose disc holds 0 at u
-    are split. Between the centres of neighbouring cells the argument changes by
-    Arg(w / F_i) + Arg(F_(i+1) / w) for any w in both discs (each disc excludes 0 and
-    holds the value at the shared edge), so no further evaluation is needed. ``robust``
-    (a family of loops): a cell whose centre's own enclosure holds 0 is not split (no
-    split can exclude 0 there), and its item's count is not certified."""
-    L = resp.size
-    bad_item = np.zeros(L, bool)
-    kids = leaves[:0]
-    for _ in range(200):
-        it = c.item[leaves]
-        fc, fr = _dpoly(c.vc[:, leaves], c.vr[:, leaves], u[it], np.zeros(leaves.size))
-        holds0 = ~(np.abs(fc) > fr)
-        if not holds0.any():
-            break
-        floor = holds0 & _theta_floor(c, leaves)
-        if robust:
-            pc, pr = _dpoly(c.pc[:, leaves], c.pr[:, leaves], u[it], np.zeros(leaves.size))
-            floor |= holds0 & ~(np.abs(pc) > pr)
-        bad_item[it[floor]] = True
-        split = leaves[holds0 & ~floor]
-        keep = leaves[~holds0 | floor]
-        if not split.size:
-            break
-        kids = c.add(resp, *_split_cells(c, split))
-        leaves = np.concatenate([keep, kids])
-    else:       # the items still splitting (not every item of a batch)
-        bad_item[c.item[kids]] = True
-    it = c.item[leaves]
-    order = np.lexsort((c.th[leaves], it))
-    leaves, it = leaves[order], it[order]
-    fc, fr = _dpoly(c.vc[:, leaves], c.vr[:, leaves], u[it], np.zeros(leaves.size))
-    F, _ = _dpoly(c.pc[:, leaves], c.pr[:, leaves], u[it], np.zeros(leaves.size))
-    same = it[1:] == it[:-1]
-    ri, rj = fr[:-1], fr[1:]
-    with np.errstate(all="ignore"):
-        t = np.where(ri + rj > 0, ri / (ri + rj), 0.5)
-        w = fc[:-1] + (fc[1:] - fc[:-1]) * t
-        inc = np.angle(w / F[:-1]) + np.angle(F[1:] / w)
-    total = np.zeros(L)
-    np.add.at(total, it[:-1][same], inc[same])
-    turns = total / np.pi
-    # F is real at theta = 0 and pi, so the turns are whole up to the rounding of the
-    # end values' arguments (~1e-15); 1e-6 off means something is wrong: not certified
-    bad = bad_item | ~np.isfinite(turns) | (np.abs(turns - np.round(turns)) > 1e-6)
-    return np.where(bad, -1, resp.q - np.round(np.where(np.isfinite(turns), turns, 0)).astype(int))
 
 
 # ------------------------------------------------------------------ the analysis
@@ -349,24 +303,24 @@ def analyse(resp: LoopResponse, full: bool = True, proof: bool = False,
     L = resp.size
     items = np.arange(L)
     c = Cells()
-    first = c.add(resp, *_initial_cells(resp, items, TURN_FULL if full else TURN_KMAX))
-    anchor = _winding_cells(resp, c, first, np.full(L, U_LO))
+    first = c.add(resp, *initial_cells(resp, items, TURN_FULL if full else TURN_KMAX))
+    anchor = winding_on_cells(resp, c, first, np.full(L, U_LO))
     cap = np.full(L, np.inf if full else U_HI)
     need = items if full else items[anchor == 0]
-    found = _boxes(resp, need, np.where(np.isin(items, need), cap, -np.inf),
+    found = branch_and_prune(resp, need, np.where(np.isin(items, need), cap, -np.inf),
                    start=(c, first)) if need.size else \
         Found([[] for _ in range(L)], [[] for _ in range(L)])
-    cross = [_dedupe(found.cross[i]) for i in range(L)]
+    cross = [dedupe_crossings(found.cross[i]) for i in range(L)]
     # the float cross-check of the counts from the crossings' directions (a safety net
     # of this search: the directions are certified by the isolating boxes) is left to
     # the ball proof where one follows: it counts, in balls, every gap it claims
     check = np.array([not (proof and resp.params and resp.params[i] is not None)
                       for i in range(L)])
     # the counts the stable sets need, for every item in a few batched calls
-    known = gap_counts(resp, anchor, [_events(cross[i], found.unsure[i])[1] for i in range(L)],
-                       check) if full else None
-    sets = [_classify(resp, i, int(anchor[i]), cross[i], found.unsure[i], full, known,
-                      bool(check[i])) for i in range(L)]
+    known = gap_counts(resp, anchor, [crossing_events(cross[i], found.unsure[i])[1]
+                                      for i in range(L)], check) if full else None
+    sets = [item_stable_set(resp, i, int(anchor[i]), cross[i], found.unsure[i], full, known,
+                            bool(check[i])) for i in range(L)]
     if not proof or not any(p is not None for p in resp.params):
         return sets
     from hapstab.analysis.exact.proved import prove_sets

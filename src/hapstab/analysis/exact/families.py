@@ -30,8 +30,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hapstab.analysis.exact.boxes import U_HI, U_LO, Cells, _dmul, _dpoly, _krawczyk
-from hapstab.analysis.exact.crossings import TURN_KMAX, _boxes, _initial_cells, _winding_cells
+from hapstab.analysis.exact.boxes import (
+    U_HI,
+    U_LO,
+    Cells,
+    disc_mul,
+    disc_quadratic,
+    initial_cells,
+    krawczyk,
+)
+from hapstab.analysis.exact.counts import winding_on_cells
+from hapstab.analysis.exact.crossings import TURN_KMAX, branch_and_prune
 from hapstab.engine.discs import EPS_OP
 from hapstab.engine.frequency import LoopResponse
 
@@ -85,10 +94,10 @@ def first_events(resp: LoopResponse) -> tuple[list[FirstEvent], Cells]:
     L = resp.size
     items = np.arange(L)
     c = Cells()
-    first = c.add(resp, *_initial_cells(resp, items, TURN_KMAX))
-    anchor = _winding_cells(resp, c, first, np.full(L, U_LO), robust=True)
+    first = c.add(resp, *initial_cells(resp, items, TURN_KMAX))
+    anchor = winding_on_cells(resp, c, first, np.full(L, U_LO), robust=True)
     need = items[anchor == 0]
-    found = _boxes(resp, need, np.where(anchor == 0, U_HI, -np.inf), start=(c, first),
+    found = branch_and_prune(resp, need, np.where(anchor == 0, U_HI, -np.inf), start=(c, first),
                    robust=True) if need.size else None
     out = []
     todo = [(i, b) for i in range(L) if found is not None and anchor[i] == 0
@@ -154,10 +163,10 @@ def _krawczyk_image(c: Cells, cell: np.ndarray, uc: np.ndarray, ur: np.ndarray) 
     """The Krawczyk test and image of boxes (cells x [uc - ur, uc + ur])."""
     g = lambda a: a[:, cell]  # noqa: E731
     vc, vr, dc, dr = g(c.vc), g(c.vr), g(c.dc), g(c.dr)
-    tc, tr = _dpoly(dc, dr, uc, ur)                              # F_theta
-    u2c, u2r = _dmul(vc[2], vr[2], 2 * uc, 2 * ur)
+    tc, tr = disc_quadratic(dc, dr, uc, ur)                      # F_theta
+    u2c, u2r = disc_mul(vc[2], vr[2], 2 * uc, 2 * ur)
     kc, kr = vc[1] + u2c, vr[1] + u2r + EPS_OP * (np.abs(vc[1]) + np.abs(u2c))   # F_u
-    return _krawczyk(c, cell, uc, ur, c.rho[cell], tc, tr, kc, kr, image=True)
+    return krawczyk(c, cell, uc, ur, c.rho[cell], tc, tr, kc, kr, image=True)
 
 
 # ------------------------------------------------------------------ the gradient
@@ -193,9 +202,9 @@ def _discs(resp: LoopResponse, items: np.ndarray, th: np.ndarray, rho: np.ndarra
     uc, ur = 0.5 * (ua + ub), 0.5 * (ub - ua)
     g = lambda a: a[:, cell]  # noqa: E731
     vc, vr, dc, dr = g(c.vc), g(c.vr), g(c.dc), g(c.dr)
-    F = _dpoly(vc, vr, uc, ur)
-    Ft = _dpoly(dc, dr, uc, ur)
-    u2c, u2r = _dmul(vc[2], vr[2], 2 * uc, 2 * ur)
+    F = disc_quadratic(vc, vr, uc, ur)
+    Ft = disc_quadratic(dc, dr, uc, ur)
+    u2c, u2r = disc_mul(vc[2], vr[2], 2 * uc, 2 * ur)
     Fu = (vc[1] + u2c, vr[1] + u2r + EPS_OP * (np.abs(vc[1]) + np.abs(u2c)))
     return F, Ft, Fu
 

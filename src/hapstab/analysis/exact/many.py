@@ -28,7 +28,7 @@ import math
 from collections.abc import Sequence
 from typing import Any, Literal, overload
 
-from hapstab.analysis.exact.core import _to_result
+from hapstab.analysis.exact.core import critical_stiffness_result
 from hapstab.analysis.exact.crossings import analyse
 from hapstab.engine.frequency import (
     ResponsePlan,
@@ -223,7 +223,7 @@ def _analyse_batch(loops: Sequence[Any], members: list[tuple[int, ResponsePlan]]
         return None
     for (i, _), res in zip(members, sets, strict=True):
         loop = loops[i]
-        r = _to_result(res, loop.period, loop.delay_in_samples)
+        r = critical_stiffness_result(res, loop.period, loop.delay_in_samples)
         note = friction_note(loop)          # as critical_stiffness words it
         out[i] = dataclasses.replace(r, note=note) if note else r
     return None

@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from hapstab.analysis.exact.boxes import Cells, _dmul, _dpoly
+from hapstab.analysis.exact.boxes import Cells, disc_mul, disc_quadratic
 from hapstab.engine.discs import EPS_OP
 from hapstab.engine.frequency import LoopResponse
 
@@ -47,7 +47,7 @@ def _point(resp: LoopResponse, items, th, kind, u) -> tuple:
     c = Cells()
     cell = c.add(resp, items, th, np.zeros_like(th), kind)
     z = np.zeros_like(u)
-    F = _dpoly(c.pc[:, cell], c.pr[:, cell], u, z)
+    F = disc_quadratic(c.pc[:, cell], c.pr[:, cell], u, z)
     Ft = c.pd[0, cell] + u * (c.pd[1, cell] + u * c.pd[2, cell])
     Fu = c.pc[1, cell] + 2 * u * c.pc[2, cell]
     return F, Ft, Fu
@@ -60,8 +60,8 @@ def _jacobian(resp: LoopResponse, items, th, rho, kind, ua, ub) -> tuple:
     cell = c.add(resp, items, th, rho, kind)
     uc, ur = 0.5 * (ua + ub), 0.5 * (ub - ua)
     vc, vr = c.vc[:, cell], c.vr[:, cell]
-    tc, tr = _dpoly(c.dc[:, cell], c.dr[:, cell], uc, ur)
-    u2c, u2r = _dmul(vc[2], vr[2], 2 * uc, 2 * ur)
+    tc, tr = disc_quadratic(c.dc[:, cell], c.dr[:, cell], uc, ur)
+    u2c, u2r = disc_mul(vc[2], vr[2], 2 * uc, 2 * ur)
     kc, kr = vc[1] + u2c, vr[1] + u2r + EPS_OP * (np.abs(vc[1]) + np.abs(u2c))
     return np.array([[tc.real, kc.real], [tc.imag, kc.imag]]), np.array([tr, kr])
 

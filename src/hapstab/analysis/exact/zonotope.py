@@ -36,8 +36,16 @@ from __future__ import annotations
 
 import numpy as np
 
-from hapstab.analysis.exact.boxes import THETA_FLOOR, U_FLOOR, U_LO, Cells, _dmul, _dpoly
-from hapstab.analysis.exact.crossings import TURN_KMAX, _initial_cells
+from hapstab.analysis.exact.boxes import (
+    THETA_FLOOR,
+    U_FLOOR,
+    U_LO,
+    Cells,
+    disc_mul,
+    disc_quadratic,
+    initial_cells,
+)
+from hapstab.analysis.exact.crossings import TURN_KMAX
 from hapstab.engine.discs import EPS_OP
 from hapstab.engine.frequency import LoopResponse
 
@@ -52,10 +60,10 @@ def _evaluate(c: Cells, cell: np.ndarray, ua: np.ndarray, ub: np.ndarray) -> tup
     """Discs of F over the boxes (cells x u-intervals) and at their centres, and the
     theta / u parts of the box disc's radius."""
     uc, ur = 0.5 * (ua + ub), 0.5 * (ub - ua)
-    box = _dpoly(c.vc[:, cell], c.vr[:, cell], uc, ur)
-    point = _dpoly(c.pc[:, cell], c.pr[:, cell], uc, np.zeros_like(uc))
-    tc, tr = _dpoly(c.dc[:, cell], c.dr[:, cell], uc, ur)
-    u2c, u2r = _dmul(c.vc[2, cell], c.vr[2, cell], 2 * uc, 2 * ur)
+    box = disc_quadratic(c.vc[:, cell], c.vr[:, cell], uc, ur)
+    point = disc_quadratic(c.pc[:, cell], c.pr[:, cell], uc, np.zeros_like(uc))
+    tc, tr = disc_quadratic(c.dc[:, cell], c.dr[:, cell], uc, ur)
+    u2c, u2r = disc_mul(c.vc[2, cell], c.vr[2, cell], 2 * uc, 2 * ur)
     kc = np.abs(c.vc[1, cell] + u2c) + c.vr[1, cell] + u2r
     return box, point, c.rho[cell] * (np.abs(tc) + tr), ur * kc
 
@@ -84,7 +92,7 @@ def _margin(fc: np.ndarray, fr: np.ndarray, gens: list[tuple[np.ndarray, np.ndar
 
 
 def _split_cells(cs: list[Cells], resps: list[LoopResponse], cell: np.ndarray) -> np.ndarray:
-    """Children of theta-cells (as :func:`hapstab.analysis.exact.boxes._split_cells`:
+    """Children of theta-cells (as :func:`hapstab.analysis.exact.boxes.split_cells`:
     an end cell [-rho, rho] around 0 or pi covers one side of it), added to every
     response's cells alike (same indices); returns the left children, then the right."""
     c = cs[0]
@@ -168,7 +176,7 @@ def family_floor(centre: LoopResponse, derivs: list[LoopResponse], half: np.ndar
     utols = np.broadcast_to(np.asarray(utol, float), (L,))
     resps = [centre, *derivs]
     cs = [Cells() for _ in resps]
-    init = _initial_cells(centre, np.arange(L), TURN_KMAX)
+    init = initial_cells(centre, np.arange(L), TURN_KMAX)
     cell = [ci.add(r, *init) for ci, r in zip(cs, resps, strict=True)][0]  # noqa: RUF015
     # u from U_LO to the cap in steps of a factor 4 at most (most are excluded at once)
     top = floor[cs[0].item[cell]]

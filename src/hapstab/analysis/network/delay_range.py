@@ -153,9 +153,9 @@ class DelayRangeResult(Result):
         -------
         matplotlib Axes
         """
-        from hapstab.plotting import _axes
+        from hapstab.plotting import axes_or_new
 
-        ax = _axes(ax)
+        ax = axes_or_new(ax)
         ax.plot(self.delays_samples, self.kmax, "o-", label="certified K_max")
         ax.plot([self.worst_delay_samples], [self.critical_stiffness], "r*", ms=12,
                 label="worst delay")

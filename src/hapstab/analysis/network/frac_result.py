@@ -139,9 +139,9 @@ class FractionalRangeResult(Result):
         -------
         matplotlib Axes
         """
-        from hapstab.plotting import _axes
+        from hapstab.plotting import axes_or_new
 
-        ax = _axes(ax)
+        ax = axes_or_new(ax)
         for i, s in enumerate(self.segments):
             ax.hlines(s.lower, s.whole + s.f_lo, s.whole + s.f_hi, colors="C0",
                       label="proved lower end" if i == 0 else None)

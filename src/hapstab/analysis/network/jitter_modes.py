@@ -46,12 +46,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from hapstab.analysis.network.jump import (
-    _layout,
-    _mode,
-    _source,
-    _term_name,
+    mode_matrices,
     networked_plant,
     rigid_householder,
+    source_row,
+    state_layout,
+    term_name,
 )
 from hapstab.errors import AnalysisError, ModelError
 
@@ -158,7 +158,7 @@ def jitter_modes(loop, lo: int, hi: int) -> JitterModes:
     deep = [(c, j, s, hi if is_net else d) for (c, j, s, d), is_net in zip(terms, net,
                                                                                strict=True)]
     none = [False] * len(terms)
-    lay = _layout(st, n, deep, none)
+    lay = state_layout(st, n, deep, none)
     parts = (Ad, Bd, pos, ratios, T)
 
     def mode(ds: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray]:
@@ -166,7 +166,7 @@ def jitter_modes(loop, lo: int, hi: int) -> JitterModes:
         for h, i in enumerate(nets):
             c, j, s, _ = terms[i]
             at[i] = (c, j, s, ds[h])
-        return _mode(st, lay, parts, at, none, 0)
+        return mode_matrices(st, lay, parts, at, none, 0)
 
     delays = tuple(itertools.product(range(lo, hi + 1), repeat=len(nets)))
     mats = [mode(ds) for ds in delays]
@@ -181,7 +181,7 @@ def jitter_modes(loop, lo: int, hi: int) -> JitterModes:
         a0, a1 = mode(up)
         col = lay.off_r[j] + lo                 # the register of x_j[k - lo - 1]
         B0[:, h], B1[:, h] = a0[:, col] - A0[0][:, col], a1[:, col] - A1[0][:, col]
-        C[h] = _source(lay, pos, j, lo) - _source(lay, pos, j, lo + 1)
+        C[h] = source_row(lay, pos, j, lo) - source_row(lay, pos, j, lo + 1)
     deflated = False
     if sys.rigid_modes:
         H = rigid_householder(A0, A1, lay, pos)
@@ -189,7 +189,7 @@ def jitter_modes(loop, lo: int, hi: int) -> JitterModes:
             A0, A1 = (H @ A0 @ H)[:, 1:, 1:], (H @ A1 @ H)[:, 1:, 1:]
             B0, B1, C = (H @ B0)[1:], (H @ B1)[1:], (C @ H)[:, 1:]
             deflated = True
-    names = tuple(_term_name(st, terms[i][0], terms[i][1]) for i in nets)
+    names = tuple(term_name(st, terms[i][0], terms[i][1]) for i in nets)
     return JitterModes(A0, A1, delays, B0, B1, C, 0, lo, hi, names, T, deflated)
 
 

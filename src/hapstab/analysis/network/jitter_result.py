@@ -176,9 +176,9 @@ class JitterResult(Result):
         -------
         matplotlib Axes
         """
-        from hapstab.plotting import _axes
+        from hapstab.plotting import axes_or_new
 
-        ax = _axes(ax)
+        ax = axes_or_new(ax)
         o = np.argsort(self.scan_K)
         ax.semilogx(self.scan_K[o], self.scan_rate[o], "o-", ms=3,
                     label="largest pattern growth per sample")

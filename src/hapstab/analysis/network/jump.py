@@ -40,7 +40,8 @@ from hapstab.engine.structure import LoopStructure, channel_ratios, structure_of
 from hapstab.engine.system import build
 from hapstab.errors import AnalysisError, ModelError, check_real
 
-__all__ = ["JumpSystem", "lossy_system", "loss_chain", "NetworkedPlant", "networked_plant"]
+__all__ = ["JumpSystem", "lossy_system", "loss_chain", "NetworkedPlant", "networked_plant",
+           "StateLayout", "state_layout", "source_row", "mode_matrices", "term_name"]
 
 
 @dataclass(frozen=True)
@@ -200,7 +201,11 @@ def _networked(st: LoopStructure) -> list[tuple[int, int, float, int]]:
 
 
 @dataclass(frozen=True)
-class _Layout:
+class StateLayout:
+    """Where each part of a mode's state starts: the plant's ``n_plant`` states, then
+    each port's delay registers (from ``off_r[j]``), the held networked values (from
+    ``off_h``) and the controllers' previous errors (from ``off_e``); ``N`` in all."""
+
     n_plant: int
     off_r: list[int]          # first register of each port
     off_h: int                # first held value
@@ -208,7 +213,10 @@ class _Layout:
     N: int
 
 
-def _layout(st: LoopStructure, n_plant: int, terms: list, net: list[bool]) -> _Layout:
+def state_layout(st: LoopStructure, n_plant: int, terms: list, net: list[bool]) -> StateLayout:
+    """The state's layout for the structure ``st``: as many registers per port as its
+    deepest delay among ``terms`` (channel, port, gain, delay), one held value per
+    networked term (``net``) and one previous error per channel."""
     p = len(st.ports)
     depth = [0] * p
     for (_, j, _, d) in terms:
@@ -216,10 +224,10 @@ def _layout(st: LoopStructure, n_plant: int, terms: list, net: list[bool]) -> _L
     off_r = list(n_plant + np.concatenate([[0], np.cumsum(depth)]).astype(int))
     off_h = off_r[-1]
     off_e = off_h + sum(net)
-    return _Layout(n_plant, off_r, off_h, off_e, off_e + len(st.channels))
+    return StateLayout(n_plant, off_r, off_h, off_e, off_e + len(st.channels))
 
 
-def _source(lay: _Layout, pos: np.ndarray, j: int, d: int) -> np.ndarray:
+def source_row(lay: StateLayout, pos: np.ndarray, j: int, d: int) -> np.ndarray:
     """Row selecting x_j[k - d] from the state."""
     r = np.zeros(lay.N)
     if d == 0:
@@ -229,7 +237,7 @@ def _source(lay: _Layout, pos: np.ndarray, j: int, d: int) -> np.ndarray:
     return r
 
 
-def _mode(st: LoopStructure, lay: _Layout, parts: tuple, terms: list, net: list[bool],
+def mode_matrices(st: LoopStructure, lay: StateLayout, parts: tuple, terms: list, net: list[bool],
           lost: int) -> tuple[np.ndarray, np.ndarray]:
     """(A0_i, A1_i) of the mode whose lost terms are the set bits of ``lost``."""
     Ad, Bd, pos, ratios, T = parts
@@ -238,7 +246,7 @@ def _mode(st: LoopStructure, lay: _Layout, parts: tuple, terms: list, net: list[
     A0 = np.zeros((N, N))
     h = 0
     for (c, j, s, d), is_net in zip(terms, net, strict=True):
-        y = _source(lay, pos, j, d)
+        y = source_row(lay, pos, j, d)
         if is_net:
             if lost >> h & 1:
                 y = np.zeros(N)
@@ -259,13 +267,13 @@ def _mode(st: LoopStructure, lay: _Layout, parts: tuple, terms: list, net: list[
     for j in range(p):
         for step in range(lay.off_r[j + 1] - lay.off_r[j]):
             r = lay.off_r[j] + step
-            A0[r] = _source(lay, pos, j, step)    # x_j[k - step] is x_j[k+1 - (step + 1)]
+            A0[r] = source_row(lay, pos, j, step)    # x_j[k - step] is x_j[k+1 - (step + 1)]
     A1 = np.zeros((N, N))
     A1[:n] = -Bd @ F1
     return A0, A1
 
 
-def rigid_householder(A0: np.ndarray, A1: np.ndarray, lay: _Layout, pos: np.ndarray
+def rigid_householder(A0: np.ndarray, A1: np.ndarray, lay: StateLayout, pos: np.ndarray
                       ) -> np.ndarray | None:
     """The similarity H (H = H^T = H^-1) whose first column is the rigid-body mode (every
     position, register and held value 1, velocities and previous errors 0), when that is
@@ -287,7 +295,7 @@ def rigid_householder(A0: np.ndarray, A1: np.ndarray, lay: _Layout, pos: np.ndar
     return np.eye(lay.N) - 2.0 * np.outer(w, w) / (w @ w)       # H u = e1, H = H^T = H^-1
 
 
-def _deflate(A0: np.ndarray, A1: np.ndarray, lay: _Layout, pos: np.ndarray
+def _deflate(A0: np.ndarray, A1: np.ndarray, lay: StateLayout, pos: np.ndarray
              ) -> tuple[np.ndarray, np.ndarray, bool]:
     """Remove the rigid-body mode (:func:`rigid_householder`) by an exact similarity, as
     the exact core divides it out."""
@@ -316,9 +324,9 @@ def lossy_system(loop, loss: float, burst: float | None = None) -> JumpSystem:
     JumpSystem
     """
     st, ratios, sys, T, n, Ad, Bd, pos, terms, net = networked_plant(loop)
-    lay = _layout(st, n, terms, net)
+    lay = state_layout(st, n, terms, net)
     m = sum(net)
-    mats = [_mode(st, lay, (Ad, Bd, pos, ratios, T), terms, net, i) for i in range(2 ** m)]
+    mats = [mode_matrices(st, lay, (Ad, Bd, pos, ratios, T), terms, net, i) for i in range(2 ** m)]
     A0, A1 = np.array([a for a, _ in mats]), np.array([b for _, b in mats])
     deflated = False
     if sys.rigid_modes:
@@ -328,7 +336,7 @@ def lossy_system(loop, loss: float, burst: float | None = None) -> JumpSystem:
     for _ in range(m):
         Pi = np.kron(chain, Pi)                    # term t is bit t of the mode index
     stat = _stationary(Pi)
-    names = tuple(_term_name(st, c, j) for (c, j, _, _), is_net in zip(terms, net, strict=True)
+    names = tuple(term_name(st, c, j) for (c, j, _, _), is_net in zip(terms, net, strict=True)
                   if is_net)
     return JumpSystem(A0, A1, Pi, stat, names, T, deflated)
 
@@ -339,6 +347,8 @@ def _stationary(Pi: np.ndarray) -> np.ndarray:
     return v / v.sum()
 
 
-def _term_name(st: LoopStructure, c: int, j: int) -> str:
+def term_name(st: LoopStructure, c: int, j: int) -> str:
+    """The words for channel c's term in port j's position: ``"device position"``, or
+    ``"slave -> master"`` when it crosses from one port to another."""
     src, dst = st.ports[j].name, st.ports[st.channels[c].port].name
     return f"{src} position" if src == dst else f"{src} -> {dst}"

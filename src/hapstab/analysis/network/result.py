@@ -141,9 +141,9 @@ class LossStiffnessResult(Result):
         -------
         matplotlib Axes
         """
-        from hapstab.plotting import _axes
+        from hapstab.plotting import axes_or_new
 
-        ax = _axes(ax)
+        ax = axes_or_new(ax)
         ax.plot(self.scan_K, self.scan_rho, "o-", ms=3, label="rho (second moment)")
         ax.axhline(1.0, color="k", lw=0.8)
         if math.isfinite(self.critical_stiffness) and self.critical_stiffness > 0:
@@ -208,9 +208,9 @@ class LossCurveResult(Result):
         -------
         matplotlib Axes
         """
-        from hapstab.plotting import _axes
+        from hapstab.plotting import axes_or_new
 
-        ax = _axes(ax)
+        ax = axes_or_new(ax)
         ax.plot(self.losses, self.critical_stiffness, "o-", label="mean-square K_max")
         ax.set_xlabel("packet loss P")
         ax.set_ylabel("K_max (N/m)")
