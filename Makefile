@@ -48,7 +48,7 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_network_all.py
 
 clean:
-	rm -rf $(VENV) out .pytest_cache .hypothesis
+	rm -rf $(VENV) out .pytest_cache .hypothesis docs/_build docs/gallery docs/reference/generated
 
 # the documentation site (docs/): offline, warnings (unresolved references included) are errors
 .PHONY: docs

@@ -2,7 +2,11 @@
 
 from __future__ import annotations
 
+import os
 import re
+import shutil
+
+from sphinx_gallery.scrapers import figure_rst
 
 import hapstab
 
@@ -16,9 +20,11 @@ extensions = [
     "sphinx.ext.autosummary",
     "numpydoc",
     "sphinx_click",
+    "sphinx_gallery.gen_gallery",
 ]
 source_suffix = {".md": "markdown", ".rst": "restructuredtext"}
-exclude_patterns = ["_build", "reference/generated/*.md"]
+exclude_patterns = ["_build", "reference/generated/*.md", "gallery/*.ipynb",
+                    "gallery/*.py", "gallery/*.zip", "gallery/*.md5"]
 html_theme = "furo"
 html_title = "hapstab"
 # plain text unless a block names its language (```python, ```toml): console sessions,
@@ -51,6 +57,68 @@ nitpick_ignore_regex = [
     (r"py:.*", r"(numpy|np|scipy|matplotlib|click|control|pyarrow|dask|mpmath|flint)(\..*)?"),
     (r"py:.*", r"(float|int|str|bool|bytes|dict|list|tuple|object|callable|None|Exception)"),
 ]
+
+
+# the gallery: the scripts of examples/ run at build time (sphinx-gallery), each writing its
+# figures with save_plot into FIGURES (its first argument); the scraper below shows the
+# figures a block wrote right after that block's code and printed output
+DOCS = os.path.dirname(os.path.abspath(__file__))
+FIGURES = os.path.join(DOCS, "_build", "gallery-figures")
+
+
+class _SavedFigures:
+    """sphinx-gallery's image scraper for figures written to files (save_plot closes its
+    figure, so the matplotlib scraper would find none): the PNGs that appeared or changed
+    in :data:`FIGURES` while a block ran, in the order they were written."""
+
+    def __init__(self) -> None:
+        self.seen: dict[str, float] = {}
+
+    def __repr__(self) -> str:        # sphinx-gallery caches its configuration by repr
+        return "SavedFigures"
+
+    def __call__(self, block, block_vars, gallery_conf) -> str:
+        if not os.path.isdir(FIGURES):
+            return ""
+        new = []
+        for name in os.listdir(FIGURES):
+            path = os.path.join(FIGURES, name)
+            mtime = os.path.getmtime(path)
+            if name.endswith(".png") and self.seen.get(path) != mtime:
+                self.seen[path] = mtime
+                new.append((mtime, path))
+        shown = []
+        for _, path in sorted(new):
+            target = next(block_vars["image_path_iterator"])
+            shutil.copyfile(path, target)
+            shown.append(target)
+        return figure_rst(shown, gallery_conf["src_dir"])
+
+
+def _figures_folder(gallery_conf, script_vars) -> list[str]:
+    """The example's command line: the folder its figures go to."""
+    os.makedirs(FIGURES, exist_ok=True)
+    return [FIGURES]
+
+
+# the gallery's configuration holds callables, which Sphinx cannot pickle to decide whether
+# a later build may reuse this one's environment: it rebuilds instead (what `make docs`
+# does anyway), so the warning that says so is not a problem of the docs
+suppress_warnings = ["config.cache"]
+
+sphinx_gallery_conf = {
+    "examples_dirs": os.path.join(DOCS, "..", "examples"),
+    "gallery_dirs": os.path.join(DOCS, "gallery"),
+    "filename_pattern": r"\.py$",              # run every example, not only plot_*.py
+    "image_scrapers": (_SavedFigures(),),
+    "reset_argv": _figures_folder,
+    "abort_on_example_error": True,           # a failing example fails the build
+    "download_all_examples": False,
+    "show_memory": False,
+    "remove_config_comments": True,
+    "within_subsection_order": "FileNameSortKey",
+    "write_computation_times": False,
+}
 
 
 def _resolve(name: str, module: str | None) -> bool:

@@ -1,4 +1,5 @@
-"""Position-error-based teleoperation over a network, step by step.
+"""Position-error-based teleoperation over a network, step by step
+===============================================================
 
 A light master and a heavier slave (0.3 kg / 1 kg), a hand on the master (0.5 kg,
 5 N*s/m, 500 N/m) and a stiff object at the slave (20,000 N/m), coupled by
@@ -23,7 +24,8 @@ from hapstab.plotting import save_plot
 out = sys.argv[1] if len(sys.argv) > 1 else os.path.join("out", "examples")
 os.makedirs(out, exist_ok=True)
 
-# -- 1. the teleoperator and its K_max ------------------------------------------------
+# %%
+# **1. the teleoperator and its K_max**
 loop = h.TeleoperationLoop(
     master=h.Device(0.3, 2.0), slave=h.Device(1.0, 5.0),
     operator=h.mass_spring_damper(0.5, 5.0, 500.0), environment=h.spring(20000.0),
@@ -31,7 +33,8 @@ loop = h.TeleoperationLoop(
 kmax = h.critical_stiffness(loop)
 print(f"1. K_max = {kmax.critical_stiffness:.1f} N/m with 5 ms each way: {kmax.reason}")
 
-# -- 2. against the one-way delay (milliseconds, fixed while T stays 1 ms) -------------
+# %%
+# **2. against the one-way delay (milliseconds, fixed while T stays 1 ms)**
 delays_s = [0.0, 0.002, 0.005, 0.010, 0.020]
 by_delay = h.boundary(loop, [1e-3], delays_s=delays_s)
 print("2. K_max (N/m) at one-way delays of " + ", ".join(f"{d * 1e3:g} ms" for d in delays_s)
@@ -42,7 +45,8 @@ print("   not monotone: a longer delay can move the crossing past the environmen
 rates = h.boundary(loop, [2.5e-4, 5e-4, 1e-3, 2e-3], delays_s=[0.005], axis="rate")
 save_plot(rates, os.path.join(out, "teleoperation_kmax_vs_rate.png"))
 
-# -- 3. the K-B region --------------------------------------------------------------
+# %%
+# **3. the K-B region**
 region = h.stability_region(loop, (0.0, 8000.0), (0.0, 60.0), resolution=80,
                             overlays=("passivity", "circle"))
 print(f"3. K_max at B = 0: {region.kmax()[0]:.0f} N/m; the largest in the window: "
@@ -51,7 +55,8 @@ print(f"3. K_max at B = 0: {region.kmax()[0]:.0f} N/m; the largest in the window
       "points differ")
 save_plot(region, os.path.join(out, "teleoperation_region.png"))
 
-# -- 4. a contact at 70 % of K_max ------------------------------------------------------
+# %%
+# **4. a contact at 70 % of K_max**
 run = h.simulate(loop.with_stiffness(0.7 * kmax.critical_stiffness), 4.0, force="step:1")
 v = run.verdict
 print(f"4. contact at 0.7 K_max: {v.verdict} ({v.behaviour}) -- {v.reason}")
