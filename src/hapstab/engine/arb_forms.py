@@ -136,11 +136,23 @@ def box_balls(kern: tuple, theta: Any, K: Any) -> tuple[Any, Any, Any, Any, Any,
     return P, Q, Fc + hh * Ft + kk * Fk, Fc, Ft, Fk
 
 
-def exclusion_test(kern: tuple, theta: Any, K: Any) -> tuple[str | None, float, float]:
+def _pk(c: list[Any], nz: tuple[bool, ...], K: Any) -> Any:
+    """:func:`poly_k` with exact zero coefficients (``nz`` False) skipped: the same ball
+    bit for bit, since Arb multiplies by an exact zero and adds one exactly (no
+    rounding, the radius unchanged)."""
+    if nz[2]:
+        return c[0] + K * (c[1] + K * c[2])
+    return c[0] + K * c[1] if nz[1] else c[0]
+
+
+def exclusion_test(kern: tuple, theta: Any, K: Any,
+                   nz: tuple | None = None) -> tuple[str | None, float, float]:
     """The tests a certificate names, in order, on the balls of :func:`box_balls`
     (each formed only when the test before it fails): ``"P"`` (|P| > |Q|), ``"Q"``
     (|Q| > |P|), ``"F"`` (0 not in det M's ball), ``"N"``
-    (:func:`preconditioned_excludes`). At the precision in force.
+    (:func:`preconditioned_excludes`). At the precision in force. ``nz``: the kernel's
+    :class:`~hapstab.engine.arb_kernel.KernelPolys` ``nonzero`` flags (terms that
+    are exact zeros are skipped: the same balls).
 
     Returns
     -------
@@ -153,16 +165,25 @@ def exclusion_test(kern: tuple, theta: Any, K: Any) -> tuple[str | None, float, 
     import flint
     acb, arb = flint.acb, flint.arb
     Pm, Qm, Fm, Pd, Qd, Fd = kern
+    zP, zQ, zF, zPd, zQd, zFd = nz or ((True,) * 3,) * 6
     Kc, km = acb(K), acb(K.mid())         # the same balls as box_balls
     hh, kk = acb(arb(0, theta.rad())), acb(arb(0, K.rad()))
-    P = poly_k(Pm, km) + hh * poly_k(Pd, Kc) + kk * dpoly_k(Pm, Kc)
-    Q = poly_k(Qm, km) + hh * poly_k(Qd, Kc) + kk * dpoly_k(Qm, Kc)
+    P, Q = _pk(Pm, zP, km), _pk(Qm, zQ, km)
+    # each term below is skipped only where box_balls' is an exact zero: the same ball
+    if any(zPd):
+        P = P + hh * _pk(Pd, zPd, Kc)
+    if zP[1] or zP[2]:
+        P = P + kk * (Pm[1] + 2 * Kc * Pm[2] if zP[2] else Pm[1])
+    if any(zQd):
+        Q = Q + hh * _pk(Qd, zQd, Kc)
+    if zQ[1] or zQ[2]:
+        Q = Q + kk * (Qm[1] + 2 * Kc * Qm[2] if zQ[2] else Qm[1])
     if P.abs_lower() > Q.abs_upper():
         return "P", 0.0, 0.0
     if Q.abs_lower() > P.abs_upper():
         return "Q", 0.0, 0.0
-    Ft, Fk = poly_k(Fd, Kc), dpoly_k(Fm, Kc)
-    Fc = poly_k(Fm, km)
+    Ft, Fc = _pk(Fd, zFd, Kc), _pk(Fm, zF, km)
+    Fk = Fm[1] + 2 * Kc * Fm[2] if zF[2] else Fm[1]
     if not (Fc + hh * Ft + kk * Fk).contains(0):
         return "F", 0.0, 0.0
     if preconditioned_excludes(Fc, Ft, Fk, theta.rad(), K.rad()):

@@ -86,9 +86,13 @@ K_TOP = 8
 HINT_MARGIN = 1e-6
 
 
-def box_status(al: ArbLoop, a: float, b: float, ka: float, kb: float) -> tuple[str | None, float]:
+def box_status(al: ArbLoop, a: float, b: float, ka: float, kb: float,
+               balls: dict | None = None) -> tuple[str | None, float]:
     """Whether det M has no zero on [a, b] x [ka, kb]; the reason, and the share of
-    the ball's width due to theta (to choose the split).
+    the ball's width due to theta (to choose the split). ``balls``: the angle balls
+    formed so far at the precision in force, by ends (the boxes of one piece of angles
+    at several K-ranges then share one ball object, and its kernel without comparing
+    balls).
 
     Returns
     -------
@@ -100,7 +104,12 @@ def box_status(al: ArbLoop, a: float, b: float, ka: float, kb: float) -> tuple[s
         spreads :meth:`~hapstab.engine.arb_loop.ArbLoop.exclusion` returns; 0 when
         excluded).
     """
-    how, s_t, s_k = al.exclusion(theta_ball(a, b), k_ball(ka, kb), key=(a, b), polys=POLY_KERNEL)
+    th = None if balls is None else balls.get((a, b))
+    if th is None:
+        th = theta_ball(a, b)
+        if balls is not None:
+            balls[(a, b)] = th
+    how, s_t, s_k = al.exclusion(th, k_ball(ka, kb), key=(a, b), polys=POLY_KERNEL)
     if how is not None:
         return how, 0.0
     if not (math.isfinite(s_t) and math.isfinite(s_k)):
@@ -157,6 +166,7 @@ def _exclude(al: ArbLoop, ka: float, kb: float, max_pieces: int) -> Exclusion:
     heap = [(ka, a, b, kb) for a, b in subdivision_start(POLY_KERNEL)]
     heapq.heapify(heap)
     tried = 0
+    balls: dict = {}        # formed at the proof's precision, set by exclude()
     while heap:
         k0, a, b, k1 = heapq.heappop(heap)
         tried += 1
@@ -164,7 +174,7 @@ def _exclude(al: ArbLoop, ka: float, kb: float, max_pieces: int) -> Exclusion:
             out.failed.append((a, b, k0, k1))
             out.failed.extend((x[1], x[2], x[0], x[3]) for x in heap)
             break
-        how, share = box_status(al, a, b, k0, k1)
+        how, share = box_status(al, a, b, k0, k1, balls)
         if how is not None:
             out.pieces.append((a, b, k0, k1, how))
             out.splits.append("x")
