@@ -109,3 +109,29 @@ def test_the_grid_counts_poles_by_the_argument_principle():
     kmax = h.critical_stiffness(loop).critical_stiffness
     got = candidates._grid_counts(resp, 0, th, c, np.array([0.5 * kmax / s, 1.01 * kmax / s]))
     assert list(got) == [0, 2]
+
+
+def test_half_turns_is_the_sum_of_the_principal_steps():
+    """The grid's winding without an arctangent per step (candidates.half_turns) equals
+    the sum of np.angle of the ratios on curves from the real axis back to it, winding
+    up to 12 times either way; a row with a value that is nan or exactly 0 is nan (where
+    np.angle of x / 0 gave a finite angle of no meaning)."""
+    import numpy as np
+    rng = np.random.default_rng(26)
+    z = np.exp(1j * np.linspace(0.0, math.pi, 1500))
+    most = 0.0
+    for deg in range(1, 13):
+        coef = rng.normal(size=(40, deg + 1))       # real coefficients: real at theta = 0, pi
+        vals = np.stack([np.polyval(c, z) for c in coef])
+        vals[:, -1] = vals[:, -1].real - 0.0j       # -0.0: arg -pi on the negative axis
+        vals[3, 7], vals[5, 9] = np.nan, 0.0
+        with np.errstate(all="ignore"):
+            ref = np.sum(np.angle(vals[:, 1:] / vals[:, :-1]), axis=1) / math.pi
+        got = candidates.half_turns(vals)
+        assert np.isnan(got[3]) and np.isnan(got[5])
+        ok = np.ones(40, bool)
+        ok[[3, 5]] = False
+        assert not np.any(np.isnan(got[ok]))
+        assert np.all(np.abs(got[ok] - ref[ok]) < 1e-9), deg
+        most = max(most, float(np.max(np.abs(ref[ok]))))
+    assert most >= 6                                # the curves do wind, several times

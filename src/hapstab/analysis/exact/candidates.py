@@ -281,17 +281,45 @@ def candidate_set(resp: LoopResponse, i: int, full: bool) -> StableSet | None:
     return ss
 
 
+def half_turns(vals: np.ndarray) -> np.ndarray:
+    """Per row, the sum of the principal arguments of ``vals[k + 1] / vals[k]`` over pi
+    (nan where a value is 0 or not finite), without an arctangent per step: it equals
+    ``(arg(last) - arg(first)) / pi + 2 m``, m the net number of steps whose principal
+    turn crosses the negative real axis (upwards -1, downwards +1): a step from the upper
+    half-plane (imaginary part >= 0, arguments in [0, pi]) to the lower one turning
+    counterclockwise (Im(b conj(a)) > 0) adds a turn. Steps exactly half a turn long
+    (measure zero) are the only ones where the two sums can differ."""
+    re, im = vals.real, vals.imag
+    with np.errstate(all="ignore"):
+        s = re[:, :-1] * im[:, 1:] - im[:, :-1] * re[:, 1:]       # Im(b conj(a))
+        up = im >= 0
+        m = (np.count_nonzero(up[:, :-1] & ~up[:, 1:] & (s > 0), axis=1)
+             - np.count_nonzero(~up[:, :-1] & up[:, 1:] & (s < 0), axis=1))
+        ends = np.angle(vals[:, [0, -1]])
+        ends = np.where(ends == -math.pi, math.pi, ends)    # -0.0 imaginary: the upper half
+        turns = (ends[:, 1] - ends[:, 0]) / math.pi + 2.0 * m
+    ok = np.all(np.isfinite(vals) & (vals != 0), axis=1)
+    return np.where(ok, turns, np.nan)
+
+
 def _grid_counts(resp: LoopResponse, i: int, th: np.ndarray, c: list, u: np.ndarray
                  ) -> np.ndarray:
     """Poles outside at each u by the argument principle on the grid (and its ends);
     -1 where the winding is not a whole number (the grid does not resolve it)."""
     e, _ = _coef(resp, i, np.array([0.0, math.pi]))
     U = u[:, None]
-    vals = np.concatenate([e[0][:1] + U * (e[1][:1] + U * e[2][:1]),
-                           c[0] + U * (c[1] + U * c[2]),
-                           e[0][1:] + U * (e[1][1:] + U * e[2][1:])], axis=1)
-    with np.errstate(all="ignore"):
-        turns = np.sum(np.angle(vals[:, 1:] / vals[:, :-1]), axis=1) / math.pi
+    vals = np.empty((u.size, th.size + 2), complex)
+    vals[:, :1] = e[0][:1] + U * (e[1][:1] + U * e[2][:1])
+    vals[:, -1:] = e[0][1:] + U * (e[1][1:] + U * e[2][1:])
+    mid = vals[:, 1:-1]             # c_0 + U (c_1 + U c_2) in place (c_2 = 0: one port)
+    if np.any(c[2] != 0):
+        np.multiply(U, c[2], out=mid)
+        mid += c[1]
+        mid *= U
+    else:
+        np.multiply(U, c[1], out=mid)
+    mid += c[0]
+    turns = half_turns(vals)
     # a winding number is an integer: a sum of angles farther than 1e-6 turn from one
     # means the grid missed a fast phase change there (the gap is recounted, not trusted)
     whole = np.isfinite(turns) & (np.abs(turns - np.round(turns)) <= 1e-6)
