@@ -331,10 +331,12 @@ class ArbLoop:
             ``(Pm, Qm, Fm, Pd, Qd, Fd)``: lists of 3 acb, the coefficients of K^0..K^2
             of P, Q, det M at the centre and of their d/dtheta over the ball.
         """
-        return self._entry(theta, key, polys)[1]
+        return self.kernel_entry(theta, key, polys)[1]
 
-    def _entry(self, theta: Any, key: Any, polys: bool) -> tuple:
-        """:meth:`kernel`'s cache entry: ``(theta, kernel, nonzero flags)``."""
+    def kernel_entry(self, theta: Any, key: Any, polys: bool) -> tuple:
+        """:meth:`kernel`'s cache entry: ``(theta, kernel, nonzero flags)``, the ball it
+        was made for (the one given, or an equal one cached), the kernel and, with
+        ``polys``, :class:`~hapstab.engine.arb_kernel.KernelPolys`'s ``nonzero``."""
         cache = self._skernels if polys else self._kernels
         if key is not None:
             got = cache.get(key)
@@ -412,7 +414,7 @@ class ArbLoop:
             |d det M/dK| rad(K) over the box, the widths of det M's ball due to each
             (to choose a split); else 0.
         """
-        _t, kern, nz = self._entry(theta, key, polys)
+        _t, kern, nz = self.kernel_entry(theta, key, polys)
         with working_precision(self.prec):
             return exclusion_test(kern, theta, K, nz)
 

@@ -290,11 +290,13 @@ def half_turns(vals: np.ndarray) -> np.ndarray:
     counterclockwise (Im(b conj(a)) > 0) adds a turn. Steps exactly half a turn long
     (measure zero) are the only ones where the two sums can differ."""
     re, im = vals.real, vals.imag
+    up = im >= 0
+    # only the steps between the halves can cross the axis: few, taken sparsely
+    r, c = np.nonzero(up[:, 1:] != up[:, :-1])
     with np.errstate(all="ignore"):
-        s = re[:, :-1] * im[:, 1:] - im[:, :-1] * re[:, 1:]       # Im(b conj(a))
-        up = im >= 0
-        m = (np.count_nonzero(up[:, :-1] & ~up[:, 1:] & (s > 0), axis=1)
-             - np.count_nonzero(~up[:, :-1] & up[:, 1:] & (s < 0), axis=1))
+        s = re[r, c] * im[r, c + 1] - im[r, c] * re[r, c + 1]     # Im(b conj(a))
+        d = up[r, c + 1].astype(int) - up[r, c]                    # +1 upwards, -1 down
+        m = np.bincount(r, weights=np.where(d * s < 0, -d, 0), minlength=vals.shape[0])
         ends = np.angle(vals[:, [0, -1]])
         ends = np.where(ends == -math.pi, math.pi, ends)    # -0.0 imaginary: the upper half
         turns = (ends[:, 1] - ends[:, 0]) / math.pi + 2.0 * m

@@ -51,6 +51,7 @@ from hapstab.analysis.exact.winding import (
     subdivision_start,
     theta_ball,
 )
+from hapstab.engine.arb_forms import exclusion_test
 from hapstab.engine.arb_loop import ArbLoop, working_precision
 
 __all__ = ["Proof", "prove", "prove_base", "count", "exclude", "theta_ball", "DELTA"]
@@ -87,12 +88,12 @@ HINT_MARGIN = 1e-6
 
 
 def box_status(al: ArbLoop, a: float, b: float, ka: float, kb: float,
-               balls: dict | None = None) -> tuple[str | None, float]:
+               entries: dict | None = None) -> tuple[str | None, float]:
     """Whether det M has no zero on [a, b] x [ka, kb]; the reason, and the share of
-    the ball's width due to theta (to choose the split). ``balls``: the angle balls
-    formed so far at the precision in force, by ends (the boxes of one piece of angles
-    at several K-ranges then share one ball object, and its kernel without comparing
-    balls).
+    the ball's width due to theta (to choose the split). ``entries``: the angle pieces'
+    kernels (:meth:`~hapstab.engine.arb_loop.ArbLoop.kernel_entry`) formed so far at
+    the precision in force, by ends (the boxes of one piece at several K-ranges share
+    its ball and kernel without looking them up and comparing balls again).
 
     Returns
     -------
@@ -104,12 +105,13 @@ def box_status(al: ArbLoop, a: float, b: float, ka: float, kb: float,
         spreads :meth:`~hapstab.engine.arb_loop.ArbLoop.exclusion` returns; 0 when
         excluded).
     """
-    th = None if balls is None else balls.get((a, b))
-    if th is None:
-        th = theta_ball(a, b)
-        if balls is not None:
-            balls[(a, b)] = th
-    how, s_t, s_k = al.exclusion(th, k_ball(ka, kb), key=(a, b), polys=POLY_KERNEL)
+    ent = None if entries is None else entries.get((a, b))
+    if ent is None:
+        ent = al.kernel_entry(theta_ball(a, b), (a, b), POLY_KERNEL)
+        if entries is not None:
+            entries[(a, b)] = ent
+    with working_precision(al.prec):        # as ArbLoop.exclusion
+        how, s_t, s_k = exclusion_test(ent[1], ent[0], k_ball(ka, kb), ent[2])
     if how is not None:
         return how, 0.0
     if not (math.isfinite(s_t) and math.isfinite(s_k)):
@@ -166,7 +168,7 @@ def _exclude(al: ArbLoop, ka: float, kb: float, max_pieces: int) -> Exclusion:
     heap = [(ka, a, b, kb) for a, b in subdivision_start(POLY_KERNEL)]
     heapq.heapify(heap)
     tried = 0
-    balls: dict = {}        # formed at the proof's precision, set by exclude()
+    entries: dict = {}      # balls formed at the proof's precision, set by exclude()
     while heap:
         k0, a, b, k1 = heapq.heappop(heap)
         tried += 1
@@ -174,7 +176,7 @@ def _exclude(al: ArbLoop, ka: float, kb: float, max_pieces: int) -> Exclusion:
             out.failed.append((a, b, k0, k1))
             out.failed.extend((x[1], x[2], x[0], x[3]) for x in heap)
             break
-        how, share = box_status(al, a, b, k0, k1, balls)
+        how, share = box_status(al, a, b, k0, k1, entries)
         if how is not None:
             out.pieces.append((a, b, k0, k1, how))
             out.splits.append("x")
