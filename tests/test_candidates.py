@@ -135,3 +135,24 @@ def test_half_turns_is_the_sum_of_the_principal_steps():
         assert np.all(np.abs(got[ok] - ref[ok]) < 1e-9), deg
         most = max(most, float(np.max(np.abs(ref[ok]))))
     assert most >= 6                                # the curves do wind, several times
+
+
+@pytest.mark.parametrize("name", ["paper-peb-0", "paper-hve-100", "paper-peb-4"])
+def test_the_grid_evaluated_ahead_is_the_grid_of_the_rounds(name):
+    """candidates._refined evaluates the midpoints of the next halvings ahead (one call
+    for several rounds): the grid and its values are those of halving round by round."""
+    import numpy as np
+    one = loop_response(dict(LOOPS)[name])
+    g = candidates._grid(one)
+    th, c = candidates._refined(one, 0, g)
+    ref_th, ref_c = g, candidates._coef(one, 0, g)[0]
+    for _ in range(candidates.REFINE_ROUNDS):
+        with np.errstate(all="ignore"):
+            turn = np.max([np.abs(np.angle(x[1:] / x[:-1])) for x in ref_c[:2]], axis=0)
+        j = np.flatnonzero(turn > candidates.MAX_TURN)
+        if not j.size:
+            break
+        ref_th, ref_c = candidates._halve(one, 0, ref_th, ref_c, j)
+    assert th.size > g.size                    # the grid was refined
+    assert np.array_equal(th, ref_th)
+    assert all(np.array_equal(a, b) for a, b in zip(c, ref_c, strict=True))

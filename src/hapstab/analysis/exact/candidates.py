@@ -58,12 +58,20 @@ THETA_LOW = 1e-12
 #: error is ~1e-3 relative; five steps bring it to rounding, and the ball proof's own
 #: Newton polishes it further (a candidate is a starting point, not an answer).
 NEWTON_STEPS = 5
+#: A Newton step this small relative to its point ends the steps: at a simple crossing
+#: the next would be ~1e-24 (quadratic convergence), below rounding; at a multiple one
+#: the point is still within ~1e-12, far inside SAME, and the ball proof polishes it.
+CONVERGED = 1e-12
 #: Largest turn of a coefficient's argument between grid neighbours (rad) before the
 #: interval is halved, and the most halvings: pi/8 keeps the crossing condition and
 #: the winding resolved; 20 halvings reach 1e-6 of the uniform spacing (a resonance
 #: narrower than that, damping ratio below ~1e-8, is left to the fallback).
 MAX_TURN = math.pi / 8
 REFINE_ROUNDS = 20
+#: Levels of halves below a halved interval whose midpoints are evaluated with it (a
+#: resonance is halved over several rounds: 2 levels, 7 points, serve 3 rounds with one
+#: evaluation, whose cost is its call's, not its points'); not a tolerance.
+LOOKAHEAD = 2
 #: Candidates this close (relative, in u and theta) are one: Newton's steps from two
 #: brackets of the same crossing end ~1e-12 apart; two true crossings this close are
 #: the proof's to separate (it falls back if it cannot).
@@ -99,6 +107,7 @@ def _refined(resp: LoopResponse, i: int, th: np.ndarray) -> tuple[np.ndarray, li
     two-port loop's is N_0 N_1 (1 - z^-n) k_0 k_1, with exact zeros on the circle
     across which its argument jumps by pi however fine the grid."""
     c, _ = _coef(resp, i, th)
+    ahead: dict[float, tuple] = {}
     for _ in range(REFINE_ROUNDS):
         with np.errstate(all="ignore"):
             turn = np.zeros(th.size - 1)
@@ -108,15 +117,41 @@ def _refined(resp: LoopResponse, i: int, th: np.ndarray) -> tuple[np.ndarray, li
         j = np.flatnonzero(turn > MAX_TURN)
         if not j.size:
             break
-        th, c = _halve(resp, i, th, c, j)
+        th, c = _halve(resp, i, th, c, j, ahead)
     return th, c
 
 
-def _halve(resp: LoopResponse, i: int, th: np.ndarray, c: list, j: np.ndarray
-           ) -> tuple[np.ndarray, list]:
-    """The grid with the midpoints of intervals ``j`` inserted, and c_0..c_2 on it."""
+def _ahead(resp: LoopResponse, i: int, lo: np.ndarray, hi: np.ndarray, ahead: dict) -> list:
+    """c_0..c_2 at the midpoints of [lo, hi], from ``ahead`` (angle: values) where it
+    has them; the others are evaluated with the midpoints of the :data:`LOOKAHEAD`
+    levels of halves below theirs, kept in ``ahead`` for the rounds that halve those
+    (one evaluation for several rounds; the same angles, formed as the rounds form
+    them, and the same values: the grid is the one the rounds alone make)."""
+    mid = 0.5 * (lo + hi)
+    miss = np.array([t not in ahead for t in mid.tolist()], bool)
+    if miss.any():
+        pts, ivs = [mid[miss]], [(lo[miss], mid[miss]), (mid[miss], hi[miss])]
+        for _ in range(LOOKAHEAD):
+            nxt = []
+            for a, b in ivs:
+                m = 0.5 * (a + b)
+                pts.append(m)
+                nxt += [(a, m), (m, b)]
+            ivs = nxt
+        allp = np.concatenate(pts)
+        got, _ = _coef(resp, i, allp)
+        ahead.update(zip(allp.tolist(), zip(*(g.tolist() for g in got), strict=True),
+                         strict=True))
+    vals = [ahead[t] for t in mid.tolist()]
+    return [np.array([v[q] for v in vals], complex) for q in range(3)]
+
+
+def _halve(resp: LoopResponse, i: int, th: np.ndarray, c: list, j: np.ndarray,
+           ahead: dict | None = None) -> tuple[np.ndarray, list]:
+    """The grid with the midpoints of intervals ``j`` inserted, and c_0..c_2 on it
+    (``ahead``: see :func:`_ahead`)."""
     mid = 0.5 * (th[j] + th[j + 1])
-    cm, _ = _coef(resp, i, mid)
+    cm = _coef(resp, i, mid)[0] if ahead is None else _ahead(resp, i, th[j], th[j + 1], ahead)
     order = np.argsort(np.concatenate([th, mid]), kind="stable")
     return (np.concatenate([th, mid])[order],
             [np.concatenate([x, y])[order] for x, y in zip(c, cm, strict=True)])
@@ -162,6 +197,11 @@ def _newton(resp: LoopResponse, i: int, th: np.ndarray, u: np.ndarray
         ok = np.isfinite(dth) & np.isfinite(du)
         th = np.where(ok, th + dth, th)
         u = np.where(ok, u + du, u)
+        # every step within CONVERGED of its point: the steps left would move it by
+        # rounding (a candidate only places the proof's Newton)
+        if np.all(~ok | ((np.abs(dth) <= CONVERGED * np.abs(th))
+                         & (np.abs(du) <= CONVERGED * np.abs(u)))):
+            break
     c, d = _coef(resp, i, th)
     Ft = d[0] + u * (d[1] + u * d[2])
     Fu = c[1] + 2 * u * c[2]
