@@ -66,8 +66,8 @@ def preconditioned_excludes(Fc: Any, Ft: Any, Fk: Any, r_theta: Any, r_K: Any) -
     """
     import flint
     arb = flint.arb
-    a, b = float(Ft.real.mid()), float(Fk.real.mid())
-    c, d = float(Ft.imag.mid()), float(Fk.imag.mid())
+    # complex(x) is (float(x.real.mid()), float(x.imag.mid())), in one call
+    (a, c), (b, d) = ((z.real, z.imag) for z in (complex(Ft), complex(Fk)))
     det = a * d - b * c
     if not (math.isfinite(det) and det != 0.0):
         return False
@@ -75,16 +75,17 @@ def preconditioned_excludes(Fc: Any, Ft: Any, Fk: Any, r_theta: Any, r_K: Any) -
     # Y A is the identity at its centre, so each component's ball is at least as wide
     # as the box's radius in that variable: where the centre's image is inside both
     # (in doubles, with 1 % to spare for their rounding), no ball can exclude 0
-    f1, f2 = float(Fc.real.mid()), float(Fc.imag.mid())
+    fc = complex(Fc)
+    f1, f2 = fc.real, fc.imag
     rt, rk = float(r_theta), float(r_K)
     if abs(Y[0][0] * f1 + Y[0][1] * f2) < 0.99 * rt and abs(Y[1][0] * f1 + Y[1][1] * f2) < 0.99 * rk:
         return False
     ht, hk = arb(0, r_theta), arb(0, r_K)
+    cr, ci, tr, ti, kr, ki = Fc.real, Fc.imag, Ft.real, Ft.imag, Fk.real, Fk.imag
     for y1, y2 in Y:
         if not (math.isfinite(y1) and math.isfinite(y2)):
             return False
-        comp = (y1 * Fc.real + y2 * Fc.imag + (y1 * Ft.real + y2 * Ft.imag) * ht
-                + (y1 * Fk.real + y2 * Fk.imag) * hk)
+        comp = y1 * cr + y2 * ci + (y1 * tr + y2 * ti) * ht + (y1 * kr + y2 * ki) * hk
         if not comp.contains(0):
             return True
     return False
