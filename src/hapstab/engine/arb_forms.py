@@ -14,7 +14,7 @@ import math
 from typing import Any
 
 __all__ = ["Dual", "preconditioned_excludes", "poly_k", "dpoly_k", "accuracy_bits",
-           "box_balls", "exclusion_test"]
+           "box_balls", "exclusion_test", "angle_parts", "stiffness_parts"]
 
 
 class Dual:
@@ -146,14 +146,33 @@ def _pk(c: list[Any], nz: tuple[bool, ...], K: Any) -> Any:
     return c[0] + K * c[1] if nz[1] else c[0]
 
 
-def exclusion_test(kern: tuple, theta: Any, K: Any,
-                   nz: tuple | None = None) -> tuple[str | None, float, float]:
+def angle_parts(theta: Any) -> tuple:
+    """What :func:`exclusion_test` forms of the angle's ball before any test: the
+    radius as an acb ball about 0, and the radius. At the precision in force."""
+    import flint
+    rt = theta.rad()
+    return flint.acb(flint.arb(0, rt)), rt
+
+
+def stiffness_parts(K: Any) -> tuple:
+    """What :func:`exclusion_test` forms of the stiffness's ball before any test: the
+    ball, its centre and its radius about 0 as acb, and the radius. At the precision in
+    force (a subdivision forms these once per K-range, the angle's once per piece)."""
+    import flint
+    acb = flint.acb
+    rk = K.rad()
+    return acb(K), acb(K.mid()), acb(flint.arb(0, rk)), rk
+
+
+def exclusion_test(kern: tuple, theta: Any, K: Any, nz: tuple | None = None,
+                   parts: tuple | None = None) -> tuple[str | None, float, float]:
     """The tests a certificate names, in order, on the balls of :func:`box_balls`
     (each formed only when the test before it fails): ``"P"`` (|P| > |Q|), ``"Q"``
     (|Q| > |P|), ``"F"`` (0 not in det M's ball), ``"N"``
     (:func:`preconditioned_excludes`). At the precision in force. ``nz``: the kernel's
     :class:`~hapstab.engine.arb_kernel.KernelPolys` ``nonzero`` flags (terms that
-    are exact zeros are skipped: the same balls).
+    are exact zeros are skipped: the same balls); ``parts``: :func:`angle_parts` and
+    :func:`stiffness_parts` of ``theta`` and ``K``, formed already.
 
     Returns
     -------
@@ -163,12 +182,9 @@ def exclusion_test(kern: tuple, theta: Any, K: Any,
         With ``how`` None: upper bounds of |d det M/d theta| rad(theta) and
         |d det M/dK| rad(K) over the box (to choose a split); else 0.
     """
-    import flint
-    acb, arb = flint.acb, flint.arb
     Pm, Qm, Fm, Pd, Qd, Fd = kern
     zP, zQ, zF, zPd, zQd, zFd = nz or ((True,) * 3,) * 6
-    Kc, km = acb(K), acb(K.mid())         # the same balls as box_balls
-    hh, kk = acb(arb(0, theta.rad())), acb(arb(0, K.rad()))
+    (hh, rt), (Kc, km, kk, rk) = parts or (angle_parts(theta), stiffness_parts(K))
     P, Q = _pk(Pm, zP, km), _pk(Qm, zQ, km)
     # each term below is skipped only where box_balls' is an exact zero: the same ball
     if any(zPd):
@@ -187,6 +203,6 @@ def exclusion_test(kern: tuple, theta: Any, K: Any,
     Fk = Fm[1] + 2 * Kc * Fm[2] if zF[2] else Fm[1]
     if not (Fc + hh * Ft + kk * Fk).contains(0):
         return "F", 0.0, 0.0
-    if preconditioned_excludes(Fc, Ft, Fk, theta.rad(), K.rad()):
+    if preconditioned_excludes(Fc, Ft, Fk, rt, rk):
         return "N", 0.0, 0.0
-    return None, float(Ft.abs_upper() * theta.rad()), float(Fk.abs_upper() * K.rad())
+    return None, float(Ft.abs_upper() * rt), float(Fk.abs_upper() * rk)

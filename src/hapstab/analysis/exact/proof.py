@@ -51,7 +51,7 @@ from hapstab.analysis.exact.winding import (
     subdivision_start,
     theta_ball,
 )
-from hapstab.engine.arb_forms import exclusion_test
+from hapstab.engine.arb_forms import angle_parts, exclusion_test, stiffness_parts
 from hapstab.engine.arb_loop import ArbLoop, working_precision
 
 __all__ = ["Proof", "prove", "prove_base", "count", "exclude", "theta_ball", "DELTA"]
@@ -105,13 +105,21 @@ def box_status(al: ArbLoop, a: float, b: float, ka: float, kb: float,
         spreads :meth:`~hapstab.engine.arb_loop.ArbLoop.exclusion` returns; 0 when
         excluded).
     """
-    ent = None if entries is None else entries.get((a, b))
+    cache = {} if entries is None else entries
+    ent, kp = cache.get((a, b)), cache.get((ka, kb, "K"))
+    # the balls at the caller's precision (the proof's, set by exclude()), what the tests
+    # form of them at the loop's, as ArbLoop.exclusion
     if ent is None:
-        ent = al.kernel_entry(theta_ball(a, b), (a, b), POLY_KERNEL)
-        if entries is not None:
-            entries[(a, b)] = ent
-    with working_precision(al.prec):        # as ArbLoop.exclusion
-        how, s_t, s_k = exclusion_test(ent[1], ent[0], k_ball(ka, kb), ent[2])
+        th = theta_ball(a, b)
+        ent = al.kernel_entry(th, (a, b), POLY_KERNEL)
+        with working_precision(al.prec):
+            ent = cache[(a, b)] = (*ent, angle_parts(ent[0]))
+    if kp is None:
+        K = k_ball(ka, kb)
+        with working_precision(al.prec):
+            kp = cache[(ka, kb, "K")] = (K, stiffness_parts(K))
+    with working_precision(al.prec):
+        how, s_t, s_k = exclusion_test(ent[1], ent[0], kp[0], ent[2], (ent[3], kp[1]))
     if how is not None:
         return how, 0.0
     if not (math.isfinite(s_t) and math.isfinite(s_k)):
