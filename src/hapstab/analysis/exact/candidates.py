@@ -316,7 +316,7 @@ def candidate_set(resp: LoopResponse, i: int, full: bool) -> StableSet | None:
         ss = _classify(resp, i, anchor, cross, [], full, None, False)
     except AnalysisError:
         return None
-    if full and not _counts_agree(resp, i, th, c, ss):
+    if full and not _counts_agree(resp, i, th, c, ss, ends[0]):
         return None
     return ss
 
@@ -344,11 +344,13 @@ def half_turns(vals: np.ndarray) -> np.ndarray:
     return np.where(ok, turns, np.nan)
 
 
-def _grid_counts(resp: LoopResponse, i: int, th: np.ndarray, c: list, u: np.ndarray
-                 ) -> np.ndarray:
+def _grid_counts(resp: LoopResponse, i: int, th: np.ndarray, c: list, u: np.ndarray,
+                 e: list | None = None) -> np.ndarray:
     """Poles outside at each u by the argument principle on the grid (and its ends);
-    -1 where the winding is not a whole number (the grid does not resolve it)."""
-    e, _ = _coef(resp, i, np.array([0.0, math.pi]))
+    -1 where the winding is not a whole number (the grid does not resolve it). ``e``:
+    c_0..c_2 at theta = 0 and pi (:func:`_ends`), if formed already."""
+    if e is None:
+        e = _ends(resp, i)[0]
     U = u[:, None]
     vals = np.empty((u.size, th.size + 2), complex)
     vals[:, :1] = e[0][:1] + U * (e[1][:1] + U * e[2][:1])
@@ -368,19 +370,21 @@ def _grid_counts(resp: LoopResponse, i: int, th: np.ndarray, c: list, u: np.ndar
     return np.where(whole, resp.q - np.round(np.where(whole, turns, 0)).astype(int), -1)
 
 
-def _counts_agree(resp: LoopResponse, i: int, th: np.ndarray, c: list, ss: StableSet) -> bool:
+def _counts_agree(resp: LoopResponse, i: int, th: np.ndarray, c: list, ss: StableSet,
+                  at_ends: list | None = None) -> bool:
     """Whether the counts the crossings' directions give in every gap (from the anchor)
     equal the grid's own argument principle at the gap's middle (refined for the
     gaps that disagree, :func:`_recount`). The proof examines only the gaps
     these counts call stable (beyond the first), so a crossing the grid missed must
-    not go unnoticed here; a count that disagrees even there: False."""
+    not go unnoticed here; a count that disagrees even there: False. ``at_ends``:
+    c_0..c_2 at theta = 0 and pi (:func:`_ends`), if formed already."""
     s = float(resp.scale[i])
     ks = [e[0] / s for e in ss.events]
     edges = [U_LO, *ks, min(U_HI, 4 * ks[-1]) if ks else U_HI]
     mids = np.array([math.sqrt(a * b) for a, b in itertools.pairwise(edges)])
     counts = np.cumsum([ss.outside_small_K] + [int(e[3] * e[4]) for e in ss.events])
     pick = _checked_gaps(mids.size, th.size)
-    got = _grid_counts(resp, i, th, c, mids[pick])
+    got = _grid_counts(resp, i, th, c, mids[pick], at_ends)
     # a gap both counts put FAR_UNSTABLE or more poles outside is not one the proof
     # examines, whichever is right: two misses of one estimate could not make it stable
     far = (got >= FAR_UNSTABLE) & (counts[pick] >= FAR_UNSTABLE)
@@ -390,7 +394,7 @@ def _counts_agree(resp: LoopResponse, i: int, th: np.ndarray, c: list, ss: Stabl
     # where u^2 c_2 dominates, its exact zeros on the circle (a two-port loop's
     # 1 - z^-n) turn det M faster than the grid resolves: those gaps are counted again
     # on a grid refined for det M at their own u
-    return bool(np.array_equal(_recount(resp, i, th, c, mids[bad]), counts[bad]))
+    return bool(np.array_equal(_recount(resp, i, th, c, mids[bad], at_ends), counts[bad]))
 
 
 def _checked_gaps(n_gaps: int, n_angles: int) -> np.ndarray:
@@ -405,8 +409,8 @@ def _checked_gaps(n_gaps: int, n_angles: int) -> np.ndarray:
                                                       most - most // 2).astype(int)]))
 
 
-def _recount(resp: LoopResponse, i: int, th: np.ndarray, c: list, u: np.ndarray
-             ) -> np.ndarray:
+def _recount(resp: LoopResponse, i: int, th: np.ndarray, c: list, u: np.ndarray,
+             e: list | None = None) -> np.ndarray:
     """The grid's counts at each u with the grid halved where det M(., u) turns by
     more than :data:`MAX_TURN` for any of them (at most :data:`REFINE_ROUNDS` times)."""
     U = u[:, None]
@@ -417,7 +421,7 @@ def _recount(resp: LoopResponse, i: int, th: np.ndarray, c: list, u: np.ndarray
         if not j.size or th.size + j.size > MAX_CHECK // max(1, u.size):
             break
         th, c = _halve(resp, i, th, c, j)
-    return _grid_counts(resp, i, th, c, u)
+    return _grid_counts(resp, i, th, c, u, e)
 
 
 def consistent(ss: StableSet, proved: StableSet) -> bool:
