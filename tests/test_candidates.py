@@ -156,3 +156,18 @@ def test_the_grid_evaluated_ahead_is_the_grid_of_the_rounds(name):
     assert th.size > g.size                    # the grid was refined
     assert np.array_equal(th, ref_th)
     assert all(np.array_equal(a, b) for a, b in zip(c, ref_c, strict=True))
+
+
+@pytest.mark.parametrize("name", ["paper-peb-0", "paper-hve-100", "paper-peb-4"])
+def test_the_grid_without_derivatives_has_the_same_values(name):
+    """The proposer's grid evaluates c_0..c_2 without their derivatives (deriv=False:
+    engine.discs.NO_DERIV): the values are those computed with them, bit for bit."""
+    import numpy as np
+
+    from hapstab.engine.discs import NO_DERIV
+    one = loop_response(dict(LOOPS)[name])
+    th = np.concatenate([candidates._grid(one), [0.0, math.pi]])
+    with_d, d = candidates._coef(one, 0, th)
+    alone, nod = candidates._coef(one, 0, th, False)
+    assert all(x is NO_DERIV for x in nod) and not any(x is NO_DERIV for x in d)
+    assert all(np.array_equal(a, b) for a, b in zip(with_d, alone, strict=True))

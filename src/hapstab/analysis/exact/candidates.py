@@ -106,7 +106,7 @@ def _refined(resp: LoopResponse, i: int, th: np.ndarray) -> tuple[np.ndarray, li
     its width, far below the uniform spacing), and the coefficients on it. Not c_2: a
     two-port loop's is N_0 N_1 (1 - z^-n) k_0 k_1, with exact zeros on the circle
     across which its argument jumps by pi however fine the grid."""
-    c, _ = _coef(resp, i, th)
+    c, _ = _coef(resp, i, th, False)
     ahead: dict[float, tuple] = {}
     for _ in range(REFINE_ROUNDS):
         with np.errstate(all="ignore"):
@@ -139,7 +139,7 @@ def _ahead(resp: LoopResponse, i: int, lo: np.ndarray, hi: np.ndarray, ahead: di
                 nxt += [(a, m), (m, b)]
             ivs = nxt
         allp = np.concatenate(pts)
-        got, _ = _coef(resp, i, allp)
+        got, _ = _coef(resp, i, allp, False)
         ahead.update(zip(allp.tolist(), zip(*(g.tolist() for g in got), strict=True),
                          strict=True))
     vals = [ahead[t] for t in mid.tolist()]
@@ -151,16 +151,19 @@ def _halve(resp: LoopResponse, i: int, th: np.ndarray, c: list, j: np.ndarray,
     """The grid with the midpoints of intervals ``j`` inserted, and c_0..c_2 on it
     (``ahead``: see :func:`_ahead`)."""
     mid = 0.5 * (th[j] + th[j + 1])
-    cm = _coef(resp, i, mid)[0] if ahead is None else _ahead(resp, i, th[j], th[j + 1], ahead)
+    cm = _coef(resp, i, mid, False)[0] if ahead is None else _ahead(resp, i, th[j], th[j + 1], ahead)
     order = np.argsort(np.concatenate([th, mid]), kind="stable")
     return (np.concatenate([th, mid])[order],
             [np.concatenate([x, y])[order] for x, y in zip(c, cm, strict=True)])
 
 
-def _coef(resp: LoopResponse, i: int, th: np.ndarray) -> tuple[list, list]:
+def _coef(resp: LoopResponse, i: int, th: np.ndarray, deriv: bool = True
+          ) -> tuple[list, list]:
     """c_0..c_2 and their d/dtheta at the angles (complex arrays; the jets' centres
-    alone: a proposer needs no enclosures)."""
-    F = resp.coefficients(np.full(th.size, i), th, np.zeros(th.size), values_only=True)
+    alone: a proposer needs no enclosures); ``deriv`` False: the values alone (the
+    derivatives :data:`~hapstab.engine.discs.NO_DERIV`, the values the same)."""
+    F = resp.coefficients(np.full(th.size, i), th, np.zeros(th.size), values_only=True,
+                          deriv=deriv)
     return [f.vc for f in F], [f.dc for f in F]
 
 
