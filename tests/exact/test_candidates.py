@@ -109,3 +109,66 @@ def test_the_grid_counts_poles_by_the_argument_principle():
     kmax = h.critical_stiffness(loop).critical_stiffness
     got = candidates._grid_counts(resp, 0, th, c, np.array([0.5 * kmax / s, 1.01 * kmax / s]))
     assert list(got) == [0, 2]
+
+
+def test_half_turns_is_the_sum_of_the_principal_steps():
+    """The grid's winding without an arctangent per step (candidates.half_turns) equals
+    the sum of np.angle of the ratios on curves from the real axis back to it, winding
+    up to 12 times either way; a row with a value that is nan or exactly 0 is nan (where
+    np.angle of x / 0 gave a finite angle of no meaning)."""
+    import numpy as np
+    rng = np.random.default_rng(26)
+    z = np.exp(1j * np.linspace(0.0, math.pi, 1500))
+    most = 0.0
+    for deg in range(1, 13):
+        coef = rng.normal(size=(40, deg + 1))       # real coefficients: real at theta = 0, pi
+        vals = np.stack([np.polyval(c, z) for c in coef])
+        vals[:, -1] = vals[:, -1].real - 0.0j       # -0.0: arg -pi on the negative axis
+        vals[3, 7], vals[5, 9] = np.nan, 0.0
+        with np.errstate(all="ignore"):
+            ref = np.sum(np.angle(vals[:, 1:] / vals[:, :-1]), axis=1) / math.pi
+        got = candidates.half_turns(vals)
+        assert np.isnan(got[3]) and np.isnan(got[5])
+        ok = np.ones(40, bool)
+        ok[[3, 5]] = False
+        assert not np.any(np.isnan(got[ok]))
+        assert np.all(np.abs(got[ok] - ref[ok]) < 1e-9), deg
+        most = max(most, float(np.max(np.abs(ref[ok]))))
+    assert most >= 6                                # the curves do wind, several times
+
+
+@pytest.mark.parametrize("name", ["paper-peb-0", "paper-hve-100", "paper-peb-4"])
+def test_the_grid_evaluated_ahead_is_the_grid_of_the_rounds(name):
+    """candidates._refined evaluates the midpoints of the next halvings ahead (one call
+    for several rounds): the grid and its values are those of halving round by round."""
+    import numpy as np
+    one = loop_response(dict(LOOPS)[name])
+    g = candidates._grid(one)
+    th, c = candidates._refined(one, 0, g)
+    ref_th, ref_c = g, candidates._coef(one, 0, g)[0]
+    for _ in range(candidates.REFINE_ROUNDS):
+        with np.errstate(all="ignore"):
+            turn = np.max([np.abs(np.angle(x[1:] / x[:-1])) for x in ref_c[:2]], axis=0)
+        j = np.flatnonzero(turn > candidates.MAX_TURN)
+        if not j.size:
+            break
+        ref_th, ref_c = candidates._halve(one, 0, ref_th, ref_c, j)
+    assert th.size > g.size                    # the grid was refined
+    assert np.array_equal(th, ref_th)
+    assert all(np.array_equal(a, b) for a, b in zip(c, ref_c, strict=True))
+
+
+@pytest.mark.parametrize("name", ["paper-peb-0", "paper-hve-100", "paper-peb-4"])
+def test_the_grid_without_derivatives_has_the_same_values(name):
+    """The proposer's grid evaluates c_0..c_2 without their derivatives (deriv=False:
+    engine.discs.NO_DERIV): the values are those computed with them, bit for bit."""
+    import numpy as np
+
+    from hapstab.engine.discs import NO_DERIV
+    one = loop_response(dict(LOOPS)[name])
+    th = np.concatenate([candidates._grid(one), [0.0, math.pi]])
+    with_d, d = candidates._coef(one, 0, th)
+    alone, nod = candidates._coef(one, 0, th, False)
+    # (a term the loop lacks, one port's c_2, is a plain zero jet either way)
+    assert nod[0] is NO_DERIV and nod[1] is NO_DERIV and not any(x is NO_DERIV for x in d)
+    assert all(np.array_equal(a, b) for a, b in zip(with_d, alone, strict=True))

@@ -14,7 +14,7 @@ import math
 from typing import Any
 
 __all__ = ["Dual", "preconditioned_excludes", "poly_k", "dpoly_k", "accuracy_bits",
-           "box_balls", "exclusion_test"]
+           "box_balls", "exclusion_test", "angle_parts", "stiffness_parts"]
 
 
 class Dual:
@@ -66,8 +66,8 @@ def preconditioned_excludes(Fc: Any, Ft: Any, Fk: Any, r_theta: Any, r_K: Any) -
     """
     import flint
     arb = flint.arb
-    a, b = float(Ft.real.mid()), float(Fk.real.mid())
-    c, d = float(Ft.imag.mid()), float(Fk.imag.mid())
+    # complex(x) is (float(x.real.mid()), float(x.imag.mid())), in one call
+    (a, c), (b, d) = ((z.real, z.imag) for z in (complex(Ft), complex(Fk)))
     det = a * d - b * c
     if not (math.isfinite(det) and det != 0.0):
         return False
@@ -75,16 +75,17 @@ def preconditioned_excludes(Fc: Any, Ft: Any, Fk: Any, r_theta: Any, r_K: Any) -
     # Y A is the identity at its centre, so each component's ball is at least as wide
     # as the box's radius in that variable: where the centre's image is inside both
     # (in doubles, with 1 % to spare for their rounding), no ball can exclude 0
-    f1, f2 = float(Fc.real.mid()), float(Fc.imag.mid())
+    fc = complex(Fc)
+    f1, f2 = fc.real, fc.imag
     rt, rk = float(r_theta), float(r_K)
     if abs(Y[0][0] * f1 + Y[0][1] * f2) < 0.99 * rt and abs(Y[1][0] * f1 + Y[1][1] * f2) < 0.99 * rk:
         return False
     ht, hk = arb(0, r_theta), arb(0, r_K)
+    cr, ci, tr, ti, kr, ki = Fc.real, Fc.imag, Ft.real, Ft.imag, Fk.real, Fk.imag
     for y1, y2 in Y:
         if not (math.isfinite(y1) and math.isfinite(y2)):
             return False
-        comp = (y1 * Fc.real + y2 * Fc.imag + (y1 * Ft.real + y2 * Ft.imag) * ht
-                + (y1 * Fk.real + y2 * Fk.imag) * hk)
+        comp = y1 * cr + y2 * ci + (y1 * tr + y2 * ti) * ht + (y1 * kr + y2 * ki) * hk
         if not comp.contains(0):
             return True
     return False
@@ -136,11 +137,42 @@ def box_balls(kern: tuple, theta: Any, K: Any) -> tuple[Any, Any, Any, Any, Any,
     return P, Q, Fc + hh * Ft + kk * Fk, Fc, Ft, Fk
 
 
-def exclusion_test(kern: tuple, theta: Any, K: Any) -> tuple[str | None, float, float]:
+def _pk(c: list[Any], nz: tuple[bool, ...], K: Any) -> Any:
+    """:func:`poly_k` with exact zero coefficients (``nz`` False) skipped: the same ball
+    bit for bit, since Arb multiplies by an exact zero and adds one exactly (no
+    rounding, the radius unchanged)."""
+    if nz[2]:
+        return c[0] + K * (c[1] + K * c[2])
+    return c[0] + K * c[1] if nz[1] else c[0]
+
+
+def angle_parts(theta: Any) -> tuple:
+    """What :func:`exclusion_test` forms of the angle's ball before any test: the
+    radius as an acb ball about 0, and the radius. At the precision in force."""
+    import flint
+    rt = theta.rad()
+    return flint.acb(flint.arb(0, rt)), rt
+
+
+def stiffness_parts(K: Any) -> tuple:
+    """What :func:`exclusion_test` forms of the stiffness's ball before any test: the
+    ball, its centre and its radius about 0 as acb, and the radius. At the precision in
+    force (a subdivision forms these once per K-range, the angle's once per piece)."""
+    import flint
+    acb = flint.acb
+    rk = K.rad()
+    return acb(K), acb(K.mid()), acb(flint.arb(0, rk)), rk
+
+
+def exclusion_test(kern: tuple, theta: Any, K: Any, nz: tuple | None = None,
+                   parts: tuple | None = None) -> tuple[str | None, float, float]:
     """The tests a certificate names, in order, on the balls of :func:`box_balls`
     (each formed only when the test before it fails): ``"P"`` (|P| > |Q|), ``"Q"``
     (|Q| > |P|), ``"F"`` (0 not in det M's ball), ``"N"``
-    (:func:`preconditioned_excludes`). At the precision in force.
+    (:func:`preconditioned_excludes`). At the precision in force. ``nz``: the kernel's
+    :class:`~hapstab.engine.arb_kernel.KernelPolys` ``nonzero`` flags (terms that
+    are exact zeros are skipped: the same balls); ``parts``: :func:`angle_parts` and
+    :func:`stiffness_parts` of ``theta`` and ``K``, formed already.
 
     Returns
     -------
@@ -150,21 +182,27 @@ def exclusion_test(kern: tuple, theta: Any, K: Any) -> tuple[str | None, float, 
         With ``how`` None: upper bounds of |d det M/d theta| rad(theta) and
         |d det M/dK| rad(K) over the box (to choose a split); else 0.
     """
-    import flint
-    acb, arb = flint.acb, flint.arb
     Pm, Qm, Fm, Pd, Qd, Fd = kern
-    Kc, km = acb(K), acb(K.mid())         # the same balls as box_balls
-    hh, kk = acb(arb(0, theta.rad())), acb(arb(0, K.rad()))
-    P = poly_k(Pm, km) + hh * poly_k(Pd, Kc) + kk * dpoly_k(Pm, Kc)
-    Q = poly_k(Qm, km) + hh * poly_k(Qd, Kc) + kk * dpoly_k(Qm, Kc)
+    zP, zQ, zF, zPd, zQd, zFd = nz or ((True,) * 3,) * 6
+    (hh, rt), (Kc, km, kk, rk) = parts or (angle_parts(theta), stiffness_parts(K))
+    P, Q = _pk(Pm, zP, km), _pk(Qm, zQ, km)
+    # each term below is skipped only where box_balls' is an exact zero: the same ball
+    if any(zPd):
+        P = P + hh * _pk(Pd, zPd, Kc)
+    if zP[1] or zP[2]:
+        P = P + kk * (Pm[1] + 2 * Kc * Pm[2] if zP[2] else Pm[1])
+    if any(zQd):
+        Q = Q + hh * _pk(Qd, zQd, Kc)
+    if zQ[1] or zQ[2]:
+        Q = Q + kk * (Qm[1] + 2 * Kc * Qm[2] if zQ[2] else Qm[1])
     if P.abs_lower() > Q.abs_upper():
         return "P", 0.0, 0.0
     if Q.abs_lower() > P.abs_upper():
         return "Q", 0.0, 0.0
-    Ft, Fk = poly_k(Fd, Kc), dpoly_k(Fm, Kc)
-    Fc = poly_k(Fm, km)
+    Ft, Fc = _pk(Fd, zFd, Kc), _pk(Fm, zF, km)
+    Fk = Fm[1] + 2 * Kc * Fm[2] if zF[2] else Fm[1]
     if not (Fc + hh * Ft + kk * Fk).contains(0):
         return "F", 0.0, 0.0
-    if preconditioned_excludes(Fc, Ft, Fk, theta.rad(), K.rad()):
+    if preconditioned_excludes(Fc, Ft, Fk, rt, rk):
         return "N", 0.0, 0.0
-    return None, float(Ft.abs_upper() * theta.rad()), float(Fk.abs_upper() * K.rad())
+    return None, float(Ft.abs_upper() * rt), float(Fk.abs_upper() * rk)

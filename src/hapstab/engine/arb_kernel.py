@@ -60,6 +60,19 @@ class KernelPolys:
         self.dP = [deriv(f) for f in self.P]
         self.dQ = [deriv(f) for f in self.Q]
         self.dF = None if self.F is None else [deriv(f) for f in self.F]
+        self.nonzero = _nonzero(self.P, self.Q, self.F)
+
+
+def _nonzero(P: list[VPoly], Q: list[VPoly], F: list[VPoly] | None) -> tuple:
+    """Which coefficients of :func:`poly_kernel`'s lists ``(Pm, Qm, Fm, Pd, Qd, Fd)`` may
+    be nonzero: False where the function is exactly 0 (its :data:`VPoly` all None; det
+    M's where P's and Q's both are), so that the kernel's entry is an exact zero ball
+    (:func:`~hapstab.engine.arb_forms.exclusion_test` skips it)."""
+    def nz(fs: list[VPoly]) -> tuple[bool, ...]:
+        return tuple(any(p is not None for p in f) for f in fs)
+    p, q = nz(P), nz(Q)
+    f = nz(F) if F is not None else tuple(a or b for a, b in zip(p, q, strict=True))
+    return p, q, f, p, q, f
 
 
 def _add(a: VPoly, b: VPoly) -> VPoly:

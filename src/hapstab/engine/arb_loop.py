@@ -331,14 +331,21 @@ class ArbLoop:
             ``(Pm, Qm, Fm, Pd, Qd, Fd)``: lists of 3 acb, the coefficients of K^0..K^2
             of P, Q, det M at the centre and of their d/dtheta over the ball.
         """
+        return self.kernel_entry(theta, key, polys)[1]
+
+    def kernel_entry(self, theta: Any, key: Any, polys: bool) -> tuple:
+        """:meth:`kernel`'s cache entry: ``(theta, kernel, nonzero flags)``, the ball it
+        was made for (the one given, or an equal one cached), the kernel and, with
+        ``polys``, :class:`~hapstab.engine.arb_kernel.KernelPolys`'s ``nonzero``."""
         cache = self._skernels if polys else self._kernels
         if key is not None:
             got = cache.get(key)
             # the kernel holds the ball's centre: it serves only the very ball it was made
             # for (the same ends formed at another precision have another centre, and a
             # centre of one with the radius of the other misses a sliver of the piece)
-            if got is not None and got[0].mid() == theta.mid() and got[0].rad() == theta.rad():
-                return got[1]
+            if got is not None and (got[0] is theta or (got[0].mid() == theta.mid()
+                                                        and got[0].rad() == theta.rad())):
+                return got
         import flint
         arb = flint.arb
         with working_precision(self.prec):
@@ -351,11 +358,12 @@ class ArbLoop:
                 Pd, Qd = [p.d for p in Pt], [q.d for q in Qt]
                 Fd = [p + wt.d * q.v + wt.v * dq for p, q, dq in zip(Pd, Qt, Qd, strict=True)]
                 kern = (Pm, Qm, Fm, Pd, Qd, Fd)
+        entry = (theta, kern, self.kernel_polys.nonzero if polys else None)
         if key is not None:
             if len(cache) >= KERNEL_CACHE:
                 cache.clear()
-            cache[key] = (theta, kern)
-        return kern
+            cache[key] = entry
+        return entry
 
     @property
     def kernel_polys(self) -> KernelPolys:
@@ -406,9 +414,9 @@ class ArbLoop:
             |d det M/dK| rad(K) over the box, the widths of det M's ball due to each
             (to choose a split); else 0.
         """
-        kern = self.kernel(theta, key, polys)
+        _t, kern, nz = self.kernel_entry(theta, key, polys)
         with working_precision(self.prec):
-            return exclusion_test(kern, theta, K)
+            return exclusion_test(kern, theta, K, nz)
 
     def box_derivatives(self, theta: Any, K: Any, key: Any = None,
                         polys: bool = False) -> tuple[Any, Any, Any]:

@@ -25,7 +25,7 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = ["Jet", "EPS_OP", "base_jets", "delay_jet", "poly_jet", "geometric_sum_jet",
-           "one_minus_delay_jet", "const", "zero", "NO_RADIUS"]
+           "one_minus_delay_jet", "const", "zero", "NO_RADIUS", "NO_DERIV"]
 
 #: Rounding allowance per operation: 4 unit round-offs covers a complex product
 #: (at most sqrt(5) u) or sum (at most sqrt(2) u) and the product of the radii.
@@ -35,6 +35,11 @@ EPS_OP = 4.0 * np.finfo(float).eps
 #: nothing (:mod:`~hapstab.analysis.exact.candidates`). An operation with such an
 #: operand gives such a result, with the centres computed exactly as with radii.
 NO_RADIUS = np.full(0, np.nan)
+#: The derivatives of a values-only jet made without them (:meth:`Jet.values_only`,
+#: ``deriv=False``; told by identity): a proposer that reads only the values (its grid)
+#: skips their cost; an operation with such an operand gives such a result, the values
+#: computed exactly as with derivatives.
+NO_DERIV = np.full(0, np.nan)
 
 
 class Jet:
@@ -63,20 +68,24 @@ class Jet:
             self._da = np.abs(self.dc)
         return self._da
 
-    def values_only(self) -> Jet:
-        """The same centres without enclosures (:data:`NO_RADIUS`)."""
-        return Jet(self.vc, NO_RADIUS, self.dc, NO_RADIUS)
+    def values_only(self, deriv: bool = True) -> Jet:
+        """The same centres without enclosures (:data:`NO_RADIUS`); ``deriv`` False:
+        without derivatives too (:data:`NO_DERIV`)."""
+        return Jet(self.vc, NO_RADIUS, self.dc if deriv else NO_DERIV, NO_RADIUS)
 
     def __add__(self, o: Jet) -> Jet:
-        vc, dc = self.vc + o.vc, self.dc + o.dc
+        vc = self.vc + o.vc
         if self.vr is NO_RADIUS or o.vr is NO_RADIUS:
-            return Jet(vc, NO_RADIUS, dc, NO_RADIUS)
+            nd = self.dc is NO_DERIV or o.dc is NO_DERIV
+            return Jet(vc, NO_RADIUS, NO_DERIV if nd else self.dc + o.dc, NO_RADIUS)
+        dc = self.dc + o.dc
         vr = self.vr + o.vr + EPS_OP * (self.va + o.va)
         dr = self.dr + o.dr + EPS_OP * (self.da + o.da)
         return Jet(vc, vr, dc, dr)
 
     def __neg__(self) -> Jet:
-        return Jet(-self.vc, self.vr, -self.dc, self.dr, va=self._va, da=self._da)
+        return Jet(-self.vc, self.vr, self.dc if self.dc is NO_DERIV else -self.dc, self.dr,
+                   va=self._va, da=self._da)
 
     def __sub__(self, o: Jet) -> Jet:
         return self + (-o)
@@ -84,7 +93,9 @@ class Jet:
     def __mul__(self, o: Jet) -> Jet:
         a, b = self, o
         if a.vr is NO_RADIUS or b.vr is NO_RADIUS:
-            return Jet(a.vc * b.vc, NO_RADIUS, a.dc * b.vc + a.vc * b.dc, NO_RADIUS)
+            nd = a.dc is NO_DERIV or b.dc is NO_DERIV
+            return Jet(a.vc * b.vc, NO_RADIUS, NO_DERIV if nd else a.dc * b.vc + a.vc * b.dc,
+                       NO_RADIUS)
         av, bv, ad, bd = a.va, b.va, a.da, b.da
         vc = a.vc * b.vc
         vr = av * b.vr + a.vr * (bv + b.vr) + EPS_OP * av * bv
@@ -97,7 +108,8 @@ class Jet:
         """Multiply by exactly known numbers ``s``."""
         s = np.asarray(s)
         if self.vr is NO_RADIUS:
-            return Jet(s * self.vc, NO_RADIUS, s * self.dc, NO_RADIUS)
+            nd = self.dc is NO_DERIV
+            return Jet(s * self.vc, NO_RADIUS, NO_DERIV if nd else s * self.dc, NO_RADIUS)
         a = np.abs(s)
         return Jet(s * self.vc, a * self.vr + EPS_OP * a * np.abs(self.vc),
                    s * self.dc, a * self.dr + EPS_OP * a * np.abs(self.dc))
@@ -108,7 +120,8 @@ class Jet:
         if r is NO_RADIUS:          # values only: the same formulas with r = 0
             with np.errstate(all="ignore"):
                 vc = np.conj(c) / (np.abs(c) ** 2)
-            return Jet(vc, NO_RADIUS, -(self.dc * (vc * vc)), NO_RADIUS)
+            nd = self.dc is NO_DERIV
+            return Jet(vc, NO_RADIUS, NO_DERIV if nd else -(self.dc * (vc * vc)), NO_RADIUS)
         with np.errstate(all="ignore"):
             den = np.abs(c) ** 2 - r * r
             ok = den > 0
@@ -252,7 +265,12 @@ def poly_jet(coef: np.ndarray, err: np.ndarray, x: Jet) -> Jet:
     each coefficient itself (same shape).
     """
     if x.vr is NO_RADIUS:       # values only: the same centres, without the discs
-        v, d = coef[:, -1].astype(complex), np.zeros(coef.shape[0], complex)
+        v = coef[:, -1].astype(complex)
+        if x.dc is NO_DERIV:
+            for k in range(coef.shape[-1] - 2, -1, -1):
+                v = v * x.vc + coef[:, k]
+            return Jet(v, NO_RADIUS, NO_DERIV, NO_RADIUS)
+        d = np.zeros(coef.shape[0], complex)
         for k in range(coef.shape[-1] - 2, -1, -1):
             v, d = v * x.vc + coef[:, k], d * x.vc + v * x.dc
         return Jet(v, NO_RADIUS, d, NO_RADIUS)

@@ -129,11 +129,12 @@ class LoopResponse:
 
     # ------------------------------------------------------------------ evaluation
     def coefficients(self, idx: np.ndarray, theta: np.ndarray, rho: np.ndarray,
-                     values_only: bool = False) -> list[Jet]:
+                     values_only: bool = False, deriv: bool = True) -> list[Jet]:
         """Jets of F0, F1, F2 (det M = F0 + u F1 + u^2 F2, u = K/scale) on the cells
-        ``[theta - rho, theta + rho]`` of items ``idx`` (``values_only``: centres alone)."""
+        ``[theta - rho, theta + rho]`` of items ``idx`` (``values_only``: centres alone;
+        and ``deriv`` False: their values alone, the derivatives ``NO_DERIV``)."""
         b = base_jets(theta, rho)
-        b = {name: jet.values_only() for name, jet in b.items()} if values_only else b
+        b = {name: jet.values_only(deriv) for name, jet in b.items()} if values_only else b
         cache: dict = {}
 
         def pj(name: str, j: int, f: float = 0.0) -> Jet:

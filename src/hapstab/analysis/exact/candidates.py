@@ -58,12 +58,20 @@ THETA_LOW = 1e-12
 #: error is ~1e-3 relative; five steps bring it to rounding, and the ball proof's own
 #: Newton polishes it further (a candidate is a starting point, not an answer).
 NEWTON_STEPS = 5
+#: A Newton step this small relative to its point ends the steps: at a simple crossing
+#: the next would be ~1e-24 (quadratic convergence), below rounding; at a multiple one
+#: the point is still within ~1e-12, far inside SAME, and the ball proof polishes it.
+CONVERGED = 1e-12
 #: Largest turn of a coefficient's argument between grid neighbours (rad) before the
 #: interval is halved, and the most halvings: pi/8 keeps the crossing condition and
 #: the winding resolved; 20 halvings reach 1e-6 of the uniform spacing (a resonance
 #: narrower than that, damping ratio below ~1e-8, is left to the fallback).
 MAX_TURN = math.pi / 8
 REFINE_ROUNDS = 20
+#: Levels of halves below a halved interval whose midpoints are evaluated with it (a
+#: resonance is halved over several rounds: 2 levels, 7 points, serve 3 rounds with one
+#: evaluation, whose cost is its call's, not its points'); not a tolerance.
+LOOKAHEAD = 2
 #: Candidates this close (relative, in u and theta) are one: Newton's steps from two
 #: brackets of the same crossing end ~1e-12 apart; two true crossings this close are
 #: the proof's to separate (it falls back if it cannot).
@@ -98,7 +106,8 @@ def _refined(resp: LoopResponse, i: int, th: np.ndarray) -> tuple[np.ndarray, li
     its width, far below the uniform spacing), and the coefficients on it. Not c_2: a
     two-port loop's is N_0 N_1 (1 - z^-n) k_0 k_1, with exact zeros on the circle
     across which its argument jumps by pi however fine the grid."""
-    c, _ = _coef(resp, i, th)
+    c, _ = _coef(resp, i, th, False)
+    ahead: dict[float, tuple] = {}
     for _ in range(REFINE_ROUNDS):
         with np.errstate(all="ignore"):
             turn = np.zeros(th.size - 1)
@@ -108,24 +117,53 @@ def _refined(resp: LoopResponse, i: int, th: np.ndarray) -> tuple[np.ndarray, li
         j = np.flatnonzero(turn > MAX_TURN)
         if not j.size:
             break
-        th, c = _halve(resp, i, th, c, j)
+        th, c = _halve(resp, i, th, c, j, ahead)
     return th, c
 
 
-def _halve(resp: LoopResponse, i: int, th: np.ndarray, c: list, j: np.ndarray
-           ) -> tuple[np.ndarray, list]:
-    """The grid with the midpoints of intervals ``j`` inserted, and c_0..c_2 on it."""
+def _ahead(resp: LoopResponse, i: int, lo: np.ndarray, hi: np.ndarray, ahead: dict) -> list:
+    """c_0..c_2 at the midpoints of [lo, hi], from ``ahead`` (angle: values) where it
+    has them; the others are evaluated with the midpoints of the :data:`LOOKAHEAD`
+    levels of halves below theirs, kept in ``ahead`` for the rounds that halve those
+    (one evaluation for several rounds; the same angles, formed as the rounds form
+    them, and the same values: the grid is the one the rounds alone make)."""
+    mid = 0.5 * (lo + hi)
+    miss = np.array([t not in ahead for t in mid.tolist()], bool)
+    if miss.any():
+        pts, ivs = [mid[miss]], [(lo[miss], mid[miss]), (mid[miss], hi[miss])]
+        for _ in range(LOOKAHEAD):
+            nxt = []
+            for a, b in ivs:
+                m = 0.5 * (a + b)
+                pts.append(m)
+                nxt += [(a, m), (m, b)]
+            ivs = nxt
+        allp = np.concatenate(pts)
+        got, _ = _coef(resp, i, allp, False)
+        ahead.update(zip(allp.tolist(), zip(*(g.tolist() for g in got), strict=True),
+                         strict=True))
+    vals = [ahead[t] for t in mid.tolist()]
+    return [np.array([v[q] for v in vals], complex) for q in range(3)]
+
+
+def _halve(resp: LoopResponse, i: int, th: np.ndarray, c: list, j: np.ndarray,
+           ahead: dict | None = None) -> tuple[np.ndarray, list]:
+    """The grid with the midpoints of intervals ``j`` inserted, and c_0..c_2 on it
+    (``ahead``: see :func:`_ahead`)."""
     mid = 0.5 * (th[j] + th[j + 1])
-    cm, _ = _coef(resp, i, mid)
+    cm = _coef(resp, i, mid, False)[0] if ahead is None else _ahead(resp, i, th[j], th[j + 1], ahead)
     order = np.argsort(np.concatenate([th, mid]), kind="stable")
     return (np.concatenate([th, mid])[order],
             [np.concatenate([x, y])[order] for x, y in zip(c, cm, strict=True)])
 
 
-def _coef(resp: LoopResponse, i: int, th: np.ndarray) -> tuple[list, list]:
+def _coef(resp: LoopResponse, i: int, th: np.ndarray, deriv: bool = True
+          ) -> tuple[list, list]:
     """c_0..c_2 and their d/dtheta at the angles (complex arrays; the jets' centres
-    alone: a proposer needs no enclosures)."""
-    F = resp.coefficients(np.full(th.size, i), th, np.zeros(th.size), values_only=True)
+    alone: a proposer needs no enclosures); ``deriv`` False: the values alone (the
+    derivatives :data:`~hapstab.engine.discs.NO_DERIV`, the values the same)."""
+    F = resp.coefficients(np.full(th.size, i), th, np.zeros(th.size), values_only=True,
+                          deriv=deriv)
     return [f.vc for f in F], [f.dc for f in F]
 
 
@@ -162,6 +200,11 @@ def _newton(resp: LoopResponse, i: int, th: np.ndarray, u: np.ndarray
         ok = np.isfinite(dth) & np.isfinite(du)
         th = np.where(ok, th + dth, th)
         u = np.where(ok, u + du, u)
+        # every step within CONVERGED of its point: the steps left would move it by
+        # rounding (a candidate only places the proof's Newton)
+        if np.all(~ok | ((np.abs(dth) <= CONVERGED * np.abs(th))
+                         & (np.abs(du) <= CONVERGED * np.abs(u)))):
+            break
     c, d = _coef(resp, i, th)
     Ft = d[0] + u * (d[1] + u * d[2])
     Fu = c[1] + 2 * u * c[2]
@@ -276,41 +319,75 @@ def candidate_set(resp: LoopResponse, i: int, full: bool) -> StableSet | None:
         ss = item_stable_set(resp, i, anchor, cross, [], full, None, False)
     except AnalysisError:
         return None
-    if full and not _counts_agree(resp, i, th, c, ss):
+    if full and not _counts_agree(resp, i, th, c, ss, ends[0]):
         return None
     return ss
 
 
-def _grid_counts(resp: LoopResponse, i: int, th: np.ndarray, c: list, u: np.ndarray
-                 ) -> np.ndarray:
-    """Poles outside at each u by the argument principle on the grid (and its ends);
-    -1 where the winding is not a whole number (the grid does not resolve it)."""
-    e, _ = _coef(resp, i, np.array([0.0, math.pi]))
-    U = u[:, None]
-    vals = np.concatenate([e[0][:1] + U * (e[1][:1] + U * e[2][:1]),
-                           c[0] + U * (c[1] + U * c[2]),
-                           e[0][1:] + U * (e[1][1:] + U * e[2][1:])], axis=1)
+def half_turns(vals: np.ndarray) -> np.ndarray:
+    """Per row, the sum of the principal arguments of ``vals[k + 1] / vals[k]`` over pi
+    (nan where a value is 0 or not finite), without an arctangent per step: it equals
+    ``(arg(last) - arg(first)) / pi + 2 m``, m the net number of steps whose principal
+    turn crosses the negative real axis (upwards -1, downwards +1): a step from the upper
+    half-plane (imaginary part >= 0, arguments in [0, pi]) to the lower one turning
+    counterclockwise (Im(b conj(a)) > 0) adds a turn. Steps exactly half a turn long
+    (measure zero) are the only ones where the two sums can differ."""
+    re, im = vals.real, vals.imag
+    up = im >= 0
+    # only the steps between the halves can cross the axis: few, taken sparsely
+    r, c = np.nonzero(up[:, 1:] != up[:, :-1])
     with np.errstate(all="ignore"):
-        turns = np.sum(np.angle(vals[:, 1:] / vals[:, :-1]), axis=1) / math.pi
+        s = re[r, c] * im[r, c + 1] - im[r, c] * re[r, c + 1]     # Im(b conj(a))
+        d = up[r, c + 1].astype(int) - up[r, c]                    # +1 upwards, -1 down
+        m = np.bincount(r, weights=np.where(d * s < 0, -d, 0), minlength=vals.shape[0])
+        ends = np.angle(vals[:, [0, -1]])
+        ends = np.where(ends == -math.pi, math.pi, ends)    # -0.0 imaginary: the upper half
+        turns = (ends[:, 1] - ends[:, 0]) / math.pi + 2.0 * m
+    ok = np.all(np.isfinite(vals) & (vals != 0), axis=1)
+    return np.where(ok, turns, np.nan)
+
+
+def _grid_counts(resp: LoopResponse, i: int, th: np.ndarray, c: list, u: np.ndarray,
+                 e: list | None = None) -> np.ndarray:
+    """Poles outside at each u by the argument principle on the grid (and its ends);
+    -1 where the winding is not a whole number (the grid does not resolve it). ``e``:
+    c_0..c_2 at theta = 0 and pi (:func:`_ends`), if formed already."""
+    if e is None:
+        e = _ends(resp, i)[0]
+    U = u[:, None]
+    vals = np.empty((u.size, th.size + 2), complex)
+    vals[:, :1] = e[0][:1] + U * (e[1][:1] + U * e[2][:1])
+    vals[:, -1:] = e[0][1:] + U * (e[1][1:] + U * e[2][1:])
+    mid = vals[:, 1:-1]             # c_0 + U (c_1 + U c_2) in place (c_2 = 0: one port)
+    if np.any(c[2] != 0):
+        np.multiply(U, c[2], out=mid)
+        mid += c[1]
+        mid *= U
+    else:
+        np.multiply(U, c[1], out=mid)
+    mid += c[0]
+    turns = half_turns(vals)
     # a winding number is an integer: a sum of angles farther than 1e-6 turn from one
     # means the grid missed a fast phase change there (the gap is recounted, not trusted)
     whole = np.isfinite(turns) & (np.abs(turns - np.round(turns)) <= 1e-6)
     return np.where(whole, resp.q - np.round(np.where(whole, turns, 0)).astype(int), -1)
 
 
-def _counts_agree(resp: LoopResponse, i: int, th: np.ndarray, c: list, ss: StableSet) -> bool:
+def _counts_agree(resp: LoopResponse, i: int, th: np.ndarray, c: list, ss: StableSet,
+                  at_ends: list | None = None) -> bool:
     """Whether the counts the crossings' directions give in every gap (from the anchor)
     equal the grid's own argument principle at the gap's middle (refined for the
     gaps that disagree, :func:`_recount`). The proof examines only the gaps
     these counts call stable (beyond the first), so a crossing the grid missed must
-    not go unnoticed here; a count that disagrees even there: False."""
+    not go unnoticed here; a count that disagrees even there: False. ``at_ends``:
+    c_0..c_2 at theta = 0 and pi (:func:`_ends`), if formed already."""
     s = float(resp.scale[i])
     ks = [e[0] / s for e in ss.events]
     edges = [U_LO, *ks, min(U_HI, 4 * ks[-1]) if ks else U_HI]
     mids = np.array([math.sqrt(a * b) for a, b in itertools.pairwise(edges)])
     counts = np.cumsum([ss.outside_small_K] + [int(e[3] * e[4]) for e in ss.events])
     pick = _checked_gaps(mids.size, th.size)
-    got = _grid_counts(resp, i, th, c, mids[pick])
+    got = _grid_counts(resp, i, th, c, mids[pick], at_ends)
     # a gap both counts put FAR_UNSTABLE or more poles outside is not one the proof
     # examines, whichever is right: two misses of one estimate could not make it stable
     far = (got >= FAR_UNSTABLE) & (counts[pick] >= FAR_UNSTABLE)
@@ -320,7 +397,7 @@ def _counts_agree(resp: LoopResponse, i: int, th: np.ndarray, c: list, ss: Stabl
     # where u^2 c_2 dominates, its exact zeros on the circle (a two-port loop's
     # 1 - z^-n) turn det M faster than the grid resolves: those gaps are counted again
     # on a grid refined for det M at their own u
-    return bool(np.array_equal(_recount(resp, i, th, c, mids[bad]), counts[bad]))
+    return bool(np.array_equal(_recount(resp, i, th, c, mids[bad], at_ends), counts[bad]))
 
 
 def _checked_gaps(n_gaps: int, n_angles: int) -> np.ndarray:
@@ -335,8 +412,8 @@ def _checked_gaps(n_gaps: int, n_angles: int) -> np.ndarray:
                                                       most - most // 2).astype(int)]))
 
 
-def _recount(resp: LoopResponse, i: int, th: np.ndarray, c: list, u: np.ndarray
-             ) -> np.ndarray:
+def _recount(resp: LoopResponse, i: int, th: np.ndarray, c: list, u: np.ndarray,
+             e: list | None = None) -> np.ndarray:
     """The grid's counts at each u with the grid halved where det M(., u) turns by
     more than :data:`MAX_TURN` for any of them (at most :data:`REFINE_ROUNDS` times)."""
     U = u[:, None]
@@ -347,7 +424,7 @@ def _recount(resp: LoopResponse, i: int, th: np.ndarray, c: list, u: np.ndarray
         if not j.size or th.size + j.size > MAX_CHECK // max(1, u.size):
             break
         th, c = _halve(resp, i, th, c, j)
-    return _grid_counts(resp, i, th, c, u)
+    return _grid_counts(resp, i, th, c, u, e)
 
 
 def consistent(ss: StableSet, proved: StableSet) -> bool:

@@ -88,7 +88,7 @@ def _polish_pole(resp: LoopResponse, u: float, z0: complex) -> complex:
     zero = np.zeros(1)
     idx = np.zeros(1, int)
     for _ in range(30):
-        F = resp.coefficients(idx, th, zero)
+        F = resp.coefficients(idx, th, zero, values_only=True)     # the centres alone
         f = F[0].vc + u * (F[1].vc + u * F[2].vc)
         df = F[0].dc + u * (F[1].dc + u * F[2].dc)
         if not (np.isfinite(f[0]) and np.isfinite(df[0])) or df[0] == 0:
@@ -150,7 +150,8 @@ def stability(loop: HapticLoop | TeleoperationLoop, *, max_memory: float | None 
         resp = loop_response(loop)
         m = resp.rigid
         u = float(sysm.stiffness[0] / resp.scale[0])
-        count = _proved_count(loop, float(sysm.stiffness[0])) if certify else None
+        count = _proved_count(resp.params[0] if resp.params else None,
+                              float(sysm.stiffness[0])) if certify else None
         if count is None:       # not covered by the ball-arithmetic core
             count = int(winding(resp, np.zeros(1, int), np.array([u]))[0])
     else:
@@ -174,12 +175,13 @@ def stability(loop: HapticLoop | TeleoperationLoop, *, max_memory: float | None 
                            note)
 
 
-def _proved_count(loop: HapticLoop | TeleoperationLoop, K: float) -> int | None:
+def _proved_count(params: dict | None, K: float) -> int | None:
     """Poles outside at K by the argument principle in ball arithmetic
-    (:func:`~hapstab.analysis.exact.proof.count`): -1 if the balls cannot decide
-    (a pole on or within their width of the circle); None if the loop is not covered."""
-    from hapstab.engine.arb_loop import ArbLoop, arb_parameters
-    params = arb_parameters(loop)
+    (:func:`~hapstab.analysis.exact.proof.count`) of the loop of ``params``
+    (:func:`~hapstab.engine.arb_loop.arb_parameters`, as its response holds them): -1 if
+    the balls cannot decide (a pole on or within their width of the circle); None if the
+    loop is not covered (``params`` None)."""
+    from hapstab.engine.arb_loop import ArbLoop
     if params is None:
         return None
     from hapstab.analysis.exact.proof import count

@@ -51,6 +51,7 @@ from hapstab.analysis.exact.winding import (
     subdivision_start,
     theta_ball,
 )
+from hapstab.engine.arb_forms import angle_parts, exclusion_test, stiffness_parts
 from hapstab.engine.arb_loop import ArbLoop, working_precision
 
 __all__ = ["Proof", "prove", "prove_base", "count", "exclude", "theta_ball", "DELTA"]
@@ -86,9 +87,13 @@ K_TOP = 8
 HINT_MARGIN = 1e-6
 
 
-def box_status(al: ArbLoop, a: float, b: float, ka: float, kb: float) -> tuple[str | None, float]:
+def box_status(al: ArbLoop, a: float, b: float, ka: float, kb: float,
+               entries: dict | None = None) -> tuple[str | None, float]:
     """Whether det M has no zero on [a, b] x [ka, kb]; the reason, and the share of
-    the ball's width due to theta (to choose the split).
+    the ball's width due to theta (to choose the split). ``entries``: the angle pieces'
+    kernels (:meth:`~hapstab.engine.arb_loop.ArbLoop.kernel_entry`) formed so far at
+    the precision in force, by ends (the boxes of one piece at several K-ranges share
+    its ball and kernel without looking them up and comparing balls again).
 
     Returns
     -------
@@ -100,7 +105,21 @@ def box_status(al: ArbLoop, a: float, b: float, ka: float, kb: float) -> tuple[s
         spreads :meth:`~hapstab.engine.arb_loop.ArbLoop.exclusion` returns; 0 when
         excluded).
     """
-    how, s_t, s_k = al.exclusion(theta_ball(a, b), k_ball(ka, kb), key=(a, b), polys=POLY_KERNEL)
+    cache = {} if entries is None else entries
+    ent, kp = cache.get((a, b)), cache.get((ka, kb, "K"))
+    # the balls at the caller's precision (the proof's, set by exclude()), what the tests
+    # form of them at the loop's, as ArbLoop.exclusion
+    if ent is None:
+        th = theta_ball(a, b)
+        ent = al.kernel_entry(th, (a, b), POLY_KERNEL)
+        with working_precision(al.prec):
+            ent = cache[(a, b)] = (*ent, angle_parts(ent[0]))
+    if kp is None:
+        K = k_ball(ka, kb)
+        with working_precision(al.prec):
+            kp = cache[(ka, kb, "K")] = (K, stiffness_parts(K))
+    with working_precision(al.prec):
+        how, s_t, s_k = exclusion_test(ent[1], ent[0], kp[0], ent[2], (ent[3], kp[1]))
     if how is not None:
         return how, 0.0
     if not (math.isfinite(s_t) and math.isfinite(s_k)):
@@ -157,6 +176,7 @@ def _exclude(al: ArbLoop, ka: float, kb: float, max_pieces: int) -> Exclusion:
     heap = [(ka, a, b, kb) for a, b in subdivision_start(POLY_KERNEL)]
     heapq.heapify(heap)
     tried = 0
+    entries: dict = {}      # balls formed at the proof's precision, set by exclude()
     while heap:
         k0, a, b, k1 = heapq.heappop(heap)
         tried += 1
@@ -164,7 +184,7 @@ def _exclude(al: ArbLoop, ka: float, kb: float, max_pieces: int) -> Exclusion:
             out.failed.append((a, b, k0, k1))
             out.failed.extend((x[1], x[2], x[0], x[3]) for x in heap)
             break
-        how, share = box_status(al, a, b, k0, k1)
+        how, share = box_status(al, a, b, k0, k1, entries)
         if how is not None:
             out.pieces.append((a, b, k0, k1, how))
             out.splits.append("x")
