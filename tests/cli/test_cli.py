@@ -177,7 +177,7 @@ def test_delay_with_one_side_is_refused():
 # ------------------------------------------------ user errors vs bugs (issue #10, 6)
 def _break_stability(monkeypatch, exc):
     import hapstab.analysis.exact.core as core
-    import hapstab.cli.analysis as mod  # noqa: F401 - the command imports stability lazily
+    import hapstab.cli.exact as mod  # noqa: F401 - the command imports stability lazily
 
     def boom(*a, **k):
         raise exc

@@ -79,13 +79,13 @@ def test_the_command_takes_the_kinds_and_the_option_named(name):
 
 
 def test_the_cli_registers_every_command_of_the_table_and_no_other_analysis():
-    from hapstab.cli import analysis, jitter, paper, regions
+    from hapstab.cli import conditions, design, exact, network
 
     assert set(table.commands()) <= set(cli.commands)
     # the commands found by name are the modules' own objects
-    assert cli.commands["kmax"] is analysis.kmax and cli.commands["audit"] is paper.audit_cmd
-    assert cli.commands["best-damping"] is regions.best
-    assert cli.commands["jitter"] is jitter.jitter_cmd
+    assert cli.commands["kmax"] is exact.kmax and cli.commands["audit"] is conditions.audit_cmd
+    assert cli.commands["best-damping"] is design.best
+    assert cli.commands["jitter"] is network.jitter_cmd
     loop_commands = {n for n, c in cli.commands.items() if isinstance(c, click.Group)}
     assert loop_commands <= set(table.commands()), loop_commands - set(table.commands())
 
@@ -118,3 +118,14 @@ def test_the_tests_are_laid_out_by_the_same_rooms():
     assert not sorted(tests.glob("test_*.py")), "a test outside its room's folder"
     names = [p.name for p in tests.glob("*/test_*.py")]
     assert len(names) == len(set(names)), "two rooms hold a test module of one name"
+
+
+@pytest.mark.parametrize("name", [n for n, r in ROWS.items() if r.command and not r.option])
+def test_the_command_lives_in_the_cli_module_of_its_room(name):
+    """cli/<room>.py answers the room's questions: the module is named as the analysis's
+    room (an analysis asked through another command's option lives with that command)."""
+    r = ROWS[name]
+    cmd = cli.commands[r.command]
+    subs = list(cmd.commands.values()) if isinstance(cmd, click.Group) else [cmd]
+    for sub in subs:
+        assert sub.callback.__module__ == f"hapstab.cli.{r.room}", (name, sub.callback.__module__)

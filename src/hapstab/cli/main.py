@@ -301,26 +301,27 @@ def _register() -> None:
     of analyses lists them (:data:`hapstab.analysis.table.TABLE`), then the others."""
     from hapstab.analysis.table import commands
     from hapstab.cli import (
-        analysis,
-        devices,
+        conditions,
+        design,
+        exact,
         explore,
-        identify,
-        jitter,
+        identification,
+        network,
         nonlinear,
-        paper,
-        regions,
         robust,
         run,
         simulation,
         sweep,
+        teleoperation,
     )
 
-    modules = (analysis, devices, explore, identify, jitter, nonlinear, paper, regions, robust,
-               run, simulation, sweep)
+    # the rooms' modules (cli/<room>.py, named as hapstab.analysis's rooms) and the others
+    modules = (exact, conditions, teleoperation, design, robust, nonlinear, network,
+               identification, simulation, explore, run, sweep)
     found = {c.name: c for m in modules for c in vars(m).values()
              if isinstance(c, click.Command)}
     # the analyses' commands, by the one table of analyses; then the others
-    others = (analysis.demo, analysis.verify_cmd, simulation.reproduce_cmd, run.run_cmd,
+    others = (exact.demo, exact.verify_cmd, simulation.reproduce_cmd, run.run_cmd,
               explore.explore_cmd, sweep.sweep_cmd)
     for cmd in (*(found[name] for name in commands()), *others):
         cli.add_command(cmd)
