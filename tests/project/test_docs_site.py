@@ -54,3 +54,19 @@ def test_docstring_examples_run() -> None:
         mod = importlib.import_module(name.removesuffix(".__init__"))
         result = doctest.testmod(mod, optionflags=doctest.ELLIPSIS | doctest.NORMALIZE_WHITESPACE)
         assert result.failed == 0, name
+
+
+def test_the_guide_names_each_room_in_every_layer() -> None:
+    """The guide's index has one row per room of the table of analyses, naming the room's
+    package, its command-line module and its tests' folder, all of which exist."""
+    from hapstab.analysis.table import TABLE
+
+    index = (ROOT / "docs" / "guide" / "index.md").read_text()
+    for room in sorted({r.room for r in TABLE}):
+        row = next((line for line in index.splitlines() if line.startswith(f"| {room} |")), None)
+        assert row, f"docs/guide/index.md has no row for the room {room}"
+        code = "simulation/" if room == "simulation" else f"analysis/{room}/"
+        for part in (code, f"cli/{room}.py", f"tests/{room}/"):
+            assert f"`{part}" in row, (room, part)
+            where = part if part.startswith("tests") else "src/hapstab/" + part
+            assert (ROOT / where).exists(), where
