@@ -49,9 +49,11 @@ from typing import Any
 
 import numpy as np
 
-from hapstab.analysis.network.modified_z import FractionalPlant, fractional_plant
+from hapstab.analysis.network.modified_z import fractional_plant
+from hapstab.analysis.network.modified_z_peb import peb_fractional_plant
 
-__all__ = ["Segment", "fraction_range_minimum", "segments_of", "RTOL", "MAX_BOXES"]
+__all__ = ["Segment", "fraction_range_minimum", "fraction_model", "segments_of", "RTOL",
+           "MAX_BOXES"]
 
 #: The gap at which a segment's enclosure is closed: K_low >= upper (1 - RTOL). The
 #: acceptance asks 1e-6 of the grid's minimum; the branch and bound's second-order
@@ -132,7 +134,33 @@ def segments_of(lo: float, hi: float) -> list[tuple[int, float, float]]:
     return out
 
 
-def _float_worst(plant: FractionalPlant, f_lo: float, f_hi: float, k0: float
+def fraction_model(loop: Any, whole: int) -> Any:
+    """The loop's float model with a fractional delay, by its number of ports: one, the
+    HVE's (:mod:`~hapstab.analysis.network.modified_z`); two, the PEB's with the same
+    delay both ways (:mod:`~hapstab.analysis.network.modified_z_peb`). Its ``balls()``
+    is the ball evaluator the proofs use.
+
+    Parameters
+    ----------
+    loop : HapticLoop or TeleoperationLoop
+        The loop (its delay is replaced).
+    whole : int
+        n.
+
+    Returns
+    -------
+    FractionalPlant or PebFractionalPlant
+
+    Raises
+    ------
+    AnalysisError
+        A loop outside both models, naming what.
+    """
+    make = {2: peb_fractional_plant}.get(len(loop.port_names), fractional_plant)
+    return make(loop, whole)
+
+
+def _float_worst(plant: Any, f_lo: float, f_hi: float, k0: float
                  ) -> tuple[float, float, float]:
     """(K, theta, f) of the smallest float first crossing over [f_lo, f_hi]: a scan of
     :data:`SCAN_FRACTIONS` fractions and a bounded search around its best."""
@@ -169,7 +197,7 @@ def _core_kmax(loop: Any, whole: int, f: float) -> float:
     """The exact core's K_max at the delay n + f (f = 1: the whole delay n + 1)."""
     from hapstab.analysis.methods import critical_stiffness
     at = (loop.with_whole_delay(whole + 1) if f >= 1.0
-          else loop.replace(delay_samples=whole, fractional_delay=f))
+          else loop.with_whole_delay(whole).replace(fractional_delay=f))
     return float(critical_stiffness(at).critical_stiffness)
 
 
@@ -180,7 +208,7 @@ class _Work:
     whole: int
     f_lo: float
     f_hi: float
-    plant: FractionalPlant
+    plant: Any
     balls: Any
     worst: tuple[float, float, float]        # float (K, theta, f)
     upper: float = math.inf                  # proved crossing at worst's f
@@ -189,14 +217,12 @@ class _Work:
 
 def _prepare(loop: Any, segs: list[tuple[int, float, float]], k0: float) -> list[_Work]:
     """Each segment's plant, balls, float worst point and proved crossing there."""
-    from hapstab.analysis.network.frac_balls import FractionBalls
-    from hapstab.analysis.network.frac_bound import proved_crossing
     out = []
     for n, a, b in segs:
-        plant = fractional_plant(loop, n)
-        w = _Work(n, a, b, plant, FractionBalls(plant), _float_worst(plant, a, b, k0))
+        plant = fraction_model(loop, n)
+        w = _Work(n, a, b, plant, plant.balls(), _float_worst(plant, a, b, k0))
         if math.isfinite(w.worst[0]):
-            w.upper = proved_crossing(w.balls, w.worst[1], w.worst[2])
+            w.upper = w.balls.proved_crossing(w.worst[1], w.worst[2])
         out.append(w)
     return out
 
@@ -218,12 +244,11 @@ def _reseed(w: _Work, box: tuple[float, float], k0: float) -> bool:
     """Search the float model on the fractions ``box`` of the branch and bound's lowest
     box (widened by a scan step); True, with the segment's worst point and proved
     crossing updated, if it finds a lower crossing than the one it had."""
-    from hapstab.analysis.network.frac_bound import proved_crossing
     half = (w.f_hi - w.f_lo) / (2 * SCAN_FRACTIONS)
     got = _float_worst(w.plant, max(w.f_lo, box[0] - half), min(w.f_hi, box[1] + half), k0)
     if not got[0] < w.worst[0]:
         return False
-    up = proved_crossing(w.balls, got[1], got[2])
+    up = w.balls.proved_crossing(got[1], got[2])
     if not up < w.upper:
         return False
     w.worst, w.upper = got, up
@@ -266,8 +291,8 @@ def fraction_range_minimum(loop: Any, lo: float, hi: float, *, rtol: float = RTO
     """
     from hapstab.engine.arb_loop import arb_parameters, base_point
     segs = segments_of(lo, hi)
-    fractional_plant(loop, segs[0][0])               # refuses a loop outside the model
-    _check_cost(segs)
+    fraction_model(loop, segs[0][0])                 # refuses a loop outside the model
+    _check_cost(segs, len(loop.port_names))
     k0 = base_point(arb_parameters(loop.with_whole_delay(segs[0][0])))   # type: ignore[arg-type]
     work = _prepare(loop, segs, k0)
     upper = min(w.upper for w in work)
@@ -290,13 +315,15 @@ def fraction_range_minimum(loop: Any, lo: float, hi: float, *, rtol: float = RTO
     return out, min(s.lower for s in out), upper, k0
 
 
-def _check_cost(segs: list[tuple[int, float, float]]) -> None:
+def _check_cost(segs: list[tuple[int, float, float]], ports: int) -> None:
     """Refuse, before any work, a range over the budget: per segment the exact core's
     K_max at its whole delay (:func:`hapstab.budget.exact_search_cost`) plus
-    :data:`SEGMENT_SECONDS` and :data:`SEGMENT_SECONDS_PER_SAMPLE` per sample of delay."""
+    :data:`SEGMENT_SECONDS` and :data:`SEGMENT_SECONDS_PER_SAMPLE` per sample of delay
+    and port (the PEB's degree 2n + 8 is twice the HVE's)."""
     from hapstab.budget import Cost, check, exact_search_cost
     n = segs[-1][0] + 1
-    one = exact_search_cost(n, 1)
+    one = exact_search_cost(n, ports)
     check(Cost(f"delay range between the samples: {len(segs)} segment(s) up to {n} samples",
                one.memory_bytes,
-               len(segs) * (one.seconds + SEGMENT_SECONDS + SEGMENT_SECONDS_PER_SAMPLE * n)))
+               len(segs) * (one.seconds + SEGMENT_SECONDS
+                            + SEGMENT_SECONDS_PER_SAMPLE * n * ports)))
