@@ -1,6 +1,11 @@
 """A proved lower bound of the smallest crossing gain over a box of fractions, by branch
 and bound over (theta, f) boxes, and a proved crossing above it.
 
+The branch and bound asks each box for its bound (``box.lower(K_floor, target)``): the
+HVE's G below (:mod:`~hapstab.analysis.network.frac_balls`); the PEB's two roots of a
+quadratic in K, each analytic on a box and bounded by the same mean-value forms
+(:func:`mean_value_lower`; :mod:`~hapstab.analysis.network.frac_balls_peb`).
+
 **What is proved.** :func:`crossing_lower_bound` returns ``lower`` such that for every
 f in [f_lo, f_hi], every theta in [0, pi] and every real K in [K_floor, lower), the
 characteristic function det M(e^{j theta}, K, f) of
@@ -178,7 +183,7 @@ def crossing_lower_bound(balls: Any, f_lo: float, f_hi: float, k_floor: float,
 
     Parameters
     ----------
-    balls : FractionBalls
+    balls : FractionBalls or PebFractionBalls
         The loop's ball evaluator.
     f_lo, f_hi : float
         The fractions, 0 <= f_lo <= f_hi <= 1.

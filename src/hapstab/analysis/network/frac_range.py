@@ -1,10 +1,14 @@
 """The certified minimum of K_max over a continuum of constant delays that act between
-the sampling instants (the HVE), and the worst delay.
+the sampling instants (the HVE, and the PEB with the same one-way delay both ways), and
+the worst delay.
 
 **The model.** The controller acts at kT on the position sampled at kT - tau: e[k] =
 x(kT - tau) with tau = (n + f)T any constant delay of [tau_lo, tau_hi] (the engine's
-fractional delay; :mod:`~hapstab.analysis.network.modified_z` for the loop as a
-modified z-transform). K_max(tau) is continuous in tau and not monotone, so no finite
+fractional delay; :mod:`~hapstab.analysis.network.modified_z` for the HVE as a
+modified z-transform, :mod:`~hapstab.analysis.network.modified_z_peb` for the PEB, each
+direction's delayed position sampled at kT - tau: chi monic of degree 2n + 8, K entering
+as a quadratic; :func:`fraction_model` picks the model by the loop's number of ports).
+K_max(tau) is continuous in tau and not monotone, so no finite
 set of delays answers; the range is cut at the whole samples into segments
 {n} x [f_a, f_b] and each is covered by a proof.
 
@@ -17,12 +21,13 @@ set of delays answers; the range is cut at the whole samples into segments
    most it; and the exact core's K_max at the point (n + f_w), reported beside it.
 3. *The lower end, proved* (:func:`~hapstab.analysis.network.frac_bound.crossing_lower_bound`):
    no real crossing K in [K_0, K_low) for f in [f_a, f_b].
-4. *Stability below it*: the exact core proves the whole delay n stable on
-   [K_0, K_max(n)] in ball arithmetic (f = 0 of the segment); a second bound proves no
-   crossing at K in [K_0, 2 K_0) for f in [0, f_a], so the path (K_0, 0) -> (K_0, f_a)
-   meets no crossing; the roots of chi (monic of fixed degree n + 4, continuous in
-   (K, f)) then cannot leave the unit disc anywhere on [K_0, K_low) x [f_a, f_b], which is
-   connected to that path. Every delay of the segment is stable for K in [K_0, K_low).
+4. *Stability below it*: the exact core proves the whole delay n (both ways, for the
+   PEB) stable on [K_0, K_max(n)] in ball arithmetic (f = 0 of the segment); a second
+   bound proves no crossing at K in [K_0, 2 K_0) for f in [0, f_a], so the path
+   (K_0, 0) -> (K_0, f_a) meets no crossing; the roots of chi (monic of fixed degree
+   n + 4, the PEB's 2n + 8, continuous in (K, f)) then cannot leave the unit disc
+   anywhere on [K_0, K_low) x [f_a, f_b], which is connected to that path. Every delay
+   of the segment is stable for K in [K_0, K_low).
 
 The range's answer is the smallest K_low over its segments (a proved lower bound of
 min K_max) with the smallest upper end as the enclosure's top. When a segment's gap stays

@@ -1,5 +1,6 @@
 """The answer for a range of constant delays that act between the sampling instants
-(:mod:`~hapstab.analysis.network.frac_range`): a proved enclosure of min K_max, the worst
+(:mod:`~hapstab.analysis.network.frac_range`; the HVE, and the PEB with the same
+one-way delay both ways): a proved enclosure of min K_max, the worst
 delay, and the segments it was proved on."""
 
 from __future__ import annotations
