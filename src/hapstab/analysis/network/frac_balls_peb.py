@@ -109,8 +109,16 @@ class PebBox:
         if roots is None:
             a0, a1, a2 = (c.v for c in self.coef)
             return disc_lower(a0, a1, a2, k_floor)
-        bounds = [b for b in (self._root_lower(r, k_floor) for r in roots) if b is not None]
-        return min(bounds) if bounds else None
+        bounds = [(b, r) for b, r in ((self._root_lower(r, k_floor), r) for r in roots)
+                  if b is not None]
+        if not bounds:
+            return None
+        # the split heuristic's scales: the slopes of the lowest root that has them
+        slopes = [(b, r) for b, r in bounds if r[2].is_finite() and r[3].is_finite()]
+        if slopes:
+            root = min(slopes, key=lambda x: x[0])[1]
+            self.d_theta, self.d_f = root[2], root[3]
+        return min(b for b, _ in bounds)
 
     def _excluded(self, k_floor: float, target: float) -> bool:
         """Whether a_0 + a_1 K + a_2 K^2 has no zero over the box for K in
@@ -131,14 +139,13 @@ class PebBox:
         centre, box, d_t, d_f, magnitude = root
         if not (centre.is_finite() and box.is_finite() and d_t.is_finite() and d_f.is_finite()):
             return max(k_floor, _down(magnitude.lower())) if magnitude.is_finite() else k_floor
-        if self.d_theta is None:
-            self.d_theta, self.d_f = d_t, d_f         # the split heuristic's scales
         return mean_value_lower(centre, d_t, d_f, self.r_theta, self.r_f, k_floor)
 
     def split_scales(self) -> tuple[float, float]:
-        """|dK/df|, |dK/dtheta| over the box (the split heuristic; inf if unknown)."""
+        """|dK/df|, |dK/dtheta| over the box of the root with the lowest bound at K >= 0
+        (the split heuristic), else the coefficients' relative scales."""
         if self.d_theta is None:
-            self.lower(-math.inf)
+            self.lower(0.0)
         if self.d_theta is None:        # no root settled: the coefficients' relative scales
             mags = [float(c.v.abs_upper()) for c in self.coef]
             return (sum(float(c.f.abs_upper()) / m for c, m in zip(self.coef, mags, strict=True) if m),
@@ -185,15 +192,27 @@ def _roots(bx: PebBox) -> list[tuple[Any, ...]] | None:
         return None
     ka, kb, q, s = _pair([a0.v, a1.v, a2.v], br)
     ca, cb, _, _ = _pair(bx.centre, br)
-    from flint import arb
+    from flint import acb, arb
+    ht, hf = acb(arb(0, bx.r_theta)), acb(arb(0, bx.r_f))
     out = []
     # |K_a| >= |q| / |a_2| (K_a passes infinity where a_2 = 0); K_b = a_0 / q is bounded
     for k, c, dk, mag in ((ka, ca, -br[1] * s, q.abs_lower() / a2.v.abs_upper()),
                           (kb, cb, br[1] * s, arb(0))):
-        d_t = -((a2.t * k + a1.t) * k + a0.t) / dk
-        d_f = -((a2.f * k + a1.f) * k + a0.f) / dk
+        d_t, d_f = _slopes(bx.coef, k, dk)
+        # the root's values over the box by its mean-value form, when narrower than the
+        # quotient's ball, give narrower slopes (both balls hold every value of the box)
+        narrow = c + d_t * ht + d_f * hf
+        if narrow.is_finite() and (not k.is_finite() or narrow.rad() < k.rad()):
+            d_t, d_f = _slopes(bx.coef, narrow, dk)
         out.append((c, k, d_t, d_f, mag))
     return out
+
+
+def _slopes(coef: list[_Jet], k: Any, dk: Any) -> tuple[Any, Any]:
+    """(dK/dtheta, dK/df) over the box for the root's values in the ball ``k`` and
+    dchi/dK in ``dk`` (implicit differentiation, module docstring)."""
+    a0, a1, a2 = coef
+    return (-((a2.t * k + a1.t) * k + a0.t) / dk, -((a2.f * k + a1.f) * k + a0.f) / dk)
 
 
 class PebFractionBalls:
@@ -271,16 +290,21 @@ class PebFractionBalls:
         P = [L[0] * L[1], L[0] * R[1] + R[0] * L[1], R[0] * R[1]]
         return [znj * Pi - ci * w for Pi, ci in zip(P, c, strict=True)]
 
-    def value(self, theta: Any, f: Any) -> list[Any]:
-        """(a_0, a_1, a_2) on the balls ``theta`` (rad) and ``f`` (arb), plain evaluation."""
+    def value(self, theta: Any, f: Any, key: tuple[float, float] | None = None) -> list[Any]:
+        """(a_0, a_1, a_2) on the balls ``theta`` (rad) and ``f`` (arb), plain evaluation
+        (``key``: the interval ``f`` is exactly, for the cache)."""
         with working_precision(self.prec):
-            return [j.v for j in self.coefficients(theta, self.fraction(f))]
+            return [j.v for j in self.coefficients(theta, self.fraction(f, key))]
 
     def box(self, theta: Any, f: Any, key: tuple[float, float] | None = None) -> PebBox:
         """The coefficients over the box ``theta`` x ``f`` and at its centre."""
         from flint import acb, arb
         with working_precision(self.prec):
-            centre = self.value(arb(theta.mid()), arb(f.mid()))
+            fm = float(f.mid())
+            # cached under (fm, fm) only when the centre is that double: the point ball
+            # arb(fm) is exactly [fm, fm]
+            exact = arb(fm) == f.mid()
+            centre = self.value(arb(theta.mid()), f.mid(), key=(fm, fm) if exact else None)
             coef = self.coefficients(theta, self.fraction(f, key))
             # the values over the box by their mean-value form: a plain evaluation loses
             # z^(2n+2) P_i - c_i Nt_m Nt_s's cancellation to first order in the radii
