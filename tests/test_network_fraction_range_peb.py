@@ -144,3 +144,15 @@ def test_loops_outside_the_model_are_refused_by_name():
                              SpringDamper(1.0, 0.1), "msd:0,1,0", "msd:0,1,0", 1e-3, 0)
     with pytest.raises(AnalysisError, match="rigid-body mode"):
         fractional_range_critical_stiffness(free, 1e-3, 2e-3)
+
+
+def test_the_answer_does_not_depend_on_arbs_global_precision():
+    from flint import ctx
+    old = ctx.prec
+    try:
+        a = fractional_range_critical_stiffness(paper_peb(1e-3), 5e-3, 6e-3).to_dict()
+        ctx.prec = 100
+        b = fractional_range_critical_stiffness(paper_peb(1e-3), 5e-3, 6e-3).to_dict()
+    finally:
+        ctx.prec = old
+    assert a == b
