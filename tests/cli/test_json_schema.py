@@ -84,6 +84,7 @@ RUNS = [
     ("kmax-loss", ["kmax", "peb", "--delay", "1", "--loss", "0.1", "--burst", "3"]),
     ("kmax-loss-curve", ["kmax", "hve", "--loss", "0:0.2:3"]),
     ("kmax-fraction-range", ["kmax", "hve", "--delay-range", "5ms:8ms"]),
+    ("kmax-fraction-range", ["kmax", "peb", "--delay-range", "1ms:2ms"]),
     ("kmax-delay-range", ["kmax", "peb", "--delay-range", "1:2"]),
     ("jitter", ["jitter", "hve", "--delay", "1:3", "-B", "0.05"]),
     ("jitter", ["jitter", "peb", "--delay", "0.5ms:2ms", "--max-length", "2"]),

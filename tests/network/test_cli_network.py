@@ -64,8 +64,14 @@ def test_kmax_delay_range_is_the_librarys():
                 ["--delay-range", "1:2", "--loss", "0.1"]):
         r = _run("kmax", "hve", *bad)
         assert r.exit_code == 2 and r.stderr.count("\n") == 1, r.stderr
-    r = _run("kmax", "peb", "--delay-range", "1ms:2ms")
-    assert r.exit_code == 2 and "2-D family" in r.stderr and r.stderr.count("\n") == 1, r.stderr
+    # peb: the same one-way delay both ways, proved over the continuum
+    r = _run("kmax", "peb", "--delay-range", "1ms:2ms", "--json")
+    d = json.loads(r.stdout)
+    assert d["fractional"] and d["certified"] and d["same_delay_both_ways"], r.stderr
+    want = fractional_range_critical_stiffness(paper_peb(), 1e-3, 2e-3)
+    assert d["critical_stiffness"] == want.critical_stiffness
+    r = _run("kmax", "4ch", "--delay-range", "1ms:2ms")
+    assert r.exit_code == 2 and "4-channel" in r.stderr and r.stderr.count("\n") == 1, r.stderr
 
 
 def test_jitter_is_the_librarys(tmp_path):

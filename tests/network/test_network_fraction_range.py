@@ -91,11 +91,13 @@ def test_segments_cut_at_the_whole_samples():
     assert segments_of(3.3, 3.3) == [(3, pytest.approx(0.3), pytest.approx(0.3))]
 
 
-def test_peb_between_the_samples_is_refused_by_name_and_sampled_is_kept():
+def test_peb_asymmetric_ranges_are_refused_by_name_and_sampled_is_kept():
     peb = TeleoperationLoop(Device(0.02, 0.05), Device(0.05, 0.1), SpringDamper(1.0, 0.05),
                             SpringDamper(1.0, 0.05), "spring:1", "msd:0.01,0.1,200", 1e-3, 0)
-    with pytest.raises(AnalysisError, match=r"teleoperator.*2-D family"):
-        fractional_range_critical_stiffness(peb, 1e-3, 3e-3)
+    with pytest.raises(AnalysisError, match=r"backward_s = .*2-D family.*allowed: the same"):
+        fractional_range_critical_stiffness(peb, 1e-3, 3e-3, backward_s=(1e-3, 4e-3))
+    with pytest.raises(AnalysisError, match=r"backward_s = .*one-port loop"):
+        fractional_range_critical_stiffness(paper_hve(1e-3), 1e-3, 3e-3, backward_s=(1e-3, 3e-3))
     got = delay_range_critical_stiffness(peb, 1e-3, 3e-3)       # a sample-synchronous receiver
     assert got.delays_samples == (2, 3, 4, 5, 6)
 

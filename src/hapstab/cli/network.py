@@ -133,10 +133,6 @@ def range_kmax(kind: str, spec: str, loop: Any, method: str, as_json: bool) -> N
                            "exact core; leave --method at exact")
     refuse_loop_delay(spec)
     lo, hi, seconds = parse_delay_range(spec, "--delay-range")
-    if seconds and kind != "hve":
-        raise HapstabError(f"--delay-range = {spec!r} for {kind}: a delay in seconds acts between "
-                           "the samples, and each direction's fraction is a 2-D family not "
-                           "covered for peb; give whole samples (e.g. 5:15)")
     if seconds:
         from hapstab.analysis.network.frac_result import fractional_range_critical_stiffness
         _fraction_table(kind, fractional_range_critical_stiffness(loop, lo, hi), loop, as_json)

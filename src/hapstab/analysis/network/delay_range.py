@@ -17,10 +17,11 @@ appearing only in the cross term), so the round trips 2 n_lo ... 2 n_hi are anal
 
 A delay that acts *between* the sampling instants (the engine's fractional delay,
 e.g. a sensor sampled off the controller's clock; what ``kmax --delay-range`` in seconds
-answers for the HVE) is proved over its continuum by
+answers) is proved over its continuum by
 :func:`~hapstab.analysis.network.frac_result.fractional_range_critical_stiffness`
-(:mod:`~hapstab.analysis.network.frac_range`); for PEB each direction's fraction is a
-2-D family that is not covered (refused, by name).
+(:mod:`~hapstab.analysis.network.frac_range`): the HVE, and the PEB with the same one-way
+delay both ways; different ranges in each direction would make the two fractions a 2-D
+family that is not covered (refused, by name).
 
 References
 ----------

@@ -28,6 +28,7 @@ IEEE Trans. Computers 66 (2017) 1281-1292; R. E. Moore, R. B. Kearfott and M. J.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -60,6 +61,17 @@ class BoxGain:
         from flint import acb, arb
         return (self.centre + self.d_theta * acb(arb(0, self.r_theta))
                 + self.d_f * acb(arb(0, self.r_f)))
+
+    def lower(self, k_floor: float, target: float = math.inf) -> float | None:
+        """The box's lower bound of the real crossings >= ``k_floor``, or None when it has
+        none (:mod:`~hapstab.analysis.network.frac_bound`; ``target`` is not used: G is
+        linear in K)."""
+        from hapstab.analysis.network.frac_bound import _box_lower
+        return _box_lower(self, k_floor)
+
+    def split_scales(self) -> tuple[float, float]:
+        """|dG/df|, |dG/dtheta| over the box (the split heuristic)."""
+        return float(self.d_f.abs_upper()), float(self.d_theta.abs_upper())
 
 
 class FractionBalls:
@@ -130,6 +142,11 @@ class FractionBalls:
             jt, z, d, _dd, nt, _ntp, _ntf = self._parts(theta, self.fraction(f))
             w = (jt * self.n1).exp()
             return -self.s * w * d / nt - self.beta * (1 - 1 / z)
+
+    def proved_crossing(self, theta: float, f: float) -> float:
+        """:func:`~hapstab.analysis.network.frac_bound.proved_crossing` for this loop."""
+        from hapstab.analysis.network.frac_bound import proved_crossing
+        return proved_crossing(self, theta, f)
 
     def box(self, theta: Any, f: Any, key: tuple[float, float] | None = None) -> BoxGain:
         """The centre value and the derivatives over the box ``theta`` x ``f`` (arb

@@ -1,6 +1,11 @@
 """A proved lower bound of the smallest crossing gain over a box of fractions, by branch
 and bound over (theta, f) boxes, and a proved crossing above it.
 
+The branch and bound asks each box for its bound (``box.lower(K_floor, target)``): the
+HVE's G below (:mod:`~hapstab.analysis.network.frac_balls`); the PEB's two roots of a
+quadratic in K, each analytic on a box and bounded by the same mean-value forms
+(:func:`mean_value_lower`; :mod:`~hapstab.analysis.network.frac_balls_peb`).
+
 **What is proved.** :func:`crossing_lower_bound` returns ``lower`` such that for every
 f in [f_lo, f_hi], every theta in [0, pi] and every real K in [K_floor, lower), the
 characteristic function det M(e^{j theta}, K, f) of
@@ -91,7 +96,6 @@ def _up(x: Any) -> float:
 def _box_lower(bx: BoxGain, k_floor: float) -> float | None:
     """The lower bound of a box (module docstring), or None when G is not real on it
     or only below K_floor."""
-    from flint import arb
     if bx.nt.contains(0) or not (bx.centre.is_finite() and bx.d_theta.is_finite()
                                  and bx.d_f.is_finite()):
         # |d| = |Nt| |H| <= |Nt| (K + 2 |beta|) at a crossing
@@ -101,25 +105,77 @@ def _box_lower(bx: BoxGain, k_floor: float) -> float | None:
             if bound.is_finite():
                 return max(k_floor, _down(bound.lower()))
         return k_floor
-    enc = bx.enclosure()
+    return mean_value_lower(bx.centre, bx.d_theta, bx.d_f, bx.r_theta, bx.r_f, k_floor)
+
+
+def mean_value_lower(centre: Any, d_theta: Any, d_f: Any, r_theta: Any, r_f: Any,
+                     k_floor: float) -> float | None:
+    """A lower bound of the real values >= ``k_floor`` of an analytic function over a box
+    from its mean-value form (module docstring: the enclosure and the preconditioned forms
+    L = Re - lambda Im), or None when it is not real on the box or only below K_floor.
+
+    Parameters
+    ----------
+    centre : acb
+        Its value at the box's centre.
+    d_theta, d_f : acb
+        Its derivatives over the box.
+    r_theta, r_f : arb
+        The box's radii.
+    k_floor : float
+        Values below it are not examined.
+
+    Returns
+    -------
+    float or None
+    """
+    from flint import acb, arb
+    ht, hf = arb(0, r_theta), arb(0, r_f)
+    enc = centre + d_theta * acb(ht) + d_f * acb(hf)
     if not enc.imag.contains(0) or enc.real < k_floor:
         return None
     best = max(k_floor, _down(enc.real.lower()))
-    ht, hf = arb(0, bx.r_theta), arb(0, bx.r_f)
-    for num, den in ((bx.d_theta.real, bx.d_theta.imag), (bx.d_f.real, bx.d_f.imag)):
+    for num, den in ((d_theta.real, d_theta.imag), (d_f.real, d_f.imag)):
         dm = float(den.mid())
         if dm == 0.0 or not math.isfinite(dm):
             continue
         lam = arb(float(num.mid()) / dm)
-        form = (bx.centre.real - lam * bx.centre.imag
-                + (bx.d_theta.real - lam * bx.d_theta.imag) * ht
-                + (bx.d_f.real - lam * bx.d_f.imag) * hf)
+        form = (centre.real - lam * centre.imag + (d_theta.real - lam * d_theta.imag) * ht
+                + (d_f.real - lam * d_f.imag) * hf)
         if form.is_finite():
             best = max(best, _down(form.lower()))
     return best
 
 
-def crossing_lower_bound(balls: FractionBalls, f_lo: float, f_hi: float, k_floor: float,
+def disc_lower(a0: Any, a1: Any, a2: Any, k_floor: float) -> float | None:
+    """A lower bound of the real roots K >= ``k_floor`` of a_2 K^2 + a_1 K + a_0 for
+    coefficients in the acb balls given: both roots lie in the disc of centre
+    -a_1 / (2 a_2) and radius sqrt|D| / (2 |a_2|), D = a_1^2 - 4 a_0 a_2. None when the
+    disc holds no real K >= ``k_floor``; ``k_floor`` when a_2's ball holds 0.
+
+    Parameters
+    ----------
+    a0, a1, a2 : acb
+        The coefficients' balls.
+    k_floor : float
+        Roots below it are not examined.
+
+    Returns
+    -------
+    float or None
+    """
+    if a2.contains(0):
+        return k_floor
+    centre = -a1 / (2 * a2)
+    rho = (a1 * a1 - 4 * a0 * a2).abs_upper().sqrt() / (2 * a2.abs_lower())
+    if not rho.is_finite() or not centre.is_finite():
+        return k_floor
+    if centre.imag.abs_lower() > rho or centre.real + rho < k_floor:
+        return None
+    return max(k_floor, _down((centre.real - rho).lower()))
+
+
+def crossing_lower_bound(balls: Any, f_lo: float, f_hi: float, k_floor: float,
                          target: float, max_boxes: int = 20000) -> CrossingBound:
     """A proved lower bound of the real crossings K >= ``k_floor`` of G over
     [0, pi] x [f_lo, f_hi] (module docstring), refined until it reaches ``target`` or
@@ -127,7 +183,7 @@ def crossing_lower_bound(balls: FractionBalls, f_lo: float, f_hi: float, k_floor
 
     Parameters
     ----------
-    balls : FractionBalls
+    balls : FractionBalls or PebFractionBalls
         The loop's ball evaluator.
     f_lo, f_hi : float
         The fractions, 0 <= f_lo <= f_hi <= 1.
@@ -146,7 +202,7 @@ def crossing_lower_bound(balls: FractionBalls, f_lo: float, f_hi: float, k_floor
         return _lower_bound(balls, f_lo, f_hi, k_floor, target, max_boxes)
 
 
-def _lower_bound(balls: FractionBalls, f_lo: float, f_hi: float, k_floor: float,
+def _lower_bound(balls: Any, f_lo: float, f_hi: float, k_floor: float,
                  target: float, max_boxes: int) -> CrossingBound:
     """:func:`crossing_lower_bound` at the precision already set."""
     from flint import arb
@@ -163,7 +219,7 @@ def _lower_bound(balls: FractionBalls, f_lo: float, f_hi: float, k_floor: float,
         th, fr = th.union(arb(ta)).union(arb(tb)), fr.union(arb(fa)).union(arb(fb))
         if tb == math.pi:                # the double pi is below pi: cover up to pi itself
             th = th.union(arb.pi())
-        lb = _box_lower(balls.box(th, fr, key=(fa, fb)), k_floor)
+        lb = balls.box(th, fr, key=(fa, fb)).lower(k_floor, target)
         if lb is None:
             return
         if lb >= target:
@@ -182,7 +238,8 @@ def _lower_bound(balls: FractionBalls, f_lo: float, f_hi: float, k_floor: float,
         # which side to split (a heuristic, not a proof): its rounded ball is not cached
         # under the piece's key, which must name only the balls push() widens over it
         bx = balls.box(arb((ta + tb) / 2, wt / 2), arb((fa + fb) / 2, wf / 2))
-        sf, st = float(bx.d_f.abs_upper()) * wf, float(bx.d_theta.abs_upper()) * wt
+        sf, st = bx.split_scales()
+        sf, st = sf * wf, st * wt
         if not (math.isfinite(sf) and math.isfinite(st)):
             sf, st = wf, wt / math.pi          # no derivatives: the wider side, relatively
         split_f = wf > 0 and (sf > st or wt <= 4 * math.ulp(tb))

@@ -1,10 +1,14 @@
 """The certified minimum of K_max over a continuum of constant delays that act between
-the sampling instants (the HVE), and the worst delay.
+the sampling instants (the HVE, and the PEB with the same one-way delay both ways), and
+the worst delay.
 
 **The model.** The controller acts at kT on the position sampled at kT - tau: e[k] =
 x(kT - tau) with tau = (n + f)T any constant delay of [tau_lo, tau_hi] (the engine's
-fractional delay; :mod:`~hapstab.analysis.network.modified_z` for the loop as a
-modified z-transform). K_max(tau) is continuous in tau and not monotone, so no finite
+fractional delay; :mod:`~hapstab.analysis.network.modified_z` for the HVE as a
+modified z-transform, :mod:`~hapstab.analysis.network.modified_z_peb` for the PEB, each
+direction's delayed position sampled at kT - tau: chi monic of degree 2n + 8, K entering
+as a quadratic; :func:`fraction_model` picks the model by the loop's number of ports).
+K_max(tau) is continuous in tau and not monotone, so no finite
 set of delays answers; the range is cut at the whole samples into segments
 {n} x [f_a, f_b] and each is covered by a proof.
 
@@ -17,12 +21,13 @@ set of delays answers; the range is cut at the whole samples into segments
    most it; and the exact core's K_max at the point (n + f_w), reported beside it.
 3. *The lower end, proved* (:func:`~hapstab.analysis.network.frac_bound.crossing_lower_bound`):
    no real crossing K in [K_0, K_low) for f in [f_a, f_b].
-4. *Stability below it*: the exact core proves the whole delay n stable on
-   [K_0, K_max(n)] in ball arithmetic (f = 0 of the segment); a second bound proves no
-   crossing at K in [K_0, 2 K_0) for f in [0, f_a], so the path (K_0, 0) -> (K_0, f_a)
-   meets no crossing; the roots of chi (monic of fixed degree n + 4, continuous in
-   (K, f)) then cannot leave the unit disc anywhere on [K_0, K_low) x [f_a, f_b], which is
-   connected to that path. Every delay of the segment is stable for K in [K_0, K_low).
+4. *Stability below it*: the exact core proves the whole delay n (both ways, for the
+   PEB) stable on [K_0, K_max(n)] in ball arithmetic (f = 0 of the segment); a second
+   bound proves no crossing at K in [K_0, 2 K_0) for f in [0, f_a], so the path
+   (K_0, 0) -> (K_0, f_a) meets no crossing; the roots of chi (monic of fixed degree
+   n + 4, the PEB's 2n + 8, continuous in (K, f)) then cannot leave the unit disc
+   anywhere on [K_0, K_low) x [f_a, f_b], which is connected to that path. Every delay
+   of the segment is stable for K in [K_0, K_low).
 
 The range's answer is the smallest K_low over its segments (a proved lower bound of
 min K_max) with the smallest upper end as the enclosure's top. When a segment's gap stays
@@ -49,9 +54,11 @@ from typing import Any
 
 import numpy as np
 
-from hapstab.analysis.network.modified_z import FractionalPlant, fractional_plant
+from hapstab.analysis.network.modified_z import fractional_plant
+from hapstab.analysis.network.modified_z_peb import peb_fractional_plant
 
-__all__ = ["Segment", "fraction_range_minimum", "segments_of", "RTOL", "MAX_BOXES"]
+__all__ = ["Segment", "fraction_range_minimum", "fraction_model", "segments_of", "RTOL",
+           "MAX_BOXES"]
 
 #: The gap at which a segment's enclosure is closed: K_low >= upper (1 - RTOL). The
 #: acceptance asks 1e-6 of the grid's minimum; the branch and bound's second-order
@@ -132,7 +139,33 @@ def segments_of(lo: float, hi: float) -> list[tuple[int, float, float]]:
     return out
 
 
-def _float_worst(plant: FractionalPlant, f_lo: float, f_hi: float, k0: float
+def fraction_model(loop: Any, whole: int) -> Any:
+    """The loop's float model with a fractional delay, by its number of ports: one, the
+    HVE's (:mod:`~hapstab.analysis.network.modified_z`); two, the PEB's with the same
+    delay both ways (:mod:`~hapstab.analysis.network.modified_z_peb`). Its ``balls()``
+    is the ball evaluator the proofs use.
+
+    Parameters
+    ----------
+    loop : HapticLoop or TeleoperationLoop
+        The loop (its delay is replaced).
+    whole : int
+        n.
+
+    Returns
+    -------
+    FractionalPlant or PebFractionalPlant
+
+    Raises
+    ------
+    AnalysisError
+        A loop outside both models, naming what.
+    """
+    make = {2: peb_fractional_plant}.get(len(loop.port_names), fractional_plant)
+    return make(loop, whole)
+
+
+def _float_worst(plant: Any, f_lo: float, f_hi: float, k0: float
                  ) -> tuple[float, float, float]:
     """(K, theta, f) of the smallest float first crossing over [f_lo, f_hi]: a scan of
     :data:`SCAN_FRACTIONS` fractions and a bounded search around its best."""
@@ -169,7 +202,7 @@ def _core_kmax(loop: Any, whole: int, f: float) -> float:
     """The exact core's K_max at the delay n + f (f = 1: the whole delay n + 1)."""
     from hapstab.analysis.methods import critical_stiffness
     at = (loop.with_whole_delay(whole + 1) if f >= 1.0
-          else loop.replace(delay_samples=whole, fractional_delay=f))
+          else loop.with_whole_delay(whole).replace(fractional_delay=f))
     return float(critical_stiffness(at).critical_stiffness)
 
 
@@ -180,7 +213,7 @@ class _Work:
     whole: int
     f_lo: float
     f_hi: float
-    plant: FractionalPlant
+    plant: Any
     balls: Any
     worst: tuple[float, float, float]        # float (K, theta, f)
     upper: float = math.inf                  # proved crossing at worst's f
@@ -189,14 +222,12 @@ class _Work:
 
 def _prepare(loop: Any, segs: list[tuple[int, float, float]], k0: float) -> list[_Work]:
     """Each segment's plant, balls, float worst point and proved crossing there."""
-    from hapstab.analysis.network.frac_balls import FractionBalls
-    from hapstab.analysis.network.frac_bound import proved_crossing
     out = []
     for n, a, b in segs:
-        plant = fractional_plant(loop, n)
-        w = _Work(n, a, b, plant, FractionBalls(plant), _float_worst(plant, a, b, k0))
+        plant = fraction_model(loop, n)
+        w = _Work(n, a, b, plant, plant.balls(), _float_worst(plant, a, b, k0))
         if math.isfinite(w.worst[0]):
-            w.upper = proved_crossing(w.balls, w.worst[1], w.worst[2])
+            w.upper = w.balls.proved_crossing(w.worst[1], w.worst[2])
         out.append(w)
     return out
 
@@ -218,12 +249,11 @@ def _reseed(w: _Work, box: tuple[float, float], k0: float) -> bool:
     """Search the float model on the fractions ``box`` of the branch and bound's lowest
     box (widened by a scan step); True, with the segment's worst point and proved
     crossing updated, if it finds a lower crossing than the one it had."""
-    from hapstab.analysis.network.frac_bound import proved_crossing
     half = (w.f_hi - w.f_lo) / (2 * SCAN_FRACTIONS)
     got = _float_worst(w.plant, max(w.f_lo, box[0] - half), min(w.f_hi, box[1] + half), k0)
     if not got[0] < w.worst[0]:
         return False
-    up = proved_crossing(w.balls, got[1], got[2])
+    up = w.balls.proved_crossing(got[1], got[2])
     if not up < w.upper:
         return False
     w.worst, w.upper = got, up
@@ -266,8 +296,8 @@ def fraction_range_minimum(loop: Any, lo: float, hi: float, *, rtol: float = RTO
     """
     from hapstab.engine.arb_loop import arb_parameters, base_point
     segs = segments_of(lo, hi)
-    fractional_plant(loop, segs[0][0])               # refuses a loop outside the model
-    _check_cost(segs)
+    fraction_model(loop, segs[0][0])                 # refuses a loop outside the model
+    _check_cost(segs, len(loop.port_names))
     k0 = base_point(arb_parameters(loop.with_whole_delay(segs[0][0])))   # type: ignore[arg-type]
     work = _prepare(loop, segs, k0)
     upper = min(w.upper for w in work)
@@ -290,13 +320,15 @@ def fraction_range_minimum(loop: Any, lo: float, hi: float, *, rtol: float = RTO
     return out, min(s.lower for s in out), upper, k0
 
 
-def _check_cost(segs: list[tuple[int, float, float]]) -> None:
+def _check_cost(segs: list[tuple[int, float, float]], ports: int) -> None:
     """Refuse, before any work, a range over the budget: per segment the exact core's
     K_max at its whole delay (:func:`hapstab.budget.exact_search_cost`) plus
-    :data:`SEGMENT_SECONDS` and :data:`SEGMENT_SECONDS_PER_SAMPLE` per sample of delay."""
+    :data:`SEGMENT_SECONDS` and :data:`SEGMENT_SECONDS_PER_SAMPLE` per sample of delay
+    and port (the PEB's degree 2n + 8 is twice the HVE's)."""
     from hapstab.budget import Cost, check, exact_search_cost
     n = segs[-1][0] + 1
-    one = exact_search_cost(n, 1)
+    one = exact_search_cost(n, ports)
     check(Cost(f"delay range between the samples: {len(segs)} segment(s) up to {n} samples",
                one.memory_bytes,
-               len(segs) * (one.seconds + SEGMENT_SECONDS + SEGMENT_SECONDS_PER_SAMPLE * n)))
+               len(segs) * (one.seconds + SEGMENT_SECONDS
+                            + SEGMENT_SECONDS_PER_SAMPLE * n * ports)))

@@ -1,5 +1,6 @@
 """The answer for a range of constant delays that act between the sampling instants
-(:mod:`~hapstab.analysis.network.frac_range`): a proved enclosure of min K_max, the worst
+(:mod:`~hapstab.analysis.network.frac_range`; the HVE, and the PEB with the same
+one-way delay both ways): a proved enclosure of min K_max, the worst
 delay, and the segments it was proved on."""
 
 from __future__ import annotations
@@ -48,6 +49,8 @@ class FractionalRangeResult(Result):
         Each whole part of the range with its proved ends.
     loop_dict : dict
         The loop analysed.
+    directions : int
+        1 for the HVE; 2 for the PEB, the one-way delay the same both ways.
     """
 
     critical_stiffness: float
@@ -58,6 +61,13 @@ class FractionalRangeResult(Result):
     period: float
     segments: tuple[Segment, ...]
     loop_dict: dict[str, Any] = field(default_factory=dict, repr=False, compare=False)
+    directions: int = 1
+
+    @property
+    def _what(self) -> str:
+        """The delay the range is of, in words."""
+        return ("constant delay" if self.directions == 1
+                else "constant one-way delay (the same both ways)")
 
     @property
     def gap(self) -> float:
@@ -82,11 +92,11 @@ class FractionalRangeResult(Result):
         if self.critical_stiffness == 0.0:
             where = (f"a pole reaches |z| = 1 by K = {self.upper_bound:.4g} N/m"
                      if math.isfinite(self.upper_bound) else "K_max is near 0")
-            return (f"no K > 0 is proved stable at every constant delay of [{lo:g}, {hi:g}] ms "
+            return (f"no K > 0 is proved stable at every {self._what} of [{lo:g}, {hi:g}] ms "
                     f"acting between the samples: at {self.worst_delay_s * 1e3:.6g} ms {where} "
                     "(uncertain below it)")
-        head = (f"stable for K in (0, {self.critical_stiffness:.10g}] N/m at every constant "
-                f"delay of [{lo:g}, {hi:g}] ms, acting between the samples (proved over the "
+        head = (f"stable for K in (0, {self.critical_stiffness:.10g}] N/m at every {self._what} "
+                f"of [{lo:g}, {hi:g}] ms, acting between the samples (proved over the "
                 f"continuum: {len(self.segments)} segment(s), branch and bound on the modified "
                 "z-transform)")
         if self.certified:
@@ -105,7 +115,8 @@ class FractionalRangeResult(Result):
             "worst_delay_s": self.worst_delay_s,
             "delay_range_s": [v * self.period for v in self.range_samples],
             "delay_range_samples": list(self.range_samples), "fractional": True,
-            "round_trip": False, "period_s": self.period, "certified": self.certified,
+            "round_trip": False, "same_delay_both_ways": self.directions == 2,
+            "period_s": self.period, "certified": self.certified,
             "segments": [{"whole_samples": s.whole, "fractions": [s.f_lo, s.f_hi],
                           "lower_N_per_m": s.lower, "upper_N_per_m": s.upper,
                           "worst_fraction": s.worst_fraction, "boxes": s.boxes}
@@ -157,17 +168,25 @@ class FractionalRangeResult(Result):
 
 
 def fractional_range_critical_stiffness(loop: Any, lo_s: float, hi_s: float, *,
-                                        max_boxes: int | None = None) -> FractionalRangeResult:
+                                        max_boxes: int | None = None,
+                                        backward_s: tuple[float, float] | None = None
+                                        ) -> FractionalRangeResult:
     """Certified minimum of K_max over every constant delay tau in [lo_s, hi_s] seconds
-    acting between the sampling instants (HVE; :mod:`~hapstab.analysis.network.frac_range`).
+    acting between the sampling instants (:mod:`~hapstab.analysis.network.frac_range`):
+    the HVE's delay, or the PEB's one-way delay, the same tau in both directions (a
+    symmetric link, what ``--delay-s`` means for the PEB).
 
     Parameters
     ----------
-    loop : HapticLoop
-        The loop (its delay is replaced): a spring-damper controller and an operator
-        without internal states.
+    loop : HapticLoop or TeleoperationLoop
+        The loop (its delay is replaced): spring-damper controllers, terminations
+        without internal states (and, for the PEB, no rigid-body mode).
     lo_s, hi_s : float
         The range, s (0 <= lo_s <= hi_s).
+    backward_s : (float, float), optional
+        The PEB's slave -> master range, s: only the forward range itself (or None) is
+        allowed; a different one is refused by name (each direction's delay would then
+        be a 2-D family, not covered).
     max_boxes : int, optional
         Boxes per segment and proof (default
         :data:`~hapstab.analysis.network.frac_range.MAX_BOXES`); a gap left open is
@@ -182,19 +201,14 @@ def fractional_range_critical_stiffness(loop: Any, lo_s: float, hi_s: float, *,
     ModelError
         A range with its end below its start, or longer than the delay limit.
     AnalysisError
-        A loop outside the model (a teleoperator, a filtered damper, an operator with
-        states).
+        A loop outside the model (the 4-channel teleoperator, a filtered damper, an
+        operator with states, a rigid-body mode), or different ranges in each direction.
     """
     from hapstab.analysis.network.delay_range import whole_delays
     from hapstab.analysis.network.frac_range import MAX_BOXES, fraction_range_minimum
     from hapstab.models.loops import require_loop
     require_loop(loop)
-    if len(loop.controllers) != 1:
-        raise AnalysisError(
-            "delay range between the samples for a teleoperator: each direction's fraction "
-            "is a 2-D family, not covered; give the range in whole samples "
-            "(delay_range_critical_stiffness(loop, lo, hi, seconds=False)) or at a "
-            "sample-synchronous receiver (delay_range_critical_stiffness in seconds)")
+    _refuse_asymmetric(loop, (lo_s, hi_s), backward_s)
     whole_delays(lo_s, hi_s, loop.period)            # validates the range and its length
     lo, hi = lo_s / loop.period, hi_s / loop.period
     segs, lower, upper, k0 = fraction_range_minimum(loop, lo, hi,
@@ -206,4 +220,25 @@ def fractional_range_critical_stiffness(loop: Any, lo_s: float, hi_s: float, *,
     safe = math.nextafter(lower, -math.inf) if lower > k0 * (1 + BASE_ROUNDING) else 0.0
     core = next((s.kmax_at_worst for s in segs if not math.isnan(s.kmax_at_worst)), math.nan)
     return FractionalRangeResult(safe, upper, core, worst.whole + worst.worst_fraction,
-                                 (lo, hi), loop.period, tuple(segs), loop.to_dict())
+                                 (lo, hi), loop.period, tuple(segs), loop.to_dict(),
+                                 len(loop.port_names))
+
+
+def _refuse_asymmetric(loop: Any, forward: tuple[float, float],
+                       backward: tuple[float, float] | None) -> None:
+    """Refuse, by name, a range this proof does not cover: a backward range other than the
+    forward one (or any, for a one-port loop), and the 4-channel teleoperator."""
+    if getattr(loop, "force_gains", None) is not None:
+        raise AnalysisError("delay range between the samples: modelled for hve and peb (the "
+                            "4-channel loop's force channels are not in the model)")
+    same = backward is not None and tuple(map(float, backward)) == tuple(map(float, forward))
+    if backward is None or (same and len(loop.port_names) == 2):
+        return
+    if len(loop.port_names) != 2:
+        raise AnalysisError(f"backward_s = {backward!r}: a one-port loop has one delay; "
+                            "leave it out")
+    raise AnalysisError(
+        f"backward_s = {backward!r} with the forward range {forward!r}: different ranges in "
+        "each direction make the two fractions a 2-D family, not covered; allowed: the same "
+        "range both ways (leave backward_s out), or whole samples per direction "
+        "(delay_range_critical_stiffness(loop, lo, hi, seconds=False))")

@@ -123,6 +123,11 @@ class FractionalPlant:
         tail = self.sign * ntz * np.poly1d([K + self.beta_N_per_m, -self.beta_N_per_m])
         return np.asarray((head + tail).coeffs)
 
+    def balls(self) -> Any:
+        """The ball evaluator of this model (:class:`~hapstab.analysis.network.frac_balls.FractionBalls`)."""
+        from hapstab.analysis.network.frac_balls import FractionBalls
+        return FractionBalls(self)
+
     def first_crossing(self, f: float, k_floor: float, points: int | None = None) -> tuple[float, float]:
         """The smallest K > ``k_floor`` at which a pole lies on the unit circle, and its
         angle (doubles: the float search that proposes the worst fraction; nothing proved).
@@ -206,8 +211,8 @@ def fractional_plant(loop: Any, whole: int) -> FractionalPlant:
     from hapstab.engine.arb_loop import arb_parameters
     if tuple(getattr(loop, "port_names", ())) != ("device",):
         raise AnalysisError(f"loop kind = {getattr(loop, 'kind', type(loop).__name__)!r}: the "
-                            "fractional delay range is modelled for the hve loop (one port; "
-                            "peb: each direction's fraction is a 2-D family not covered)")
+                            "fractional delay range is modelled for the hve loop (one port) "
+                            "and for peb (two ports, the same delay both ways)")
     params = arb_parameters(loop.with_whole_delay(whole))
     if params is None:
         raise AnalysisError("delay range with fractional delays: covered for a spring-damper "

@@ -68,7 +68,7 @@ const HapstabNetwork = (() => {
           (d.length ? ` of ${fmt(d[0])}…${fmt(d[d.length - 1])}` : ""),
       model: (a.certified ? "exact: the certified minimum"
         : between ? "exact: a proved lower end, uncertain above it" : "exact criterion, not certified") +
-        (between ? ` · one constant delay, unknown in ${s}, acting between the samples (every delay of the continuum)`
+        (between ? ` · one constant delay, unknown in ${s}${a.same_delay_both_ways ? " (the same one-way delay both ways)" : ""}, acting between the samples (every delay of the continuum)`
           : ` · one constant delay, unknown in ${s}, used from the next sampling instant`),
       cmp: compared(a.critical_stiffness, ref),
     };

@@ -1,0 +1,158 @@
+"""Unknown constant delay in a range for the PEB, the same one-way delay both ways and
+acting between the samples (issue 30, item 1): the modified z-transform's quadratic in K
+against the engine's closed loop, the ball enclosures against points of their boxes, and
+the proved enclosure of min K_max over the continuum against an independent brute-force
+grid of >= 1000 delays per range (tests/references/brute_fractional_peb.py: its own
+closed loop, eigenvalues and bisection; no hapstab code)."""
+
+import math
+
+import numpy as np
+import pytest
+from flint import arb
+from tests.lanes import draw
+from tests.references import brute_fractional_peb as bp
+
+from hapstab import Device, SpringDamper, TeleoperationLoop, paper_peb
+from hapstab.analysis.network import (
+    delay_range_critical_stiffness,
+    fractional_range_critical_stiffness,
+)
+from hapstab.analysis.network.modified_z_peb import peb_fractional_plant
+from hapstab.engine.system import build
+from hapstab.errors import AnalysisError
+
+#: the acceptance: within 1e-6 of the grid's minimum
+RTOL = 1e-6
+#: the reference bisects to 1e-11: "never above" allows that much
+REF_TOL = 1e-10
+GRID = 1000
+#: the brute force's lowest K (N/m): a K_max below it reads 0 there
+BELOW_SCAN = 1e-6
+
+
+def _case(seed: int):
+    """A random PEB and range: light damping on every third seed, a stiff environment
+    on every other, unequal controllers and position / force scales on some, a range of
+    1-3 whole samples (longer delays on every seventh)."""
+    rng = np.random.default_rng(30_100 + seed)
+    T = float(rng.uniform(5e-4, 3e-3))
+    light = seed % 3 == 0
+    dev = [(float(rng.uniform(0.02, 1)), float(rng.uniform(1e-3, 1e-2) if light
+                                              else rng.uniform(0.05, 2))) for _ in range(2)]
+    term = [(float(rng.uniform(0.01, 0.5)), float(0.0 if light else rng.uniform(0, 2)),
+             float(rng.uniform(1, 400))) for _ in range(2)]
+    if seed % 2:
+        term[1] = (term[1][0], term[1][1], float(10 ** rng.uniform(3, 4.5)))
+    rho = float(rng.uniform(0.3, 3)) if seed % 4 == 1 else 1.0
+    B = (float(rng.uniform(0, 2)), float(rng.uniform(0, 2)))
+    a, b = (float(rng.uniform(0.5, 2)), float(rng.uniform(0.5, 2))) if seed % 5 == 2 else (1.0, 1.0)
+    lo = float(rng.uniform(8, 12) if seed % 7 == 3 else rng.uniform(0, 4))
+    hi = lo + float(rng.uniform(1, 3))
+    loop = TeleoperationLoop(Device(*dev[0]), Device(*dev[1]), SpringDamper(1.0, B[0]),
+                             SpringDamper(rho, B[1]), "msd:{!r},{!r},{!r}".format(*term[0]),
+                             "msd:{!r},{!r},{!r}".format(*term[1]), T, 0,
+                             position_scale=a, force_scale=b)
+    ports = [(d[0] + t[0], d[1] + t[1], t[2]) for d, t in zip(dev, term, strict=True)]
+    return loop, (ports, T, B, rho, a, b), lo * T, hi * T
+
+
+def _grid(phys, delays) -> np.ndarray:
+    ports, T, B, rho, a, b = phys
+    return bp.kmax_many(ports, T, delays, B, rho, a, b)
+
+
+def _check(seed: int) -> None:
+    loop, phys, lo, hi = _case(seed)
+    res = fractional_range_critical_stiffness(loop, lo, hi)
+    T = loop.period
+    # the grid, and the reported worst delay among its points (so the grid resolves it)
+    delays = np.append(np.linspace(lo / T, hi / T, GRID), res.worst_delay_samples)
+    kref = _grid(phys, delays)
+    assert np.all(np.isfinite(kref))
+    assert res.critical_stiffness <= kref.min() * (1 + REF_TOL)       # never above
+    # within 1e-6 of the grid's minimum (the scan starts at 1e-6 N/m: below, unresolved)
+    assert res.critical_stiffness == pytest.approx(kref.min(), rel=RTOL, abs=BELOW_SCAN)
+    if math.isfinite(res.upper_bound):
+        assert res.upper_bound >= kref.min() * (1 - REF_TOL)
+        assert kref[-1] == pytest.approx(res.upper_bound, rel=RTOL, abs=BELOW_SCAN)
+    assert res.certified or (res.critical_stiffness == 0.0 and kref.min() <= BELOW_SCAN)
+
+
+@pytest.mark.parametrize("seed", draw(range(50), 2))
+def test_range_minimum_against_the_brute_force_grid(seed):
+    _check(seed)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_characteristic_function_against_the_engine(seed):
+    loop, _, _, _ = _case(seed)
+    rng = np.random.default_rng(seed)
+    n, f, K = int(rng.integers(0, 6)), float(rng.uniform(0.01, 0.99)), float(rng.uniform(1, 300))
+    plant = peb_fractional_plant(loop, n)
+    roots = np.roots(plant.char_poly(K, f))
+    eng = np.linalg.eigvals(build(loop.replace(delay_samples=n, fractional_delay=f)
+                                  .with_stiffness(K)).closed_loop()[0])
+    assert len(roots) == len(eng) == 2 * n + 8
+    d = np.abs(roots[:, None] - eng[None, :])
+    assert max(d.min(axis=1).max(), d.min(axis=0).max()) < 1e-6     # doubles, no multiple roots
+    # the quadratic in K is chi on the circle
+    th = np.array([0.2, 1.3, 3.0])
+    a0, a1, a2 = plant.quadratic(th, f)
+    chi = np.polyval(plant.char_poly(K, f), np.exp(1j * th))
+    assert np.allclose(a0 + K * (a1 + K * a2), chi, rtol=1e-9, atol=0)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_the_balls_hold_the_points_of_their_boxes(seed):
+    loop, _, _, _ = _case(seed)
+    plant = peb_fractional_plant(loop, 2)
+    balls = plant.balls()
+    rng = np.random.default_rng(seed)
+    for _ in range(5):
+        tc, fc = float(rng.uniform(0.05, 3.0)), float(rng.uniform(0.05, 0.95))
+        rt, rf = 1e-3, 1e-2            # a box of angles and fractions
+        bx = balls.box(arb(tc, rt), arb(fc, rf))
+        for t, f in rng.uniform([tc - rt, fc - rf], [tc + rt, fc + rf], (4, 2)):
+            pt = plant.quadratic(np.array([t]), float(f))
+            for jet, v in zip(bx.coef, pt, strict=True):   # the doubles' rounding: 1e-9
+                assert abs(complex(jet.v.mid()) - complex(v[0])) <= \
+                    float(jet.v.rad()) + 1e-9 * abs(v[0])
+
+
+def test_paper_peb_over_5_to_15_ms():
+    res = fractional_range_critical_stiffness(paper_peb(1e-3), 5e-3, 15e-3)
+    whole = delay_range_critical_stiffness(paper_peb(1e-3), 5, 15, seconds=False)
+    assert res.certified and res.worst_delay_samples == pytest.approx(15.0)
+    assert res.critical_stiffness <= whole.critical_stiffness
+    assert res.critical_stiffness == pytest.approx(whole.critical_stiffness, rel=1e-8)
+    d = res.to_dict()
+    assert d["same_delay_both_ways"] and "the same both ways" in d["reason"]
+
+
+def test_uncertain_when_the_budget_cannot_close_the_gap():
+    loop, phys, lo, hi = _case(1)
+    res = fractional_range_critical_stiffness(loop, lo, hi, max_boxes=40)
+    assert not res.certified and "uncertain" in res.reason
+    T = loop.period
+    kref = _grid(phys, np.linspace(lo / T, hi / T, 200))
+    assert res.critical_stiffness <= kref.min()
+
+
+def test_loops_outside_the_model_are_refused_by_name():
+    free = TeleoperationLoop(Device(0.1, 0.1), Device(0.1, 0.1), SpringDamper(1.0, 0.1),
+                             SpringDamper(1.0, 0.1), "msd:0,1,0", "msd:0,1,0", 1e-3, 0)
+    with pytest.raises(AnalysisError, match="rigid-body mode"):
+        fractional_range_critical_stiffness(free, 1e-3, 2e-3)
+
+
+def test_the_answer_does_not_depend_on_arbs_global_precision():
+    from flint import ctx
+    old = ctx.prec
+    try:
+        a = fractional_range_critical_stiffness(paper_peb(1e-3), 5e-3, 6e-3).to_dict()
+        ctx.prec = 100
+        b = fractional_range_critical_stiffness(paper_peb(1e-3), 5e-3, 6e-3).to_dict()
+    finally:
+        ctx.prec = old
+    assert a == b
