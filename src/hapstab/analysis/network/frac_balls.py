@@ -66,8 +66,8 @@ class BoxGain:
         """The box's lower bound of the real crossings >= ``k_floor``, or None when it has
         none (:mod:`~hapstab.analysis.network.frac_bound`; ``target`` is not used: G is
         linear in K)."""
-        from hapstab.analysis.network.frac_bound import _box_lower
-        return _box_lower(self, k_floor)
+        from hapstab.analysis.network.frac_bound import box_lower
+        return box_lower(self, k_floor)
 
     def split_scales(self) -> tuple[float, float]:
         """|dG/df|, |dG/dtheta| over the box (the split heuristic)."""

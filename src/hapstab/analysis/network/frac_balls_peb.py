@@ -135,10 +135,10 @@ class PebBox:
 
     def _root_lower(self, root: tuple[Any, ...], k_floor: float) -> float | None:
         """One root's bound: its mean-value form, or |q| / |a_2| where it is unbounded."""
-        from hapstab.analysis.network.frac_bound import _down, mean_value_lower
+        from hapstab.analysis.network.frac_bound import double_below, mean_value_lower
         centre, box, d_t, d_f, magnitude = root
         if not (centre.is_finite() and box.is_finite() and d_t.is_finite() and d_f.is_finite()):
-            return max(k_floor, _down(magnitude.lower())) if magnitude.is_finite() else k_floor
+            return max(k_floor, double_below(magnitude.lower())) if magnitude.is_finite() else k_floor
         return mean_value_lower(centre, d_t, d_f, self.r_theta, self.r_f, k_floor)
 
     def split_scales(self) -> tuple[float, float]:
@@ -334,7 +334,7 @@ class PebFractionBalls:
     def _proved_crossing(self, theta: float, f: float) -> float:
         from flint import arb
 
-        from hapstab.analysis.network.frac_bound import _up
+        from hapstab.analysis.network.frac_bound import double_above
         fb = arb(f)
         if theta in (0.0, math.pi):
             a0, a1, a2 = (c.real for c in self.value(arb.pi() if theta else arb(0), fb))
@@ -344,7 +344,7 @@ class PebFractionBalls:
             # both roots real: q / a_2 and a_0 / q (a_2 = 0 at z = 1: only the second finite)
             q = -(a1 + (1 if a1 > 0 else -1) * D.sqrt()) / 2
             ks = [k for k in (q / a2, a0 / q) if k.is_finite() and k > 0]
-            return min((_up(k.upper()) for k in ks), default=math.inf)
+            return min((double_above(k.upper()) for k in ks), default=math.inf)
         for rel in (1e-12, 1e-10, 1e-8, 1e-6, 1e-4):    # 1e-12..1e-4: brackets around a
             a, b = theta * (1 - rel), min(theta * (1 + rel), math.pi)   # float root
             span = arb((a + b) / 2, (b - a) / 2).union(arb(a)).union(arb(b))
@@ -357,5 +357,5 @@ class PebFractionBalls:
             for i in (0, 1):
                 ia, ib = ends[0][i].imag, ends[1][i].imag
                 if ((ia < 0 < ib) or (ib < 0 < ia)) and roots[i].is_finite() and roots[i].real > 0:
-                    return _up(roots[i].real.upper())
+                    return double_above(roots[i].real.upper())
         return math.inf

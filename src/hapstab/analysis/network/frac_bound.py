@@ -53,7 +53,8 @@ from typing import Any
 from hapstab.analysis.network.frac_balls import BoxGain, FractionBalls
 from hapstab.engine.arb_loop import working_precision
 
-__all__ = ["CrossingBound", "crossing_lower_bound", "proved_crossing"]
+__all__ = ["CrossingBound", "crossing_lower_bound", "proved_crossing", "box_lower", "double_below",
+           "double_above"]
 
 
 @dataclass(frozen=True)
@@ -83,17 +84,17 @@ class CrossingBound:
     worst_fractions: tuple[float, float] = (math.nan, math.nan)
 
 
-def _down(x: Any) -> float:
+def double_below(x: Any) -> float:
     """A double at or below the exact value of the arb point ``x``."""
     return math.nextafter(float(x), -math.inf)
 
 
-def _up(x: Any) -> float:
+def double_above(x: Any) -> float:
     """A double at or above the exact value of the arb point ``x``."""
     return math.nextafter(float(x), math.inf)
 
 
-def _box_lower(bx: BoxGain, k_floor: float) -> float | None:
+def box_lower(bx: BoxGain, k_floor: float) -> float | None:
     """The lower bound of a box (module docstring), or None when G is not real on it
     or only below K_floor."""
     if bx.nt.contains(0) or not (bx.centre.is_finite() and bx.d_theta.is_finite()
@@ -103,7 +104,7 @@ def _box_lower(bx: BoxGain, k_floor: float) -> float | None:
         if not nt_hi.is_zero() and nt_hi.is_finite():
             bound = bx.d.abs_lower() / nt_hi - 2 * bx.beta.abs_upper()
             if bound.is_finite():
-                return max(k_floor, _down(bound.lower()))
+                return max(k_floor, double_below(bound.lower()))
         return k_floor
     return mean_value_lower(bx.centre, bx.d_theta, bx.d_f, bx.r_theta, bx.r_f, k_floor)
 
@@ -134,7 +135,7 @@ def mean_value_lower(centre: Any, d_theta: Any, d_f: Any, r_theta: Any, r_f: Any
     enc = centre + d_theta * acb(ht) + d_f * acb(hf)
     if not enc.imag.contains(0) or enc.real < k_floor:
         return None
-    best = max(k_floor, _down(enc.real.lower()))
+    best = max(k_floor, double_below(enc.real.lower()))
     for num, den in ((d_theta.real, d_theta.imag), (d_f.real, d_f.imag)):
         dm = float(den.mid())
         if dm == 0.0 or not math.isfinite(dm):
@@ -143,7 +144,7 @@ def mean_value_lower(centre: Any, d_theta: Any, d_f: Any, r_theta: Any, r_f: Any
         form = (centre.real - lam * centre.imag + (d_theta.real - lam * d_theta.imag) * ht
                 + (d_f.real - lam * d_f.imag) * hf)
         if form.is_finite():
-            best = max(best, _down(form.lower()))
+            best = max(best, double_below(form.lower()))
     return best
 
 
@@ -172,7 +173,7 @@ def disc_lower(a0: Any, a1: Any, a2: Any, k_floor: float) -> float | None:
         return k_floor
     if centre.imag.abs_lower() > rho or centre.real + rho < k_floor:
         return None
-    return max(k_floor, _down((centre.real - rho).lower()))
+    return max(k_floor, double_below((centre.real - rho).lower()))
 
 
 def crossing_lower_bound(balls: Any, f_lo: float, f_hi: float, k_floor: float,
@@ -287,7 +288,7 @@ def _proved_crossing(balls: FractionBalls, theta: float, f: float) -> float:
     fb = arb(f)
     if theta in (0.0, math.pi):
         g = balls.value(arb.pi() if theta else arb(0), fb)
-        return _up(g.real.upper()) if g.is_finite() and g.real > 0 else math.inf
+        return double_above(g.real.upper()) if g.is_finite() and g.real > 0 else math.inf
     for rel in (1e-12, 1e-10, 1e-8, 1e-6, 1e-4):    # 1e-12..1e-4: brackets around a
         # float root (wider where G is a small difference of large terms, near K = 0)
         a, b = theta * (1 - rel), min(theta * (1 + rel), math.pi)
@@ -297,5 +298,5 @@ def _proved_crossing(balls: FractionBalls, theta: float, f: float) -> float:
             bx = balls.box(span, fb)
             g = bx.enclosure() if not bx.nt.contains(0) else balls.value(span, fb)
             if g.is_finite() and g.real > 0:          # a crossing at a K > 0
-                return _up(g.real.upper())
+                return double_above(g.real.upper())
     return math.inf

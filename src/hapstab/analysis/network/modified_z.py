@@ -58,7 +58,7 @@ import numpy as np
 
 from hapstab.errors import AnalysisError
 
-__all__ = ["FractionalPlant", "fractional_plant"]
+__all__ = ["FractionalPlant", "fractional_plant", "full_period"]
 
 
 @dataclass(frozen=True)
@@ -96,7 +96,7 @@ class FractionalPlant:
         """(d, Nt_f): ascending coefficients in y = z - 1 (doubles, for the float
         search and the point checks; the proof uses balls)."""
         from hapstab.engine.zoh import expm_batched
-        d, a0, a1 = _full_period(self)
+        d, a0, a1 = full_period(self)
         Xf = expm_batched(self.aug((1.0 - f) * self.period_s)[None])[0]
         return d, Xf[0, 0] * a0 + Xf[0, 1] * a1 + Xf[0, 2] * d
 
@@ -176,7 +176,7 @@ class FractionalPlant:
 
 
 @functools.lru_cache(maxsize=256)
-def _full_period(plant: FractionalPlant) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def full_period(plant: FractionalPlant) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(d, a_0, a_1) of the module docstring, ascending in y, from the ZOH over T."""
     from hapstab.engine.zoh import expm_batched
     X = expm_batched(plant.aug(plant.period_s)[None])[0]

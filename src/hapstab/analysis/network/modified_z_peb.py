@@ -59,7 +59,7 @@ from typing import Any
 
 import numpy as np
 
-from hapstab.analysis.network.modified_z import FractionalPlant, _full_period
+from hapstab.analysis.network.modified_z import FractionalPlant, full_period
 from hapstab.errors import AnalysisError
 
 __all__ = ["PebFractionalPlant", "peb_fractional_plant"]
@@ -100,7 +100,7 @@ class PebFractionalPlant:
         out = []
         for p in self.ports:
             d, nt = p.coefficients(f)
-            out.append((d, _full_period(p)[1], nt))
+            out.append((d, full_period(p)[1], nt))
         return out
 
     def quadratic(self, theta: np.ndarray, f: float, polys: list[Any] | None = None
