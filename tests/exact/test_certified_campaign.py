@@ -240,3 +240,27 @@ def test_a_count_the_argument_principle_cannot_decide_is_decided_by_the_roots():
         mp.setattr(winding, "_winding_count", lambda *a, **k: undecided)
         mp.setattr(winding, "ROOTS_FALLBACK_DEGREE", -1)
         assert winding.count(al, K0).outside is None
+
+
+def test_a_stiff_teleoperator_the_referees_aberth_leaves_undecided_is_decided_at_40_digits():
+    # mass-peb#200134 of fresh seed 1796540596: 1.2 g / 12 g ports behind springs of
+    # 5.4e8 / 2.6e8 N/m at T = 11.7 us (their resonances above the Nyquist frequency),
+    # n = 18 each way. Every pole sits within 1e-6 of the circle from K = 4 N/m on, where
+    # Aberth does not converge: the referee was undecided from 4.26 N/m and took that as
+    # the first unstable K, flagging hapstab's K_max 277.74 N/m as above the truth. The
+    # roots of det(zI - A(K)) built at 40 digits decide it: stable at 4.3 N/m
+    # (|z| = 1 - 2.4e-7) and at hapstab's K_max (1 - 2.2e-19), unstable 1e-9 above it.
+    # (mpmath's QR on the double-precision matrices puts the crossing 3e-7 lower:
+    # their rounding moves |z| by ~1e-13 here, which is why the referee never uses them.)
+    s = certified.scenario("mass", 200134, seed=1796540596)
+    res = h.critical_stiffness(s.hapstab_loop(), certify=True)
+    K = float(res.critical_stiffness)
+    assert K == pytest.approx(277.7387277830205, rel=1e-12)   # bit-stable: a pin, not a truth
+    # the referee built whole scans the K axis (hours here): only its 40-digit verdicts
+    L = s.brute_loop()
+    A0, A1 = brute.matrices(L)
+    ref = certified._Referee.__new__(certified._Referee)
+    ref.L, ref.long = L, False
+    assert ref._qr_spectrum(A0, A1, 4.3) is True
+    assert ref._qr_spectrum(A0, A1, K) is True
+    assert ref._qr_spectrum(A0, A1, K * (1 + 1e-9)) is False

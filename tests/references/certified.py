@@ -64,6 +64,9 @@ DPS = 40
 #: most states for which an undecided verdict is settled by refining the whole spectrum
 #: at DPS digits (Aberth: ~0.4 s at 72 states; quadratic in the states per iteration)
 WHOLE_SPECTRUM_MAX = 160
+#: most states for which, when Aberth does not converge either, the whole spectrum is
+#: computed by mpmath's QR (mpmath.eig) at DPS digits (~7 s at 42 states, cubic)
+QR_SPECTRUM_MAX = 64
 
 #: relative distance below the truth within which K_max counts as tight (the issue's)
 TIGHT = 1e-9
@@ -254,10 +257,35 @@ class _Referee:
             return None
         roots = brute.aberth(self.L, K, np.linalg.eigvals(A0 + K * A1), DPS, iters=400)
         if roots is None:
-            return None
+            return self._qr_spectrum(A0, A1, K)
         with mpmath.workdps(DPS):
             top = max(abs(r) for r in roots)
         return None if top == 1 else bool(top < 1)
+
+    def _qr_spectrum(self, A0: np.ndarray, A1: np.ndarray, K: float) -> bool | None:
+        """The verdict from every root of det(zI - A(K)) built at DPS digits (the ZOH by
+        mpmath.expm: :func:`brute.char_poly_mp`) and found by mpmath.polyroots, where
+        Aberth did not converge (many poles within 1e-6 of the circle: a stiff PEB with
+        its ports' resonances above the Nyquist frequency, mass-peb#200134 of seed
+        1796540596: |z| = 1 - 2.4e-7 at K = 4.3). Not the double-precision matrices: their
+        rounding moves |z| by ~1e-13 there, 1e-4 N/m of K near the crossing. Decided only
+        when polyroots converges and the spectral radius is farther from 1 than its error
+        estimate; None beyond QR_SPECTRUM_MAX states or for the loops char_poly_mp does
+        not build."""
+        import mpmath
+        if A0.shape[0] > QR_SPECTRUM_MAX or self.L.extended:
+            return None
+        with mpmath.workdps(DPS):
+            coeffs = brute.char_poly_mp(self.L, K, DPS)
+            try:
+                roots, err = mpmath.polyroots(coeffs[::-1], maxsteps=600, extraprec=4 * DPS,
+                                              error=True, asc=True)   # lowest power first
+            except mpmath.libmp.libhyper.NoConvergence:
+                return None
+            top = max(abs(r) for r in roots)
+            if abs(top - 1) <= 10 * err:
+                return None
+            return bool(top < 1)
 
     def rho_near_circle(self, K: float) -> bool:
         """Within :data:`MARGINAL_BAND` of the circle ("marginal" acceptable)."""
