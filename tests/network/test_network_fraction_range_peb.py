@@ -18,6 +18,7 @@ from hapstab.analysis.network import (
     delay_range_critical_stiffness,
     fractional_range_critical_stiffness,
 )
+from hapstab.analysis.network.frac_range import segments_of
 from hapstab.analysis.network.modified_z_peb import peb_fractional_plant
 from hapstab.engine.system import build
 from hapstab.errors import AnalysisError
@@ -156,3 +157,20 @@ def test_the_answer_does_not_depend_on_arbs_global_precision():
     finally:
         ctx.prec = old
     assert a == b
+
+
+def test_an_end_just_below_a_whole_sample_is_not_snapped_into_the_range():
+    # independent review: [10 - 9e-9, 10.5] samples was cut as (10, 0, 0.5) (the low end
+    # snapped up onto 10), the delays in [10 - 9e-9, 10) were left out of the proof and
+    # 1472.7556717 N/m was reported certified against a true 1472.7556536 at the low end
+    # (1.2e-8 above). The ends move onto a whole sample only outwards.
+    loop, phys, _lo, _hi = _case(3)
+    T = loop.period
+    lo, hi = 10 - 9e-9, 10.5
+    assert segments_of(lo, hi) == [(9, lo - 9, 1.0), (10, 0.0, 0.5)]
+    res = fractional_range_critical_stiffness(loop, lo * T, hi * T)
+    ports, _T, B, rho, a, b = phys
+    k_lo = bp.kmax_many(ports, T, np.array([lo, 10.0]), B, rho, a, b, rtol=1e-13)
+    # 1e-11: the brute force's bisection to 1e-13 and its double-precision ZOH, far below
+    # the 1.2e-8 of the bug
+    assert res.certified and res.critical_stiffness <= k_lo.min() * (1 + 1e-11)
