@@ -22,7 +22,8 @@ import numpy as np
 from scipy import signal
 
 
-def _zoh(M: float, b: float, k: float, t: float) -> tuple[np.ndarray, np.ndarray]:
+def zoh(M: float, b: float, k: float, t: float) -> tuple[np.ndarray, np.ndarray]:
+    """ZOH over t of M x'' + b x' + k x = u, state [x, v] (scipy's cont2discrete)."""
     A = np.array([[0.0, 1.0], [-k / M, -b / M]])
     Bc = np.array([[0.0], [1.0 / M]])
     if t == 0.0:
@@ -34,8 +35,8 @@ def _zoh(M: float, b: float, k: float, t: float) -> tuple[np.ndarray, np.ndarray
 def matrices(M: float, b: float, k: float, T: float, n: int, f: float, B: float
              ) -> tuple[np.ndarray, np.ndarray]:
     """(A0, A1) of the closed loop with delay (n + f) T, 0 <= f < 1 (module docstring)."""
-    Ad, bd = _zoh(M, b, k, T)
-    Af, bf = _zoh(M, b, k, (1.0 - f) * T)
+    Ad, bd = zoh(M, b, k, T)
+    Af, bf = zoh(M, b, k, (1.0 - f) * T)
     N = 2 + 1 + n + 1
     r = lambda lag: 2 + lag            # noqa: E731  (state of r[k - lag])
     u0, u1 = np.zeros(N), np.zeros(N)

@@ -25,16 +25,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy import signal
 
-
-def _zoh(M: float, b: float, k: float, t: float) -> tuple[np.ndarray, np.ndarray]:
-    A = np.array([[0.0, 1.0], [-k / M, -b / M]])
-    Bc = np.array([[0.0], [1.0 / M]])
-    if t == 0.0:
-        return np.eye(2), np.zeros(2)
-    Ad, Bd, _, _, _ = signal.cont2discrete((A, Bc, np.eye(2), np.zeros((2, 1))), t, method="zoh")
-    return Ad, Bd[:, 0]
+from .brute_fractional import zoh  # one port's ZOH, as the HVE's reference builds it
 
 
 def matrices(ports, T: float, n: int, f: float, B, rho: float, a: float = 1.0, b: float = 1.0
@@ -50,8 +42,8 @@ def matrices(ports, T: float, n: int, f: float, B, rho: float, a: float = 1.0, b
     A0, A1 = np.zeros((N, N)), np.zeros((N, N))
     for j in (0, 1):
         o = 1 - j
-        Ad, bd = _zoh(*ports[j], T)
-        Af, bf = _zoh(*ports[j], (1.0 - f) * T)
+        Ad, bd = zoh(*ports[j], T)
+        Af, bf = zoh(*ports[j], (1.0 - f) * T)
         e, e_old = np.zeros(N), np.zeros(N)      # e_j[k], e_j[k-1] as rows on the state
         e[X[j]] += own[j]
         e[R[o] + n] += cross[j]
