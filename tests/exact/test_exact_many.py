@@ -230,18 +230,36 @@ def test_batches_are_bounded(monkeypatch):
     assert sizes == [BATCH, 40] and len(got) == BATCH + 40
 
 
-def test_memory_of_one_full_batch():
-    # the costliest structure of the documented range (PEB, 30 samples each way): the
-    # batch is sized so its search stays near BATCH_BYTES (300 MB), far below 1 GB
-    loops = [h.paper_peb(float(T), 30) for T in np.geomspace(1e-4, 1e-2, 40)]
+def _peak_of_one_full_batch(budget_bytes, count, monkeypatch):
+    """Peak traced memory of ``critical_stiffness_many`` over ``count`` PEBs at 30 samples
+    each way (the costliest structure of the documented range), batches sized for
+    ``budget_bytes``; and the batch size."""
+    monkeypatch.setattr(many, "BATCH_BYTES", budget_bytes)
+    loops = [h.paper_peb(float(T), 30) for T in np.geomspace(1e-4, 1e-2, count)]
     size = many.batch_size(many.plan_response(loops[0]))
-    assert 8 <= size < 40
     tracemalloc.start()
     try:
         critical_stiffness_many(loops)
         peak = tracemalloc.get_traced_memory()[1]
     finally:
         tracemalloc.stop()
+    return peak, size
+
+
+def test_memory_of_one_full_batch_follows_the_budget(monkeypatch):
+    # the batch is sized from BATCH_BYTES at the call: a quarter of the default budget gives
+    # the floor of 8 loops, whose search stays near it (the default budget's 32 loops:
+    # the campaign's test below)
+    peak, size = _peak_of_one_full_batch(75e6, 8, monkeypatch)
+    assert size == 8
+    assert peak < 1.5 * 75e6, f"peak {peak / 1e6:.0f} MB"
+
+
+@pytest.mark.campaign
+def test_memory_of_one_full_batch(monkeypatch):
+    # the default budget (300 MB): the batch stays near it, far below 1 GB
+    peak, size = _peak_of_one_full_batch(many.BATCH_BYTES, 40, monkeypatch)
+    assert 8 <= size < 40
     assert peak < 1.5 * many.BATCH_BYTES, f"peak {peak / 1e9:.2f} GB"
 
 

@@ -4,6 +4,7 @@ notebook; a result with a picture draws it with plot(ax=None) and returns the ax
 a result with a table writes it with to_csv."""
 
 import csv
+import functools
 import json
 import math
 
@@ -14,34 +15,60 @@ import hapstab as h
 from hapstab.results import CriticalStiffnessResult, Result, merged
 
 
+def _loops():
+    return h.paper_hve(1e-3, 2), h.paper_peb(1e-3, 2)
+
+
+#: (the result's class name, how to compute it): computed when a test asks for it, once
+#: per worker (not at collection, where every pytest worker would compute all of them)
+FACTORIES = {
+    "StabilityResult": lambda hve, peb: h.stability(hve.with_stiffness(50.0)),
+    "MarginResult": lambda hve, peb: h.margins(hve.with_stiffness(20.0), max_extra_samples=4.0),
+    "FrequencyView": lambda hve, peb: h.frequency_view(peb.with_stiffness(3.0)),
+    "CriticalStiffnessResult": lambda hve, peb: h.critical_stiffness(hve),
+    "CriticalStiffnessResult-simulation":
+        lambda hve, peb: h.critical_stiffness(hve, method="simulation"),
+    "BoundaryResult": lambda hve, peb: h.boundary(hve, [1e-3, 2e-3], [0, 2]),
+    "PassivityResult": lambda hve, peb: h.sampled_passivity(peb.with_stiffness(3.0)),
+    "PositiveRealResult": lambda hve, peb: h.circle_test(hve.with_stiffness(10.0)),
+    "AuditResult": lambda hve, peb: h.audit(hve),
+    "RegionResult": lambda hve, peb: h.stability_region(hve, (0, 300), (0, 1), 8),
+    "BestDampingResult": lambda hve, peb: h.best_damping(hve, resolution=8),
+    "SimulationResult": lambda hve, peb: h.simulate(hve.with_stiffness(50.0), 0.2),
+    "BoundednessVerdict": lambda hve, peb: h.simulate(hve.with_stiffness(50.0), 0.2).verdict,
+    "TransparencyResult": lambda hve, peb: h.transparency(peb.with_stiffness(3.0)),
+    "NonlinearPassivityResult": lambda hve, peb: h.nonlinear_passivity(
+        hve.replace(delay_samples=0).with_stiffness(150.0), coulomb_friction_N=0.005,
+        resolution_m=1e-4),
+    "LimitCycleResult": lambda hve, peb: h.limit_cycles(
+        h.paper_hve(1e-3, 10).with_stiffness(8.0), resolution_m=1e-4, quantizer="nearest"),
+    "JitterResult": lambda hve, peb: h.jitter(hve, (1, 2), max_length=3),
+}
+
+#: the ones that draw themselves (test_the_plot_list_is_every_result_with_a_plot keeps it so)
+PLOTS = ["StabilityResult", "MarginResult", "FrequencyView", "BoundaryResult",
+         "PositiveRealResult", "AuditResult", "RegionResult", "BestDampingResult",
+         "SimulationResult", "TransparencyResult", "LimitCycleResult", "JitterResult"]
+
+
+@functools.cache
+def _result(name):
+    res = FACTORIES[name](*_loops())
+    assert type(res).__name__ == name.split("-")[0], (name, type(res).__name__)
+    return res
+
+
 def _results():
-    loop = h.paper_hve(1e-3, 2)
-    peb = h.paper_peb(1e-3, 2)
-    return [
-        h.stability(loop.with_stiffness(50.0)),
-        h.margins(loop.with_stiffness(20.0), max_extra_samples=4.0),
-        h.frequency_view(peb.with_stiffness(3.0)),
-        h.critical_stiffness(loop),
-        h.critical_stiffness(loop, method="simulation"),
-        h.boundary(loop, [1e-3, 2e-3], [0, 2]),
-        h.sampled_passivity(peb.with_stiffness(3.0)),
-        h.circle_test(loop.with_stiffness(10.0)),
-        h.audit(loop),
-        h.stability_region(loop, (0, 300), (0, 1), 8),
-        h.best_damping(loop, resolution=8),
-        h.simulate(loop.with_stiffness(50.0), 0.2),
-        h.simulate(loop.with_stiffness(50.0), 0.2).verdict,
-        h.transparency(peb.with_stiffness(3.0)),
-        h.nonlinear_passivity(loop.replace(delay_samples=0).with_stiffness(150.0),
-                              coulomb_friction_N=0.005, resolution_m=1e-4),
-        h.limit_cycles(h.paper_hve(1e-3, 10).with_stiffness(8.0), resolution_m=1e-4,
-                       quantizer="nearest"),
-        h.jitter(loop, (1, 2), max_length=3),
-    ]
+    return [_result(name) for name in FACTORIES]
 
 
-@pytest.mark.parametrize("res", _results(), ids=lambda r: type(r).__name__)
-def test_every_result_is_a_result_with_json_and_html(res):
+def test_the_plot_list_is_every_result_with_a_plot():
+    assert PLOTS == [n for n in FACTORIES if hasattr(_result(n), "plot")]
+
+
+@pytest.mark.parametrize("name", FACTORIES)
+def test_every_result_is_a_result_with_json_and_html(name):
+    res = _result(name)
     assert isinstance(res, Result)
     d = res.to_dict()
     text = json.dumps(d, allow_nan=False)   # JSON-ready: no NaN, no Infinity, no numpy types
@@ -61,11 +88,9 @@ def test_details_cannot_replace_a_key_of_the_result():
     assert merged({"a": 1}, {"b": np.float64(2.0)}, "x") == {"a": 1, "b": 2.0}
 
 
-PLOTS = [r for r in _results() if hasattr(r, "plot")]
-
-
-@pytest.mark.parametrize("res", PLOTS, ids=lambda r: type(r).__name__)
-def test_plot_returns_the_axes_and_draws_on_given_ones(res):
+@pytest.mark.parametrize("name", PLOTS)
+def test_plot_returns_the_axes_and_draws_on_given_ones(name):
+    res = _result(name)
     import matplotlib
 
     matplotlib.use("Agg")

@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 import hapstab as h
+import lanes
 from hapstab.models.fourchannel import FourChannelLoop
 from test_transparency import _felt_in_time  # the held-sinusoid reference
 
@@ -152,8 +153,10 @@ def _campaign(seed: int, loops: int, per_loop: int) -> tuple[int, int]:
 
 
 def test_force_reflection_campaign_llewellyn_is_a_bound() -> None:
-    pairs, bad = _campaign(seed=1313, loops=10, per_loop=4)
-    assert pairs == 40 and bad == 0
+    # the default lane draws 5 loops x 3 terminations of the seed's 10 x 4 (tests/lanes.py)
+    loops, per_loop = lanes.size(5, 10), lanes.size(3, 4)
+    pairs, bad = _campaign(seed=1313, loops=loops, per_loop=per_loop)
+    assert pairs == loops * per_loop and bad == 0
 
 
 @pytest.mark.slow
