@@ -31,7 +31,7 @@ from references import brute, certified, phase
 DEFAULT = [("wall", 45, 0), ("marginal", 10, 0), ("mass", 40, 0), ("delay", 10, 400)]
 #: the default lane's share of DEFAULT: ~1 s CPU a scenario (the 40-digit referee and the
 #: certificate's three forgeries), so 30 keep the file near half a minute on 2 workers
-LANE = 30
+LANE = 20
 #: on demand (-m campaign): 5,000 scenarios, 1,600 of them stiff walls
 FULL = [("wall", 1600, 0), ("marginal", 700, 0), ("mass", 1900, 0), ("delay", 800, 10_000)]
 

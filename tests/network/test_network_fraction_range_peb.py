@@ -80,7 +80,7 @@ def _check(seed: int) -> None:
     assert res.certified or (res.critical_stiffness == 0.0 and kref.min() <= BELOW_SCAN)
 
 
-@pytest.mark.parametrize("seed", draw(range(50), 2))
+@pytest.mark.parametrize("seed", draw(range(50), 1))
 def test_range_minimum_against_the_brute_force_grid(seed):
     _check(seed)
 

@@ -15,6 +15,7 @@ import time
 import pytest
 from click.testing import CliRunner
 
+import lanes
 import paths
 from hapstab.cli.main import cli
 from hapstab.sweep.cluster import NO_DASHBOARD
@@ -171,7 +172,8 @@ def _workers_spawning(pid):
 
 
 @pytest.mark.skipif(not os.path.exists("/proc/self/task"), reason="needs Linux's /proc")
-@pytest.mark.parametrize("after_s", [0.0, 0.4, 0.8])      # spawning, registering, scattering
+# spawning, registering, scattering: the default lane the middle one (tests/lanes.py)
+@pytest.mark.parametrize("after_s", [lanes.costly(0.0), 0.4, lanes.costly(0.8)])
 def test_a_ctrl_c_while_the_local_cluster_starts_is_one_line(reference, tmp_path, after_s):
     """Issue 27, 11: a SIGINT while the workers are being spawned printed Dask's "Nanny
     failed to start", an atexit traceback of the half-started cluster or an asyncio
@@ -206,7 +208,8 @@ def _group_of(pid):
 
 
 @pytest.mark.skipif(not os.path.exists("/proc/self/task"), reason="needs Linux's /proc")
-@pytest.mark.parametrize("when", ["loading", "spawning", "registering", "midway"])
+@pytest.mark.parametrize("when", ["loading", lanes.costly("spawning"), lanes.costly("registering"),
+                                  "midway"])
 def test_a_ctrl_c_to_the_whole_process_group_is_one_line(reference, tmp_path, when):
     """Issue 27: a terminal's Ctrl-C goes to the whole foreground process group, the Dask
     workers too, which each printed a KeyboardInterrupt traceback (multiprocessing's
