@@ -121,7 +121,8 @@ def outputs(tmp_path_factory):
     os.chdir(tmp_path_factory.mktemp("json"))       # reproduce writes ./out
     with open("study.toml", "w") as fh:
         fh.write('kind = "peb"\n[loop]\ndelay = 2\n[[variant]]\nname = "stiff"\n'
-                 'environment = "spring:2000"\n[run.kmax]\n[run.check]\nK = 3\n')
+                 'environment = "spring:2000"\n[run.kmax]\n[run.check]\nK = 3\n'
+                 'margins = false\n')    # check's margins: validated by `check hve -K 5`
     _write_log("log.csv")
     with open("trace.csv", "w") as fh:              # a network trace: delays 1-2, a loss
         fh.write("sample,delay_samples,arrived\n" + "".join(
