@@ -23,7 +23,7 @@ OLD = b"the previous file\n"
 COMMANDS = {
     "simulate-csv": ["simulate", "hve", "-K", "9", "--duration", "60", "--csv", "{out}"],
     "simulate-plot": ["simulate", "hve", "-K", "9", "--duration", "20", "--plot", "{out}.png"],
-    "region-csv": ["region", "hve", "--K", "0:900", "--B", "0:20", "--resolution", "300",
+    "region-csv": ["region", "hve", "--K", "0:900", "--B", "0:20", "--resolution", "200",
                    "--csv", "{out}"],
     "boundary-csv": ["boundary", "hve", "--period", "0.001:0.01:40", "-n", "0,1,2,5,10",
                      "--csv", "{out}"],
