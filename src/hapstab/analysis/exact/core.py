@@ -5,7 +5,9 @@
 characteristic function with the delays as exact phases,
 :mod:`~hapstab.engine.frequency`) and the stable
 set in K. ``stability(loop)`` counts the poles outside the circle by the argument
-principle, certified the same way, and reports the dominant pole (eigenvalues of
+principle, certified the same way (with a fraction of a sample of delay: by isolating the
+characteristic polynomial's roots in balls, :mod:`hapstab.engine.arb_fraction`), and
+reports the dominant pole (eigenvalues of
 the closed-loop matrix, polished on the characteristic function). Rigid-body modes
 (poles at z = 1 that no K moves) are divided out exactly and reported as marginal,
 never as unstable.
@@ -117,8 +119,10 @@ def stability(loop: HapticLoop | TeleoperationLoop, *, max_memory: float | None 
         estimated first and refused above it.
     certify : bool
         Count the poles outside by the argument principle in ball arithmetic
-        (python-flint Arb; :func:`~hapstab.analysis.exact.proof.count`) where the loop is
-        covered (default True). False: the float enclosures alone, whose rounding
+        (python-flint Arb; :func:`~hapstab.analysis.exact.proof.count`), or with a
+        fraction of a sample of delay by isolating the characteristic polynomial's roots
+        in balls (:func:`~hapstab.engine.arb_fraction.fractional_count`), where the loop is
+        covered (default True); the reason says which. False: the float enclosures alone, whose rounding
         allowances are not proved and are known to be short for stiff walls on light
         devices (k T^2 / m >> 1; issue 26).
 
@@ -150,13 +154,13 @@ def stability(loop: HapticLoop | TeleoperationLoop, *, max_memory: float | None 
         resp = loop_response(loop)
         m = resp.rigid
         u = float(sysm.stiffness[0] / resp.scale[0])
-        count = _proved_count(resp.params[0] if resp.params else None,
-                              float(sysm.stiffness[0])) if certify else None
+        count, how = _certified_count(loop, resp, float(sysm.stiffness[0]), certify)
         if count is None:       # not covered by the ball-arithmetic core
             count = int(winding(resp, np.zeros(1, int), np.array([u]))[0])
+            how = FLOAT_COUNT
     else:
         m = sysm.rigid_modes
-        count = -2
+        count, how = -2, ""
     rest = eigs
     if m:
         rest = eigs[np.argsort(np.abs(eigs - 1.0))[m:]]
@@ -166,13 +170,35 @@ def stability(loop: HapticLoop | TeleoperationLoop, *, max_memory: float | None 
         dom = _polish_pole(resp, u, dom)
     rho = abs(dom)
     freq = abs(math.atan2(dom.imag, dom.real)) / (2 * math.pi * T)
-    verdict, reason = _verdict(count, rho, dom, T, m)
+    verdict, reason = _verdict(count, rho, dom, T, m, how)
     if (verdict == "unstable" and count > 0 and rho <= 1) or (verdict == "stable" and rho >= 1):
         reason += (f" (the eigenvalue solver puts the largest pole at |z| = {rho:.12g}; with "
                    "poles crowding z = 1 it is less accurate than the certified count)")
     note = friction_note(loop)          # the linear loop: friction-free (said once)
     return StabilityResult(verdict, rho, dom, freq, reason, T, tuple(complex(e) for e in eigs), m,
                            note)
+
+
+#: How a count of poles outside is known (the verdict's reason says which).
+ARGUMENT_PRINCIPLE = "certified by the argument principle"
+ROOTS = "certified by isolating the characteristic polynomial's roots in ball arithmetic"
+FLOAT_COUNT = ("by the argument principle on float enclosures, not proved in ball arithmetic "
+               "for this loop's structure")
+
+
+def _certified_count(loop: HapticLoop | TeleoperationLoop, resp: LoopResponse, K: float,
+                     certify: bool) -> tuple[int | None, str]:
+    """(poles outside at K proved in ball arithmetic, -1 undecided, None not covered;
+    how): whole delays by the argument principle on
+    :class:`~hapstab.engine.arb_loop.ArbLoop`, delays with a fraction of a sample by
+    isolating the roots of the characteristic polynomial
+    (:mod:`hapstab.engine.arb_fraction`)."""
+    if not certify:
+        return None, ""
+    if resp.params and resp.params[0] is not None:
+        return _proved_count(resp.params[0], K), ARGUMENT_PRINCIPLE
+    from hapstab.engine.arb_fraction import fractional_count
+    return fractional_count(loop, K), ROOTS
 
 
 def _proved_count(params: dict | None, K: float) -> int | None:
@@ -189,9 +215,10 @@ def _proved_count(params: dict | None, K: float) -> int | None:
     return -1 if got is None else int(got)
 
 
-def _verdict(count: int, rho: float, dom: complex, T: float, m: int) -> tuple[str, str]:
-    """(verdict, reason) from the certified count of poles outside (-1: not
-    certifiable, -2: not available) and the dominant pole."""
+def _verdict(count: int, rho: float, dom: complex, T: float, m: int,
+             how: str = ARGUMENT_PRINCIPLE) -> tuple[str, str]:
+    """(verdict, reason) from the count of poles outside (-1: not certifiable, -2: not
+    available), how it is known, and the dominant pole."""
     near = abs(rho - 1.0) <= MARGINAL_TOL
     if count == -1 or (count in (0, -2) and near and m == 0) or (count == -2 and near):
         return "marginal", (f"closed-loop pole on the unit circle to the model's accuracy "
@@ -199,7 +226,7 @@ def _verdict(count: int, rho: float, dom: complex, T: float, m: int) -> tuple[st
                             "drift; the count of poles outside cannot be certified")
     if count > 0 or (count == -2 and rho > 1 + MARGINAL_TOL):
         n = f"{count} closed-loop pole(s)" if count > 0 else "a closed-loop pole"
-        reason = (f"{n} outside the unit circle (certified by the argument principle); the "
+        reason = (f"{n} outside the unit circle ({how}); the "
                   f"largest at |z| = {rho:.10g} ({_describe(dom, T)}): the response grows")
         if count == -2:
             reason = (f"closed-loop pole at |z| = {rho:.10g} ({_describe(dom, T)}): the "
@@ -212,7 +239,7 @@ def _verdict(count: int, rho: float, dom: complex, T: float, m: int) -> tuple[st
                             "so a constant offset persists; all other poles have |z| <= "
                             f"{rho:.6g} < 1")
     return "stable", (f"all closed-loop poles inside the unit circle (largest |z| = {rho:.10g}"
-                      + ("; none outside, certified by the argument principle)" if count == 0
+                      + (f"; none outside, {how})" if count == 0
                          else ")"))
 
 

@@ -1,0 +1,306 @@
+"""The characteristic polynomial of a loop whose delays are not whole samples, in ball
+arithmetic (python-flint's Arb), and its poles outside the unit circle from roots
+isolated in balls.
+
+Covered: the loops of :class:`~hapstab.engine.arb_loop.ArbLoop` (one or two ports whose
+terminations have no internal states, spring-damper controllers, no rigid-body mode,
+the own position read undelayed on two ports) with any delay ``n + f`` samples on each
+measured term, ``f`` in [0, 1).
+
+**Derivation.** Each port j alone: with the ZOH ``[Phi_t, Gamma_t; 0, 1] = exp([A_j, B_j;
+0, 0] t)`` (``arb_mat.exp``), ``E = Phi_T - I``, ``y = z - 1`` and ``d_j(y) = det(yI -
+E)``, its position sampled ``fT`` before the instants has the transform ``z X_{j,f} =
+-Nt_{j,f}(y) / d_j(y) U_j`` with (Jury's modified z-transform, m = 1 - f; derived in
+:mod:`hapstab.analysis.network.modified_z`)
+
+    Nt_{j,f} = c_f adj(yI - E) Gamma_T + g_f d_j,   [c_f, g_f] = row x of exp([A_j, B_j; 0, 0](1 - f)T),
+
+and ``c adj(yI - E) Gamma = det(yI - E + Gamma c) - d_j(y)`` (the matrix determinant
+lemma). At f = 0, ``Nt_{j,0} = z N_j``, ``N_j = C adj(yI - E) Gamma_T``, used exactly
+(no ball of a polynomial that vanishes at z = 0). A term (j, s, n + f) of channel i
+contributes ``s z^-(n+1) Nt_{j,f} / d_j`` to ``x``, and ``H_i = (K r_i z + beta_i (z -
+1)) / z``, so with each row i multiplied by ``z^R_i``, ``R_i = 1 + max (n + 1)`` over its
+terms, the loop's matrix has polynomial entries
+
+    chi_ij(z) = delta_ij z^R_i d_j(z - 1) + h_i(z) sum_t s_t z^(R_i - 2 - n_t) Nt_{j,f_t}(z - 1),
+
+``h_i = K r_i z + beta_i (z - 1)``; ``chi = det [chi_ij]`` is ``z^(sum R_i)`` times the
+characteristic function ``det M`` of :mod:`hapstab.engine.arb_loop` (with the fractional
+terms), so its roots are the closed-loop poles and roots at z = 0; the roots at 0 that
+come out as exactly zero coefficients at the bottom are divided out. The HVE's chi is
+that of :mod:`~hapstab.analysis.network.modified_z` (monic of degree n + 4), the PEB's
+that of :mod:`~hapstab.analysis.network.modified_z_peb` for the same delay both ways
+(degree 2n + 8 there; here also different delays in each direction).
+
+**The count.** Arb's ``acb_poly.roots`` (``acb_poly_find_roots`` refined by
+``acb_poly_validate_roots``: a ball of radius deg |chi(m) / chi'(m)| about each
+approximation m holds a root of *every* polynomial in the coefficient balls, and when
+the deg balls are pairwise disjoint each holds exactly one) gives one ball per pole; the
+number outside is decided when every ball lies strictly inside or strictly outside the
+unit circle, and is otherwise *undecided* -- never guessed.
+
+References
+----------
+F. Johansson, "Arb: efficient arbitrary-precision midpoint-radius interval arithmetic",
+IEEE Trans. Computers 66 (2017) 1281-1292, and the Arb documentation of
+``acb_poly_validate_roots`` / ``_acb_poly_root_inclusion``; E. I. Jury, *Theory and
+Application of the z-Transform Method*, Wiley 1964, ch. 2; K. J. Astrom and B.
+Wittenmark, *Computer-Controlled Systems*, 3rd ed., sec. 2.3 and 7.7.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from hapstab.engine.arb_forms import accuracy_bits
+from hapstab.engine.arb_loop import MIN_BITS, PREC, arb_parameters, working_precision
+
+__all__ = ["fractional_polynomial", "outside_count", "fractional_count", "MAX_DEGREE"]
+
+#: Largest degree of chi whose roots are isolated here: Arb isolates degree ~100 in
+#: ~5 ms and ~1000 in ~0.6 s (measured, python-flint 0.9); beyond, the caller's other
+#: count answers (a long delay's degree grows with n).
+MAX_DEGREE = 600
+
+
+def _terms(loop: Any) -> tuple[dict[str, Any], list[list[tuple[int, float, int, float]]]] | None:
+    """(the ball core's numbers of the loop at whole delays, each channel's terms as
+    (port, sign, n, f)), or None if the loop is outside this model or has no fraction."""
+    from hapstab.engine.structure import structure_of
+    from hapstab.models.delays import split_delay
+    try:
+        st = structure_of(loop)
+        whole = loop.with_whole_delay(0)
+    except Exception:        # not a loop the exact core takes at all
+        return None
+    params = arb_parameters(whole)
+    if params is None or len(params["channels"]) != len(st.channels):
+        return None
+    terms = [[(int(j), float(s), *split_delay(float(d))) for j, s, d in ch.terms]
+             for ch in st.channels]
+    if not any(f for ch in terms for *_, f in ch):
+        return None
+    own = [[t for t in ch if t[0] == i] for i, ch in enumerate(terms)] if len(terms) == 2 else []
+    if any(len(o) != 1 or o[0][2] or o[0][3] for o in own):
+        return None              # two ports: the own position is read undelayed
+    return params, terms
+
+
+def _port(p: dict[str, Any], T: Any, fractions: set[float]) -> tuple[Any, Any, dict[float, Any]]:
+    """(d, N, {f: Nt_f}) of one port, arb_poly in y (module docstring)."""
+    import flint
+    arb, arb_mat = flint.arb, flint.arb_mat
+    M = arb(p["mass_kg"]) + arb(p["termination_mass_kg"])
+    b = arb(p["damping_N_s_per_m"]) + arb(p["termination_damping_N_s_per_m"])
+    k = arb(p["termination_stiffness_N_per_m"])
+
+    def aug(t: Any) -> Any:
+        return arb_mat([[0, t, 0], [-k / M * t, -b / M * t, t / M], [0, 0, 0]]).exp()
+
+    X = aug(T)
+    E = arb_mat([[X[0, 0] - 1, X[0, 1]], [X[1, 0], X[1, 1] - 1]])
+    G = (X[0, 2], X[1, 2])
+    d = E.charpoly()
+
+    def numerator(c0: Any, c1: Any) -> Any:        # c adj(yI - E) Gamma
+        EG = arb_mat([[E[0, 0] - G[0] * c0, E[0, 1] - G[0] * c1],
+                      [E[1, 0] - G[1] * c0, E[1, 1] - G[1] * c1]])
+        return EG.charpoly() - d
+
+    nt = {}
+    for f in fractions:
+        Xf = aug((1 - arb(f)) * T)
+        nt[f] = numerator(Xf[0, 0], Xf[0, 1]) + d * Xf[0, 2]
+    return d, numerator(1, 0), nt
+
+
+def fractional_polynomial(loop: Any, K: float) -> tuple[Any, int] | None:
+    """chi(z) of ``loop`` at stiffness ``K`` (module docstring) as an acb_poly in z with
+    exact zero coefficients at the bottom divided out, and the precision it was formed
+    at; None if the loop is not covered (or has whole delays only: :class:`ArbLoop`).
+
+    Parameters
+    ----------
+    loop : HapticLoop or TeleoperationLoop
+    K : float
+        The (master's) stiffness, N/m; each channel's is ``K r_i``.
+
+    Returns
+    -------
+    (acb_poly, int) or None
+    """
+    got = _terms(loop)
+    if got is None:
+        return None
+    params, terms = got
+    prec = PREC
+    while True:
+        with working_precision(prec):
+            chi, ok = _build(params, terms, K)
+        if ok or prec >= 4096:       # the accuracy check of ArbLoop (MIN_BITS)
+            break
+        prec *= 2
+    if not ok:
+        return None
+    low = next((i for i in range(chi.degree() + 1) if not chi[i].is_zero()), None)
+    if low is None:
+        return None
+    import flint
+    return flint.acb_poly([chi[i] for i in range(low, chi.degree() + 1)]), prec
+
+
+def _build(params: dict[str, Any], terms: list[list[tuple[int, float, int, float]]],
+           K: float) -> tuple[Any, bool]:
+    import flint
+    arb, arb_poly = flint.arb, flint.arb_poly
+    T = arb(params["period_s"])
+    used: list[set[float]] = [set() for _ in params["ports"]]
+    for ch in terms:
+        for j, _s, _n, f in ch:
+            if f:
+                used[j].add(f)
+    ports = [_port(p, T, used[j]) for j, p in enumerate(params["ports"])]
+    ok = all(accuracy_bits(d) >= MIN_BITS and accuracy_bits(N) >= MIN_BITS for d, N, _ in ports)
+    y, z = arb_poly([-1, 1]), arb_poly([0, 1])
+    dz = [d(y) for d, _, _ in ports]
+    rows = []
+    for i, (ch, c) in enumerate(zip(terms, params["channels"], strict=True)):
+        R = 1 + max(n + 1 for _j, _s, n, _f in ch)
+        h = z * (arb(K) * arb(c["stiffness_ratio"])) + (z - 1) * (arb(c["damping_N_s_per_m"]) / T)
+        row = [z ** R * dz[j] if j == i else arb_poly([0]) for j in range(len(ports))]
+        for j, s, n, f in ch:
+            part = z ** (R - 1 - n) * ports[j][1](y) if not f else \
+                z ** (R - 2 - n) * ports[j][2][f](y)
+            row[j] = row[j] + h * part * s
+        rows.append(row)
+    if len(rows) == 1:
+        return rows[0][0], ok
+    return rows[0][0] * rows[1][1] - rows[0][1] * rows[1][0], ok
+
+
+#: Relative allowance on a disc's radius in :func:`_inclusion_count`: the product of
+#: the n - 1 differences, summed as logs of moduli of complex doubles, is within
+#: n (4 eps + eps |log|) <= 600 (9e-16 + 1.1e-16 * 745) ~ 5e-11 relative for n <=
+#: MAX_DEGREE (|log| <= 745, the range of doubles), a ball's bound converted to a double
+#: within 1.2e-16: 1e-9 covers both twenty times over.
+FLOAT_SLACK = 1e-9
+#: Relative allowance on a modulus or a distance of complex doubles (|a - b|, |x|):
+#: within 4 eps ~ 9e-16 of the exact value (one rounding per part, one in hypot), 1e-14
+#: covers it ten times.
+MODULUS_SLACK = 1e-14
+#: Newton steps on each double approximation at the working precision before its disc
+#: is formed: numpy's roots of poles crowding z = 1 are off by ~1e-8; each step squares
+#: the error of a simple root (the discs only need good centres).
+NEWTON_STEPS = 3
+
+
+def _centres(chi: Any, deg: int, newton: int) -> Any:
+    """Approximations of the roots (complex doubles, distinct): numpy's, refined by
+    ``newton`` steps of Newton's method on the ball polynomial's midpoints; None if that
+    fails."""
+    import flint
+    import numpy as np
+    coef = [complex(float(c.real.mid()), float(c.imag.mid())) for c in chi.coeffs()]
+    with np.errstate(all="ignore"):
+        m = np.roots(coef[::-1])
+    if m.size != deg or not np.all(np.isfinite(m)):
+        return None
+    if not newton:
+        return m if np.unique(m).size == deg else None
+    dchi = chi.derivative()
+    for i, x in enumerate(m):
+        xa = flint.acb(float(x.real), float(x.imag))
+        for _ in range(newton):
+            step = chi(xa) / dchi(xa)
+            if not step.is_finite():
+                break
+            xa = (xa - step).mid()
+        m[i] = complex(float(xa.real), float(xa.imag))
+    return m if np.unique(m).size == deg else None
+
+
+def _inclusion_count(chi: Any, deg: int, newton: int = 0) -> int | None:
+    """The roots outside the unit circle from Weierstrass inclusion discs: with distinct
+    centres x_i and W_i = chi(x_i) / (lc prod_{j != i} (x_i - x_j)), the union of the
+    discs |z - x_i| <= deg |W_i| holds every root, and each connected component of k of
+    them holds exactly k (D. Braess and K. P. Hadeler, "Simultaneous inclusion of the
+    zeros of a polynomial", Numer. Math. 21 (1973) 161-165). |chi(x_i)| is bounded above
+    and |lc| below by ball evaluation, so the discs hold those of every polynomial in the
+    coefficient balls. None when a component meets the circle."""
+    import numpy as np
+    m = _centres(chi, deg, newton)
+    if m is None:
+        return None
+    import flint
+    lc = chi[deg].abs_lower()
+    if not lc > 0:
+        return None
+    diff = m[:, None] - m[None, :]
+    np.fill_diagonal(diff, 1.0)
+    logprod = np.sum(np.log(np.abs(diff)), axis=1)
+    radius = np.empty(deg)
+    for i, x in enumerate(m):
+        up = chi(flint.acb(float(x.real), float(x.imag))).abs_upper() / lc
+        radius[i] = float(up.mid()) + float(up.rad())
+    with np.errstate(all="ignore"):
+        radius = deg * radius * np.exp(-logprod) * (1 + FLOAT_SLACK)
+    if not np.all(np.isfinite(radius)):
+        return None
+    touch = np.abs(diff) * (1 - MODULUS_SLACK) <= radius[:, None] + radius[None, :]
+    np.fill_diagonal(touch, True)
+    size = np.abs(m)
+    outside = size * (1 - MODULUS_SLACK) - radius > 1
+    inside = size * (1 + MODULUS_SLACK) + radius < 1
+    # each component (overlapping discs, by reachability) must lie on one side
+    group = np.arange(deg)
+    for _ in range(deg):
+        new = np.min(np.where(touch, group[None, :], deg), axis=1)
+        if np.array_equal(new, group):
+            break
+        group = new
+    for g in np.unique(group):
+        k = group == g
+        if not (np.all(outside[k]) or np.all(inside[k])):
+            return None
+    return int(np.sum(outside))
+
+
+def outside_count(chi: Any, prec: int) -> int | None:
+    """The roots of ``chi`` (acb_poly, leading coefficient clear of 0) outside the unit
+    circle, from balls isolating each (module docstring); None when a ball touches the
+    circle, the roots cannot be isolated (a multiple or very close pair) or the degree is
+    above :data:`MAX_DEGREE`."""
+    deg = chi.degree()
+    if deg > MAX_DEGREE or chi[deg].contains(0):
+        return None
+    if deg == 0:
+        return 0
+    with working_precision(prec):
+        # numpy's centres; refined (poles crowding z = 1 or a close pair); Arb's roots
+        for newton in (0, NEWTON_STEPS):
+            fast = _inclusion_count(chi, deg, newton)
+            if fast is not None:
+                return fast
+    with working_precision(prec):
+        # Arb's own radii first (cheapest), then refined to 1e-20: a pole nearer the
+        # circle than that is left undecided (None), never guessed
+        for tol in (None, 1e-20):
+            try:
+                rs = chi.roots(tol=tol, maxprec=4 * prec)
+            except ValueError:
+                return None
+            out = sum(1 for r in rs if r.abs_lower() > 1)
+            if len(rs) == deg and out + sum(1 for r in rs if r.abs_upper() < 1) == deg:
+                return out
+    return None
+
+
+def fractional_count(loop: Any, K: float) -> int | None:
+    """Poles of ``loop`` outside the unit circle at ``K``: an int (proved), -1 (a pole
+    within the balls' width of the circle: undecided), None (not covered: no fractional
+    delay, outside the model, or a degree above :data:`MAX_DEGREE`)."""
+    got = fractional_polynomial(loop, K)
+    if got is None or got[0].degree() > MAX_DEGREE:
+        return None
+    out = outside_count(*got)
+    return -1 if out is None else out
