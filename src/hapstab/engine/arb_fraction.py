@@ -55,7 +55,8 @@ from typing import Any
 from hapstab.engine.arb_forms import accuracy_bits
 from hapstab.engine.arb_loop import MIN_BITS, PREC, arb_parameters, working_precision
 
-__all__ = ["fractional_polynomial", "outside_count", "fractional_count", "MAX_DEGREE"]
+__all__ = ["fractional_polynomial", "outside_count", "outside_poles", "fractional_count",
+           "fractional_poles", "MAX_DEGREE"]
 
 #: Largest degree of chi whose roots are isolated here: Arb isolates degree ~100 in
 #: ~5 ms and ~1000 in ~0.6 s (measured, python-flint 0.9); beyond, the caller's other
@@ -194,15 +195,21 @@ MODULUS_SLACK = 1e-14
 NEWTON_STEPS = 3
 
 
-def _centres(chi: Any, deg: int, newton: int) -> Any:
-    """Approximations of the roots (complex doubles, distinct): numpy's, refined by
-    ``newton`` steps of Newton's method on the ball polynomial's midpoints; None if that
-    fails."""
+def _centres(chi: Any, deg: int, newton: int, guess: Any = None) -> Any:
+    """Approximations of the roots (complex doubles, distinct): the ``deg`` largest of
+    ``guess`` (the closed loop's eigenvalues: the roots and poles at z = 0) or numpy's
+    roots of the midpoints, refined by ``newton`` steps of Newton's method on the ball
+    polynomial's midpoints; None if that fails. (Only the discs' centres: a poor guess
+    makes the inclusion test fail, never pass wrongly.)"""
     import flint
     import numpy as np
-    coef = [complex(float(c.real.mid()), float(c.imag.mid())) for c in chi.coeffs()]
-    with np.errstate(all="ignore"):
-        m = np.roots(coef[::-1])
+    if guess is not None:
+        g = np.asarray(guess, complex)
+        m = g[np.argsort(-np.abs(g), kind="stable")[:deg]].copy()
+    else:
+        coef = [complex(float(c.real.mid()), float(c.imag.mid())) for c in chi.coeffs()]
+        with np.errstate(all="ignore"):
+            m = np.roots(coef[::-1])
     if m.size != deg or not np.all(np.isfinite(m)):
         return None
     if not newton:
@@ -219,16 +226,18 @@ def _centres(chi: Any, deg: int, newton: int) -> Any:
     return m if np.unique(m).size == deg else None
 
 
-def _inclusion_count(chi: Any, deg: int, newton: int = 0) -> int | None:
+def _inclusion_count(chi: Any, deg: int, newton: int = 0, guess: Any = None
+                     ) -> tuple[int, Any] | None:
     """The roots outside the unit circle from Weierstrass inclusion discs: with distinct
     centres x_i and W_i = chi(x_i) / (lc prod_{j != i} (x_i - x_j)), the union of the
     discs |z - x_i| <= deg |W_i| holds every root, and each connected component of k of
     them holds exactly k (D. Braess and K. P. Hadeler, "Simultaneous inclusion of the
     zeros of a polynomial", Numer. Math. 21 (1973) 161-165). |chi(x_i)| is bounded above
     and |lc| below by ball evaluation, so the discs hold those of every polynomial in the
-    coefficient balls. None when a component meets the circle."""
+    coefficient balls. (the count, the centres), or None when a component meets the
+    circle."""
     import numpy as np
-    m = _centres(chi, deg, newton)
+    m = _centres(chi, deg, newton, guess)
     if m is None:
         return None
     import flint
@@ -262,23 +271,30 @@ def _inclusion_count(chi: Any, deg: int, newton: int = 0) -> int | None:
         k = group == g
         if not (np.all(outside[k]) or np.all(inside[k])):
             return None
-    return int(np.sum(outside))
+    return int(np.sum(outside)), m
 
 
-def outside_count(chi: Any, prec: int) -> int | None:
-    """The roots of ``chi`` (acb_poly, leading coefficient clear of 0) outside the unit
-    circle, from balls isolating each (module docstring); None when a ball touches the
-    circle, the roots cannot be isolated (a multiple or very close pair) or the degree is
-    above :data:`MAX_DEGREE`."""
+def outside_poles(chi: Any, prec: int, guess: Any = None) -> tuple[int | None, Any]:
+    """(the roots of ``chi`` outside the unit circle, approximations of all its roots):
+    the count from balls isolating the roots (module docstring), None when a ball touches
+    the circle, the roots cannot be isolated (a multiple or very close pair) or the
+    degree is above :data:`MAX_DEGREE`; the approximations (complex doubles, accurate to
+    the balls' radii) None where no isolation succeeded. ``guess``: approximations to
+    try first (e.g. the closed loop's eigenvalues, already computed)."""
+    import numpy as np
     deg = chi.degree()
     if deg > MAX_DEGREE or chi[deg].contains(0):
-        return None
+        return None, None
     if deg == 0:
-        return 0
+        return 0, np.zeros(0, complex)
     with working_precision(prec):
         # numpy's centres; refined (poles crowding z = 1 or a close pair); Arb's roots
-        for newton in (0, NEWTON_STEPS):
-            fast = _inclusion_count(chi, deg, newton)
+        tries = [(g, newton) for g in ((guess, None) if guess is not None else (None,))
+                 for newton in (0, NEWTON_STEPS)]
+        for g, newton in tries:
+            if g is not None and len(g) < deg:
+                continue
+            fast = _inclusion_count(chi, deg, newton, g)
             if fast is not None:
                 return fast
     with working_precision(prec):
@@ -288,19 +304,36 @@ def outside_count(chi: Any, prec: int) -> int | None:
             try:
                 rs = chi.roots(tol=tol, maxprec=4 * prec)
             except ValueError:
-                return None
+                return None, None
             out = sum(1 for r in rs if r.abs_lower() > 1)
             if len(rs) == deg and out + sum(1 for r in rs if r.abs_upper() < 1) == deg:
-                return out
-    return None
+                return out, np.array([complex(float(r.real.mid()), float(r.imag.mid()))
+                                      for r in rs])
+    return None, None
+
+
+def outside_count(chi: Any, prec: int) -> int | None:
+    """The roots of ``chi`` (acb_poly, leading coefficient clear of 0) outside the unit
+    circle (:func:`outside_poles`), or None if undecided."""
+    return outside_poles(chi, prec)[0]
+
+
+def fractional_poles(loop: Any, K: float, guess: Any = None) -> tuple[int, Any] | None:
+    """(poles of ``loop`` outside the unit circle at ``K``, the poles but those at z = 0):
+    the count an int (proved) or -1 (a pole within the balls' width of the circle:
+    undecided), the poles complex doubles or None (not isolated); None if not covered
+    (no fractional delay, outside the model, or a degree above :data:`MAX_DEGREE`).
+    ``guess``: the closed loop's eigenvalues, if at hand (:func:`outside_poles`)."""
+    got = fractional_polynomial(loop, K)
+    if got is None or got[0].degree() > MAX_DEGREE:
+        return None
+    out, poles = outside_poles(*got, guess=guess)
+    return (-1 if out is None else out), poles
 
 
 def fractional_count(loop: Any, K: float) -> int | None:
     """Poles of ``loop`` outside the unit circle at ``K``: an int (proved), -1 (a pole
     within the balls' width of the circle: undecided), None (not covered: no fractional
     delay, outside the model, or a degree above :data:`MAX_DEGREE`)."""
-    got = fractional_polynomial(loop, K)
-    if got is None or got[0].degree() > MAX_DEGREE:
-        return None
-    out = outside_count(*got)
-    return -1 if out is None else out
+    got = fractional_poles(loop, K)
+    return None if got is None else got[0]

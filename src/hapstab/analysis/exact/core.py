@@ -146,15 +146,14 @@ def stability(loop: HapticLoop | TeleoperationLoop, *, max_memory: float | None 
     budget.check(budget.Cost(f"stability: the eigenvalues of a {N}-state closed loop",
                              64.0 * N * N, budget.eig_seconds(N)),
                  max_memory, max_seconds)
-    A = sysm.closed_loop()[0]
-    eigs = np.linalg.eigvals(A)
+    eigs = np.linalg.eigvals(sysm.closed_loop()[0])
     T = loop.period
     certified = _spring_dampers(loop)
     if certified:
         resp = loop_response(loop)
         m = resp.rigid
         u = float(sysm.stiffness[0] / resp.scale[0])
-        count, how = _certified_count(loop, resp, float(sysm.stiffness[0]), certify)
+        count, how = _certified_count(loop, resp, float(sysm.stiffness[0]), certify, eigs)
         if count is None:       # not covered by the ball-arithmetic core
             count = int(winding(resp, np.zeros(1, int), np.array([u]))[0])
             how = FLOAT_COUNT
@@ -187,18 +186,20 @@ FLOAT_COUNT = ("by the argument principle on float enclosures, not proved in bal
 
 
 def _certified_count(loop: HapticLoop | TeleoperationLoop, resp: LoopResponse, K: float,
-                     certify: bool) -> tuple[int | None, str]:
+                     certify: bool, eigs: np.ndarray) -> tuple[int | None, str]:
     """(poles outside at K proved in ball arithmetic, -1 undecided, None not covered;
     how): whole delays by the argument principle on
     :class:`~hapstab.engine.arb_loop.ArbLoop`, delays with a fraction of a sample by
     isolating the roots of the characteristic polynomial
-    (:mod:`hapstab.engine.arb_fraction`)."""
+    (:mod:`hapstab.engine.arb_fraction`; the closed loop's eigenvalues ``eigs`` are its
+    first guesses of them)."""
     if not certify:
         return None, ""
     if resp.params and resp.params[0] is not None:
         return _proved_count(resp.params[0], K), ARGUMENT_PRINCIPLE
-    from hapstab.engine.arb_fraction import fractional_count
-    return fractional_count(loop, K), ROOTS
+    from hapstab.engine.arb_fraction import fractional_poles
+    got = fractional_poles(loop, K, guess=eigs)
+    return (None, "") if got is None else (got[0], ROOTS)
 
 
 def _proved_count(params: dict | None, K: float) -> int | None:
