@@ -169,3 +169,42 @@ def test_check_json_has_the_delay_margin():
     assert d["delay_margin_s"] == pytest.approx(m.delay_margin_s, rel=1e-12)
     assert d["verdict"] == "stable" and "spectral_radius" in d
     assert certified_stable(hapstab.stability(loop(200.0)))
+
+
+def test_a_time_bound_cuts_the_delay_search_and_says_so():
+    # the paper's PEB with a massive environment is stable past +100 samples: the search
+    # is cut after max_seconds at the delay it reached, which the margin then is
+    import dataclasses
+    slow = dataclasses.replace(hapstab.paper_peb(delay_samples=3, stiffness=1.0),
+                               environment="msd:0.1,1,300",
+                               master_controller=SpringDamper(1.0, 0.01),
+                               slave_controller=SpringDamper(1.0, 0.01))
+    m = hapstab.margins(slow, view=False, max_seconds=0.3)
+    assert m.delay_unstable_samples is None
+    assert 0 <= m.delay_margin_samples == m.delay_searched_samples < 100
+    assert "stopped at" in m.reason and "max_seconds = 0.3 s" in m.reason
+    # what it says holds: stable at the delay it reached (certified, as each grid point)
+    from hapstab.models.variations import extra_delay
+    assert certified_stable(hapstab.stability(extra_delay(slow, m.delay_margin_samples)))
+    # a search that ends before the bound is the whole search, unchanged
+    whole = hapstab.margins(loop(200.0), view=False)
+    bounded = hapstab.margins(loop(200.0), view=False, max_seconds=600)
+    assert bounded.delay_margin_samples == whole.delay_margin_samples
+    assert "stopped" not in bounded.reason
+
+
+def test_check_cuts_the_delay_search_it_was_not_asked_for():
+    from hapstab.cli import cli
+    from hapstab.cli.exact import AUTO_MARGIN_SECONDS
+
+    args = ["check", "peb", "-n", "3", "-B", "0.01", "--environment", "msd:0.1,1,300", "-K", "1",
+            "--json"]
+    r = CliRunner().invoke(cli, [*args, "--margin-seconds", "0.2"])
+    assert r.exit_code == 0, r.output
+    d = json.loads(r.output)
+    assert "max_seconds = 0.2 s" in d["margins_reason"] and d["delay_unstable_s"] is None
+    assert d["delay_searched_s"] == d["delay_margin_s"] < 0.1
+    r = CliRunner().invoke(cli, [*args, "--margin-seconds", "0"])
+    assert r.exit_code == 2 and "--margin-seconds" in r.output
+    assert f"{AUTO_MARGIN_SECONDS:g} s unasked" in CliRunner().invoke(cli, ["check", "peb",
+                                                                          "--help"]).output

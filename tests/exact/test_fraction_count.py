@@ -137,10 +137,16 @@ def test_the_polynomial_is_the_modified_z_transforms():
     ([0.3, 0.3 + 1e-12, 0.9, 1.5], 1),                 # a close pair inside
     ([1.0 + 1e-6, 1.0 - 1e-6, 0.1], 1),                # a pair straddling the circle
     ([0.999999999999, 0.2], 0),                        # a pole 1e-12 inside
+    ([1e-6, 1e6, 0.5, 2.0, -1e3, 3e-4j, -3e-4j], 3),   # widely scaled roots
 ])
 def test_counts_of_known_roots(roots, outside):
     chi = acb_poly.from_roots([acb(complex(r).real, complex(r).imag) for r in roots])
     assert outside_count(chi, 320) == outside
+    # the inclusion discs alone (the first route): the right count or undecided
+    from hapstab.engine.arb_fraction import _inclusion_count
+    for newton in (0, 3):
+        got = _inclusion_count(chi, chi.degree(), newton)
+        assert got is None or got[0] == outside
 
 
 @pytest.mark.parametrize("roots", [[1.0, 0.5], [1j, -1j, 0.3], [np.exp(0.7j), np.exp(-0.7j)]])

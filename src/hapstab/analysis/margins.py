@@ -51,6 +51,8 @@ ed., Theorem 7.1 (circle criterion; its discrete-time form with e^{j theta}).
 
 from __future__ import annotations
 
+import math
+import time
 from collections.abc import Callable
 from typing import Any
 
@@ -101,12 +103,15 @@ def certified_stable(res: Any) -> bool:
 
 
 def _first_loss(ok: Callable[[float], bool], grid: np.ndarray, bisections: int,
-                start: float = 0.0) -> tuple[float, float | None]:
+                start: float = 0.0, deadline: float = math.inf) -> tuple[float, float | None]:
     """(the last x of ``grid`` before its first point not ``ok``, refined against it by
-    ``bisections`` bisections; that point moved in by them), or (grid[-1], None) when every
-    point is ``ok``. ``start`` is known ``ok``."""
+    ``bisections`` bisections; that point moved in by them), or (the last x checked, None)
+    when every point is ``ok`` or the clock (``time.monotonic``) passes ``deadline``
+    before the next point. ``start`` is known ``ok``."""
     lo = start
     for x in grid:
+        if time.monotonic() > deadline:
+            return lo, None
         if not ok(float(x)):
             hi = float(x)
             for _ in range(bisections):
@@ -118,15 +123,17 @@ def _first_loss(ok: Callable[[float], bool], grid: np.ndarray, bisections: int,
 
 
 def delay_margin(loop: Any, step_samples: float = 0.25, max_extra_samples: float = 100.0,
-                 bisections: int = BISECTIONS) -> tuple[float, float | None]:
+                 bisections: int = BISECTIONS, deadline: float = math.inf
+                 ) -> tuple[float, float | None]:
     """The delay margin in samples and the first extra delay found not stable (None: none
-    up to ``max_extra_samples``); see the module docstring for what it rests on."""
+    up to ``max_extra_samples``, or up to the first value when the clock passed
+    ``deadline``); see the module docstring for what it rests on."""
     h = check_real("step_samples", step_samples, positive=True)
     top = check_real("max_extra_samples", max_extra_samples, positive=True)
     # a floor against division by zero / rounding, far below the answer's own accuracy
     grid = np.arange(1, int(np.floor(top / h + 1e-9)) + 1) * h
     return _first_loss(lambda x: certified_stable(stability(extra_delay(loop, x))), grid,
-                       bisections)
+                       bisections, deadline=deadline)
 
 
 #: The damping search's doublings: from 1e-3 m/T (m the lightest device) up to
@@ -209,7 +216,7 @@ def frequency_view(loop: Any, frequencies_hz: Any = None) -> FrequencyView:
 
 
 def margins(loop: Any, *, step_samples: float = 0.25, max_extra_samples: float = 100.0,
-            view: bool = True) -> MarginResult:
+            view: bool = True, max_seconds: float | None = None) -> MarginResult:
     """The delay, stiffness and damping margins of ``loop`` at its own K, and its Nyquist /
     Bode view (see the module docstring for each definition and what it rests on).
 
@@ -223,6 +230,11 @@ def margins(loop: Any, *, step_samples: float = 0.25, max_extra_samples: float =
         How far the delay search goes (default 100 samples more).
     view : bool
         Compute the Nyquist / Bode view too (default True).
+    max_seconds : float, optional
+        Stop the delay search once this much time has gone (a long delay's verdict is an
+        eigenvalue problem of ~2 states per sample per direction): the margin then holds
+        up to the extra delay reached (``delay_searched_samples``), and the reason says
+        the search was cut short. Default: the whole search.
 
     Returns
     -------
@@ -259,7 +271,15 @@ def margins(loop: Any, *, step_samples: float = 0.25, max_extra_samples: float =
             max_extra_samples = max(room, step_samples)
             why.append(f"the delay search stops at hapstab's longest delay, "
                        f"{MAX_DELAY_SAMPLES} samples")
-        dm, du = delay_margin(loop, step_samples, max_extra_samples, bis)
+        deadline = math.inf if max_seconds is None else \
+            time.monotonic() + check_real("max_seconds", max_seconds, positive=True)
+        dm, du = delay_margin(loop, step_samples, max_extra_samples, bis, deadline)
+        # the grid's last point (as delay_margin forms it)
+        end = math.floor(max_extra_samples / step_samples + 1e-9) * step_samples
+        if du is None and dm < end:
+            why.append(f"the delay search stopped at +{dm:g} samples, after max_seconds = "
+                       f"{max_seconds:g} s; ask for the margins alone for the whole search")
+            max_extra_samples = dm
         damp = _damping(loop, B, why)
     iv = _stiffness_interval(loop, K, why)
     fv = None

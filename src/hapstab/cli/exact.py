@@ -13,6 +13,7 @@ from hapstab.cli.network import network_kmax, network_options, range_kmax
 from hapstab.cli.options import (
     LOOP_KINDS,
     NONNEG,
+    POS,
     STATE_SPACE_KINDS,
     bounds_of,
     console,
@@ -122,15 +123,20 @@ def _check_command(kind: str) -> None:
                        "teleoperation: to each direction), the stiffness range and the "
                        "virtual-damping range with the loop stable (docs/guide/margins.md). "
                        f"Default: computed when estimated under {AUTO_MARGIN_SECONDS:g} s "
-                       "(about 100 certified verdicts), else said how to ask for them.")
+                       "(about 100 certified verdicts), the delay search cut at "
+                       f"{AUTO_MARGIN_SECONDS:g} s, else said how to ask for them.")
+    @click.option("--margin-seconds", type=POS, default=None,
+                  help="Stop the delay margin's search after this many seconds (it then "
+                       "holds up to the extra delay reached, and says so). Default: the "
+                       f"whole search with --margins, {AUTO_MARGIN_SECONDS:g} s unasked.")
     @click.option("--plot", "plot_path", type=click.Path(dir_okay=False), default=None,
                   help="Write the Nyquist and Bode views of the exact sampled loop at K.")
     @click.option("--certify/--no-certify", default=True, show_default=True,
                   help="Count the poles outside in ball arithmetic (python-flint Arb); "
                        "--no-certify: the float enclosures alone, not proved "
                        "(docs/guide/certificate.md).")
-    def _cmd(stiffness: float, margins: bool | None, plot_path: str | None, certify: bool,
-             as_json: bool, **kw: Any) -> None:
+    def _cmd(stiffness: float, margins: bool | None, margin_seconds: float | None,
+             plot_path: str | None, certify: bool, as_json: bool, **kw: Any) -> None:
         from hapstab.analysis.exact.core import stability
         from hapstab.cli.files import check_files
 
@@ -144,11 +150,12 @@ def _check_command(kind: str) -> None:
                 ("frequency", f"{res.frequency_hz:.6g} Hz"), ("why", res.reason)]
         if margins is None:
             margins = _margins_cheap(loop, d)
+            margin_seconds = margin_seconds or AUTO_MARGIN_SECONDS
             if not margins:
                 rows.append(("margins", d["margins_reason"]))
         if margins or plot_path:
             try:
-                rows += _margins(loop, d, margins, plot_path)
+                rows += _margins(loop, d, margins, plot_path, margin_seconds)
             except HapstabError as e:      # the verdict stands; the margins say why not
                 if plot_path:
                     raise
@@ -185,14 +192,14 @@ def _margins_cheap(loop: Any, d: dict[str, Any]) -> bool:
     return False
 
 
-def _margins(loop: Any, d: dict[str, Any], keys: bool, plot_path: str | None
-             ) -> list[tuple[str, str]]:
+def _margins(loop: Any, d: dict[str, Any], keys: bool, plot_path: str | None,
+             max_seconds: float | None = None) -> list[tuple[str, str]]:
     """The margins' rows of ``check``'s table; their keys added to ``d`` (``--margins``)
     and the Nyquist / Bode figure written (``--plot``)."""
     from hapstab.analysis.margins import margins
     from hapstab.cli.files import write_files
 
-    m = margins(loop, view=plot_path is not None)
+    m = margins(loop, view=plot_path is not None, max_seconds=max_seconds)
     if plot_path:
         write_files(m, None, plot_path)
     if not keys:

@@ -32,17 +32,25 @@ that of :mod:`~hapstab.analysis.network.modified_z` (monic of degree n + 4), the
 that of :mod:`~hapstab.analysis.network.modified_z_peb` for the same delay both ways
 (degree 2n + 8 there; here also different delays in each direction).
 
-**The count.** Arb's ``acb_poly.roots`` (``acb_poly_find_roots`` refined by
-``acb_poly_validate_roots``: a ball of radius deg |chi(m) / chi'(m)| about each
-approximation m holds a root of *every* polynomial in the coefficient balls, and when
-the deg balls are pairwise disjoint each holds exactly one) gives one ball per pole; the
-number outside is decided when every ball lies strictly inside or strictly outside the
-unit circle, and is otherwise *undecided* -- never guessed.
+**The count.** First Weierstrass inclusion discs (:func:`_inclusion_count`): about
+approximations x_i of the roots (the closed loop's eigenvalues, or numpy's roots of
+the midpoints, refined by Newton's method where needed), the discs |z - x_i| <= deg |W_i|,
+W_i = chi(x_i) / (lc prod_{j != i}(x_i - x_j)), hold every root, k of them in each
+connected component of k discs (Braess and Hadeler 1973; p / lc is the characteristic
+polynomial of diag(x) - W 1^T, and Gershgorin's discs of that matrix lie inside these);
+|chi(x_i)| bounded above and |lc| below by ball evaluation, so for every polynomial in
+the coefficient balls. Where they cannot decide, Arb's ``acb_poly.roots``
+(``acb_poly_find_roots`` refined by ``acb_poly_validate_roots``: a ball of radius
+deg |chi(m) / chi'(m)| about each approximation m holds a root of every polynomial in
+the balls, and when the deg balls are pairwise disjoint each holds exactly one). The
+number outside is decided when every component (ball) lies strictly inside or strictly
+outside the unit circle, and is otherwise *undecided* -- never guessed.
 
 References
 ----------
-F. Johansson, "Arb: efficient arbitrary-precision midpoint-radius interval arithmetic",
-IEEE Trans. Computers 66 (2017) 1281-1292, and the Arb documentation of
+D. Braess and K. P. Hadeler, "Simultaneous inclusion of the zeros of a polynomial",
+Numer. Math. 21 (1973) 161-165. F. Johansson, "Arb: efficient arbitrary-precision
+midpoint-radius interval arithmetic", IEEE Trans. Computers 66 (2017) 1281-1292, and the Arb documentation of
 ``acb_poly_validate_roots`` / ``_acb_poly_root_inclusion``; E. I. Jury, *Theory and
 Application of the z-Transform Method*, Wiley 1964, ch. 2; K. J. Astrom and B.
 Wittenmark, *Computer-Controlled Systems*, 3rd ed., sec. 2.3 and 7.7.
@@ -50,6 +58,7 @@ Wittenmark, *Computer-Controlled Systems*, 3rd ed., sec. 2.3 and 7.7.
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 from hapstab.engine.arb_forms import accuracy_bits
@@ -179,12 +188,15 @@ def _build(params: dict[str, Any], terms: list[list[tuple[int, float, int, float
     return rows[0][0] * rows[1][1] - rows[0][1] * rows[1][0], ok
 
 
-#: Relative allowance on a disc's radius in :func:`_inclusion_count`: the product of
-#: the n - 1 differences, summed as logs of moduli of complex doubles, is within
-#: n (4 eps + eps |log|) <= 600 (9e-16 + 1.1e-16 * 745) ~ 5e-11 relative for n <=
-#: MAX_DEGREE (|log| <= 745, the range of doubles), a ball's bound converted to a double
-#: within 1.2e-16: 1e-9 covers both twenty times over.
-FLOAT_SLACK = 1e-9
+#: Relative allowance on a disc's radius in :func:`_inclusion_count` for the rounding
+#: of a ball's bound converted to a double (1.2e-16) and of the products by deg and the
+#: exponential (a few eps): 1e-12. The log-sum of the n - 1 differences has its own,
+#: larger allowance, formed per disc (:func:`_log_sum_error`).
+FLOAT_SLACK = 1e-12
+#: A bound or product of differences beyond the doubles' safe range (1e-290 ... 1e290):
+#: a subnormal or overflowing double would make the relative allowances meaningless, so
+#: such a disc is left undecided.
+SAFE_LOG = 660.0
 #: Relative allowance on a modulus or a distance of complex doubles (|a - b|, |x|):
 #: within 4 eps ~ 9e-16 of the exact value (one rounding per part, one in hypot), 1e-14
 #: covers it ten times.
@@ -226,6 +238,21 @@ def _centres(chi: Any, deg: int, newton: int, guess: Any = None) -> Any:
     return m if np.unique(m).size == deg else None
 
 
+def _log_sum_error(logs: Any) -> Any:
+    """A bound on |computed - exact| of each row's sum of ``logs`` (logs of moduli of
+    complex differences of doubles): each modulus within 4 eps relative, so each log
+    within 4 eps + eps |log| (its own rounding); the n - 1 additions of recursive
+    summation within (n - 1) eps sum |log| (Higham, *Accuracy and Stability of Numerical
+    Algorithms*, 2nd ed., eq. 4.4; numpy's pairwise summation is tighter); doubled for
+    the rounding of this bound itself."""
+    import numpy as np
+    eps = 2.0 ** -52
+    n = logs.shape[1]
+    a = np.abs(logs)
+    np.fill_diagonal(a, 0.0)
+    return 2.0 * (n * 4 * eps + eps * a.sum(axis=1) + (n - 1) * eps * a.sum(axis=1))
+
+
 def _inclusion_count(chi: Any, deg: int, newton: int = 0, guess: Any = None
                      ) -> tuple[int, Any] | None:
     """The roots outside the unit circle from Weierstrass inclusion discs: with distinct
@@ -246,13 +273,18 @@ def _inclusion_count(chi: Any, deg: int, newton: int = 0, guess: Any = None
         return None
     diff = m[:, None] - m[None, :]
     np.fill_diagonal(diff, 1.0)
-    logprod = np.sum(np.log(np.abs(diff)), axis=1)
+    with np.errstate(all="ignore"):
+        logs = np.log(np.abs(diff))
+    logprod = np.sum(logs, axis=1)
+    if not np.all(np.abs(logprod) < SAFE_LOG):
+        return None
     radius = np.empty(deg)
     for i, x in enumerate(m):
         up = chi(flint.acb(float(x.real), float(x.imag))).abs_upper() / lc
         radius[i] = float(up.mid()) + float(up.rad())
-    with np.errstate(all="ignore"):
-        radius = deg * radius * np.exp(-logprod) * (1 + FLOAT_SLACK)
+    if not np.all((radius > math.exp(-SAFE_LOG)) & (radius < math.exp(SAFE_LOG))):
+        return None
+    radius = deg * radius * np.exp(-logprod + _log_sum_error(logs)) * (1 + FLOAT_SLACK)
     if not np.all(np.isfinite(radius)):
         return None
     touch = np.abs(diff) * (1 - MODULUS_SLACK) <= radius[:, None] + radius[None, :]

@@ -13,6 +13,9 @@
   const DEBOUNCE_MS = 30;
   const PAGE = Math.random().toString(36).slice(2, 10);   // this tab's channels
   const CURVE_POINTS = 400;      // the passivity margin curve
+  // the delay margin's search stops after this many seconds (a long delay's verdict is an
+  // eigenvalue problem of ~2 states per sample): the page says how far it searched
+  const MARGIN_SECONDS = 5;
   const REGION_RESOLUTION = 48;  // K-B rows of B (each row's K intervals are exact)
   const SWEEP = 25;              // periods of the K_max-against-T plot, T/4 ... 4T
   const NET = HapstabNetwork;                             // the network card (network.js)
@@ -387,7 +390,7 @@
     // the verdict does not wait for them, and a later change supersedes them
     $("#margins-detail").textContent = "";
     if (!unavailable("check")) {
-      call("margins", "check", optionsFor("check", { margins: true }), seq).then((r) => {
+      call("margins", "check", optionsFor("check", { margins: true, "margin-seconds": MARGIN_SECONDS }), seq).then((r) => {
         if (r.ok) drawMargins(r.ok);
         else if (!r.superseded) $("#margins-detail").textContent = "margins: " + r.error;
       });
