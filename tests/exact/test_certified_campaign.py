@@ -242,6 +242,9 @@ def test_a_count_the_argument_principle_cannot_decide_is_decided_by_the_roots():
         assert winding.count(al, K0).outside is None
 
 
+#: 11 s of 40-digit mpmath: under -m campaign (the referee's fallback itself is checked in the
+#: default lane by the campaign scenarios that reach it, and hapstab's answer by its siblings)
+@pytest.mark.campaign
 def test_a_stiff_teleoperator_the_referees_aberth_leaves_undecided_is_decided_at_40_digits():
     # mass-peb#200134 of fresh seed 1796540596: 1.2 g / 12 g ports behind springs of
     # 5.4e8 / 2.6e8 N/m at T = 11.7 us (their resonances above the Nyquist frequency),

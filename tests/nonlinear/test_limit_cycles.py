@@ -33,6 +33,7 @@ from hapstab.analysis.nonlinear.harmonic import (
 from hapstab.analysis.nonlinear.limit_cycles import limit_cycles
 from hapstab.cli.main import cli
 from hapstab.errors import AnalysisError, ModelError
+from lanes import costly
 
 D = 1e-4          # the encoder step of the campaigns (quantisation scales with it)
 TOL = 0.10        # the acceptance: amplitude and frequency within 10 % of the simulation
@@ -147,8 +148,8 @@ FAST_CYCLES = [1, 4, 7]
 SLOW_CYCLES = list(range(100, 140))
 
 
-@pytest.mark.parametrize("seed", FAST_CYCLES + [pytest.param(s, marks=pytest.mark.slow)
-                                                for s in SLOW_CYCLES])
+@pytest.mark.parametrize("seed", [s if s != 7 else costly(s, id="7") for s in FAST_CYCLES]
+                         + [pytest.param(s, marks=pytest.mark.slow) for s in SLOW_CYCLES])
 def test_quantisation_cycles_match_the_simulator(seed):
     loop, f_x, q, _ = _quantised_case(seed, (0.75, 1.2))
     pred = limit_cycles(loop, resolution_m=D, quantizer=q)
