@@ -160,9 +160,9 @@ def _network_options(f: Any) -> Any:
 def _network(loop: Any, trace: str | None, jitter: str | None, loss: float | None,
              seed: int) -> Any:
     """The network the options ask for: a trace file, random delays and losses, or None."""
-    from hapstab.analysis.network.delay_range import whole_delays
     from hapstab.cli.network import parse_delay_range
     from hapstab.errors import HapstabError
+    from hapstab.models.delays import whole_delays
     from hapstab.simulation.network_trace import read_trace
 
     if trace is not None:

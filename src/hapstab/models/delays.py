@@ -6,6 +6,7 @@ The one snap rule of hapstab is :func:`split_delay`, with ``DELAY_SNAP``
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
@@ -13,7 +14,7 @@ import numpy as np
 from hapstab.errors import MAX_DELAY_SAMPLES, ModelError, check_real
 from hapstab.tolerances import DELAY_SNAP
 
-__all__ = ["split_delay", "delay_from_seconds", "check_fraction", "DELAY_SNAP"]
+__all__ = ["split_delay", "delay_from_seconds", "check_fraction", "whole_delays", "DELAY_SNAP"]
 
 
 def check_fraction(name: str, value: Any) -> float:
@@ -90,3 +91,34 @@ def delay_from_seconds(name: str, seconds: Any, period: float) -> tuple[int, flo
                          f"{MAX_DELAY_SAMPLES} (the exact model carries one state per sample)"
                          f"{hint}")
     return split_delay(d)
+
+
+def whole_delays(lo_s: float, hi_s: float, period: float) -> tuple[int, int]:
+    """(n_lo, n_hi) = (ceil(tau_lo / T), ceil(tau_hi / T)), a delay within
+    :data:`~hapstab.tolerances.DELAY_SNAP` of a sampling instant counting as on it.
+
+    Parameters
+    ----------
+    lo_s, hi_s : float
+        The range of the transport delay, s (0 <= lo <= hi).
+    period : float
+        T in s.
+
+    Returns
+    -------
+    (int, int)
+    """
+    lo = check_real("delay range start", lo_s, nonnegative=True)
+    hi = check_real("delay range end", hi_s, nonnegative=True)
+    if hi < lo:
+        raise ModelError(f"delay range = {lo_s!r}:{hi_s!r}: the end must not be below the start")
+
+    def up(t: float) -> int:
+        d = t / period
+        return max(0, math.ceil(d - DELAY_SNAP * max(1.0, d)))
+
+    n_lo, n_hi = up(lo), up(hi)
+    if n_hi > MAX_DELAY_SAMPLES:
+        raise ModelError(f"delay range end = {hi_s!r} s: {n_hi} samples at T = {period:g} s; at "
+                         f"most {MAX_DELAY_SAMPLES}")
+    return n_lo, n_hi

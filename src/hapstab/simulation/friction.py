@@ -46,8 +46,6 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy.linalg import matrix_balance
-from scipy.optimize import brentq
 
 from hapstab.engine.structure import Port
 from hapstab.engine.zoh import expm_batched, port_matrices
@@ -158,6 +156,7 @@ def _scalings(A: np.ndarray) -> list[np.ndarray]:
     out = [np.ones(n)]
     if n:
         with contextlib.suppress(ValueError, np.linalg.LinAlgError):   # LAPACK's refusal
+            from scipy.linalg import matrix_balance  # lazily: scipy costs 0.4 s to import
             out.append(np.asarray(matrix_balance(A, permute=False, separate=True)[1][0], float))
     if n >= 2 and A[0, 1] == 1.0 and A[1, 0] < 0:
         sc = np.ones(n)
@@ -256,6 +255,7 @@ def first_zero(flow: _Flow, z0: np.ndarray, g: float, c: np.ndarray, d: float, t
 def _locate(flow: _Flow, za: np.ndarray, g: float, c: np.ndarray, d: float, a: float, h: float,
             tau: float) -> tuple[float, np.ndarray]:
     """The one root of y on (a, a + h], where y(a) > 0 > y(a + h): Brent's method."""
+    from scipy.optimize import brentq  # lazily: scipy costs 0.4 s to import
     t = brentq(lambda s: float(c @ flow.prop(za, g, s, cache=False)) + d, 0.0, h,
                xtol=TIME_RTOL * tau, rtol=TIME_RTOL)
     return a + t, flow.prop(za, g, t, cache=False)

@@ -30,49 +30,17 @@ The paper, Fig. 2a and eq. (20); the exact core (:func:`hapstab.critical_stiffne
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
-from hapstab.errors import MAX_DELAY_SAMPLES, AnalysisError, ModelError, check_real
+from hapstab.errors import AnalysisError, ModelError, check_real
+from hapstab.models.delays import whole_delays
 from hapstab.models.loops import require_loop
 from hapstab.results import Result, jsonable, write_csv
-from hapstab.tolerances import DELAY_SNAP
 
 __all__ = ["DelayRangeResult", "delay_range_critical_stiffness", "whole_delays"]
-
-
-def whole_delays(lo_s: float, hi_s: float, period: float) -> tuple[int, int]:
-    """(n_lo, n_hi) = (ceil(tau_lo / T), ceil(tau_hi / T)), a delay within
-    :data:`~hapstab.tolerances.DELAY_SNAP` of a sampling instant counting as on it.
-
-    Parameters
-    ----------
-    lo_s, hi_s : float
-        The range of the transport delay, s (0 <= lo <= hi).
-    period : float
-        T in s.
-
-    Returns
-    -------
-    (int, int)
-    """
-    lo = check_real("delay range start", lo_s, nonnegative=True)
-    hi = check_real("delay range end", hi_s, nonnegative=True)
-    if hi < lo:
-        raise ModelError(f"delay range = {lo_s!r}:{hi_s!r}: the end must not be below the start")
-
-    def up(t: float) -> int:
-        d = t / period
-        return max(0, math.ceil(d - DELAY_SNAP * max(1.0, d)))
-
-    n_lo, n_hi = up(lo), up(hi)
-    if n_hi > MAX_DELAY_SAMPLES:
-        raise ModelError(f"delay range end = {hi_s!r} s: {n_hi} samples at T = {period:g} s; at "
-                         f"most {MAX_DELAY_SAMPLES}")
-    return n_lo, n_hi
 
 
 @dataclass(frozen=True)

@@ -204,8 +204,8 @@ def fractional_range_critical_stiffness(loop: Any, lo_s: float, hi_s: float, *,
         A loop outside the model (the 4-channel teleoperator, a filtered damper, an
         operator with states, a rigid-body mode), or different ranges in each direction.
     """
-    from hapstab.analysis.network.delay_range import whole_delays
     from hapstab.analysis.network.frac_range import MAX_BOXES, fraction_range_minimum
+    from hapstab.models.delays import whole_delays
     from hapstab.models.loops import require_loop
     require_loop(loop)
     _refuse_asymmetric(loop, (lo_s, hi_s), backward_s)
