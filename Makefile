@@ -22,15 +22,11 @@ demo: $(STAMP)
 # included), about 7 s per worker's collection and 0.2 s per command.
 PYCACHE := env -u PYTHONDONTWRITEBYTECODE
 
-# lint (ruff), then the suite (warnings are errors: pyproject) with the types (mypy on
-# src/, ~20 s of one core without a cache) checked beside it, in the CPU the suite's
-# waits leave idle (its servers, subprocesses and signals); either failing fails the target
+# lint (ruff), types (mypy on src/), then the suite (warnings are errors: pyproject)
 test: $(STAMP)
 	$(BIN)/ruff check src tests benchmarks
-	@$(BIN)/mypy src > .mypy.out 2>&1 & mypy=$$!; \
-	$(PYCACHE) $(BIN)/python -m pytest -n auto --dist loadgroup; tests=$$?; \
-	wait $$mypy; types=$$?; cat .mypy.out; rm -f .mypy.out; \
-	test $$types -eq 0 && exit $$tests || exit 1
+	$(BIN)/mypy src
+	$(PYCACHE) $(BIN)/python -m pytest -n auto --dist loadgroup
 
 # the rest of every seeded draw and the long campaigns (tests/lanes.py): with `make test`,
 # each case once
