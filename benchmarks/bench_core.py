@@ -344,7 +344,7 @@ def explorer() -> str:
                 change()
                 wall.append(time.perf_counter() - t)
     return (f"explorer, PEB n = 4: verdict + K_max per change {statistics.median(wall) * 1e3:.0f}"
-            " ms wall (in-process API, target < 50 ms)")
+            " ms wall (the API in-process, computing in its worker processes; target < 50 ms)")
 
 
 def version() -> str:
