@@ -157,6 +157,25 @@ def test_a_ctrl_c_that_an_extension_module_turned_into_an_import_error_exits_130
         r.stderr.decode()
 
 
+def test_a_ctrl_c_that_ended_a_string_exec_exits_130_under_python_m(tmp_path):
+    """CPython marks a KeyboardInterrupt that ended an ``exec`` of source text (as
+    dataclasses and namedtuples do while a module imports) as unhandled even when it is
+    caught, and under ``python -m`` then ends the process by SIGINT (-2) whatever
+    ``sys.exit`` says: seen under load, a Ctrl-C during a sweep's start. The CLI's exit
+    clears the mark (``hapstab.cli.main._exit_interrupted``)."""
+    (tmp_path / "ctrl_c_probe.py").write_text(
+        "import click\n"
+        "def interrupted(self, ctx):\n"
+        "    exec('raise KeyboardInterrupt', {})\n"
+        "click.Command.invoke = interrupted\n"
+        "from hapstab.cli import main\n"
+        "main(['simulate', 'hve', '-K', '9'])\n")
+    r = subprocess.run([sys.executable, "-m", "ctrl_c_probe"], env=_env(), cwd=tmp_path,
+                       capture_output=True, timeout=60)
+    assert r.returncode == 130 and r.stderr.decode().strip() == "hapstab: interrupted", \
+        (r.returncode, r.stderr.decode())
+
+
 def test_an_import_error_without_an_interrupt_is_not_called_one():
     code = (
         "import builtins\n"

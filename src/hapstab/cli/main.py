@@ -115,7 +115,7 @@ def _stopped(e: BaseException) -> None:
         sys.exit(143)
     if isinstance(e, _Interrupted) or isinstance(e.__cause__, KeyboardInterrupt):
         click.echo("hapstab: interrupted", err=True)
-        sys.exit(130)
+        _exit_interrupted()
     click.echo("hapstab: aborted", err=True)
     sys.exit(1)
 
@@ -128,13 +128,32 @@ def _bug(e: Exception, argv: list[str]) -> None:
 
         interrupted = SIGNALLED[0] == signal.SIGINT
         click.echo("hapstab: interrupted" if interrupted else "hapstab: terminated", err=True)
-        sys.exit(130 if interrupted else 143)
+        if interrupted:
+            _exit_interrupted()
+        sys.exit(143)
     if "--debug" in argv:
         raise e
     click.echo(f"hapstab: internal error: {type(e).__name__}: "
                f"{' '.join(str(e).split())[:300]} -- this is a bug in hapstab; please "
                "report it with the command line (--debug shows the traceback)", err=True)
     sys.exit(1)
+
+
+def _exit_interrupted() -> None:
+    """``sys.exit(130)`` after a Ctrl-C, made to hold under ``python -m hapstab``.
+
+    CPython marks a KeyboardInterrupt that ends the evaluation of a *string*
+    (``exec``/``eval`` of source text, ``PyRun_String``: dataclasses and namedtuples
+    create their methods that way while a module is imported) as unhandled, even when a
+    caller catches it; under ``-m``, ``Py_RunMain`` then ends the process by SIGINT (exit
+    status -2) whatever ``sys.exit`` said (Modules/main.c, ``exit_sigint``; seen here
+    under load: a Ctrl-C during the sweep's start printed "hapstab: interrupted" and
+    ended by the signal). The mark is reset at the start of every string evaluation, so
+    one that ends normally clears it. A script or ``-c`` exits by ``Py_Exit`` and never
+    looks at the mark.
+    """
+    exec("None", {})       # a constant string: clears CPython's mark (docstring)
+    sys.exit(130)
 
 
 class _BrokenPipe(Exception):
