@@ -96,16 +96,16 @@ def _refill(least: int = SPARES) -> None:
             _SPARE.append(_fork())
 
 
-def _end(w: list[Any]) -> None:
-    """End a worker: at once if it still computes (SIGTERM, then SIGKILL), else by
-    closing its pipe (its wait for a request sees the end); reap it."""
+def _end(w: list[Any], computing: bool = False) -> None:
+    """End a worker and reap it: one ``computing`` (a superseded request, a bug) at once
+    (SIGTERM, then SIGKILL); a waiting one by closing its pipe (its wait for a request
+    sees the end)."""
     process, conn = w[0], w[1]
-    conn.close()
-    process.join(0.5)
-    if process.is_alive():
+    if computing and process.is_alive():
         process.terminate()
-        process.join(2.0)
-    if process.is_alive():       # pragma: no cover - SIGTERM ignored
+    conn.close()
+    process.join(2.0)
+    if process.is_alive():       # pragma: no cover - SIGTERM ignored, or a hung wait
         process.kill()
         process.join()
     process.close()
@@ -163,7 +163,10 @@ def _child(conn: Any, kind: str, arg: Any) -> None:
         out = ("api", e.status, e.error, e.parameter)
     except BaseException as e:          # a bug: reported as the 500 it is, with its traceback
         out = ("bug", type(e).__name__, traceback.format_exc())
-    conn.send(out)
+    try:
+        conn.send(out)
+    except OSError:         # the explorer has gone (it ends its workers as it goes)
+        return
 
 
 class Job:
@@ -222,4 +225,4 @@ class Job:
         if self._answered:
             _give_back(self._worker)
         else:
-            _end(self._worker)
+            _end(self._worker, computing=True)
