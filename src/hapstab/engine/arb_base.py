@@ -2,6 +2,8 @@
 alone (:func:`base_point`): the proof counts the poles there and proves stability on
 [K_0, K_max]; a certificate's K_0 is re-derived with it
 (:mod:`hapstab.analysis.verify`). Re-exported by :mod:`~hapstab.engine.arb_loop`.
+Also one port's ZOH in balls (:class:`PortZoh`), the one builder of the ports of the
+whole-delay and the fractional-delay characteristic functions.
 
 References
 ----------
@@ -14,7 +16,8 @@ from __future__ import annotations
 import math
 from typing import Any
 
-__all__ = ["base_point", "k_scale", "damping_scale", "BASE_RATIO", "NEGLIGIBLE_DAMPING"]
+__all__ = ["base_point", "k_scale", "damping_scale", "BASE_RATIO", "NEGLIGIBLE_DAMPING",
+           "PortZoh"]
 
 #: The base point K_0 standing for K -> 0+, relative to the loop's K scale (the
 #: smaller of m/T^2 and b/T): the float search's lower end U_LO
@@ -64,3 +67,53 @@ def base_point(params: dict[str, Any]) -> float:
     The proof counts the poles there and proves stability on [K_0, K_max]; a
     certificate's K_0 is re-derived with this (:mod:`hapstab.analysis.verify`)."""
     return BASE_RATIO * min(k_scale(params), damping_scale(params))
+
+
+class PortZoh:
+    """One port's ZOH in balls (:mod:`~hapstab.engine.arb_loop`'s docstring): the mass
+    M, damping b and spring k of the device with its termination, ``aug(t) =
+    exp([A, B; 0, 0] t)`` by ``arb_mat.exp`` (rigorous), and over one period T,
+    ``E = Phi - I``, ``Gamma`` and ``d(y) = det(yI - E)`` (arb_poly in ``y = z - 1``).
+    The one builder of a port for :class:`~hapstab.engine.arb_loop.ArbLoop` (whole
+    delays) and :mod:`~hapstab.engine.arb_fraction` (fractional ones), at the
+    precision in force.
+
+    Parameters
+    ----------
+    p : dict
+        A port of :func:`~hapstab.engine.arb_loop.arb_parameters`.
+    T : arb
+        The period, s.
+    """
+
+    def __init__(self, p: dict[str, Any], T: Any) -> None:
+        import flint
+        arb, arb_mat = flint.arb, flint.arb_mat
+        self.M = arb(p["mass_kg"]) + arb(p["termination_mass_kg"])
+        self.b = arb(p["damping_N_s_per_m"]) + arb(p["termination_damping_N_s_per_m"])
+        self.k = arb(p["termination_stiffness_N_per_m"])
+        X = self.aug(T)
+        self.E = arb_mat([[X[0, 0] - 1, X[0, 1]], [X[1, 0], X[1, 1] - 1]])
+        self.G = (X[0, 2], X[1, 2])
+        self.d = self.E.charpoly()
+
+    def aug(self, t: Any) -> Any:
+        """``exp([A, B; 0, 0] t)`` (arb_mat) for ``t`` seconds (arb)."""
+        import flint
+        M, b, k = self.M, self.b, self.k
+        return flint.arb_mat([[0, t, 0], [-k / M * t, -b / M * t, t / M], [0, 0, 0]]).exp()
+
+    def numerator(self, row: tuple[Any, Any] | None = None) -> Any:
+        """``c adj(yI - E) Gamma = det(yI - E + Gamma c) - d(y)`` (the matrix
+        determinant lemma) for the output row ``c = row`` (two arb); None: the position,
+        ``c = (1, 0)``, N(y), written out (``E - Gamma c`` without multiplying by 1 and
+        0: Arb would round the radius of ``Gamma * 1`` up by an ulp)."""
+        import flint
+        E, G = self.E, self.G
+        if row is None:
+            EG = flint.arb_mat([[E[0, 0] - G[0], E[0, 1]], [E[1, 0] - G[1], E[1, 1]]])
+        else:
+            c0, c1 = row
+            EG = flint.arb_mat([[E[0, 0] - G[0] * c0, E[0, 1] - G[0] * c1],
+                                [E[1, 0] - G[1] * c0, E[1, 1] - G[1] * c1]])
+        return EG.charpoly() - self.d

@@ -61,6 +61,7 @@ from __future__ import annotations
 import math
 from typing import Any
 
+from hapstab.engine.arb_base import PortZoh
 from hapstab.engine.arb_forms import accuracy_bits
 from hapstab.engine.arb_loop import MIN_BITS, PREC, arb_parameters, working_precision
 
@@ -99,29 +100,12 @@ def _terms(loop: Any) -> tuple[dict[str, Any], list[list[tuple[int, float, int, 
 def _port(p: dict[str, Any], T: Any, fractions: set[float]) -> tuple[Any, Any, dict[float, Any]]:
     """(d, N, {f: Nt_f}) of one port, arb_poly in y (module docstring)."""
     import flint
-    arb, arb_mat = flint.arb, flint.arb_mat
-    M = arb(p["mass_kg"]) + arb(p["termination_mass_kg"])
-    b = arb(p["damping_N_s_per_m"]) + arb(p["termination_damping_N_s_per_m"])
-    k = arb(p["termination_stiffness_N_per_m"])
-
-    def aug(t: Any) -> Any:
-        return arb_mat([[0, t, 0], [-k / M * t, -b / M * t, t / M], [0, 0, 0]]).exp()
-
-    X = aug(T)
-    E = arb_mat([[X[0, 0] - 1, X[0, 1]], [X[1, 0], X[1, 1] - 1]])
-    G = (X[0, 2], X[1, 2])
-    d = E.charpoly()
-
-    def numerator(c0: Any, c1: Any) -> Any:        # c adj(yI - E) Gamma
-        EG = arb_mat([[E[0, 0] - G[0] * c0, E[0, 1] - G[0] * c1],
-                      [E[1, 0] - G[1] * c0, E[1, 1] - G[1] * c1]])
-        return EG.charpoly() - d
-
+    z = PortZoh(p, T)
     nt = {}
     for f in fractions:
-        Xf = aug((1 - arb(f)) * T)
-        nt[f] = numerator(Xf[0, 0], Xf[0, 1]) + d * Xf[0, 2]
-    return d, numerator(1, 0), nt
+        Xf = z.aug((1 - flint.arb(f)) * T)
+        nt[f] = z.numerator((Xf[0, 0], Xf[0, 1])) + z.d * Xf[0, 2]
+    return z.d, z.numerator(), nt
 
 
 def fractional_polynomial(loop: Any, K: float) -> tuple[Any, int] | None:

@@ -45,6 +45,7 @@ from typing import Any
 from hapstab.engine.arb_base import (
     BASE_RATIO,
     NEGLIGIBLE_DAMPING,
+    PortZoh,
     base_point,
     damping_scale,
     k_scale,
@@ -235,18 +236,8 @@ class ArbLoop:
     @staticmethod
     def _port(p: dict[str, Any], T: Any) -> _Port:
         import flint
-        acb_poly, arb, arb_mat = flint.acb_poly, flint.arb, flint.arb_mat
-        M = arb(p["mass_kg"]) + arb(p["termination_mass_kg"])
-        b = arb(p["damping_N_s_per_m"]) + arb(p["termination_damping_N_s_per_m"])
-        k = arb(p["termination_stiffness_N_per_m"])
-        aug = arb_mat([[0, T, 0], [-k / M * T, -b / M * T, T / M], [0, 0, 0]])
-        X = aug.exp()
-        E = arb_mat([[X[0, 0] - 1, X[0, 1]], [X[1, 0], X[1, 1] - 1]])
-        G = (X[0, 2], X[1, 2])
-        EG = arb_mat([[E[0, 0] - G[0], E[0, 1]], [E[1, 0] - G[1], E[1, 1]]])
-        d = E.charpoly()
-        N = EG.charpoly() - d
-        return _Port(acb_poly(d), acb_poly(N), 2)
+        z = PortZoh(p, T)
+        return _Port(flint.acb_poly(z.d), flint.acb_poly(z.numerator()), 2)
 
     # -------------------------------------------------------------- evaluation
     def parts(self, theta: Any, deriv: bool = False) -> tuple[list[Any], list[Any], Any]:
