@@ -5,13 +5,16 @@ their own closed loops, numpy eigenvalues; no hapstab code) and against polynomi
 whose roots are known exactly."""
 
 import dataclasses
+import functools
 
+import mpmath
 import numpy as np
 import pytest
 from flint import acb, acb_poly, arb
 from tests.lanes import draw
 from tests.references import brute_fractional as bf
 from tests.references import brute_fractional_peb as bfp
+from tests.references.referee_eig import DIGITS, count_outside, refined_moduli
 
 from hapstab import Device, HapticLoop, SpringDamper, TeleoperationLoop, paper_peb, stability
 from hapstab.engine.arb_fraction import (
@@ -61,7 +64,8 @@ def test_hve_counts_equal_the_brute_force(block):
         got = fractional_count(loop, K)
         if np.min(np.abs(lam - 1)) < UNDECIDED:
             skipped += 1
-            assert got in (-1, int(np.sum(lam > 1)))
+            exact = functools.partial(bf.matrices, m, b, k, T, n, f, B)
+            assert got in (-1, _referee(A0, A1, exact, K))
             continue
         assert got == int(np.sum(lam > 1)), (m, b, k, T, n, f, B, K)
     assert skipped <= BLOCK // 4
@@ -91,9 +95,100 @@ def test_peb_counts_equal_the_brute_force(block):
                                  fractional_delay=f)
         got = fractional_count(loop, K)
         if np.min(np.abs(lam - 1)) < UNDECIDED:
-            assert got in (-1, int(np.sum(lam > 1)))
+            summed = [(mpmath.mpf(d[0]) + t[0], d[1], t[2])
+                      for d, t in zip(dev, term, strict=True)]
+            exact = functools.partial(bfp.matrices, summed, T, n, f, B, rho)
+            assert got in (-1, _referee(A0, A1, exact, K))
             continue
         assert got == int(np.sum(lam > 1)), (dev, term, B, rho, T, n, f, K)
+
+
+def _referee(A0, A1, exact, K):
+    """The 40-digit referee's count of poles outside (``exact(digits=...)``: the closed
+    loop in mpmath), or the float one where the referee abstains."""
+    with mpmath.workdps(DIGITS):
+        X0, X1 = exact(digits=DIGITS)
+    moduli = refined_moduli(A0, A1, X0, X1, K)
+    if moduli is None:
+        return int(np.sum(np.abs(np.linalg.eigvals(A0 + K * A1)) > 1))
+    return count_outside(moduli, ON_THE_CIRCLE)[0]
+
+
+#: A pole this near the circle is on it for the referee: its matrices hold the loop's
+#: doubles exactly and its eigenvalues are refined to ~1e-40.
+ON_THE_CIRCLE = 1e-30
+
+
+def _peb(rng):
+    """A random PEB with a fractional delay (as test_peb_counts_equal_the_brute_force)."""
+    T = float(rng.uniform(5e-4, 3e-3))
+    light = rng.random() < 0.3
+    dev = [(float(rng.uniform(0.02, 1)), 0.0 if light else float(rng.uniform(0.05, 2)))
+           for _ in range(2)]
+    term = [(float(rng.uniform(0.01, 0.5)), 0.0, float(10 ** rng.uniform(0, 4.5)))
+            for _ in range(2)]
+    B = (float(rng.uniform(0, 2)), float(rng.uniform(0, 2)))
+    rho = float(rng.uniform(0.3, 3)) if rng.random() < 0.3 else 1.0
+    return T, dev, term, B, rho, int(rng.integers(0, 12)), float(rng.uniform(1e-6, 1))
+
+
+def _next_to_the_circle(rng, kind):
+    """(loop at K, A0, A1, exact A0, exact A1, K): a loop drawn at the brute force's
+    K_max nudged by a relative 1e-12..1e-8 either way, where a pole is that near the
+    circle; None when the loop has no finite K_max."""
+    if kind == "hve":
+        m, b, k, T, n, f, B = _hve(rng)
+        kref = bf.kmax(m, b, k, T, n + f, B)
+        mats = lambda d=None: bf.matrices(m, b, k, T, n, f, B, digits=d)  # noqa: E731
+    else:
+        T, dev, term, B, rho, n, f = _peb(rng)
+        ports = [(d[0] + t[0], d[1], t[2]) for d, t in zip(dev, term, strict=True)]
+        kref = float(bfp.kmax_many(ports, T, [n + f], B, rho)[0])
+
+        def mats(d=None):           # the exact referee sums the masses exactly
+            p = ports if d is None else [(mpmath.mpf(a[0]) + t[0], a[1], t[2])
+                                         for a, t in zip(dev, term, strict=True)]
+            return bfp.matrices(p, T, n, f, B, rho, digits=d)
+    if not (np.isfinite(kref) and kref > 0):
+        return None
+    K = float(kref * (1 + rng.choice([-1, 1]) * 10 ** rng.uniform(-12, -8)))
+    A0, A1 = mats()
+    with mpmath.workdps(DIGITS):
+        X0, X1 = mats(DIGITS)
+    if kind == "hve":
+        loop = HapticLoop(Device(m, b), SpringDamper(K, B), f"spring:{k!r}" if k else "none",
+                          T, n, fractional_delay=f)
+    else:
+        loop = TeleoperationLoop(Device(*dev[0]), Device(*dev[1]), SpringDamper(K, B[0]),
+                                 SpringDamper(K * rho, B[1]),
+                                 f"msd:{term[0][0]!r},0.0,{term[0][2]!r}",
+                                 f"msd:{term[1][0]!r},0.0,{term[1][2]!r}", T, n,
+                                 fractional_delay=f)
+    return loop, A0, A1, X0, X1, K
+
+
+@pytest.mark.parametrize("block", draw(range(12), 1))
+def test_counts_next_to_the_circle_equal_a_40_digit_referee(block):
+    """Next to the circle the float brute force cannot decide (its eigenvalues are good
+    to ~1e-11): the count is -1 (not decided) or the count of the 40-digit referee
+    (tests/references/referee_eig.py: the brute force's own closed loop in mpmath, the
+    poles near the circle refined by Rayleigh-quotient iteration), never another."""
+    rng = np.random.default_rng(2_630_000 + block)
+    seen = decided = 0
+    for i in range(8):
+        got = _next_to_the_circle(rng, ("hve", "peb")[i % 2])
+        if got is None:
+            continue
+        loop, A0, A1, X0, X1, K = got
+        moduli = refined_moduli(A0, A1, X0, X1, K)
+        if moduli is None:            # the referee abstains (module docstring): rare
+            continue
+        want, _ = count_outside(moduli, ON_THE_CIRCLE)
+        count = fractional_count(loop, K)
+        assert count in (-1, want), (block, i, K, count, want)
+        seen += 1
+        decided += count != -1
+    assert seen >= 4 and decided >= seen // 2, (seen, decided)
 
 
 def test_different_fractions_each_way_equal_the_closed_loop_eigenvalues():

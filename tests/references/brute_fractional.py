@@ -22,8 +22,13 @@ import numpy as np
 from scipy import signal
 
 
-def zoh(M: float, b: float, k: float, t: float) -> tuple[np.ndarray, np.ndarray]:
-    """ZOH over t of M x'' + b x' + k x = u, state [x, v] (scipy's cont2discrete)."""
+def zoh(M: float, b: float, k: float, t, digits: int | None = None
+        ) -> tuple[np.ndarray, np.ndarray]:
+    """ZOH over t of M x'' + b x' + k x = u, state [x, v] (scipy's cont2discrete); with
+    ``digits``, in mpmath at that many digits (``t`` an mpf), as object arrays: the
+    exponential of the augmented matrix [[A, B], [0, 0]] t by ``mpmath.expm``."""
+    if digits is not None:
+        return _zoh_mp(M, b, k, t, digits)
     A = np.array([[0.0, 1.0], [-k / M, -b / M]])
     Bc = np.array([[0.0], [1.0 / M]])
     if t == 0.0:
@@ -32,18 +37,47 @@ def zoh(M: float, b: float, k: float, t: float) -> tuple[np.ndarray, np.ndarray]
     return Ad, Bd[:, 0]
 
 
-def matrices(M: float, b: float, k: float, T: float, n: int, f: float, B: float
-             ) -> tuple[np.ndarray, np.ndarray]:
-    """(A0, A1) of the closed loop with delay (n + f) T, 0 <= f < 1 (module docstring)."""
-    Ad, bd = zoh(M, b, k, T)
-    Af, bf = zoh(M, b, k, (1.0 - f) * T)
+def _zoh_mp(M: float, b: float, k: float, t, digits: int):
+    import mpmath
+    with mpmath.workdps(digits):
+        M, b, k = mpmath.mpf(M), mpmath.mpf(b), mpmath.mpf(k)
+        if t == 0:
+            return np.array([[mpmath.mpf(1), 0], [0, mpmath.mpf(1)]], dtype=object), \
+                np.array([mpmath.mpf(0)] * 2, dtype=object)
+        X = mpmath.expm(mpmath.matrix([[0, 1, 0], [-k / M, -b / M, 1 / M], [0, 0, 0]]) * t)
+        return (np.array([[X[0, 0], X[0, 1]], [X[1, 0], X[1, 1]]], dtype=object),
+                np.array([X[0, 2], X[1, 2]], dtype=object))
+
+
+def exact_numbers(digits: int | None):
+    """What the builders compute in: floats (None), or mpmath at ``digits``: (zeros,
+    number) with ``number(x)`` the double x as an exact mpf."""
+    if digits is None:
+        return np.zeros, float
+    import mpmath
+
+    def zeros(shape):
+        out = np.empty(shape, dtype=object)
+        out[...] = mpmath.mpf(0)
+        return out
+    return zeros, mpmath.mpf
+
+
+def matrices(M: float, b: float, k: float, T: float, n: int, f: float, B: float,
+             digits: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """(A0, A1) of the closed loop with delay (n + f) T, 0 <= f < 1 (module docstring);
+    with ``digits``, in mpmath (object arrays; every double taken as exact)."""
+    zeros, num = exact_numbers(digits)
+    T_, f_ = num(T), num(f)
+    Ad, bd = zoh(M, b, k, T_, digits)
+    Af, bf = zoh(M, b, k, (1 - f_) * T_, digits)
     N = 2 + 1 + n + 1
     r = lambda lag: 2 + lag            # noqa: E731  (state of r[k - lag])
-    u0, u1 = np.zeros(N), np.zeros(N)
+    u0, u1 = zeros(N), zeros(N)
     u1[r(n)] = 1.0
-    u0[r(n)] += B / T
-    u0[r(n + 1)] -= B / T
-    A0, A1 = np.zeros((N, N)), np.zeros((N, N))
+    u0[r(n)] += num(B) / T_
+    u0[r(n + 1)] -= num(B) / T_
+    A0, A1 = zeros((N, N)), zeros((N, N))
     A0[:2, :2] = Ad
     A0[:2] -= np.outer(bd, u0)
     A1[:2] -= np.outer(bd, u1)

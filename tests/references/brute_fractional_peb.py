@@ -26,30 +26,33 @@ import math
 
 import numpy as np
 
-from .brute_fractional import zoh  # one port's ZOH, as the HVE's reference builds it
+from .brute_fractional import exact_numbers, zoh  # one port's ZOH, as the HVE's reference
 
 
-def matrices(ports, T: float, n: int, f: float, B, rho: float, a: float = 1.0, b: float = 1.0
-             ) -> tuple[np.ndarray, np.ndarray]:
+def matrices(ports, T: float, n: int, f: float, B, rho: float, a: float = 1.0, b: float = 1.0,
+             digits: int | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(A0, A1) of the closed loop with one-way delay (n + f) T, 0 <= f < 1 (module
-    docstring); ``ports`` ((M, b, k) of master and slave), ``B`` (B_m, B_s)."""
+    docstring); ``ports`` ((M, b, k) of master and slave), ``B`` (B_m, B_s); with
+    ``digits``, in mpmath (object arrays; every double taken as exact)."""
+    zeros, num = exact_numbers(digits)
+    T, f, a, b, rho = num(T), num(f), num(a), num(b), num(rho)
     N = 4 + 2 + 2 * (n + 2)
     X = [0, 2]                                   # [x_j, v_j] at X[j], X[j] + 1
     P = [4, 5]                                   # x_j[k-1]
     R = [6, 6 + n + 2]                           # r_j[k - lag] at R[j] + lag
     own, cross = [a * b, 1.0], [-b, -a]
     ratio = [1.0, rho]
-    A0, A1 = np.zeros((N, N)), np.zeros((N, N))
+    A0, A1 = zeros((N, N)), zeros((N, N))
     for j in (0, 1):
         o = 1 - j
-        Ad, bd = zoh(*ports[j], T)
-        Af, bf = zoh(*ports[j], (1.0 - f) * T)
-        e, e_old = np.zeros(N), np.zeros(N)      # e_j[k], e_j[k-1] as rows on the state
+        Ad, bd = zoh(*ports[j], T, digits)
+        Af, bf = zoh(*ports[j], (1 - f) * T, digits)
+        e, e_old = zeros(N), zeros(N)            # e_j[k], e_j[k-1] as rows on the state
         e[X[j]] += own[j]
         e[R[o] + n] += cross[j]
         e_old[P[j]] += own[j]
         e_old[R[o] + n + 1] += cross[j]
-        u0, u1 = B[j] / T * (e - e_old), ratio[j] * e
+        u0, u1 = num(B[j]) / T * (e - e_old), ratio[j] * e
         A0[X[j]:X[j] + 2, X[j]:X[j] + 2] = Ad
         A0[X[j]:X[j] + 2] -= np.outer(bd, u0)
         A1[X[j]:X[j] + 2] -= np.outer(bd, u1)
