@@ -68,7 +68,7 @@ def test_polynomial_kernel_derivatives_hold_the_difference_quotient(name):
 def test_version_3_certificates_still_verify(monkeypatch, n):
     loop = h.paper_peb(delay_samples=n)
     new = h.critical_stiffness(loop, certify=True)
-    assert new.certificate["version"] == 4
+    assert new.certificate["version"] == 5
     assert h.verify_certificate(new.certificate, loop).valid
     monkeypatch.setattr(proof, "POLY_KERNEL", False)
     old = h.critical_stiffness(loop, certify=True)

@@ -284,7 +284,7 @@ def test_preconditioned_test_keeps_the_crossing_and_excludes_close_to_it():
 
 def test_certificate_with_preconditioned_pieces_verifies_and_catches_a_false_one(paper_cert):
     loop, _, cert = paper_cert
-    assert cert["version"] == 4
+    assert cert["version"] == 5
     gap = _first_gap(cert)
     n_pieces = [i for i, p in enumerate(gap["pieces"]) if p[4] == "N"]
     assert n_pieces, "the fast path's test is not used"

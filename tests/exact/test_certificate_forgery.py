@@ -39,6 +39,13 @@ def genuine_winding():
     return loop, cert
 
 
+def _rename(cert, old, new):
+    for g in cert["gaps"]:
+        for p in g.get("pieces") or []:
+            if p[-1] == old:
+                p[-1] = new
+
+
 def _forged(cert, edit):
     t = copy.deepcopy(cert)
     edit(t)
@@ -173,7 +180,7 @@ FORGERIES = {
     "proved_range_wrong": (lambda t: t.update(proved_range_N_per_m=[1e-30, 1e9]),
                            "proved_range_N_per_m"),
     # 7: versions and shapes
-    "version_5": (lambda t: t.update(version=5), "unknown format version"),
+    "version_6": (lambda t: t.update(version=6), "unknown format version"),
     "version_string": (lambda t: t.update(version="1"), "unknown format version"),
     "version_float": (lambda t: t.update(version=1.0), "unknown format version"),
     "version_missing": (lambda t: t.pop("version"), "unknown format version"),
@@ -185,7 +192,10 @@ FORGERIES = {
                             "excluded = 'yes': not true/false"),
     "piece_short": (lambda t: _first_gap(t)["pieces"][0].pop(), "not 4 numbers"),
     "piece_how_other": (lambda t: _first_gap(t)["pieces"][0].__setitem__(4, "Z"),
-                        "not 4 numbers and one of 'P', 'Q', 'F', 'N' (certificate version 4)"),
+                        "not 4 numbers and one of 'P', 'Q', 'F', 'N', 'I' (certificate version 5)"),
+    # an I piece (the iterated Krawczyk operator) exists from version 5 only
+    "version_4_with_I": (lambda t: t.update(version=4),
+                         "not 4 numbers and one of 'P', 'Q', 'F', 'N' (certificate version 4)"),
     # an N piece (the preconditioned test) exists from version 2 only
     "version_1_with_N": (lambda t: (t.update(version=1),
                                     _first_gap(t)["pieces"][0].__setitem__(4, "N")),
@@ -227,7 +237,8 @@ ROOTS_FORGERIES = {
                              "count.method = None: not one of 'winding', 'roots'"),
     "roots_method_other": (lambda t: _counted_gap(t)["count"].update(method="eigenvalues"),
                            "count.method = 'eigenvalues'"),
-    "roots_in_version_2": (lambda t: t.update(version=2),
+    # (its "I" pieces, version 5's, named "N" so that the method is the first fault seen)
+    "roots_in_version_2": (lambda t: (t.update(version=2), _rename(t, "I", "N")),
                            "count.method = 'roots': not one of 'winding' (certificate version 2)"),
     "roots_as_winding": (lambda t: _counted_gap(t)["count"].update(method="winding"),
                          "count.pieces: empty"),
@@ -238,7 +249,7 @@ ROOTS_FORGERIES = {
 
 def test_the_short_delays_counts_are_by_roots(genuine):
     _, cert = genuine
-    assert cert["version"] == 4
+    assert cert["version"] == 5
     assert {g["count"]["method"] for g in cert["gaps"] if g["count"]} == {"roots"}
 
 

@@ -11,16 +11,16 @@ from hapstab.engine.arb_loop import base_point
 
 #: The certificate's ``format`` and the ``version`` numbers this checker reads.
 FORMAT = "hapstab-certificate"
-VERSIONS = (1, 2, 3, 4)
+VERSIONS = (1, 2, 3, 4, 5)
 #: The reasons a piece may give for excluding 0, by version: ``N`` (the preconditioned
 #: mean-value test) from version 2, for gap pieces only (a count piece has one K).
 REASONS = {1: ("P", "Q", "F"), 2: ("P", "Q", "F", "N"), 3: ("P", "Q", "F", "N"),
-           4: ("P", "Q", "F", "N")}
+           4: ("P", "Q", "F", "N"), 5: ("P", "Q", "F", "N", "I")}
 #: How a count is proved, by version: from version 3 a count names its ``method``,
 #: ``winding`` (its pieces, the argument principle) or ``roots`` (no pieces: the roots
 #: of the characteristic polynomial isolated in balls); before, a winding.
 COUNT_METHODS = {1: ("winding",), 2: ("winding",), 3: ("winding", "roots"),
-                 4: ("winding", "roots")}
+                 4: ("winding", "roots"), 5: ("winding", "roots")}
 #: Most start pieces a certificate may ask for: the proof uses 32; a higher number
 #: only makes the replay slower, so beyond this it is refused (a valve on time).
 MAX_START_PIECES = 4096

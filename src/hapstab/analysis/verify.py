@@ -27,7 +27,8 @@ that produced it: it rebuilds the characteristic function from the certificate's
    piece [a, b] of angles with b > 4a > 0 is halved at its geometric mean and a
    K-range with k1 > 64 k0 cut at k1 / 8), each excluding 0 for the reason given
    (``P``, ``Q``, ``F`` or, from version 2, ``N``:
-   :func:`~hapstab.engine.arb_loop.preconditioned_excludes`), its balls formed as the
+   :func:`~hapstab.engine.arb_loop.preconditioned_excludes`; from version 5, ``I``:
+   the iterated Krawczyk operator, :mod:`~hapstab.engine.arb_krawczyk`), its balls formed as the
    certificate's version says (from version 4 by the angle kernel of precomputed
    ball polynomials, :mod:`~hapstab.engine.arb_kernel`; before, by forward-mode
    derivatives);
@@ -114,7 +115,8 @@ def _ball(a: float, b: float) -> Any:
 def _excludes(al: ArbLoop, a: float, b: float, ka: float, kb: float, how: str,
               polys: bool) -> bool:
     """Whether the box [a, b] x [ka, kb] has no zero of det M, for the reason ``how``
-    (``N``: the preconditioned mean-value form, certificate version 2). Any balls that
+    (``N``: the preconditioned mean-value form, certificate version 2; ``I``: the
+    iterated Krawczyk operator, version 5, :mod:`~hapstab.engine.arb_krawczyk`). Any balls that
     hold the box prove it; the search forms them in double precision and the counts at
     the proof's (:func:`_ball`), and the mean-value test is not monotone in the ball
     (its centre moves), so both forms are tried (seed 1796236426's mass-peb#6: an 'N'
@@ -132,6 +134,8 @@ def _excludes_with(al: ArbLoop, a: float, b: float, ka: float, kb: float, how: s
     with working_precision(prec or 53):
         th, K = _ball(a, b), arb(ka).union(arb(kb))
     key = (a, b, prec)                    # the angle's kernel, per form of its ball
+    if how == "I":                        # version 5 (certificate_shape admits it there)
+        return polys and al.krawczyk_excludes(th, K, (a, b, ka, kb))
     if how == "N":
         Fc, Ft, Fk = al.box_derivatives(th, K, key=key, polys=polys)
         with working_precision(al.prec):

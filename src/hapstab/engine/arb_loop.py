@@ -419,6 +419,20 @@ class ArbLoop:
             return box_balls(kern, theta, K)[3:]
 
 
+    def krawczyk_excludes(self, theta: Any, K: Any, box: tuple[float, float, float, float],
+                          kern0: tuple | None = None) -> bool:
+        """Whether det M has no zero on ``box`` = (a, b, K_a, K_b) by the iterated
+        Krawczyk operator from the balls ``theta`` x ``K`` that hold it (certificate
+        version 5's test ``"I"``, :mod:`~hapstab.engine.arb_krawczyk`), on the angle
+        kernel of ball polynomials at the loop's precision; ``kern0``: that kernel on
+        ``theta``, formed already."""
+        from hapstab.engine.arb_krawczyk import krawczyk_excludes
+
+        def kernel_at(t: Any) -> tuple:
+            return self.kernel_entry(t, None, True)[1]
+        with working_precision(self.prec):
+            return krawczyk_excludes(kernel_at, theta, K, box, kern0)
+
     @property
     def degree(self) -> int:
         """The degree of :meth:`polynomial` in z: the closed loop's number of states."""

@@ -17,8 +17,10 @@ __all__ = ["certificate", "VERSION"]
 #: count names its ``method``, ``winding`` (its pieces) or ``roots`` (the characteristic
 #: polynomial's roots isolated in balls, no pieces); 4: the gap pieces are proved with
 #: the angle kernel of precomputed ball polynomials (:mod:`~hapstab.engine.arb_kernel`),
-#: which the checker then uses. Versions 1 to 3 are still verified.
-VERSION = 4
+#: which the checker then uses; 5: gap pieces may be excluded by ``I`` (the iterated
+#: Krawczyk operator, :mod:`~hapstab.engine.arb_krawczyk`). Versions 1 to 4 are still
+#: verified.
+VERSION = 5
 
 def _count_json(c: Count) -> dict[str, Any]:
     return {"K_N_per_m": c.K, "outside": c.outside, "method": c.method,

@@ -1,0 +1,91 @@
+"""The iterated Krawczyk exclusion (certificate version 5's ``"I"``,
+hapstab.engine.arb_krawczyk): a box that holds a crossing -- a zero of det M at
+(theta*, K*), placed by the certificate's window [K_lo, K_hi] and angle -- is never
+excluded, whatever its size and wherever the zero sits in it; a box beside the window is
+excluded in one piece where halving needed tens; and a certificate's piece that the test
+does not exclude is refused."""
+
+import copy
+import math
+
+import numpy as np
+import pytest
+from flint import arb
+
+import hapstab as h
+from hapstab.analysis.exact import proof
+from hapstab.engine.arb_loop import ArbLoop, arb_parameters, working_precision
+
+LOOPS = {
+    "hve-4": h.paper_hve(delay_samples=4),
+    "hve-40": h.paper_hve(delay_samples=40),
+    "peb-0": h.paper_peb(delay_samples=0),
+    "peb-4": h.paper_peb(delay_samples=4),
+    # issue 26's stiff wall on a light device (k T^2 / m ~ 640)
+    "wall": h.HapticLoop(h.Device(0.0011034930256540415, 2.793119774241153e-05),
+                         h.SpringDamper(0.0, 0.008156767423636477), h.spring(1e6),
+                         0.0008382324672663228, 4),
+}
+
+
+@pytest.fixture(scope="module", params=sorted(LOOPS))
+def crossing(request):
+    loop = LOOPS[request.param]
+    res = h.critical_stiffness(loop, certify=True)
+    c = res.certificate["crossings"][0]
+    assert res.certificate["version"] == 5
+    return loop, ArbLoop(arb_parameters(loop)), c["theta_rad"], c["K_lo_N_per_m"], \
+        c["K_hi_N_per_m"], res.certificate
+
+
+def _excludes(al, a, b, ka, kb):
+    with working_precision(al.prec):
+        th, K = arb(a).union(arb(b)), arb(ka).union(arb(kb))
+    return al.krawczyk_excludes(th, K, (a, b, ka, kb))
+
+
+def test_a_box_holding_the_crossing_is_never_excluded(crossing):
+    _, al, t, klo, khi, _ = crossing
+    rng = np.random.default_rng(5_000)
+    for _ in range(60):
+        # the angle is the polished one rounded to a double: 1e-13 of it either side
+        # holds the true one; the window [klo, khi] holds the true K*
+        below, above = (10 ** rng.uniform(-13, -1, 2)) * t
+        down, up = 10 ** rng.uniform(-14, -0.5, 2)
+        a, b = max(t - below, 0.0), min(t + above, math.pi)
+        ka, kb = klo * (1 - down), khi * (1 + up) if rng.random() < 0.8 else khi
+        assert not _excludes(al, a, b, ka, kb), (a, b, ka, kb)
+
+
+def test_a_box_beside_the_window_is_excluded_in_one_piece(crossing):
+    _, al, t, klo, _, _ = crossing
+    for rel_theta, rel_k in [(1e-4, 0.01), (1e-4, 0.5), (1e-3, 0.9)]:
+        a, b = t * (1 - rel_theta), min(t * (1 + rel_theta), math.pi)
+        assert _excludes(al, a, b, klo * (1 - rel_k), klo)
+
+
+def test_the_version_5_certificate_has_i_pieces_and_fewer_boxes(crossing, monkeypatch):
+    loop, _, _, _, _, cert = crossing
+    pieces = [p for g in cert["gaps"] for p in g.get("pieces") or []]
+    assert any(p[4] == "I" for p in pieces)
+    assert h.verify_certificate(cert, loop).valid
+    monkeypatch.setattr(proof, "KRAWCZYK", False)
+    old = h.critical_stiffness(loop, certify=True)
+    assert old.certificate["version"] == 4 and h.verify_certificate(old.certificate, loop).valid
+    assert old.critical_stiffness == h.critical_stiffness(loop).critical_stiffness
+    assert len(pieces) < len([p for g in old.certificate["gaps"] for p in g.get("pieces") or []])
+
+
+def test_a_piece_relabelled_i_where_it_does_not_hold_is_refused(crossing):
+    loop, al, _, _, _, cert = crossing
+    # an excluded piece far from the crossing whose box the Krawczyk steps do not settle
+    # (det M far from 0 over a wide box: they do not converge)
+    for gi, g in enumerate(cert["gaps"]):
+        for pi, p in enumerate(g.get("pieces") or []):
+            if p[4] in "PQF" and not _excludes(al, *p[:4]):
+                forged = copy.deepcopy(cert)
+                forged["gaps"][gi]["pieces"][pi][4] = "I"
+                chk = h.verify_certificate(forged, loop)
+                assert not chk.valid and "is not excluded by 'I'" in chk.reason
+                return
+    pytest.skip("every piece is also excluded by I")
