@@ -88,6 +88,20 @@ def test_phase_reference_reaches_ten_thousand_samples():
     assert float(pt.kmax_mp) == pytest.approx(pt.crossings[0].K, rel=1e-9)
 
 
+def test_the_phase_reference_finds_the_crossing_its_grid_missed():
+    # delay-peb#100009 of seed 11061207 (620 samples): the crossing at K = 300.74 and a
+    # root of the real-root function for K = -992 lie 7e-6 rad apart, inside one grid
+    # step (4e-5): no sign change, and the reference said "unstable from K = 0" (its
+    # winding at half the next crossing, 1561, is unstable). The closed-loop matrix's
+    # eigenvalues (1246 states) are stable at K = 1e-6, 1, 100, 290 and unstable at 310;
+    # now the winding brackets the missed crossing and a finer grid finds it at 40 digits
+    s = certified.scenario("delay", 100_009, max_delay=10_000, seed=11061207)
+    pt = phase.truth(s.brute_loop())
+    assert pt.kmax_mp is not None and pt.kmax == pytest.approx(300.73923936, rel=1e-9)
+    K = h.critical_stiffness(s.hapstab_loop()).critical_stiffness
+    assert K <= float(pt.kmax_mp) and K == pytest.approx(float(pt.kmax_mp), rel=1e-11)
+
+
 def test_referee_confirms_the_issue_reproducer_truth():
     # issue 26, item 1: true K_max 481.82184543319056 (40 digits in the issue)
     L = certified.ISSUE_26[0].brute_loop()

@@ -187,13 +187,13 @@ def _endpoint_crossings(loop: brute.Loop) -> list[Crossing]:
     return out
 
 
-def crossings(loop: brute.Loop) -> list[Crossing]:
+def crossings(loop: brute.Loop, density: int = 1) -> list[Crossing]:
     """Every (K, theta), K > 0, where a closed-loop root lies on the unit circle, sorted
     by K; those within :data:`REFINE_WINDOW` of the lowest refined at :data:`DPS`
-    digits (``K_mp``)."""
+    digits (``K_mp``). ``density``: of the theta grid (:func:`grid`)."""
     _require(loop)
     quad = _quadratic(loop)
-    theta = grid(loop)
+    theta = grid(loop, density)
     theta = theta[(theta > 0) & (theta < math.pi)]      # the ends apart (F = 0 there)
     F, _ = _real_root_fn(*coefficients(loop, theta), quad)
     idx = np.flatnonzero(np.sign(F[1:]) * np.sign(F[:-1]) < 0)
@@ -341,8 +341,48 @@ def truth(loop: brute.Loop) -> PhaseTruth:
     k1 = float(first.K_mp) if first.K_mp is not None else first.K
     s = stable(loop, 0.5 * k1)
     if not s:
-        return PhaseTruth(0.0, mpmath.mpf(0), cr, s)
+        return _missed(loop, k1, cr, s)
     return PhaseTruth(k1, first.K_mp, cr, s)
+
+
+#: Finer theta grids :func:`_missed` searches a missed crossing on (times the usual)
+DENSER = (16, 128)
+#: How far below the lowest crossing found :func:`_missed` looks for a stable K
+#: (relative): below, the loop is taken as unstable from K = 0 (K_max 0, as before).
+MISSED_FLOOR = 1e-12
+
+
+def _missed(loop: brute.Loop, k1: float, cr: list, s: bool | None) -> PhaseTruth:
+    """Unstable (or undecided) at half the lowest crossing found: either unstable from
+    K = 0, or the grid missed a crossing below it -- two roots of the real-root function
+    closer than its spacing (measured: delay-peb#100009 of seed 11061207, 620 samples,
+    the crossing at K = 300.74 and a root for K = -992 7e-6 rad apart, one 4e-5 grid
+    step). The winding decides: K halved from k1 / 2 until stable (else K_max 0); the
+    crossing between that K and twice it is then searched on grids :data:`DENSER` times
+    finer and refined at DPS digits; if none is found, the truth is the upper
+    (unstable) end of the stability boundary bisected to 1e-6, in doubles."""
+    K = 0.5 * k1
+    while K > MISSED_FLOOR * k1:
+        K *= 0.5
+        v = stable(loop, K)
+        if v is None:
+            break
+        if not v:
+            continue
+        lo, hi = K, 2 * K
+        for density in DENSER:
+            found = [c for c in crossings(loop, density) if lo < c.K <= hi * (1 + 1e-6)]
+            if found:
+                c = min(found, key=lambda c: c.K_mp if c.K_mp is not None else c.K)
+                return PhaseTruth(float(c.K_mp) if c.K_mp is not None else c.K, c.K_mp, cr, True)
+        while hi / lo - 1 > 1e-6:
+            mid = math.sqrt(lo * hi)
+            w = stable(loop, mid)
+            if w is None:
+                break
+            lo, hi = (mid, hi) if w else (lo, mid)
+        return PhaseTruth(hi, None, cr, True)
+    return PhaseTruth(0.0, mpmath.mpf(0), cr, s)
 
 
 def decided(pt: PhaseTruth, loop: brute.Loop, K: float, away: float = 1e-4) -> bool | None:
