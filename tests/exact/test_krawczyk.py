@@ -14,6 +14,7 @@ from flint import arb
 
 import hapstab as h
 from hapstab.analysis.exact import proof
+from hapstab.analysis.exact.winding import k_ball, theta_ball
 from hapstab.engine.arb_loop import ArbLoop, arb_parameters, working_precision
 
 LOOPS = {
@@ -39,8 +40,8 @@ def crossing(request):
 
 
 def _excludes(al, a, b, ka, kb):
-    with working_precision(al.prec):
-        th, K = arb(a).union(arb(b)), arb(ka).union(arb(kb))
+    with working_precision(al.prec):          # the balls as the proof forms them
+        th, K = theta_ball(a, b), k_ball(ka, kb)
     return al.krawczyk_excludes(th, K, (a, b, ka, kb))
 
 
@@ -76,16 +77,37 @@ def test_the_version_5_certificate_has_i_pieces_and_fewer_boxes(crossing, monkey
     assert len(pieces) < len([p for g in old.certificate["gaps"] for p in g.get("pieces") or []])
 
 
-def test_a_piece_relabelled_i_where_it_does_not_hold_is_refused(crossing):
-    loop, al, _, _, _, cert = crossing
+@pytest.mark.parametrize("name", ["hve-4", "peb-0", "peb-4", "wall"])
+def test_a_piece_relabelled_i_where_it_does_not_hold_is_refused(name):
+    loop = LOOPS[name]
+    cert = h.critical_stiffness(loop, certify=True).certificate
+    al = ArbLoop(arb_parameters(loop))
     # an excluded piece far from the crossing whose box the Krawczyk steps do not settle
     # (det M far from 0 over a wide box: they do not converge)
-    for gi, g in enumerate(cert["gaps"]):
-        for pi, p in enumerate(g.get("pieces") or []):
-            if p[4] in "PQF" and not _excludes(al, *p[:4]):
-                forged = copy.deepcopy(cert)
-                forged["gaps"][gi]["pieces"][pi][4] = "I"
-                chk = h.verify_certificate(forged, loop)
-                assert not chk.valid and "is not excluded by 'I'" in chk.reason
-                return
-    pytest.skip("every piece is also excluded by I")
+    where = next((gi, pi) for gi, g in enumerate(cert["gaps"])
+                 for pi, p in enumerate(g.get("pieces") or [])
+                 if p[4] in "PQF" and not _excludes(al, *p[:4]))
+    forged = copy.deepcopy(cert)
+    forged["gaps"][where[0]]["pieces"][where[1]][4] = "I"
+    chk = h.verify_certificate(forged, loop)
+    assert not chk.valid and "is not excluded by 'I'" in chk.reason
+
+
+def test_balls_that_do_not_hold_the_box_are_refused():
+    """The Nyquist zero of the paper's HVE n = 4 (theta = pi, K ~ 5.4e9) in a box ending
+    at pi: a ball that stops at the double below pi (1.2e-16 short) would miss the zero
+    and let the steps pin it outside; such balls are refused, the proof's own hold pi
+    (found by the review of version 5)."""
+    loop = h.paper_hve(delay_samples=4)
+    al = ArbLoop(arb_parameters(loop))
+    ends = [c for c in h.critical_stiffness(loop, certify=True).certificate["crossings"]
+            if c["theta_rad"] == math.pi]
+    K = ends[0]["K_lo_N_per_m"] if ends else 5399993040.0023
+    for w in (1e-8, 1e-12):
+        box = (math.pi - w, math.pi, K * (1 - w), K * (1 + w))
+        with working_precision(al.prec):
+            short = arb(box[0]).union(arb(box[1]))
+            whole = theta_ball(box[0], box[1])
+            Kb = k_ball(box[2], box[3])
+        assert not al.krawczyk_excludes(short, Kb, box)
+        assert not al.krawczyk_excludes(whole, Kb, box)

@@ -72,7 +72,8 @@ def krawczyk_excludes(kernel_at: Callable[[Any], tuple], theta: Any, K: Any,
         An arb ball of angles -> its kernel ``(Pm, Qm, Fm, Pd, Qd, Fd)``
         (:meth:`~hapstab.engine.arb_loop.ArbLoop.kernel` with ``polys``).
     theta, K : arb
-        Balls holding [a, b] and [K_a, K_b] (the first X).
+        Balls holding [a, b] and [K_a, K_b] (the first X); balls that do not hold the
+        box's ends are refused (False): the box's zeros would not all be in X.
     box : tuple of float
         The box's exact ends (rad, N/m); an angle end equal to ``math.pi`` stands for pi.
     kern0 : tuple, optional
@@ -89,6 +90,8 @@ def krawczyk_excludes(kernel_at: Callable[[Any], tuple], theta: Any, K: Any,
     arb = flint.arb
     a, b = (arb.pi() if x == math.pi else x for x in box[:2])
     ka, kb = box[2], box[3]
+    if not all(ball.contains(end) for ball, end in ((theta, a), (theta, b), (K, ka), (K, kb))):
+        return False        # the balls must hold the box (its ends; pi as pi itself)
     for step in range(steps):
         kern = kern0 if step == 0 and kern0 is not None else kernel_at(theta)
         new = _image(kern, theta, K, box if step == 0 else None)
