@@ -75,15 +75,7 @@ def test_hve_counts_equal_the_brute_force(block):
 def test_peb_counts_equal_the_brute_force(block):
     rng = np.random.default_rng(2_610_000 + block)
     for _ in range(BLOCK // 2):
-        T = float(rng.uniform(5e-4, 3e-3))
-        light = rng.random() < 0.3
-        dev = [(float(rng.uniform(0.02, 1)), 0.0 if light else float(rng.uniform(0.05, 2)))
-               for _ in range(2)]
-        term = [(float(rng.uniform(0.01, 0.5)), 0.0, float(10 ** rng.uniform(0, 4.5)))
-                for _ in range(2)]
-        B = (float(rng.uniform(0, 2)), float(rng.uniform(0, 2)))
-        rho = float(rng.uniform(0.3, 3)) if rng.random() < 0.3 else 1.0
-        n, f = int(rng.integers(0, 12)), float(rng.uniform(1e-6, 1))
+        T, dev, term, B, rho, n, f = _peb(rng)
         ports = [(d[0] + t[0], d[1], t[2]) for d, t in zip(dev, term, strict=True)]
         A0, A1 = bfp.matrices(ports, T, n, f, B, rho)
         K = float(10 ** rng.uniform(-1, 3))
@@ -120,7 +112,8 @@ ON_THE_CIRCLE = 1e-30
 
 
 def _peb(rng):
-    """A random PEB with a fractional delay (as test_peb_counts_equal_the_brute_force)."""
+    """A random PEB with a fractional delay: (T, devices, terminations, B's, force
+    ratio, whole delay, fraction); about a third with undamped devices."""
     T = float(rng.uniform(5e-4, 3e-3))
     light = rng.random() < 0.3
     dev = [(float(rng.uniform(0.02, 1)), 0.0 if light else float(rng.uniform(0.05, 2)))
