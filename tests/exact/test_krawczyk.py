@@ -111,3 +111,19 @@ def test_balls_that_do_not_hold_the_box_are_refused():
             Kb = k_ball(box[2], box[3])
         assert not al.krawczyk_excludes(short, Kb, box)
         assert not al.krawczyk_excludes(whole, Kb, box)
+
+
+def test_an_exclusion_ends_at_its_first_box_failed_at_the_floor():
+    """A gap holding a crossing the float search cannot see (device damping 1e-100:
+    K_max ~ 4e-98 N/m) fails at the floor at its lowest K; the boxes left above are
+    not split to the floor K-ulp by K-ulp (they were: 1,836 failures, 12 s a call), and
+    the verdict is the one the full search gave: marginal at K -> 0+, K_max 0."""
+    loop = h.paper_hve(1e-3, 2).with_stiffness(5.0).replace(device=h.Device(0.1, 1e-100))
+    al = ArbLoop(arb_parameters(loop))
+    ex = proof.exclude(al, 1e-111, 1170818.1328650434)
+    assert ex.splits.count("f") == 1 and ex.splits[-1] == "f"
+    first = min(f[2] for f in ex.failed)
+    assert first == 1e-111                      # nothing below the failure is claimed
+    res = h.critical_stiffness(loop)
+    assert res.critical_stiffness == 0.0 and res.stable_intervals == ()
+    assert "marginal for K -> 0+" in res.reason
