@@ -217,11 +217,8 @@ def _exclude(al: ArbLoop, ka: float, kb: float, max_pieces: int) -> Exclusion:
             heapq.heappush(heap, (m, a, b, k1))
             out.splits.append("k")
         else:
-            # at the floor in both: the gap is not proved from k0 up. Boxes come off the
-            # heap by their lowest K, so no later failure lies below k0 and the rest of
-            # the stack cannot change what the caller keeps (the lowest failed K, and
-            # the least upper end of the boxes failing there): it is left, as the valve
-            # leaves it, instead of being split to the floor K-ulp by K-ulp
+            # not proved from k0 up; boxes leave the heap by lowest K, so the rest cannot
+            # change what the caller keeps: left as the valve leaves it (not split K-ulp by K-ulp)
             out.failed.append((a, b, k0, k1))
             out.failed.extend((x[1], x[2], x[0], x[3]) for x in heap)
             out.splits.append("f")
