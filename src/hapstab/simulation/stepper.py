@@ -29,6 +29,7 @@ The paper, Fig. 2a and Fig. 3 (sampler, ZOH, delay, discrete controller).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -168,8 +169,12 @@ def step_nonlinear(roles: Roles, s0: np.ndarray, F: np.ndarray, M: int,
     S : (M+1, N) states, U : (M+1, p) applied controller forces, C : (M+1,) wall
     contact flags (None without a wall). Rows after an overflow are inf / nan.
     """
-    ph, ct = roles.physical, ~roles.physical
+    # integer indices (not the boolean masks: a mask's scatter costs several times
+    # more per sample) and the held forces' (state, port) columns, formed once
+    ph, ct = np.flatnonzero(roles.physical), np.flatnonzero(~roles.physical)
     Af, Gp, Ac = roles.A_free[ph], roles.G[ph], roles.A[ct]
+    hu_s, hu_p = roles.held_u[:, 1], roles.held_u[:, 0]
+    hf_s, hf_p = roles.held_f[:, 1], roles.held_f[:, 0]
     Fu = roles.Fu
     E0 = roles.E[0] if roles.E is not None else np.zeros(s0.size)   # the wall's (HVE) reading
     S = np.empty((M + 1, s0.size))
@@ -196,14 +201,17 @@ def step_nonlinear(roles: Roles, s0: np.ndarray, F: np.ndarray, M: int,
         if k == M:
             break
         nxt = np.empty_like(s)
-        nxt[ph] = Af @ s + Gp @ (F[k] - u)
+        Fk = F[k]
+        nxt[ph] = Af @ s + Gp @ (Fk - u)
         nxt[ct] = Ac @ sm
-        nxt[roles.held_u[:, 1]] = u[roles.held_u[:, 0]]     # the force actually applied
-        nxt[roles.held_f[:, 1]] = F[k][roles.held_f[:, 0]]
+        nxt[hu_s] = u[hu_p]                  # the force actually applied
+        nxt[hf_s] = Fk[hf_p]
         if between is not None:
-            between(k, s, F[k] - u, nxt)
+            between(k, s, Fk - u, nxt)
         s = nxt
-        if not np.all(np.isfinite(s)):
+        # s @ s is finite when every entry is, unless it overflows (|s| > 1e154): then
+        # the entries themselves are looked at
+        if not math.isfinite(s @ s) and not np.isfinite(s).all():
             S[k + 1:] = np.inf
             U[k + 1:] = np.nan
             break
