@@ -38,7 +38,15 @@ PRELOAD = ["hapstab.explorer.api", "hapstab.explorer.code", "hapstab.cli.main",
            "hapstab.analysis.exact.candidates", "hapstab.analysis.exact.certificate",
            "hapstab.analysis.exact.polish",
            "hapstab.analysis.exact.proof", "hapstab.analysis.exact.proved",
-           "hapstab.analysis.exact.top", "hapstab.analysis.exact.winding"]
+           "hapstab.analysis.exact.top", "hapstab.analysis.exact.winding",
+           # the page's other commands: the margins of a check, the audit's nonlinear
+           # rows, best-damping's design and robust modules and its bounded scalar
+           # minimiser (measured: best-damping hve 1.8 s in a worker without them, 0.67 s
+           # with them; scipy.optimize alone is most of the difference)
+           "hapstab.engine.arb_krawczyk", "hapstab.engine.arb_fraction",
+           "hapstab.analysis.margins", "hapstab.analysis.nonlinear", "hapstab.analysis.design",
+           "hapstab.analysis.robust", "hapstab.engine.balls", "hapstab.engine.operator_family",
+           "scipy.optimize"]
 _CONTEXT: list[Any] = []
 #: Workers forked at the start (the explorer computes :data:`WORKERS
 #: <hapstab.explorer.app.WORKERS>` = 2 at once: the page's verdict and K_max of one
