@@ -245,7 +245,10 @@ class StabilityResult(Result):
     period : float
         Sampling period T in s.
     poles : tuple of complex
-        All closed-loop poles at the sampling instants.
+        All closed-loop poles at the sampling instants; for a loop of more than
+        :data:`~hapstab.analysis.exact.core.LONG_STATES` states (a long delay), the
+        poles near the circle Newton's method found, with their conjugates (the reason
+        says so).
     rigid_body_modes : int
         Poles at z = 1 that no stiffness can move (nothing ties a mass to ground).
     note : str

@@ -89,7 +89,6 @@ def test_the_issues_long_haul_command_is_answered():
     (["kmax", "peb", "--delay", "100000", "--method", "passivity"], "a frequency grid of"),
     (["kmax", "hve", "--delay-range", "9000:10000"], "delay range: K_max at"),
     (["limit-cycle", "hve", "-n", "100000", "-K", "0.2", "--resolution", "1e-4"], "build:"),
-    (["check", "hve", "-n", "100000", "-K", "0.2"], "build:"),
     (["simulate", "hve", "-n", "100000", "-K", "0.2", "--duration", "1"], "build:"),
 ])
 def test_what_grows_with_the_delay_is_refused_up_front_naming_its_cost(args, cost):

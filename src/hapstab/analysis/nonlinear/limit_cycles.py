@@ -441,10 +441,13 @@ def limit_cycles(loop: HapticLoop, *, resolution_m: float | None = None,
     C, P, mass, k = loop_parts(loop)
     K = loop.controller.stiffness                       # type: ignore[union-attr]
     from hapstab.analysis.exact.core import stability
+    from hapstab.engine.system import build
     from hapstab.errors import check_real
 
-    # the linear loop's verdict first: its budget check refuses a long delay chain at
-    # once, before the scan's work (whose grid grows with the delay)
+    # the closed-loop model's budget refuses a long delay chain at once, before the
+    # scan's work (whose grid grows with the delay; stability() alone no longer does:
+    # it answers long delays from the certified count)
+    build(loop)
     linear = stability(loop).verdict
     bal = Balance(C, P, k, K, delta, quantizer, fc, _rest(rest_position_m, delta))
     amps, theta = _grids(bal, loop.delay_samples, max_amplitude_m)
