@@ -106,6 +106,34 @@ def main() -> None:
         t = median_time(partial(h.boundary, loop, T, [n]), 3)
         print(f"10,000 boundary points, paper {name} (n = {n}): {t:.2f} s "
               f"({t / T.size * 1e6:.0f} us per point)", flush=True)
+    long_verdicts()
+
+
+def long_verdicts() -> None:
+    """stability() at K = K_max / 2 as the delay grows: past 1,000 states the certified
+    count and Newton's dominant pole (analysis/exact/long_poles.py) against the dense
+    eigenvalues of the closed-loop matrix a user would take (numpy.linalg.eigvals; one
+    timed solve, skipped past 4,000 states), with the spectral radii's difference."""
+    print(f"{'loop':4} {'n':>6} {'N':>6} | {'numpy eigvals':>13} | {'hapstab stability':>17} "
+          f"{'ratio':>7} | rho difference", flush=True)
+    for n in (1000, 2000, 10_000):
+        for name, loop in loops(n).items():
+            k = exact_kmax_batch(loop, intervals=False)[0].kmax
+            at = loop.with_stiffness(0.5 * k)
+            t_h = median_time(partial(h.stability, at), 3)
+            rho = h.stability(at).spectral_radius
+            N = 2 * n + 8 if name == "peb" else n + 4           # about (build refuses 10^4)
+            if N <= 4000:
+                A = build(at).closed_loop()[0]
+                t0 = time.perf_counter()
+                ev = np.linalg.eigvals(A)
+                t_e = time.perf_counter() - t0
+                diff = f"{abs(np.abs(ev).max() / rho - 1):.1e}"
+                te, ratio = f"{t_e * 1e3:10.0f} ms", f"{t_e / t_h:6.0f}x"
+            else:
+                te, ratio, diff = "   (skipped)", "     -", "-"
+            print(f"{name:4} {n:6d} {N:6d} | {te:>13} | {t_h * 1e3:14.0f} ms {ratio:>7} | {diff}",
+                  flush=True)
 
 
 if __name__ == "__main__":
