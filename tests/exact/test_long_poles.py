@@ -122,3 +122,43 @@ def test_a_loop_the_count_does_not_cover_is_still_refused_by_the_budget():
     loop = h.paper_hve(delay_samples=1).with_delay_s(3.0005)      # 3000.5 samples
     with pytest.raises(h.HapstabError, match="budget"):
         h.stability(loop.with_stiffness(0.1))
+
+
+def test_a_double_pole_outside_is_found_not_dropped():
+    """Identical master and slave with negative virtual damping: P has a double real
+    root outside the circle, where Newton converges only linearly. It was dropped (the
+    radius reported 1.00176, 5.7 % low; the reviewer's reproducer); now kept within
+    its linear convergence (1e-9: STALLED)."""
+    from hapstab.engine.system import build
+    c = h.SpringDamper(0.1, -1.0)
+    loop = h.TeleoperationLoop(h.Device(0.015, 0.02), h.Device(0.015, 0.02), c, c,
+                               h.spring(1.0), h.spring(1.0), 1e-3, 800, 400)
+    res = h.stability(loop)
+    eig = np.abs(np.linalg.eigvals(build(loop).closed_loop()[0])).max()
+    assert res.verdict == "unstable"
+    assert res.spectral_radius == pytest.approx(eig, rel=1e-8)
+
+
+def test_missed_poles_outside_hand_over_to_the_eigenvalue_solver_within_the_budget():
+    """B = -5 on the same pair (forced onto Newton's path at 606 states): Newton finds
+    fewer poles outside than the certified count; within the budget the eigenvalue
+    solver answers instead (its pole, not a lower bound)."""
+    from hapstab.engine.system import build
+    c = h.SpringDamper(0.1, -5.0)
+    loop = h.TeleoperationLoop(h.Device(0.015, 0.02), h.Device(0.015, 0.02), c, c,
+                               h.spring(1.0), h.spring(1.0), 1e-3, 300, 300)
+    old = core.LONG_STATES
+    try:
+        core.LONG_STATES = 0
+        res = h.stability(loop)
+    finally:
+        core.LONG_STATES = old
+    eig = np.abs(np.linalg.eigvals(build(loop).closed_loop()[0])).max()
+    assert res.verdict == "unstable" and "at least" not in res.reason
+    assert res.spectral_radius == pytest.approx(eig, rel=1e-8)
+
+
+def test_the_callers_budget_bounds_newtons_grid_too():
+    loop = h.paper_peb(delay_samples=100_000).with_stiffness(0.1)
+    with pytest.raises(h.HapstabError, match="the poles near the circle on .* angles"):
+        h.stability(loop, max_memory=5e7, max_seconds=0.5)

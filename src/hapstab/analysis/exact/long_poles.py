@@ -31,7 +31,7 @@ import numpy as np
 from hapstab.engine.frequency import LoopResponse
 from hapstab.tolerances import NEWTON_ANGLE_STEP
 
-__all__ = ["near_circle_poles", "POINTS_PER_TURN", "RADII", "NEWTON_STEPS"]
+__all__ = ["near_circle_poles", "grid_points", "POINTS_PER_TURN", "RADII", "NEWTON_STEPS"]
 
 #: Grid points per turn of det M's phase over [0, pi] (LoopResponse.phase_rate turns):
 #: a local minimum of |det M| per pole near the circle needs a few points per turn;
@@ -48,6 +48,12 @@ FAST_GONE = 40.0
 #: Newton steps at most (quadratic convergence from a start within a turn of its pole
 #: needs ~5-8; the rest are for starts near a double pole).
 NEWTON_STEPS = 40
+#: A start still moving after NEWTON_STEPS steps with a step below this (relative) is a
+#: multiple pole reached linearly: its angle is that close (a simple pole's start either
+#: converges to NEWTON_ANGLE_STEP or wanders off by far more)
+STALLED = 1e-9
+#: Angles evaluated at once (memory: ~600 B an angle for the jets of det M)
+CHUNK = 1 << 16
 #: Two poles closer than this (relative) are one, found from two starts: far below the
 #: spacing of distinct poles (2 pi / n at n = 10^5 is 6e-5) and far above Newton's
 #: convergence (NEWTON_ANGLE_STEP).
@@ -60,6 +66,24 @@ def _det(resp: LoopResponse, u: float, theta: np.ndarray) -> tuple[np.ndarray, n
     F = resp.coefficients(np.zeros(theta.size, int), theta, zero, values_only=True)
     return (F[0].vc + u * (F[1].vc + u * F[2].vc),
             F[0].dc + u * (F[1].dc + u * F[2].dc))
+
+
+def grid_points(resp: LoopResponse) -> int:
+    """How many angles :func:`near_circle_poles` evaluates det M at (for its budget)."""
+    return sum((POINTS_PER_TURN * resp.phase_rate
+                if resp.phase_rate * abs(math.log(r)) < FAST_GONE else 0) + 1024 for r in RADII)
+
+
+def _minima(resp: LoopResponse, u: float, ring: np.ndarray) -> np.ndarray:
+    """The angles of ``ring`` where |det M| has a local minimum, with its two ends;
+    evaluated :data:`CHUNK` angles at a time (the jets of a long grid at once took
+    ~600 B an angle: 2 GB for a PEB at 10^5 samples each way)."""
+    with np.errstate(all="ignore"):
+        a = np.concatenate([np.abs(_det(resp, u, ring[i:i + CHUNK])[0])
+                            for i in range(0, ring.size, CHUNK)])
+    inner = np.flatnonzero((a[1:-1] <= a[:-2]) & (a[1:-1] <= a[2:])) + 1
+    # the ends too: a real pole near z = +1 or -1 has its minimum at the grid's edge
+    return np.concatenate([ring[inner], ring[:1], ring[-1:]])
 
 
 def near_circle_poles(resp: LoopResponse, u: float) -> np.ndarray:
@@ -86,11 +110,7 @@ def near_circle_poles(resp: LoopResponse, u: float) -> np.ndarray:
         fast = resp.phase_rate * abs(math.log(r)) < FAST_GONE
         m = (POINTS_PER_TURN * resp.phase_rate if fast else 0) + 1024
         ring = (np.arange(m) + 0.5) * (math.pi / m) - 1j * math.log(r)   # z = r e^{j phi}
-        with np.errstate(all="ignore"):
-            a = np.abs(_det(resp, u, ring)[0])
-        inner = np.flatnonzero((a[1:-1] <= a[:-2]) & (a[1:-1] <= a[2:])) + 1
-        # the ends too: a real pole near z = +1 or -1 has its minimum at the grid's edge
-        starts += [ring[inner], ring[:1], ring[-1:]]
+        starts.append(_minima(resp, u, ring))
     th = np.concatenate(starts).astype(complex)
     active, converged = np.ones(th.size, bool), np.zeros(th.size, bool)
     with np.errstate(all="ignore"):
@@ -105,6 +125,14 @@ def near_circle_poles(resp: LoopResponse, u: float) -> np.ndarray:
             active[idx[small | ~ok]] = False        # converged, or lost (not a pole)
             if not active.any():
                 break
+        # a double pole (two poles of P met, e.g. identical master and slave): Newton
+        # converges only linearly there, halving its step; after NEWTON_STEPS steps its
+        # last step is ~2^-40 of the start's distance: kept when below STALLED
+        idx = np.flatnonzero(active)
+        if idx.size:
+            f, df = _det(resp, u, th[idx])
+            step = np.abs(f / df)
+            converged[idx[np.isfinite(step) & (step <= STALLED * np.maximum(1.0, np.abs(th[idx])))]] = True
         z = np.exp(1j * th[converged])
     z = z[np.isfinite(z)]
     z = np.where(z.imag < 0, np.conj(z), z)             # the pair's upper member
