@@ -160,5 +160,5 @@ def test_missed_poles_outside_hand_over_to_the_eigenvalue_solver_within_the_budg
 
 def test_the_callers_budget_bounds_newtons_grid_too():
     loop = h.paper_peb(delay_samples=100_000).with_stiffness(0.1)
-    with pytest.raises(h.HapstabError, match="the poles near the circle on .* angles"):
+    with pytest.raises(h.HapstabError, match=r"the poles near the circle on .* angles"):
         h.stability(loop, max_memory=5e7, max_seconds=0.5)
