@@ -157,13 +157,13 @@ def stability(loop: HapticLoop | TeleoperationLoop, *, max_memory: float | None 
         sysm = build(loop)
         N = sysm.order
         if long is not None and N > LONG_STATES:
-            got = _long_stability(loop, long, limits, partial=False)
+            got = _long_stability(loop, long, limits)
             if got is not None:
-                return got      # else: Newton missed a pole outside; the solver, if it may
+                return got      # else: Newton missed a pole outside: the solver, if it may
         budget.check(budget.Cost(f"stability: the eigenvalues of a {N}-state closed loop",
                                  64.0 * N * N, budget.eig_seconds(N)), *limits)
     except budget.BudgetError:
-        got = _long_stability(loop, long, limits, partial=True) if long is not None else None
+        got = _long_stability(loop, long, limits) if long is not None else None
         if got is None:         # not covered, or no pole found near the circle
             raise
         return got
@@ -199,16 +199,16 @@ def stability(loop: HapticLoop | TeleoperationLoop, *, max_memory: float | None 
 
 
 def _long_stability(loop: HapticLoop | TeleoperationLoop, resp: LoopResponse,
-                    limits: tuple[float | None, float | None], partial: bool
-                    ) -> StabilityResult | None:
+                    limits: tuple[float | None, float | None]) -> StabilityResult | None:
     """:func:`stability` of a loop of more than :data:`LONG_STATES` states, or whose
     closed-loop model or eigenvalue problem is over the budget: the verdict from the
     certified count (a cost that does not grow with the delay), the dominant pole from
     the poles near the circle found by Newton's method
-    (:mod:`~hapstab.analysis.exact.long_poles`); None when Newton finds no pole, or
-    (``partial`` False) fewer poles outside than the count: the eigenvalue problem then
-    answers, if the budget allows it. ``limits``: the caller's (max_memory, max_seconds),
-    checked against the grid's cost."""
+    (:mod:`~hapstab.analysis.exact.long_poles`); None when Newton finds no pole, or fewer
+    poles outside than the count: the eigenvalue problem then answers if the budget
+    allows it, and is refused with its cost if not (never a radius the count
+    contradicts). ``limits``: the caller's (max_memory, max_seconds), checked against
+    the grid's cost."""
     from hapstab.analysis.exact.long_poles import CHUNK, grid_points, near_circle_poles
     pts = grid_points(resp)
     budget.check(budget.Cost(f"stability: the poles near the circle on {pts} angles",
@@ -234,11 +234,8 @@ def _long_stability(loop: HapticLoop | TeleoperationLoop, resp: LoopResponse,
                "largest of the poles Newton's method finds near the circle on the "
                "characteristic function, not an eigenvalue solver's")
     if count is not None and count > outside:
-        if not partial:
-            return None
-        reason += (f"; it found {outside} of the {count} poles outside (a pole it missed, "
-                   f"or a multiple one found once), so the spectral radius is at least "
-                   f"{rho:.10g}")
+        return None     # a pole outside missed (or a multiple one found once): not answered
+    # the conjugates of the poles off the real axis (1e-12 of |z|, as ``real`` above)
     pairs = np.concatenate([found, np.conj(found[np.abs(found.imag) > 1e-12 * np.abs(found)])])
     return StabilityResult(verdict, rho, dom, freq, reason + ")", T,
                            tuple(complex(p) for p in pairs), m, friction_note(loop))

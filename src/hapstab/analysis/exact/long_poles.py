@@ -19,7 +19,8 @@ starts that converge. Checked against LAPACK's eigenvalues on seeded loops
 (tests/exact/test_long_poles.py: the dominant pole within 1e-10) and, for a stiff wall
 on a light device, against a 40-digit referee (Newton 8e-8 off, the eigenvalue solver
 1.4e-6). The verdict never rests on this: the certified count does, and where fewer
-poles outside were found than it counts, the reason says so.
+poles outside were found than it counts, stability() does not report them (the
+eigenvalue problem answers, or its budget refuses).
 """
 
 from __future__ import annotations
