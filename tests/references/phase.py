@@ -342,7 +342,19 @@ def truth(loop: brute.Loop) -> PhaseTruth:
     s = stable(loop, 0.5 * k1)
     if not s:
         return _missed(loop, k1, cr, s)
+    # stable at k1 / 2; unstable just below k1 means the grid missed a crossing between
+    # (measured: delay-peb#632 of seed 12071208, 2256 samples each way: a crossing at
+    # 73.946 missed, 106.88 found; the matrix brute force, 4518 states: 2 poles outside
+    # at K = 90): searched between, as _missed does
+    if stable(loop, k1 * (1 - JUST_BELOW)) is False:
+        return _between(loop, 0.5 * k1, k1 * (1 - JUST_BELOW), cr)
     return PhaseTruth(k1, first.K_mp, cr, s)
+
+
+#: How far below the lowest crossing found :func:`truth` checks the winding (relative):
+#: far enough that the phase steps stay resolvable (:func:`decided` needs 1e-4), close
+#: enough that a missed crossing between it and the one found is unlikely
+JUST_BELOW = 1e-3
 
 
 #: Finer theta grids :func:`_missed` searches a missed crossing on (times the usual)
@@ -369,20 +381,26 @@ def _missed(loop: brute.Loop, k1: float, cr: list, s: bool | None) -> PhaseTruth
             break
         if not v:
             continue
-        lo, hi = K, 2 * K
-        for density in DENSER:
-            found = [c for c in crossings(loop, density) if lo < c.K <= hi * (1 + 1e-6)]
-            if found:
-                c = min(found, key=lambda c: c.K_mp if c.K_mp is not None else c.K)
-                return PhaseTruth(float(c.K_mp) if c.K_mp is not None else c.K, c.K_mp, cr, True)
-        while hi / lo - 1 > 1e-6:
-            mid = math.sqrt(lo * hi)
-            w = stable(loop, mid)
-            if w is None:
-                break
-            lo, hi = (mid, hi) if w else (lo, mid)
-        return PhaseTruth(hi, None, cr, True)
+        return _between(loop, K, 2 * K, cr)
     return PhaseTruth(0.0, mpmath.mpf(0), cr, s)
+
+
+def _between(loop: brute.Loop, lo: float, hi: float, cr: list) -> PhaseTruth:
+    """The lowest crossing in (lo, hi], the loop stable at lo and unstable at hi: on
+    grids :data:`DENSER` times finer, refined at DPS digits; if none is found, the
+    upper (unstable) end of the stability boundary bisected to 1e-6, in doubles."""
+    for density in DENSER:
+        found = [c for c in crossings(loop, density) if lo < c.K <= hi * (1 + 1e-6)]
+        if found:
+            c = min(found, key=lambda c: c.K_mp if c.K_mp is not None else c.K)
+            return PhaseTruth(float(c.K_mp) if c.K_mp is not None else c.K, c.K_mp, cr, True)
+    while hi / lo - 1 > 1e-6:
+        mid = math.sqrt(lo * hi)
+        w = stable(loop, mid)
+        if w is None:
+            break
+        lo, hi = (mid, hi) if w else (lo, mid)
+    return PhaseTruth(hi, None, cr, True)
 
 
 def decided(pt: PhaseTruth, loop: brute.Loop, K: float, away: float = 1e-4) -> bool | None:
