@@ -346,15 +346,21 @@ def truth(loop: brute.Loop) -> PhaseTruth:
     # (measured: delay-peb#632 of seed 12071208, 2256 samples each way: a crossing at
     # 73.946 missed, 106.88 found; the matrix brute force, 4518 states: 2 poles outside
     # at K = 90): searched between, as _missed does
-    if stable(loop, k1 * (1 - JUST_BELOW)) is False:
-        return _between(loop, 0.5 * k1, k1 * (1 - JUST_BELOW), cr)
+    # (and delay-peb#596 of the same seed: 25.6493 missed 1.4e-4 below 25.6530 found)
+    for below in JUST_BELOW:
+        v = stable(loop, k1 * (1 - below))
+        if v is False:
+            return _between(loop, 0.5 * k1, k1 * (1 - below), cr)
+        if v is None:           # the phase steps too fine to resolve there: not decided
+            break
     return PhaseTruth(k1, first.K_mp, cr, s)
 
 
-#: How far below the lowest crossing found :func:`truth` checks the winding (relative):
-#: far enough that the phase steps stay resolvable (:func:`decided` needs 1e-4), close
-#: enough that a missed crossing between it and the one found is unlikely
-JUST_BELOW = 1e-3
+#: How far below the lowest crossing found :func:`truth` checks the winding (relative),
+#: in turn: a missed crossing at least this far below the one found is caught; closer,
+#: the winding needs phase steps it may not resolve (then it says None and the check
+#: ends; :func:`decided` stays 1e-4 away)
+JUST_BELOW = (1e-3, 1e-5)
 
 
 #: Finer theta grids :func:`_missed` searches a missed crossing on (times the usual)
