@@ -86,13 +86,10 @@ def _polish_pole(resp: LoopResponse, u: float, z0: complex) -> complex:
     lose accuracy, the characteristic function in y = z - 1 does not."""
     if z0 == 0:
         return z0
+    from hapstab.analysis.exact.long_poles import det_and_slope
     th = np.array([-1j * np.log(z0)])
-    zero = np.zeros(1)
-    idx = np.zeros(1, int)
     for _ in range(30):
-        F = resp.coefficients(idx, th, zero, values_only=True)     # the centres alone
-        f = F[0].vc + u * (F[1].vc + u * F[2].vc)
-        df = F[0].dc + u * (F[1].dc + u * F[2].dc)
+        f, df = det_and_slope(resp, u, th)     # the centres alone
         if not (np.isfinite(f[0]) and np.isfinite(df[0])) or df[0] == 0:
             return z0
         step = f[0] / df[0]
@@ -153,18 +150,19 @@ def stability(loop: HapticLoop | TeleoperationLoop, *, max_memory: float | None 
     if long is not None and long.params[0] is None:
         long = None
     limits = (max_memory, max_seconds)
+    tried = False               # Newton's search, run at most once
     try:
         sysm = build(loop)
         N = sysm.order
         if long is not None and N > LONG_STATES:
-            got = _long_stability(loop, long, limits)
+            tried, got = True, _long_stability(loop, long, limits)
             if got is not None:
                 return got      # else: Newton missed a pole outside: the solver, if it may
         budget.check(budget.Cost(f"stability: the eigenvalues of a {N}-state closed loop",
                                  64.0 * N * N, budget.eig_seconds(N)), *limits)
     except budget.BudgetError:
-        got = _long_stability(loop, long, limits) if long is not None else None
-        if got is None:         # not covered, or no pole found near the circle
+        got = _long_stability(loop, long, limits) if long is not None and not tried else None
+        if got is None:         # not covered, Newton tried already, or no pole found
             raise
         return got
     eigs = np.linalg.eigvals(sysm.closed_loop()[0])
@@ -226,17 +224,15 @@ def _long_stability(loop: HapticLoop | TeleoperationLoop, resp: LoopResponse,
     dom = complex(rest[int(np.argmax(np.abs(rest)))])
     rho, T = abs(dom), loop.period
     freq = abs(math.atan2(dom.imag, dom.real)) / (2 * math.pi * T)
-    verdict, reason = _verdict(-1 if count is None else count, rho, dom, T, m)
     out = np.abs(rest) > 1
-    real = np.abs(rest.imag) <= 1e-12 * np.abs(rest)     # a real pole (listed once, no pair)
-    outside = 2 * int(np.sum(out)) - int(np.sum(out & real))
+    real = np.abs(rest.imag) <= REAL_POLE * np.abs(rest)   # listed once, no conjugate
+    if count is not None and count > 2 * int(np.sum(out)) - int(np.sum(out & real)):
+        return None     # a pole outside missed (or a multiple one found once): not answered
+    verdict, reason = _verdict(-1 if count is None else count, rho, dom, T, m)
     reason += (f" (a closed loop of more than {LONG_STATES} states: the dominant pole is the "
                "largest of the poles Newton's method finds near the circle on the "
                "characteristic function, not an eigenvalue solver's")
-    if count is not None and count > outside:
-        return None     # a pole outside missed (or a multiple one found once): not answered
-    # the conjugates of the poles off the real axis (1e-12 of |z|, as ``real`` above)
-    pairs = np.concatenate([found, np.conj(found[np.abs(found.imag) > 1e-12 * np.abs(found)])])
+    pairs = np.concatenate([found, np.conj(found[np.abs(found.imag) > REAL_POLE * np.abs(found)])])
     return StabilityResult(verdict, rho, dom, freq, reason + ")", T,
                            tuple(complex(p) for p in pairs), m, friction_note(loop))
 
@@ -250,6 +246,9 @@ LONG_STATES = 1000
 #: samples each way, 3.2e6 angles on the unit circle, ~9 s; HVE 10^5, ~1.6e6, 1.2-3.3 s
 #: (measured, session 12): 3e-6 is above both
 NEWTON_SECONDS = 3e-6
+#: A pole found with |Im z| below this share of |z| is real (Newton leaves ~1e-16 of an
+#: imaginary part on a real pole; a pair's own is far above it): no conjugate is added
+REAL_POLE = 1e-12
 #: A pole found within this of z = 1 is a rigid-body mode's (divided out of the count;
 #: the modes sit at z = 1 exactly, the other poles near it are ~(k T^2 / m)^(1/2) away)
 RIGID_NEAR = 1e-6

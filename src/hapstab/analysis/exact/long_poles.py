@@ -32,7 +32,7 @@ import numpy as np
 from hapstab.engine.frequency import LoopResponse
 from hapstab.tolerances import NEWTON_ANGLE_STEP
 
-__all__ = ["near_circle_poles", "grid_points", "POINTS_PER_TURN", "RADII", "NEWTON_STEPS"]
+__all__ = ["near_circle_poles", "det_and_slope", "grid_points", "POINTS_PER_TURN", "RADII", "NEWTON_STEPS"]
 
 #: Grid points per turn of det M's phase over [0, pi] (LoopResponse.phase_rate turns):
 #: a local minimum of |det M| per pole near the circle needs a few points per turn;
@@ -61,8 +61,11 @@ CHUNK = 1 << 16
 SAME_POLE = 1e-9
 
 
-def _det(resp: LoopResponse, u: float, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """det M and d det M / d theta at the (complex) angles, stiffness u = K / scale."""
+def det_and_slope(resp: LoopResponse, u: float, theta: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """det M and d det M / d theta at the (complex) angles, stiffness u = K / scale (the
+    jets' centres alone; also :func:`~hapstab.analysis.exact.core.stability`'s polish of
+    an eigenvalue)."""
     zero = np.zeros(theta.size)
     F = resp.coefficients(np.zeros(theta.size, int), theta, zero, values_only=True)
     return (F[0].vc + u * (F[1].vc + u * F[2].vc),
@@ -80,7 +83,7 @@ def _minima(resp: LoopResponse, u: float, ring: np.ndarray) -> np.ndarray:
     evaluated :data:`CHUNK` angles at a time (the jets of a long grid at once took
     ~600 B an angle: 2 GB for a PEB at 10^5 samples each way)."""
     with np.errstate(all="ignore"):
-        a = np.concatenate([np.abs(_det(resp, u, ring[i:i + CHUNK])[0])
+        a = np.concatenate([np.abs(det_and_slope(resp, u, ring[i:i + CHUNK])[0])
                             for i in range(0, ring.size, CHUNK)])
     inner = np.flatnonzero((a[1:-1] <= a[:-2]) & (a[1:-1] <= a[2:])) + 1
     # the ends too: a real pole near z = +1 or -1 has its minimum at the grid's edge
@@ -117,7 +120,7 @@ def near_circle_poles(resp: LoopResponse, u: float) -> np.ndarray:
     with np.errstate(all="ignore"):
         for _ in range(NEWTON_STEPS):
             idx = np.flatnonzero(active)
-            f, df = _det(resp, u, th[idx])
+            f, df = det_and_slope(resp, u, th[idx])
             step = f / df
             ok = np.isfinite(step)
             th[idx[ok]] -= step[ok]
@@ -131,7 +134,7 @@ def near_circle_poles(resp: LoopResponse, u: float) -> np.ndarray:
         # last step is ~2^-40 of the start's distance: kept when below STALLED
         idx = np.flatnonzero(active)
         if idx.size:
-            f, df = _det(resp, u, th[idx])
+            f, df = det_and_slope(resp, u, th[idx])
             step = np.abs(f / df)
             converged[idx[np.isfinite(step) & (step <= STALLED * np.maximum(1.0, np.abs(th[idx])))]] = True
         z = np.exp(1j * th[converged])

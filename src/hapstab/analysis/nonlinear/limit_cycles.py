@@ -440,14 +440,15 @@ def limit_cycles(loop: HapticLoop, *, resolution_m: float | None = None,
                              "line is a term of the balance")
     C, P, mass, k = loop_parts(loop)
     K = loop.controller.stiffness                       # type: ignore[union-attr]
+    from hapstab import budget
     from hapstab.analysis.exact.core import stability
-    from hapstab.engine.system import build
+    from hapstab.analysis.methods import order_estimate
     from hapstab.errors import check_real
 
-    # the closed-loop model's budget refuses a long delay chain at once, before the
-    # scan's work (whose grid grows with the delay; stability() alone no longer does:
-    # it answers long delays from the certified count)
-    build(loop)
+    # the closed-loop model's budget (hapstab.build's) refuses a long delay chain at once,
+    # before the scan's work (whose grid grows with the delay; stability() alone no longer
+    # does: it answers long delays from the certified count)
+    budget.check(budget.build_cost(1, order_estimate(loop, loop.delay_in_samples)))
     linear = stability(loop).verdict
     bal = Balance(C, P, k, K, delta, quantizer, fc, _rest(rest_position_m, delta))
     amps, theta = _grids(bal, loop.delay_samples, max_amplitude_m)
