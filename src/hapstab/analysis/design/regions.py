@@ -75,7 +75,18 @@ def kmax_over_B(loop: Loop, Bs: Sequence[float] | np.ndarray,
     list of StableSet
         One per damping.
     """
-    return analyse(_row_responses(loop, Bs), full=intervals, proof=certify)
+    resp = _row_responses(loop, Bs)
+    return analyse(resp, full=intervals, proof=certify or _proof_is_faster(resp))
+
+
+def _proof_is_faster(resp: LoopResponse) -> bool:
+    """One row of a one-port loop: its proved answer (the angle grid's candidates, then
+    the ball proof) costs less than the float branch-and-prune's (the paper's HVE at
+    n = 4: 8.5 against 22 ms, measured), and is the safe end of the same K_max, so it is
+    the one given even where the caller did not ask for a proof. Batches and two ports:
+    the float search (batched it costs ~2 ms a row)."""
+    return resp.size == 1 and len(resp.ports) == 1 and bool(resp.params) and \
+        resp.params[0] is not None
 
 
 def _row_responses(loop: Loop, Bs: Sequence[float] | np.ndarray) -> LoopResponse:
