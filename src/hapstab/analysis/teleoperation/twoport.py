@@ -232,7 +232,9 @@ def critical_stiffness_llewellyn(loop: TeleoperationLoop, approximation: str = "
 
 #: Seconds per angle of the grid of one Llewellyn K_max (the K scan, its refinement and
 #: bisection): 21 s at 192,144 angles (PEB, 2000 samples) and 87 s at 960,144 (10,000),
-#: measured on a loaded 2-core machine (1.1e-4 and 0.9e-4): taken as 1.2e-4.
+#: measured on a loaded 2-core machine (1.1e-4 and 0.9e-4): taken as 1.2e-4. Since the
+#: screened scan (session 13, quiet): 1.8 s at 19,344 angles (n = 200, 9.3e-5: the
+#: refinement's share) and 9.2 s at 192,144 (4.8e-5); the bound is kept for loaded machines.
 SCAN_SECONDS_PER_ANGLE = 1.2e-4
 
 
