@@ -86,3 +86,16 @@ def test_a_pair_the_screen_passes_has_a_positive_margin(seed):
     margin = tp._margin_of(P)
     assert np.all(margin[sure] > 0), seed
     assert sure.sum() >= 40      # ~1/3 are clear of the band (measured 85 of 256 at seed 0)
+
+
+def test_an_undamped_pair_without_virtual_damping_is_zero_at_once():
+    """b = 0 and B = 0: every margin is 0 at K = 0 and negative above, and the bisection
+    toward K = 0 had no floor (zero = 1e-12 b/T = 0): ~1,100 refined minima down to the
+    denormals (minutes, a session-13 hostile run). Now it stops at 1e-12 of the scan's
+    first K: 0 and the reason."""
+    loop = h.TeleoperationLoop(h.Device(0.015, 0.0), h.Device(0.015, 0.0),
+                               h.SpringDamper(1.0, 0.0), h.SpringDamper(1.0, 0.0),
+                               period=1e-3)
+    res = tp.critical_stiffness_llewellyn(loop)
+    assert res.critical_stiffness == 0.0
+    assert "not absolutely stable for any K > 0" in res.reason

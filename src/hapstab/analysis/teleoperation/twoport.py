@@ -217,8 +217,10 @@ def critical_stiffness_llewellyn(loop: TeleoperationLoop, approximation: str = "
     while lo > 0 and worst(lo)[1] < -tol:   # the grid passed lo; the refined minimum must too
         lo, hi = _below(lo), lo
     # 1e-12 of the loop's stiffness scale b/T is zero (a margin exactly 0 at K = 0 ends
-    # there, up to the slack)
-    zero = 1e-12 * float(np.max(side.damping)) / T
+    # there, up to the slack); without any damping (b = 0: an undamped pair, B = 0, every
+    # margin 0 at K = 0) 1e-12 of the scan's first K, else the bisection went on to the
+    # denormals (~1,100 refined minima: minutes)
+    zero = 1e-12 * max(float(np.max(side.damping)) / T, SCAN_START)
     while hi - lo > 1e-9 * hi and hi > zero:     # to 1e-9 relative: far below any design use
         mid = 0.5 * (lo + hi)
         lo, hi = (mid, hi) if worst(mid)[1] >= -tol else (lo, mid)
