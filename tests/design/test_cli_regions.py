@@ -88,3 +88,16 @@ def test_region_of_rigid_body_peb_and_asymmetric_plot(tmp_path):
     r = run("region", "peb", "--delay-forward", "2", "--delay-backward", "6", "--K", "0:50",
             "--B", "0:0.1", "--resolution", "20", "--plot", str(png))
     assert r.exit_code == 0 and png.stat().st_size > 5000
+
+
+def test_an_undamped_mode_on_the_boundarys_angle_grid_is_a_gap_not_a_crash():
+    """A 1e6 kg device on the 1 N/m operator, no damping: its open-loop mode sits at
+    theta = sqrt(k/m) T = 1e-6, the D-decomposition's first angle, where zI - A0 is
+    singular to working precision (numpy raised LinAlgError: an internal error, found by
+    a session-13 hostile run). G has a pole there: the boundary skips that angle."""
+    r = CliRunner().invoke(cli, ["region", "hve", "--K", "0:100", "--B", "0:1", "--resolution",
+                                 "12", "--damping", "0", "--mass", "1e6", "--json"])
+    assert r.exit_code == 0, r.output
+    d = json.loads(r.stdout)
+    assert d["rows"][0]["stable_intervals"] == []          # B = 0, b = 0: nothing stable
+    assert d["rows"][1]["stable_intervals"] == [[0.0, 100.0]]

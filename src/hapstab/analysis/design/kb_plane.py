@@ -13,6 +13,7 @@ Gil, Avello, Rubio, Florez 2004; Hulin, Preusche, Hirzinger 2008 (K-B charts).
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 from typing import Any, cast
 
@@ -89,15 +90,33 @@ def _unit_loop(loop: Loop) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def _mu(A0: np.ndarray, B1: np.ndarray, C1: np.ndarray, z: np.ndarray) -> np.ndarray:
-    """Eigenvalues of G(z) for each z, shape (len(z), p), in numpy's order."""
+    """Eigenvalues of G(z) for each z, shape (len(z), p), in numpy's order; NaN at a z
+    where zI - A0 is singular to working precision (an undamped mode of the loop without
+    controller exactly at a grid angle: G has a pole there, the boundary a gap)."""
     N = A0.shape[0]
     # in chunks of at most ~64 MB of N x N complex matrices: the memory stays flat in
     # the number of angles (4000 angles of a 200-state loop were 5 GB at once)
     chunk = max(1, int(64e6 // (16 * N * N)))
-    G = np.concatenate([C1 @ np.linalg.solve(zc[:, None, None] * np.eye(N) - A0,
-                                             np.broadcast_to(B1, (zc.size, *B1.shape)))
+    G = np.concatenate([_transfer(A0, B1, C1, zc)
                         for zc in np.array_split(z, -(-z.size // chunk))])
-    return np.linalg.eigvals(G)
+    out = np.full(G.shape[:2], np.nan + 0j)
+    ok = np.isfinite(G).all(axis=(1, 2))
+    out[ok] = np.linalg.eigvals(G[ok])
+    return out
+
+
+def _transfer(A0: np.ndarray, B1: np.ndarray, C1: np.ndarray, z: np.ndarray) -> np.ndarray:
+    """C1 (zI - A0)^-1 B1 at each z (NaN where the solve meets a singular matrix)."""
+    M = z[:, None, None] * np.eye(A0.shape[0]) - A0
+    rhs = np.broadcast_to(B1, (z.size, *B1.shape))
+    try:
+        return C1 @ np.linalg.solve(M, rhs)
+    except np.linalg.LinAlgError:        # one singular angle: the others one by one
+        out = np.full((z.size, C1.shape[0], B1.shape[1]), np.nan + 0j)
+        for i in range(z.size):
+            with contextlib.suppress(np.linalg.LinAlgError):
+                out[i] = C1 @ np.linalg.solve(M[i], B1)
+        return out
 
 
 def _follow(mu: np.ndarray) -> np.ndarray:
