@@ -68,7 +68,8 @@ def kmax_over_B(loop: Loop, Bs: Sequence[float] | np.ndarray,
     certify : bool
         Re-prove each row in ball arithmetic (default True, as
         :func:`~hapstab.analysis.exact.core.exact_critical_stiffness`); False: the float
-        search alone, faster and not proved.
+        search alone, faster and not proved -- except one row of a one-port loop, whose
+        proved answer is the faster one (:func:`_proof_is_faster`).
 
     Returns
     -------
