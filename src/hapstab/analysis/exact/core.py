@@ -146,9 +146,8 @@ def stability(loop: HapticLoop | TeleoperationLoop, *, max_memory: float | None 
     # the loops the certified count covers (whole-sample delays): past LONG_STATES, or
     # where the model or its eigenvalue problem is over the budget (a long delay), the
     # verdict is the count's and the dominant pole Newton's (_long_stability)
-    long = loop_response(loop) if certified and certify else None
-    if long is not None and long.params[0] is None:
-        long = None
+    resp0 = loop_response(loop) if certified and certify else None
+    long = resp0 if resp0 is not None and resp0.params[0] is not None else None
     limits = (max_memory, max_seconds)
     tried = False               # Newton's search, run at most once
     try:
@@ -168,7 +167,7 @@ def stability(loop: HapticLoop | TeleoperationLoop, *, max_memory: float | None 
     eigs = np.linalg.eigvals(sysm.closed_loop()[0])
     T = loop.period
     if certified:
-        resp = long if long is not None else loop_response(loop)
+        resp = resp0 if resp0 is not None else loop_response(loop)
         m = resp.rigid
         u = float(sysm.stiffness[0] / resp.scale[0])
         count, how = _certified_count(loop, resp, float(sysm.stiffness[0]), certify, eigs)

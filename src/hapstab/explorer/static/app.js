@@ -15,7 +15,7 @@
   const CURVE_POINTS = 400;      // the passivity margin curve
   // the delay margin's search stops after this many seconds (a long delay's verdict is an
   // eigenvalue problem of ~2 states per sample): the page says how far it searched
-  const MARGIN_SECONDS = 5;
+  const MARGIN_SECONDS = 2;
   const REGION_RESOLUTION = 48;  // K-B rows of B (each row's K intervals are exact)
   const SWEEP = 25;              // periods of the K_max-against-T plot, T/4 ... 4T
   const NET = HapstabNetwork;                             // the network card (network.js)
