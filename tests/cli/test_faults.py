@@ -19,15 +19,19 @@ from lanes import draw
 SRC = str(paths.SRC)
 OLD = b"the previous file\n"
 
-#: writing commands, each with a target of its own (the {out} placeholder)
+#: writing commands, each with a target of its own (the {out} placeholder). Sized so that
+#: the computation still fills most of a run after the ~0.3-0.4 s of imports, so the
+#: seeded moments (0.2-1.0 of the run) land mid-computation or mid-write: region at 120
+#: rows (was 200) and boundary at 20 periods (was 40) still compute for ~70 % of their
+#: run; reproduce's 2 periods (was 3) still commit several pending files together.
 COMMANDS = {
     "simulate-csv": ["simulate", "hve", "-K", "9", "--duration", "60", "--csv", "{out}"],
     "simulate-plot": ["simulate", "hve", "-K", "9", "--duration", "20", "--plot", "{out}.png"],
-    "region-csv": ["region", "hve", "--K", "0:900", "--B", "0:20", "--resolution", "200",
+    "region-csv": ["region", "hve", "--K", "0:900", "--B", "0:20", "--resolution", "120",
                    "--csv", "{out}"],
-    "boundary-csv": ["boundary", "hve", "--period", "0.001:0.01:40", "-n", "0,1,2,5,10",
+    "boundary-csv": ["boundary", "hve", "--period", "0.001:0.01:20", "-n", "0,1,2,5,10",
                      "--csv", "{out}"],
-    "reproduce-folder": ["reproduce", "fig5", "--periods", "0.002,0.004,0.006", "--out", "{out}"],
+    "reproduce-folder": ["reproduce", "fig5", "--periods", "0.002,0.006", "--out", "{out}"],
 }
 
 

@@ -37,6 +37,7 @@ from hapstab.errors import AnalysisError, ModelError
 from hapstab.models.controllers import SpringDamper
 from hapstab.models.loops import TeleoperationLoop
 from hapstab.models.parts import Device, mass_spring_damper
+from lanes import PARTS, draw, part
 
 #: a light device's mass per unit of (b + c) T (see the module notes)
 LIGHT = 1e-6
@@ -165,16 +166,18 @@ def test_a_large_sector_tends_to_the_passive_limit(loop):
     assert large == pytest.approx(passive, rel=1e-4)
 
 
-@pytest.mark.parametrize("n", [1, 2, 4])
+# n = 1 and 4 by default (the same claim at another delay), n = 2 -m campaign
+@pytest.mark.parametrize("n", draw([1, 2, 4], 2))
 def test_a_smaller_sector_allows_more_stiffness_up_to_the_free_loop_limit(n):
     # with nothing attached (c = 0 is in every sector) the light loop's determinant at
     # K = b/T is, by hand, b^2 (1 + z + ... + z^(2n+1)): all its roots on the circle, so
     # no sector allows K >= b/T = 20 N/m, and a vanishing sector approaches it
     loop = h.paper_peb(delay_samples=n)
     ks = [kmax(loop, k) for k in (10.0, 1.0, 0.1, 0.01, 1e-5)]
-    assert kmax(loop) * (1 - 1e-6) <= ks[0]  # bisection to 1e-6 relative
+    passive = kmax(loop)
+    assert passive * (1 - 1e-6) <= ks[0]  # bisection to 1e-6 relative
     assert all(a <= b for a, b in itertools.pairwise(ks))
-    assert ks[2] > 1.3 * kmax(loop) and ks[-1] < 20.0
+    assert ks[2] > 1.3 * passive and ks[-1] < 20.0
     assert ks[-1] == pytest.approx(20.0, rel=1e-3)
 
 
@@ -236,16 +239,26 @@ def _random_peb(rng):
     return kw, b * 10 ** rng.uniform(-2, 1, 2)   # the sector: 0.01 to 10 times the damping
 
 
-def test_forward_is_a_bound_for_light_devices_in_a_seeded_campaign():
+def _forward_campaign():
+    """The seeded campaign's 6 loops: (loop, sector, a damper pair inside the sector)."""
+    rng = np.random.default_rng(20260513)
+    cases = []
+    for _ in range(6):
+        kw, k = _random_peb(rng)
+        cases.append((kw, k, tuple(rng.uniform(0, 1, 2) * k)))
+    return cases
+
+
+# 3 of the 6 loops by default (tests/lanes.py: part), the other 3 -m campaign
+@pytest.mark.parametrize("rest", PARTS)
+def test_forward_is_a_bound_for_light_devices_in_a_seeded_campaign(rest):
     # dampers at the corners of the sector and one inside; K up to K_max (1 - 1e-5): the
     # light devices move the exact limit by O(1e-6) (measured: the tightest of 40 loops,
     # where nothing attached binds, is 4e-6 above K_max)
-    rng = np.random.default_rng(20260513)
-    for _ in range(6):
-        kw, k = _random_peb(rng)
+    for kw, k, inside in part(_forward_campaign(), 3, rest):
         Km = kmax(peb(**kw), k)
         assert Km >= kmax(peb(**kw)) * (1 - 1e-6)   # bisection to 1e-6 relative
-        for c in ((0.0, 0.0), (k[0], 0.0), (0.0, k[1]), tuple(k), tuple(rng.uniform(0, 1, 2) * k)):
+        for c in ((0.0, 0.0), (k[0], 0.0), (0.0, k[1]), tuple(k), inside):
             for K in (0.3 * Km, 0.8 * Km, Km * (1 - 1e-5)):
                 assert stable(peb(**kw, c=c, K=K)), (kw, k, c, K)
 

@@ -57,6 +57,10 @@ if CHROMIUM is None:
 
 ARGS = ["--no-sandbox", "--disable-gpu", "--disable-background-networking",
         "--disable-component-update", "--disable-sync", "--no-first-run"]
+#: how often a wait asks the page (ms): Playwright's default asks on every animation frame,
+#: which makes the headless chromium draw 60 frames a second for the whole wait (about half
+#: of the browser tests' CPU went to chromium); 50 ms adds at most that to a settle
+POLL_MS = 50
 TIMEOUT_MS = 90_000     # one settle of the page: well under a second when quiet, but the lane runs
 #                         beside other tests on 2 cores (15 s timed out at load 4-6); a hang still fails
 ROOT = paths.ROOT
@@ -125,7 +129,8 @@ def page(browser, server):
 def settle(pg) -> None:
     """Wait until the page has answered its latest change (no request in flight)."""
     pg.wait_for_function("document.body.dataset.seq && !document.body.dataset.pending"
-                         " && !document.querySelector('.busy')", timeout=TIMEOUT_MS)
+                         " && !document.querySelector('.busy')", timeout=TIMEOUT_MS,
+                         polling=POLL_MS)
 
 
 def open_page(pg, query: str = "") -> None:

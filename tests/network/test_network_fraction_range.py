@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 import pytest
-from tests.lanes import draw
+from tests.lanes import costly, draw, part
 from tests.references import brute_fractional as bf
 
 from hapstab import Device, HapticLoop, SpringDamper, TeleoperationLoop, paper_hve
@@ -42,12 +42,17 @@ def _case(seed: int):
     return loop, (m + om, b + ob, ok, T, B), lo * T, hi * T
 
 
-def _check(seed: int) -> None:
+def _check(seed: int, rest: bool | None = None) -> None:
     loop, phys, lo, hi = _case(seed)
     res = fractional_range_critical_stiffness(loop, lo, hi)
     T = loop.period
-    # the grid, and the reported worst delay among its points (so the grid resolves it)
-    delays = np.append(np.linspace(lo / T, hi / T, GRID), res.worst_delay_samples)
+    # the grid, and the reported worst delay among its points (so the grid resolves it);
+    # with ``rest`` False / True only its evenly spaced quarter / the other points (see
+    # `_grid_parts`: the two lanes together check every point of the grid once)
+    grid = np.linspace(lo / T, hi / T, GRID)
+    if rest is not None:
+        grid = grid[part(range(GRID), GRID // 4, rest)]
+    delays = np.append(grid, res.worst_delay_samples)
     kref = bf.kmax_many(phys[0], phys[1], phys[2], T, delays, phys[4])
     assert np.all(np.isfinite(kref))
     assert res.critical_stiffness <= kref.min() * (1 + REF_TOL)       # never above
@@ -61,9 +66,28 @@ def _check(seed: int) -> None:
     assert res.certified or (res.critical_stiffness == 0.0 and kref.min() <= BELOW_SCAN)
 
 
-@pytest.mark.parametrize("seed", draw(range(50), 2))
-def test_range_minimum_against_the_brute_force_grid(seed):
-    _check(seed)
+def _grid_parts(seeds, reduced):
+    """``draw(seeds, reduced)`` with the default lane's seeds' grids split in two: the
+    brute force's 1000 delays are ~95 % of such a test (4-5 s), so the default lane checks
+    an evenly spaced quarter of them (ends included, spacing < 0.02 sample) plus the
+    reported worst delay: the same questions (never above any grid point, within 1e-6 of
+    the grid's minimum, the upper bound at the worst delay); ``-m campaign`` checks the
+    other 750 points (the ">= 1000 delays per range" of the acceptance: both lanes
+    together, every point once). The other seeds keep their whole grid in one test."""
+    out = []
+    for p in draw(seeds, reduced):
+        seed, = p.values
+        if p.marks:
+            out.append(pytest.param(seed, None, marks=p.marks, id=str(seed)))
+        else:
+            out += [pytest.param(seed, False, id=f"{seed}-reduced"),
+                    costly(seed, True, id=f"{seed}-rest")]
+    return out
+
+
+@pytest.mark.parametrize("seed, rest", _grid_parts(range(50), 2))
+def test_range_minimum_against_the_brute_force_grid(seed, rest):
+    _check(seed, rest)
 
 
 def test_uncertain_when_the_budget_cannot_close_the_gap():

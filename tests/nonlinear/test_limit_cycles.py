@@ -44,14 +44,16 @@ TOL = 0.10        # the acceptance: amplitude and frequency within 10 % of the s
 def test_dual_input_describing_function_against_a_fourier_integral(quantizer):
     rng = np.random.default_rng(7)
     phi = np.linspace(0, 2 * math.pi, 2_000_001)[:-1]
+    # sin and cos of the 2e6 points once, not three times per draw (the same arrays)
+    sin, cos = np.sin(phi), np.cos(phi)
     for _ in range(12):
         x0, A = rng.uniform(-3, 3), 10 ** rng.uniform(-1, 1)
-        q = quantize(x0 + A * np.sin(phi), 1.0, quantizer)
+        q = quantize(x0 + A * sin, 1.0, quantizer)
         n1, mean = quantizer_describing_function(A, x0, 1.0, quantizer)
         # a Riemann sum on 2e6 points: each jump costs <= 1 cell, ~1e-6 per threshold
-        assert abs(n1 - 2 * np.mean(q * np.sin(phi)) / A) < 1e-5 * (1 + 2 * A)
+        assert abs(n1 - 2 * np.mean(q * sin) / A) < 1e-5 * (1 + 2 * A)
         assert abs(mean - np.mean(q)) < 1e-5 * (1 + 2 * A)
-        assert abs(np.mean(q * np.cos(phi))) < 1e-5 * (1 + 2 * A)   # memoryless: no phase
+        assert abs(np.mean(q * cos)) < 1e-5 * (1 + 2 * A)   # memoryless: no phase
 
 
 def test_textbook_quantiser_and_relay():
@@ -75,11 +77,15 @@ def test_textbook_quantiser_and_relay():
 def test_staircase_harmonics_against_an_fft():
     rng = np.random.default_rng(3)
     M = 1 << 20
-    phi = np.arange(M) * 2 * math.pi / M
     for _ in range(6):
         X = (rng.normal(size=7) + 1j * rng.normal(size=7)) / np.arange(1, 8) ** 2
         x0 = rng.uniform(-1, 1)
-        x = x0 + (np.exp(1j * np.outer(phi, np.arange(1, 8))) @ X).real
+        # x = x0 + Re sum_k X_k e^{jk phi} on the M-point grid phi = 2 pi i / M, by the
+        # inverse FFT (the same samples to 3e-15, measured; the input, not what is tested)
+        # rather than an M x 7 matrix of exponentials (0.5 s a draw)
+        spec = np.zeros(M // 2 + 1, complex)
+        spec[0], spec[1:8] = x0 * M, X * (M / 2)
+        x = np.fft.irfft(spec, M)
         levels = np.arange(math.floor(x.min() / 0.37) - 1, math.ceil(x.max() / 0.37) + 2) * 0.37
         q0, Q = staircase_harmonics(x0, X, levels,
                                     lambda v: 0.37 * np.floor(np.asarray(v) / 0.37))
@@ -127,11 +133,12 @@ def _quantised_case(seed, ratio_range):
     return loop.with_stiffness(ratio * km.critical_stiffness), km.crossing_frequency_hz, q, rng
 
 
-def _check_cycles(loop, pred, f_x, q, rest=0.0, friction=False):
-    """Every trusted stable cycle, simulated from its peak: (errors in A and f, how)."""
+def _check_cycles(loop, pred, f_x, q, rest=0.0, friction=False, duration=None):
+    """Every trusted stable cycle, simulated from its peak (for ``duration`` s, by default
+    100 of its periods, 60 s at least): (errors in A and f, how)."""
     out = []
     for c in [c for c in pred.cycles if c.stable and c.trusted][:3]:
-        dur = max(60.0, 100 / c.frequency_hz)
+        dur = duration or max(60.0, 100 / c.frequency_hz)
         res = h.simulate(loop, dur, initial_position=c.offset_m + c.amplitude_m,
                          rest_position=rest, resolution=D if pred.resolution_m else None,
                          quantizer=q)
@@ -148,7 +155,9 @@ FAST_CYCLES = [1, 4, 7]
 SLOW_CYCLES = list(range(100, 140))
 
 
-@pytest.mark.parametrize("seed", [s if s != 7 else costly(s, id="7") for s in FAST_CYCLES]
+#: seed 4 (a nearest-step encoder) in the default lane; 1 and 7 (floor encoders, their
+#: cycles simulated longer) in `make test-campaign`
+@pytest.mark.parametrize("seed", [s if s == 4 else costly(s, id=str(s)) for s in FAST_CYCLES]
                          + [pytest.param(s, marks=pytest.mark.slow) for s in SLOW_CYCLES])
 def test_quantisation_cycles_match_the_simulator(seed):
     loop, f_x, q, _ = _quantised_case(seed, (0.75, 1.2))
@@ -156,8 +165,11 @@ def test_quantisation_cycles_match_the_simulator(seed):
     _check_cycles(loop, pred, f_x, q)
 
 
-FAST_NONE = [2, 5]
-SLOW_NONE = list(range(200, 230))
+#: seed 209 (nearest encoder) is a draw of the slow lane's whose verdict is "no limit
+#: cycle predicted": the default lane's case that simulates the claim (2 predicts chatter
+#: and 5 a cycle, so neither reaches it)
+FAST_NONE = [2, 5, 209]
+SLOW_NONE = [s for s in range(200, 230) if s not in FAST_NONE]
 
 
 def no_cycle(res):
@@ -170,8 +182,11 @@ def no_cycle(res):
     return e[-1] <= 1e-9 * max(e) or (e[-1] < 0.95 * e[-2] < 0.95 ** 2 * e[-3])
 
 
-@pytest.mark.parametrize("seed", FAST_NONE + [pytest.param(s, marks=pytest.mark.slow)
-                                              for s in SLOW_NONE])
+#: seed 5 (K = 0.6 K_max: a cycle is predicted, and checked as in
+#: test_quantisation_cycles_match_the_simulator, whose cheaper seed 4 asks the same in the
+#: default lane) in `make test-campaign`
+@pytest.mark.parametrize("seed", [s if s != 5 else costly(s, id="5") for s in FAST_NONE]
+                         + [pytest.param(s, marks=pytest.mark.slow) for s in SLOW_NONE])
 def test_no_cycle_predicted_means_none_simulated(seed):
     loop, f_x, q, rng = _quantised_case(seed, (0.3, 0.75))
     rest = D * (round(rng.uniform(-3, 3)) + rng.uniform(0.2, 0.8))    # inside a step
@@ -208,14 +223,26 @@ def test_the_paper_loop_documented_cases():
     assert pred.verdict == "no limit cycle predicted" and "gain margin" in pred.conditions
 
 
-def test_chatter_where_the_device_cannot_rest():
+#: relaxed 0.05 steps below the line in `make test-campaign`: 0.2 steps below asks the same
+#: (no rest anywhere: chatter predicted, a sub-step cycle simulated), its cycle in a
+#: period of 1.8 s against 3.0 s
+@pytest.mark.parametrize("rest", [pytest.param(-0.2 * D, id="-0.2D"),
+                                  costly(-0.05 * D, id="-0.05D")])
+def test_chatter_where_the_device_cannot_rest(rest):
     # a floor encoder, the operator's spring relaxed just below a line: no rest anywhere
     loop = _quantised_case(2, (0.3, 0.78))[0]      # msd operator, K = 0.39 K_max
-    for rest in (-0.2 * D, -0.05 * D):
-        pred = limit_cycles(loop, resolution_m=D, quantizer="floor", rest_position_m=rest)
-        assert pred.verdict == "chatter" and pred.rests == "nowhere"
-        res = h.simulate(loop, 60.0, initial_position=3 * D, rest_position=rest, resolution=D)
-        assert res.verdict.behaviour == "limit cycle" and res.verdict.amplitude_m < D / 2
+    pred = limit_cycles(loop, resolution_m=D, quantizer="floor", rest_position_m=rest)
+    assert pred.verdict == "chatter" and pred.rests == "nowhere"
+    # 45 s for -0.2 steps (its cycle's period 1.8 s; the verdict's limit cycle, 0.175
+    # steps, is the same to rounding at 36, 40, 45, 50 and 60 s, measured), 60 s for -0.05
+    # (3.0 s: 8 periods in the judged half need it)
+    res = h.simulate(loop, 45.0 if rest == -0.2 * D else 60.0, initial_position=3 * D,
+                     rest_position=rest, resolution=D)
+    assert res.verdict.behaviour == "limit cycle" and res.verdict.amplitude_m < D / 2
+
+
+def test_no_chatter_where_the_device_can_rest():
+    loop = _quantised_case(2, (0.3, 0.78))[0]      # the loop above
     # relaxed on the line: it may rest there (this overdamped loop does), not predicted
     pred = limit_cycles(loop, resolution_m=D, quantizer="floor", rest_position_m=0.0)
     assert pred.verdict == "undecided" and pred.rests == "on a line"
@@ -256,7 +283,9 @@ def test_friction_threshold_separates_stopping_from_growing():
     c = pred.cycles[0]
     assert not c.stable and c.trusted
     assert c.amplitude_m == pytest.approx(0.0701, rel=2e-3)     # 4 f_c / (pi c_eq w)
-    below = h.simulate(loop, 60.0, initial_position=0.9 * c.amplitude_m, rest_position=0.0)
+    # 45 s: the run below stops exactly at t = 34.6 s (measured), and a 45 s run still
+    # sees it stopped and at rest for its last 10 s ("settles", as a 60 s run)
+    below = h.simulate(loop, 45.0, initial_position=0.9 * c.amplitude_m, rest_position=0.0)
     above = h.simulate(loop, 30.0, initial_position=1.1 * c.amplitude_m, rest_position=0.0)
     assert _stops(below, c.amplitude_m) and _grows(above, c.amplitude_m)
     # a stable linear loop: friction adds no cycle, and the run stops
@@ -294,7 +323,12 @@ def test_friction_and_quantisation_cycles(ratio, fc):
     loop = base.replace(device=h.Device(0.15, 0.1, coulomb_friction=fc)).with_stiffness(ratio * kmax)
     pred = limit_cycles(loop, resolution_m=D, quantizer="nearest")
     assert pred.verdict == "limit cycle"
-    _check_cycles(loop, pred, 1.33, "nearest", friction=True)
+    # the default lane's case for 40 s (55 periods) instead of 100 periods (73 s; a
+    # stick-slip step costs 5 times a quantised one): started on the predicted cycle, the
+    # run is on it within 15 s (A and f within 0.06 % of the prediction at every length
+    # from 15 s to 73 s, measured, against the 10 % asked)
+    dur = 40.0 if (ratio, fc) == (0.9, 1e-5) else None
+    _check_cycles(loop, pred, 1.33, "nearest", friction=True, duration=dur)
 
 
 # ----------------------------------------------------------------- the interface

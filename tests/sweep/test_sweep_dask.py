@@ -29,18 +29,22 @@ distributed = pytest.importorskip("dask.distributed")
 pytestmark = pytest.mark.xdist_group("sweep-dask")
 
 SRC = str(paths.SRC)
-#: 4 periods x 20 delays of the paper's HVE, K_max, passivity and a verdict: ~2-4 s on one
-#: core, 20 chunks of 4 points (~0.1-0.2 s each)
+#: 4 periods x 10 delays of the paper's HVE, K_max, passivity and a verdict: ~1-2 s on one
+#: core, 10 chunks of 4 points (~0.1 s each). (It was 20 delays, 0..19: the costlier half,
+#: ~1.6 s of CPU in each run of it here; 10 chunks still leave about a second between the
+#: first finished chunk and the last for a stop, polled every 0.02 s.)
 STUDY = '''kind = "hve"
 [sweep]
 quantities = ["kmax", "passivity", "closed-form", "check"]
 chunk = 4
 [sweep.axes]
 period = "1ms:4ms:4"
-delay = "0:19:20"
+delay = "0:9:10"
 [sweep.check]
 stiffness = 20
 '''
+#: the study's points and chunks
+POINTS, CHUNKS = 40, 10
 
 
 @pytest.fixture(autouse=True, scope="module")
@@ -74,7 +78,7 @@ def reference(tmp_path_factory):
                                  "--workers", "1", "--json"])
     assert r.exit_code == 0, r.stderr
     t = rows(d / "out")
-    assert t.column("point_id").to_pylist() == list(range(80))
+    assert t.column("point_id").to_pylist() == list(range(POINTS))
     return d / "s.toml", t
 
 
@@ -88,7 +92,7 @@ def test_a_local_cluster_of_two_processes_gets_exactly_the_single_process_rows(r
     assert r.exit_code == 0, r.stderr
     got = rows(out)
     assert got.equals(ref)                    # every column, bitwise, nulls included
-    assert json.loads(r.stdout)["manifest"]["finished_points"] == 80
+    assert json.loads(r.stdout)["manifest"]["finished_points"] == POINTS
 
 
 def _start(study, out, workers, group=False):
@@ -123,8 +127,14 @@ def _finished(out):
             if n.startswith("chunk-")}
 
 
-@pytest.mark.parametrize("sig, workers, code", [(signal.SIGKILL, 1, -9), (signal.SIGINT, 2, 130)],
-                         ids=["SIGKILL", "SIGINT"])
+# SIGINT (2 workers) -m campaign (tests/lanes.py): the default lane asks its questions of
+# its siblings: a resume computing only the missing chunks and keeping the finished ones
+# of SIGKILL's stop; a Ctrl-C midway of a 2-worker sweep (exit 130, one line, the rows of
+# the resumed run) of test_a_ctrl_c_to_the_whole_process_group_is_one_line[midway], whose
+# SIGINT reaches the sweep as this one's does, and its workers too
+@pytest.mark.parametrize("sig, workers, code", [
+    pytest.param(signal.SIGKILL, 1, -9, id="SIGKILL"),
+    lanes.costly(signal.SIGINT, 2, 130, id="SIGINT")])
 def test_a_stopped_sweep_resumes_with_every_row_once(reference, tmp_path, sig, workers, code):
     study, ref = reference
     out = str(tmp_path / "out")
@@ -138,14 +148,14 @@ def test_a_stopped_sweep_resumes_with_every_row_once(reference, tmp_path, sig, w
     before = _finished(out)
     with open(os.path.join(out, "manifest.json")) as fh:
         m = json.load(fh)
-    assert 0 < len(before) < 20 and m["finished_chunks"] <= len(before)
+    assert 0 < len(before) < CHUNKS and m["finished_chunks"] <= len(before)
     r = CliRunner().invoke(cli, ["sweep", str(study), "--out", out, "--workers", "1", "--json"])
     assert r.exit_code == 0, r.stderr
-    assert json.loads(r.stdout)["computed_chunks"] == 20 - len(before)    # only the missing
+    assert json.loads(r.stdout)["computed_chunks"] == CHUNKS - len(before)    # only the missing
     after = _finished(out)
     assert all(after[n] == t for n, t in before.items())                   # kept, not rewritten
     got = rows(out)
-    assert got.column("point_id").to_pylist() == list(range(80))          # each point once
+    assert got.column("point_id").to_pylist() == list(range(POINTS))          # each point once
     assert got.equals(ref)
     assert not [f for f in os.listdir(out) if f.endswith(".part")]
 
