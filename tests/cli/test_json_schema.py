@@ -46,8 +46,8 @@ RUNS = [
     ("audit", ["audit", "hve", "--friction", "0.005", "--resolution", "1e-4"]),   # + a row
     ("passivity", ["passivity", "hve", "-K", "150", "--friction", "0.005", "--resolution",
                    "1e-4"]),                                 # Abbott-Okamura beside it
-    ("limit-cycle", ["limit-cycle", "hve", "-K", "8", "-n", "10", "--resolution", "1e-4",
-                     "--quantizer", "nearest"]),
+    ("limit-cycle", ["limit-cycle", "hve", "-K", "18", "-n", "4", "--resolution", "1e-4",
+                     "--quantizer", "nearest"]),     # the keys and nulls of -K 8 -n 10, faster
     ("limit-cycle", ["limit-cycle", "hve", "-K", "11.44", "-n", "10", "--friction", "0.01"]),
     ("region", ["region", "hve", "--K", "0:100", "--B", "0:1", "--resolution", "8"]),
     ("best-damping", ["best-damping", "hve"]),
@@ -88,7 +88,7 @@ RUNS = [
     ("kmax-fraction-range", ["kmax", "peb", "--delay-range", "1ms:2ms"]),
     ("kmax-delay-range", ["kmax", "peb", "--delay-range", "1:2"]),
     ("jitter", ["jitter", "hve", "--delay", "1:3", "-B", "0.05"]),
-    ("jitter", ["jitter", "peb", "--delay", "0.5ms:2ms", "--max-length", "2"]),
+    ("jitter", ["jitter", "peb", "--delay", "0.5ms:2ms", "--max-length", "1"]),   # keys of 2
     ("identify", ["identify", "log.csv", "--resolution", "2um"]),
     ("error", ["kmax", "hve", "--delay", "x"]),
     ("error", ["simulate", "hve", "-K", "9", "--duration", "1e9"]),              # budget

@@ -13,6 +13,7 @@ from hapstab.analysis.exact.core import exact_critical_stiffness
 from hapstab.analysis.methods import METHODS, critical_stiffness
 from hapstab.errors import AnalysisError
 from hapstab.paper.reproduce import FIGURES, PAPER_PERIODS, reproduce_figure, write_figure
+from lanes import PARTS, part
 
 
 def read_csv(path):
@@ -29,18 +30,37 @@ def theory(fig, T, n):
     return (h.eq29(lp) if n == 0 else h.eq34(lp)).critical_stiffness
 
 
-@pytest.fixture(scope="module")
-def reports():
-    """The whole paper grid (40 simulation stars) of both figures, once: a few seconds
-    (the CSV test and the stars' 1e-4 test read the same reproductions)."""
-    return {name: reproduce_figure(name) for name in FIGURES}
+#: the paper's periods the default lane reproduces: 1, 4, 7 and 10 ms (16 of the 40 stars,
+#: both ends of the grid and both delays of each figure); the other 6 periods (24 stars) run
+#: in `make test-campaign`, which reproduces the whole default grid (and checks that it is
+#: the paper's 20 rows a figure) and checks its rows at those periods: every star once
+REDUCED_PERIODS = 4
+
+
+@pytest.fixture(scope="module", params=PARTS)
+def reports(request):
+    """The paper grid's part of both figures (see `REDUCED_PERIODS`), once: a few seconds
+    (the CSV test and the stars' 1e-4 test read the same reproductions). Returns the
+    reproductions, the periods whose rows the lane checks and whether the reproductions
+    are the default call's whole grid."""
+    whole = request.param        # the rest: the default call, the whole grid
+    periods = part(PAPER_PERIODS, REDUCED_PERIODS, whole)
+    return ({name: reproduce_figure(name, None if whole else periods) for name in FIGURES},
+            periods, whole)
 
 
 @pytest.fixture(scope="module")
 def full(reports, tmp_path_factory):
-    """The whole paper grid, written."""
+    """The part's reproductions, written."""
     out = tmp_path_factory.mktemp("out")
-    return {name: write_figure(rep, str(out)) for name, rep in reports.items()}
+    reps, periods, whole = reports
+    return {name: write_figure(rep, str(out)) for name, rep in reps.items()}, periods, whole
+
+
+def checked(rows, periods):
+    """The rows at the lane's periods (each lane checks its own stars)."""
+    return [r for r in rows if any(math.isclose(float(r["period_s"]), T, rel_tol=1e-12)
+                                   for T in periods)]
 
 
 def test_paper_grid_is_section_5():
@@ -50,15 +70,19 @@ def test_paper_grid_is_section_5():
 @pytest.mark.xdist_group("reproduce-full")     # `reports` once, not once per xdist worker
 @pytest.mark.parametrize("fig", ["fig5", "fig6"])
 def test_csv_columns_match_library(full, fig):
-    csv_path, png, svg, manifest = full[fig]
+    files, periods, whole = full
+    csv_path, png, svg, manifest = files[fig]
     assert manifest.endswith("manifest.json")
     rows = read_csv(csv_path)
     cols = ["period_s", "delay_samples", "theory", "exact", "simulation"]
     if "circle" in METHODS:
         cols.append("circle")
     assert list(rows[0]) == cols
-    assert len(rows) == 20
+    # the rest's reproduction is the default call: the paper's grid, 20 rows
+    assert len(rows) == (20 if whole else 2 * len(periods))
     assert {int(r["delay_samples"]) for r in rows} == set(FIGURES[fig].delays)
+    rows = checked(rows, periods)
+    assert len(rows) == 2 * len(periods)
     make = h.paper_hve if fig == "fig5" else h.paper_peb
     for r in rows:
         T, n = float(r["period_s"]), int(r["delay_samples"])
@@ -103,8 +127,11 @@ def test_simulation_stars_within_1e_4_of_exact_on_the_papers_40_points(reports):
     # exact. The bisection brackets K_max to relative width rtol = 1e-4 and every
     # verdict in it is resolved (noise-free linear runs), so the star is below the
     # exact K_max by less than 1e-4
+    reps, periods, whole = reports
     for fig in ("fig5", "fig6"):
-        rep = reports[fig]           # reproduce_figure(fig), the whole grid
-        assert len(rep.rows) == 20
-        for r in rep.rows:
+        rep = reps[fig]              # the lane's part of the paper's grid (`reports`)
+        assert len(rep.rows) == (20 if whole else 2 * len(periods))
+        rows = checked(rep.rows, periods)
+        assert len(rows) == 2 * len(periods)
+        for r in rows:
             assert 0 <= 1 - r["simulation"] / r["exact"] < 1e-4, r

@@ -4,6 +4,7 @@ fractional delay written here from the physics, no hapstab code); the stiffness 
 against the exact stable set; the damping range against the brute force; the Nyquist
 view's critical point; the result protocol and ``check --json``."""
 
+import functools
 import json
 import math
 
@@ -73,6 +74,14 @@ def loop(K=200.0, B=0.5, n=20, f=0.0):
     return HapticLoop(Device(M, B_DEV), SpringDamper(K, B), mass_spring_damper(*OP), T, n, f)
 
 
+@functools.cache
+def margins_200():
+    """``margins(loop(200.0), view=False)``, computed once per process: five tests read
+    the same (frozen) result, ~0.6 s each time; each still compares it to its own
+    reference (the brute force, the exact set, the CLI, a bounded search)."""
+    return hapstab.margins(loop(200.0), view=False)
+
+
 def test_brute_force_agrees_with_hapstab_at_fractional_delays():
     # the reference itself first: its radius against hapstab's at a few fractional delays
     # (1e-9: two eigenvalue solvers of ~25 x 25 matrices of norm ~1)
@@ -84,7 +93,7 @@ def test_brute_force_agrees_with_hapstab_at_fractional_delays():
 @pytest.mark.parametrize("K,B,n,f", [(200.0, 0.5, 20, 0.0), (400.0, 2.0, 7, 0.3)])
 def test_delay_margin_brackets_exact_kmax_and_matches_brute_force(K, B, n, f):
     lp = loop(K, B, n, f)
-    m = hapstab.margins(lp, view=False)
+    m = margins_200() if lp == loop() else hapstab.margins(lp, view=False)
     dm = m.delay_margin_samples
     assert m.delay_unstable_samples is not None and 0 < dm < m.delay_unstable_samples
     # the bracket is 0.25 / 2^14 samples wide
@@ -105,7 +114,7 @@ def test_delay_margin_brackets_exact_kmax_and_matches_brute_force(K, B, n, f):
 def test_no_margin_when_unstable_and_stiffness_margin_from_exact_set():
     lp = loop(200.0)
     kmax = hapstab.critical_stiffness(lp)
-    m = hapstab.margins(lp, view=False)
+    m = margins_200()
     lo, hi = m.stiffness_interval
     assert (lo, hi) == tuple(kmax.stable_intervals[0])
     assert math.isclose(m.stiffness_margin, kmax.critical_stiffness / 200.0)
@@ -115,7 +124,7 @@ def test_no_margin_when_unstable_and_stiffness_margin_from_exact_set():
 
 
 def test_damping_range_against_brute_force():
-    m = hapstab.margins(loop(200.0, 0.5, 20), view=False)
+    m = margins_200()                                    # loop(200.0, 0.5, 20)
     lo, hi = m.damping_interval
     # the ends are stable, a little beyond is not (brute force; 1e-3 N*s/m is wider than
     # the bisection's bracket: 2^k 1e-3 m/T / 8 / 2^10 ~ 1e-4 N*s/m here)
@@ -165,7 +174,7 @@ def test_check_json_has_the_delay_margin():
                                  "200", "-B", "0.5", "--json"])
     assert r.exit_code == 0, r.output
     d = json.loads(r.output)
-    m = hapstab.margins(loop(200.0), view=False)
+    m = margins_200()
     assert d["delay_margin_s"] == pytest.approx(m.delay_margin_s, rel=1e-12)
     assert d["verdict"] == "stable" and "spectral_radius" in d
     assert certified_stable(hapstab.stability(loop(200.0)))
@@ -187,7 +196,7 @@ def test_a_time_bound_cuts_the_delay_search_and_says_so():
     from hapstab.models.variations import extra_delay
     assert certified_stable(hapstab.stability(extra_delay(slow, m.delay_margin_samples)))
     # a search that ends before the bound is the whole search, unchanged
-    whole = hapstab.margins(loop(200.0), view=False)
+    whole = margins_200()
     bounded = hapstab.margins(loop(200.0), view=False, max_seconds=600)
     assert bounded.delay_margin_samples == whole.delay_margin_samples
     assert "stopped" not in bounded.reason

@@ -43,6 +43,7 @@ for _module, _why in (("starlette", "the explorer needs starlette: pip install '
 import uvicorn  # noqa: E402 - after the checks above
 from playwright import sync_api  # noqa: E402 - after the checks above
 
+import lanes  # noqa: E402 - after the checks above
 import paths  # noqa: E402 - after the checks above
 from hapstab.cli.main import cli  # noqa: E402 - after the checks above
 from hapstab.explorer.app import create_app  # noqa: E402 - after the checks above
@@ -169,8 +170,11 @@ def test_default_kmax_is_the_clis(page):
 
 
 def test_delay_moves_kmax_to_the_clis_value(page):
-    open_page(page)
-    before = kmax_shown(page)
+    # lanes: the page opens refused (delay -1: answered 422 before any analysis) instead of
+    # computing the default page first; the K_max the delay moves from is the default
+    # page's, which test_default_kmax_is_the_clis shows to be the CLI's
+    open_page(page, "?delay=-1")
+    before = cli_json("kmax", "hve", "--json")["critical_stiffness"]
     set_field(page, "delay", "10")
     after = kmax_shown(page)
     assert after == cli_json("kmax", "hve", "-n", "10", "--json")["critical_stiffness"]
@@ -189,13 +193,26 @@ def test_delay_moves_kmax_to_the_clis_value(page):
 
 
 def test_peb_kmax_is_the_clis(page):
-    open_page(page)
+    # lanes: the HVE page the switch starts from is refused at once (mass -1: its commands
+    # answer 422 before any analysis), so the PEB page is the one computed (the default HVE
+    # page cost a quarter of it); the switch drops the mass PEB has not (asserted below)
+    open_page(page, "?mass=-1")
     page.click('#kind label:has(input[value="peb"])')
     settle(page)
     assert kmax_shown(page) == cli_json("kmax", "peb", "--json")["critical_stiffness"]
     assert page.locator("#f-master-mass").is_visible() and page.locator("#f-mass").count() == 0
-    set_field(page, "delay", "4")
-    assert kmax_shown(page) == cli_json("kmax", "peb", "-n", "4", "--json")["critical_stiffness"]
+    assert "kind=peb" in page.url
+
+
+# lanes: a second PEB computation (~4x an HVE page) for a delay typed on the PEB page; the
+# same field typed on the HVE page (test_delay_moves_kmax_to_the_clis_value, the same form
+# code) asks it in the default lane, this PEB case under -m campaign
+@pytest.mark.parametrize("delay", [lanes.costly("4", id="n4")])
+def test_a_delay_typed_on_the_peb_page_is_the_clis(page, delay):
+    open_page(page, "?kind=peb")
+    set_field(page, "delay", delay)
+    assert kmax_shown(page) == cli_json("kmax", "peb", "-n", delay, "--json")[
+        "critical_stiffness"]
     assert "kind=peb" in page.url
 
 
@@ -217,7 +234,11 @@ def test_negative_mass_shows_the_librarys_message_then_recovers(page):
 
 
 def test_text_in_a_number_field_and_an_absurd_delay(page):
-    open_page(page)
+    # lanes: the page opens refused (damping -1: answered 422 before any analysis) instead of
+    # computing the default page first; the text typed over it gets its own line below, and
+    # the recovery (0.1) is still the one page computed
+    open_page(page, "?damping=-1")
+    assert field_message(page, "damping") == cli_error("kmax", "hve", "--damping", "-1")
     set_field(page, "damping", "abc")
     assert field_message(page, "damping") == cli_error("kmax", "hve", "--damping", "abc")
     set_field(page, "damping", "0.1")
@@ -242,14 +263,23 @@ def test_url_restores_the_view(page):
     assert page.get_attribute("#verdict", "data-value") == "stable"      # 200 < 286.3 N/m
 
 
-def test_copy_as_cli_reproduces_kmax(page):
-    open_page(page, "?kind=peb&delay=3&virtual-damping=0.01&environment=msd%3A0.1%2C1%2C300")
+@pytest.mark.parametrize("kind, query", [
+    # the page's copy is built the same for both kinds (optionsFor + /api/v1/code); the PEB
+    # page with its environment cost ~7 s of the server's CPU, the HVE one ~2 s: lanes, the
+    # HVE case in the default lane (an impedance given as text, a delay, a B), PEB on demand
+    pytest.param("hve", "?kind=hve&delay=3&virtual-damping=0.01&operator=msd%3A0.1%2C1%2C300",
+                 id="hve"),
+    lanes.costly("peb", "?kind=peb&delay=3&virtual-damping=0.01&environment=msd%3A0.1%2C1%2C300",
+                 id="peb"),
+])
+def test_copy_as_cli_reproduces_kmax(page, kind, query):
+    open_page(page, query)
     page.click("#copy-cli")
     page.wait_for_function("document.querySelector('#code').value.startsWith('hapstab ')",
                            timeout=TIMEOUT_MS)
     line = page.input_value("#code")
     argv = shlex.split(line)
-    assert argv[:3] == ["hapstab", "kmax", "peb"]
+    assert argv[:3] == ["hapstab", "kmax", kind]
     argv = [a for a in argv[1:] if a != "--json"] + ["--json"]
     assert cli_json(*argv)["critical_stiffness"] == kmax_shown(page)
 
@@ -279,6 +309,11 @@ def test_four_plots_drawn_with_the_region_marker(page):
     page.screenshot(path=str(artifacts() / "explorer.png"), full_page=True)
     assert float(page.get_attribute("#plot-region", "data-marker-x")) == 0.0
     assert float(page.get_attribute("#plot-region", "data-marker-y")) == 8.0
+    # lanes: the network card's three questions emptied first (no request: each says what
+    # to give), else the change of B asks all three again (~4.6 s of the server's CPU, as
+    # much as the rest of the test) for an answer this test does not read
+    for channel in ("_range", "_jitter", "_loss", "_burst"):
+        set_field(page, channel, "")
     set_field(page, "virtual-damping", "0.05")      # the marker follows (K, B)
     assert float(page.get_attribute("#plot-region", "data-marker-x")) == 0.05
     assert float(page.get_attribute("#plot-region", "data-marker-y")) == 8.0

@@ -50,12 +50,14 @@ def test_refusals_are_one_line_and_exit_2(args, words):
 def test_kmax_delay_range_is_the_librarys():
     from hapstab.analysis.network import fractional_range_critical_stiffness
 
-    r = _run("kmax", "hve", "--delay-range", "5ms:15ms", "--json")
+    # 5-8 ms (was 5-15 ms, computed twice: by the command and here, 1.2 s each): the
+    # command's answer is still the library's bit for bit at a window's worst end
+    r = _run("kmax", "hve", "--delay-range", "5ms:8ms", "--json")
     assert r.exit_code == 0, r.stderr
     d = json.loads(r.stdout)
-    want = fractional_range_critical_stiffness(paper_hve(), 5e-3, 15e-3)
+    want = fractional_range_critical_stiffness(paper_hve(), 5e-3, 8e-3)
     assert d["critical_stiffness"] == want.critical_stiffness
-    assert d["worst_delay_samples"] == pytest.approx(15) and d["fractional"] and d["certified"]
+    assert d["worst_delay_samples"] == pytest.approx(8) and d["fractional"] and d["certified"]
     r = _run("kmax", "hve", "--delay-range", "5ms:6ms")
     assert r.exit_code == 0 and "proved enclosure" in r.stdout, r.stderr
     r = _run("kmax", "peb", "--delay-range", "1:3", "--json")

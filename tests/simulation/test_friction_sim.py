@@ -11,6 +11,7 @@ import pytest
 from click.testing import CliRunner
 
 import hapstab as h
+import lanes
 from hapstab.cli.main import cli
 from hapstab.errors import ModelError
 from hapstab.simulation.run import simulate
@@ -267,9 +268,20 @@ def _check_peb(seed):
     return int((res.velocity[1:] == 0).sum())
 
 
-def test_campaign_against_the_event_driven_reference():
-    stuck = [_check_hve(s) for s in range(5)] + [_check_peb(s) for s in range(3)]
-    assert sum(s > 0 for s in stuck) >= 3, stuck        # the campaign does stick and slip
+#: the short campaign's cases: (check, seed); the ones that stick and slip (measured: HVE
+#: seed 4 sticks 391 samples, PEB 0 and 1 stick 19 and 63; the other five never stick)
+_STICKING = [(_check_hve, 4), (_check_peb, 0), (_check_peb, 1)]
+_SLIDING = [(_check_hve, s) for s in range(4)] + [(_check_peb, 2)]
+
+
+@pytest.mark.parametrize("rest", lanes.PARTS)
+def test_campaign_against_the_event_driven_reference(rest):
+    # the default lane the three cases that stick and slip (the events the reference is
+    # for, both loops; 1.3 of the campaign's 3 s), -m campaign the five that only slide
+    # (tests/lanes.py): together the same 8 cases, each checked against the reference
+    stuck = [check(s) for check, s in (_SLIDING if rest else _STICKING)]
+    if not rest:
+        assert sum(s > 0 for s in stuck) >= 3, stuck    # the campaign does stick and slip
 
 
 @pytest.mark.slow
