@@ -117,3 +117,39 @@ def part(cases: Sequence[Any], reduced: int, rest: bool) -> list[Any]:
 #: ``@pytest.mark.parametrize("rest", PARTS)``: the reduced part of a draw in the default
 #: lane, the rest marked ``campaign`` (see `part`)
 PARTS = draw([False, True], 1, ids=lambda rest: "rest" if rest else "reduced")
+
+
+def part_groups(cases: Sequence[Any], keys: Sequence[Any], reduced: int, rest: bool,
+                also: Sequence[int] = ()) -> list[Any]:
+    """`part` for a draw whose cases act on each other in one call (the batched exact
+    core: the loops sharing a structure are one batch): whole groups of the cases with
+    equal ``keys`` go to one lane, so every batch of the whole draw's call is one lane's
+    batch. The default lane checks ``reduced`` evenly spaced groups of more than one case
+    (and the groups of ``also``); with ``rest``, the other groups and the cases alone in
+    theirs. Parametrize with :data:`PARTS`, as for `part`.
+
+    Parameters
+    ----------
+    cases : sequence
+        The whole draw, built the same way in both lanes.
+    keys : sequence
+        Each case's group (its batch's key; a unique value for a case that has none).
+    reduced : int
+        How many groups of more than one case the default lane checks.
+    rest : bool
+        The other cases instead.
+    also : sequence of int
+        Cases whose group (whole) the default lane checks too (a kind to keep there).
+
+    Returns
+    -------
+    list
+        The lane's cases, in the draw's order.
+    """
+    order: list[Any] = []
+    for k in keys:
+        if k not in order:
+            order.append(k)
+    shared = [k for k in order if list(keys).count(k) > 1]
+    chosen = {shared[i] for i in reduced_indices(len(shared), reduced)} | {keys[i] for i in also}
+    return [c for c, k in zip(cases, keys, strict=True) if (k in chosen) != rest]

@@ -23,7 +23,7 @@ import hapstab as h
 from hapstab.analysis.exact import many
 from hapstab.analysis.exact.many import BATCH, critical_stiffness_many
 from hapstab.errors import AnalysisError, ArgumentTypeError, HapstabError
-from lanes import PARTS, part
+from lanes import PARTS, part_groups
 from references import campaign
 from references.mixed import mixed_loops, undamped_loops
 
@@ -52,6 +52,17 @@ def _same(got, want) -> str:
 
 def _nan(x) -> bool:
     return isinstance(x, float) and math.isnan(x)
+
+
+def _keys(loops):
+    """Each loop's batch (its structure's key; a refused loop alone in its own)."""
+    out = []
+    for i, lp in enumerate(loops):
+        try:
+            out.append(many.plan_response(lp).key())
+        except HapstabError:
+            out.append(("refused", i))
+    return out
 
 
 def _batched_part(loops, rest, also=()):
@@ -105,12 +116,14 @@ def test_one_structure_many_numbers_equals_the_single_core():
     _check_equal(loops)
 
 
-@pytest.mark.parametrize("rest", PARTS)     # 15 of the 60 loops by default, the rest -m campaign
+@pytest.mark.parametrize("rest", PARTS)     # 4 of the draw's 13 batches by default (whole)
 def test_marginal_and_uncertain_verdicts_equal_the_single_core(rest):
     # (nearly) undamped loops: "marginal for K -> 0+" and K-intervals the numerics
-    # cannot decide, batched with loops of the same structure that are decided (the
-    # default lane's 15: 5 of them unstable as K -> 0+, two batches of 2 and 3)
-    loops = part(undamped_loops(60, seed=1), 15, rest)
+    # cannot decide, batched with loops of the same structure that are decided. The
+    # default lane: 4 of the 13 batches of the whole draw's call, whole (lanes.part_groups:
+    # every batch is one lane's), the other batches and the loops alone -m campaign
+    full = undamped_loops(60, seed=1)
+    loops = part_groups(full, _keys(full), 4, rest)
     got = critical_stiffness_many(loops, errors="return")
     marginal = [r for r in got if r.reason.startswith("marginal for K -> 0+")]
     uncertain = [r for r in got if r.details["uncertain_intervals"] and r not in marginal]
@@ -295,9 +308,13 @@ def test_memory_of_one_full_batch(monkeypatch):
 
 
 # -------------------------------------------------------- against the brute force
-@pytest.mark.parametrize("rest", PARTS)     # 6 of the 12 by default, the rest -m campaign
+@pytest.mark.parametrize("rest", PARTS)     # the draw's 2 batches by default, the rest -m campaign
 def test_batched_answers_pass_the_brute_force_campaign(monkeypatch, rest):
-    scns = part([campaign.scenario(i, max_delay=12) for i in range(300, 312)], 6, rest)
+    # the default lane: the scenarios batched together in the whole draw's call (302 and
+    # 303, 301 and 305: lanes.part_groups), the 8 alone in their batches -m campaign
+    every = [campaign.scenario(i, max_delay=12) for i in range(300, 312)]
+    keys = _keys([s.hapstab_loop() for s in every])
+    scns = part_groups(every, keys, 2, rest)
     loops = [s.hapstab_loop() for s in scns]
     got = critical_stiffness_many(loops)
     table = list(zip(loops, got, strict=True))

@@ -23,7 +23,7 @@ from hapstab.errors import HapstabError
 from hapstab.models.controllers import AffineController, FilteredSpringDamper
 from hapstab.models.fourchannel import FourChannelLoop
 from hapstab.models.parts import Impedance
-from lanes import PARTS, part
+from lanes import PARTS, part_groups, reduced_indices
 
 
 def _single(loop):
@@ -52,6 +52,19 @@ def _check(loops) -> None:
         assert not bad, f"{len(bad)} differ; first: loop {bad[0][0]}: {bad[0][1]}"
 
 
+def _lane(loops, groups, rest, also=()):
+    """The lane's loops: ``groups`` of the whole draw's batches (the loops sharing a
+    structure), whole (lanes.part_groups: every batch of the whole call is one lane's);
+    with ``rest`` the other batches and the loops alone in theirs."""
+    keys = []
+    for i, lp in enumerate(loops):
+        try:
+            keys.append(plan_response(lp).key())
+        except HapstabError:
+            keys.append(("refused", i))
+    return part_groups(loops, keys, groups, rest, also)
+
+
 def _hve(rng, ctrl, op="spring:200", frac=0.0, n=2, dev_b=None):
     m = float(10 ** rng.uniform(-1.5, 0.5))
     b = float(10 ** rng.uniform(-3, 0)) if dev_b is None else dev_b
@@ -64,7 +77,8 @@ Z1 = Impedance((1.0, 10.0), (1.0, 50.0))                      # 1 - 40/(s + 50)
 Z2 = Impedance((2.0, 3.0, 40.0), (1.0, 30.0, 200.0))          # 2 + rest of order 2
 
 
-@pytest.mark.parametrize("rest", PARTS)     # 30 of the 60 loops by default, the rest -m campaign
+# 7 of the draw's 13 batches by default (15 loops), whole; the other 45 loops -m campaign
+@pytest.mark.parametrize("rest", PARTS)
 def test_hve_options_differing_in_one_structural_thing_equal_the_single_core(rest):
     rng = np.random.default_rng(16_21)
     ctrls = [h.SpringDamper(1, 0.02), h.SpringDamper(1, -0.001), h.SpringDamper(1, 0.0),
@@ -89,11 +103,14 @@ def test_hve_options_differing_in_one_structural_thing_equal_the_single_core(res
     for k in (1e-15, 1e-13, 0.0):
         loops += [h.HapticLoop(h.Device(1.0, 0.01), h.SpringDamper(1, 0.01), f"spring:{k:g}",
                                1e-3, n) for n in (1, 2)]
-    _check(part(loops, 30, rest))
+    _check(_lane(loops, 7, rest))
 
 
-# 10 of the 81 loops by default (every kind, every slave controller and both ends, free and
-# springs, still among them, and the refused one), the rest -m campaign
+# 3 of the draw's 16 batches by default, whole (a batch is one kind's three plain
+# spring-damper slaves, with or without the environment): equal delays with springs at both
+# ends (loop 1's), a fractional forward delay (20's), position and force scaling (50's),
+# ~1.3 s of the batches' 0.1-2.7 s; the other 13 batches, the loops alone in theirs (the
+# filtered slaves) and the refused one -m campaign
 @pytest.mark.parametrize("rest", PARTS)
 def test_teleoperators_differing_in_one_structural_thing_equal_the_single_core(rest):
     rng = np.random.default_rng(16_22)
@@ -119,11 +136,12 @@ def test_teleoperators_differing_in_one_structural_thing_equal_the_single_core(r
     # master stiffness 0 with the slave's not (refused), next to accepted neighbours
     loops.append(h.TeleoperationLoop(dev(), dev(), h.SpringDamper(0, 0.01), h.SpringDamper(1, 0.01),
                                      None, None, 1e-3, 2))
-    _check(part(loops, 10, rest))
+    _check(_lane(loops, 0, rest, also=[1, 20, 50]))
 
 
-# 7 of the 30 loops by default (every gain set, both slave dampers and the three
-# master-from-slave channels still among them), the rest -m campaign
+# the draw's one batch of two loops by default (whole) and 7 evenly spaced loops, one of
+# them in that batch (every gain set, both slave dampers and the three master-from-slave
+# channels among them): 8 loops; the other 22 -m campaign
 @pytest.mark.parametrize("rest", PARTS)
 def test_four_channel_gains_and_dampers_equal_the_single_core(rest):
     rng = np.random.default_rng(16_23)
@@ -140,7 +158,7 @@ def test_four_channel_gains_and_dampers_equal_the_single_core(rest):
                     "spring:30", "msd:0.05,0.01,300", 1e-3, int(rng.integers(1, 4)),
                     int(rng.integers(1, 4)), master_from_slave=c4, force_to_master=f2m,
                     force_to_slave=f2s, slave_force_feedback=sff, master_force_feedback=mff))
-    _check(part(loops, 7, rest))
+    _check(_lane(loops, 1, rest, also=reduced_indices(len(loops), 7)))
 
 
 def test_structure_keys_separate_what_the_core_treats_as_structure():

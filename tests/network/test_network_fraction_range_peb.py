@@ -163,8 +163,13 @@ def test_uncertain_when_the_budget_cannot_close_the_gap():
     res = fractional_range_critical_stiffness(loop, lo, hi, max_boxes=40)
     assert not res.certified and "uncertain" in res.reason
     T = loop.period
-    kref = _grid(phys, np.linspace(lo / T, hi / T, 200))
+    kref = _grid(phys, np.append(np.linspace(lo / T, hi / T, 200), res.worst_delay_samples))
     assert res.critical_stiffness <= kref.min()
+    # the reported K is 0 (the safe end), so the line above cannot fail here: the
+    # enclosure's upper end must be the brute force's K_max at its worst delay, and no
+    # lower than the grid's minimum (the truth lies between 0 and it)
+    assert kref[-1] == pytest.approx(res.upper_bound, rel=RTOL, abs=BELOW_SCAN)
+    assert res.upper_bound >= kref.min() * (1 - REF_TOL)
 
 
 def test_loops_outside_the_model_are_refused_by_name():
