@@ -153,3 +153,33 @@ def part_groups(cases: Sequence[Any], keys: Sequence[Any], reduced: int, rest: b
     shared = [k for k in order if list(keys).count(k) > 1]
     chosen = {shared[i] for i in reduced_indices(len(shared), reduced)} | {keys[i] for i in also}
     return [c for c, k in zip(cases, keys, strict=True) if (k in chosen) != rest]
+
+
+def draw_split(cases: Iterable[Any], reduced: int, ids: Any = str) -> list[Any]:
+    """``draw(cases, reduced)`` as ``(case, rest)`` parameters, where each of the default
+    lane's cases is itself split in two (a test that checks a large grid per case): its
+    ``rest=False`` part in the default lane, its ``rest=True`` part ``campaign``; the other
+    cases ``rest=None`` (the whole grid) and ``campaign``, as with `draw`.
+
+    Parameters
+    ----------
+    cases : iterable
+        The seeded draw (one value per case).
+    reduced : int
+        How many cases the default lane checks (their reduced parts).
+    ids : callable
+        The test id of a case; the split ones get ``-reduced`` / ``-rest`` after it.
+
+    Returns
+    -------
+    list of pytest.param
+    """
+    out = []
+    for p in draw(cases, reduced):
+        case, = p.values
+        if p.marks:
+            out.append(pytest.param(case, None, marks=p.marks, id=ids(case)))
+        else:
+            out += [pytest.param(case, False, id=f"{ids(case)}-reduced"),
+                    costly(case, True, id=f"{ids(case)}-rest")]
+    return out

@@ -25,7 +25,7 @@ from hapstab.analysis.exact.many import BATCH, critical_stiffness_many
 from hapstab.errors import AnalysisError, ArgumentTypeError, HapstabError
 from lanes import PARTS, part_groups
 from references import campaign
-from references.mixed import mixed_loops, undamped_loops
+from references.mixed import batch_keys, mixed_loops, undamped_loops
 
 
 def _single(loop):
@@ -54,26 +54,6 @@ def _nan(x) -> bool:
     return isinstance(x, float) and math.isnan(x)
 
 
-def _keys(loops):
-    """Each loop's batch (its structure's key; a refused loop alone in its own)."""
-    out = []
-    for i, lp in enumerate(loops):
-        try:
-            out.append(many.plan_response(lp).key())
-        except HapstabError:
-            out.append(("refused", i))
-    return out
-
-
-def _batched_part(loops, rest, also=()):
-    """The default lane's part of a draw: the loops that share their structure with another
-    loop of the draw (the ones batched together, where the rows of a batch meet) and the
-    loops ``also``; with ``rest``, the others (-m campaign: together, every loop once)."""
-    keys = [many.plan_response(lp).key() for lp in loops]
-    keep = {i for i, k in enumerate(keys) if keys.count(k) > 1} | set(also)
-    return [lp for i, lp in enumerate(loops) if (i in keep) != rest]
-
-
 def _check_equal(loops) -> None:
     got = critical_stiffness_many(loops, errors="return")
     assert len(got) == len(loops)
@@ -90,7 +70,7 @@ def test_mixed_structures_in_one_call_equal_the_single_core(rest):
     # first 4-channel loop (the three kinds in one call); the other 32 -m campaign
     loops = mixed_loops(44, seed=1601, most_delay=30)
     first_4ch = next(i for i, lp in enumerate(loops) if type(lp).__name__ == "FourChannelLoop")
-    loops = _batched_part(loops, rest, also=[first_4ch])
+    loops = part_groups(loops, batch_keys(loops), len(loops), rest, also=[first_4ch])
     kinds = {type(lp).__name__ for lp in loops}
     assert kinds == {"HapticLoop", "TeleoperationLoop", "FourChannelLoop"}
     _check_equal(loops)
@@ -102,8 +82,8 @@ def test_campaign_scenarios_equal_the_single_core(rest):
     # The default lane: the 4 that share a structure (two batches: free PEBs, a PEB with
     # an unequal one; an evenly spaced half had one of them) and an HVE (#1); the other
     # 19, each alone in its batch, -m campaign
-    _check_equal(_batched_part([campaign.scenario(i, max_delay=20).hapstab_loop()
-                                for i in range(24)], rest, also=[1]))
+    every = [campaign.scenario(i, max_delay=20).hapstab_loop() for i in range(24)]
+    _check_equal(part_groups(every, batch_keys(every), len(every), rest, also=[1]))
 
 
 def test_one_structure_many_numbers_equals_the_single_core():
@@ -123,7 +103,7 @@ def test_marginal_and_uncertain_verdicts_equal_the_single_core(rest):
     # default lane: 4 of the 13 batches of the whole draw's call, whole (lanes.part_groups:
     # every batch is one lane's), the other batches and the loops alone -m campaign
     full = undamped_loops(60, seed=1)
-    loops = part_groups(full, _keys(full), 4, rest)
+    loops = part_groups(full, batch_keys(full), 4, rest)
     got = critical_stiffness_many(loops, errors="return")
     marginal = [r for r in got if r.reason.startswith("marginal for K -> 0+")]
     uncertain = [r for r in got if r.details["uncertain_intervals"] and r not in marginal]
@@ -313,7 +293,7 @@ def test_batched_answers_pass_the_brute_force_campaign(monkeypatch, rest):
     # the default lane: the scenarios batched together in the whole draw's call (302 and
     # 303, 301 and 305: lanes.part_groups), the 8 alone in their batches -m campaign
     every = [campaign.scenario(i, max_delay=12) for i in range(300, 312)]
-    keys = _keys([s.hapstab_loop() for s in every])
+    keys = batch_keys([s.hapstab_loop() for s in every])
     scns = part_groups(every, keys, 2, rest)
     loops = [s.hapstab_loop() for s in scns]
     got = critical_stiffness_many(loops)

@@ -24,6 +24,7 @@ from hapstab.models.controllers import AffineController, FilteredSpringDamper
 from hapstab.models.fourchannel import FourChannelLoop
 from hapstab.models.parts import Impedance
 from lanes import PARTS, part_groups, reduced_indices
+from references.mixed import batch_keys
 
 
 def _single(loop):
@@ -56,13 +57,7 @@ def _lane(loops, groups, rest, also=()):
     """The lane's loops: ``groups`` of the whole draw's batches (the loops sharing a
     structure), whole (lanes.part_groups: every batch of the whole call is one lane's);
     with ``rest`` the other batches and the loops alone in theirs."""
-    keys = []
-    for i, lp in enumerate(loops):
-        try:
-            keys.append(plan_response(lp).key())
-        except HapstabError:
-            keys.append(("refused", i))
-    return part_groups(loops, keys, groups, rest, also)
+    return part_groups(loops, batch_keys(loops), groups, rest, also)
 
 
 def _hve(rng, ctrl, op="spring:200", frac=0.0, n=2, dev_b=None):

@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 import pytest
-from tests.lanes import costly, draw, part
+from tests.lanes import draw_split, part
 from tests.references import brute_fractional as bf
 
 from hapstab import Device, HapticLoop, SpringDamper, TeleoperationLoop, paper_hve
@@ -66,26 +66,14 @@ def _check(seed: int, rest: bool | None = None) -> None:
     assert res.certified or (res.critical_stiffness == 0.0 and kref.min() <= BELOW_SCAN)
 
 
-def _grid_parts(seeds, reduced):
-    """``draw(seeds, reduced)`` with the default lane's seeds' grids split in two: the
-    brute force's 1000 delays are ~95 % of such a test (4-5 s), so the default lane checks
-    an evenly spaced quarter of them (ends included, spacing < 0.02 sample) plus the
-    reported worst delay: the same questions (never above any grid point, within 1e-6 of
-    the grid's minimum, the upper bound at the worst delay); ``-m campaign`` checks the
-    other 750 points (the ">= 1000 delays per range" of the acceptance: both lanes
-    together, every point once). The other seeds keep their whole grid in one test."""
-    out = []
-    for p in draw(seeds, reduced):
-        seed, = p.values
-        if p.marks:
-            out.append(pytest.param(seed, None, marks=p.marks, id=str(seed)))
-        else:
-            out += [pytest.param(seed, False, id=f"{seed}-reduced"),
-                    costly(seed, True, id=f"{seed}-rest")]
-    return out
-
-
-@pytest.mark.parametrize("seed, rest", _grid_parts(range(50), 2))
+#: the draw's default-lane seeds' grids split in two (`lanes.draw_split`): the
+#: brute force's 1000 delays are ~95 % of such a test (4-5 s), so the default lane checks
+#: an evenly spaced quarter of them (ends included, spacing < 0.02 sample) plus the
+#: reported worst delay: the same questions (never above any grid point, within 1e-6 of
+#: the grid's minimum, the upper bound at the worst delay); ``-m campaign`` checks the
+#: other 750 points (the ">= 1000 delays per range" of the acceptance: both lanes
+#: together, every point once). The other seeds keep their whole grid in one test.
+@pytest.mark.parametrize("seed, rest", draw_split(range(50), 2))
 def test_range_minimum_against_the_brute_force_grid(seed, rest):
     _check(seed, rest)
 

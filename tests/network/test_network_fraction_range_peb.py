@@ -10,7 +10,7 @@ import math
 import numpy as np
 import pytest
 from flint import arb
-from tests.lanes import costly, draw, part
+from tests.lanes import costly, draw_split, part
 from tests.references import brute_fractional_peb as bp
 
 from hapstab import Device, SpringDamper, TeleoperationLoop, paper_peb
@@ -85,26 +85,14 @@ def _check(seed: int, rest: bool | None = None) -> None:
     assert res.certified or (res.critical_stiffness == 0.0 and kref.min() <= BELOW_SCAN)
 
 
-def _grid_parts(seeds, reduced):
-    """``draw(seeds, reduced)`` with the default lane's seeds' grids split in two: the
-    brute force's 1000 delays are ~85 % of such a test (10 s), so the default lane checks
-    an evenly spaced quarter of them (ends included, spacing < 0.01 sample) plus the
-    reported worst delay: the same questions (never above any grid point, within 1e-6 of
-    the grid's minimum, the upper bound at the worst delay); ``-m campaign`` checks the
-    other 750 points (the ">= 1000 delays per range" of the acceptance: both lanes
-    together, every point once). The other seeds keep their whole grid in one test."""
-    out = []
-    for p in draw(seeds, reduced):
-        seed, = p.values
-        if p.marks:
-            out.append(pytest.param(seed, None, marks=p.marks, id=str(seed)))
-        else:
-            out += [pytest.param(seed, False, id=f"{seed}-reduced"),
-                    costly(seed, True, id=f"{seed}-rest")]
-    return out
-
-
-@pytest.mark.parametrize("seed, rest", _grid_parts(range(50), 1))
+#: the draw's default-lane seeds' grids split in two (`lanes.draw_split`): the
+#: brute force's 1000 delays are ~85 % of such a test (10 s), so the default lane checks
+#: an evenly spaced quarter of them (ends included, spacing < 0.01 sample) plus the
+#: reported worst delay: the same questions (never above any grid point, within 1e-6 of
+#: the grid's minimum, the upper bound at the worst delay); ``-m campaign`` checks the
+#: other 750 points (the ">= 1000 delays per range" of the acceptance: both lanes
+#: together, every point once). The other seeds keep their whole grid in one test.
+@pytest.mark.parametrize("seed, rest", draw_split(range(50), 1))
 def test_range_minimum_against_the_brute_force_grid(seed, rest):
     _check(seed, rest)
 

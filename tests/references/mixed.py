@@ -131,3 +131,19 @@ def undamped_loops(count: int, seed: int = SEED + 1) -> list:
                                            h.SpringDamper(1, float(rng.choice([0.0, 1e-5]))), z(), z(),
                                            T, n))
     return out
+
+
+def batch_keys(loops: list) -> list:
+    """Each loop's batch in one ``critical_stiffness_many`` call: its structure's key (the
+    loops sharing one are one batch), a refused loop alone in its own. The split of a
+    batched draw between the test lanes (``lanes.part_groups``) reads it."""
+    from hapstab.engine.frequency import plan_response
+    from hapstab.errors import HapstabError
+
+    out: list = []
+    for i, lp in enumerate(loops):
+        try:
+            out.append(plan_response(lp).key())
+        except HapstabError:
+            out.append(("refused", i))
+    return out
