@@ -12,7 +12,7 @@ import math
 import pytest
 
 import hapstab as h
-from hapstab.analysis.exact import candidates, crossings
+from hapstab.analysis.exact import angle_grid, candidates, crossings
 from hapstab.analysis.exact.crossings import analyse
 from hapstab.engine.frequency import loop_response
 from references import campaign, certified
@@ -103,7 +103,7 @@ def test_the_grid_counts_poles_by_the_argument_principle():
     import numpy as np
     loop = h.paper_hve(delay_samples=10)
     resp = loop_response(loop)
-    th, c = candidates._refined(resp, 0, candidates._grid(resp))
+    th, c = angle_grid.refined(resp, 0, angle_grid.grid(resp))
     s = float(resp.scale[0])
     # below K_max nothing is outside; just above it, one pair
     kmax = h.critical_stiffness(loop).critical_stiffness
@@ -139,20 +139,20 @@ def test_half_turns_is_the_sum_of_the_principal_steps():
 
 @pytest.mark.parametrize("name", ["paper-peb-0", "paper-hve-100", "paper-peb-4"])
 def test_the_grid_evaluated_ahead_is_the_grid_of_the_rounds(name):
-    """candidates._refined evaluates the midpoints of the next halvings ahead (one call
+    """angle_grid.refined evaluates the midpoints of the next halvings ahead (one call
     for several rounds): the grid and its values are those of halving round by round."""
     import numpy as np
     one = loop_response(dict(LOOPS)[name])
-    g = candidates._grid(one)
-    th, c = candidates._refined(one, 0, g)
-    ref_th, ref_c = g, candidates._coef(one, 0, g)[0]
-    for _ in range(candidates.REFINE_ROUNDS):
+    g = angle_grid.grid(one)
+    th, c = angle_grid.refined(one, 0, g)
+    ref_th, ref_c = g, angle_grid.coefficients(one, 0, g)[0]
+    for _ in range(angle_grid.REFINE_ROUNDS):
         with np.errstate(all="ignore"):
             turn = np.max([np.abs(np.angle(x[1:] / x[:-1])) for x in ref_c[:2]], axis=0)
-        j = np.flatnonzero(turn > candidates.MAX_TURN)
+        j = np.flatnonzero(turn > angle_grid.MAX_TURN)
         if not j.size:
             break
-        ref_th, ref_c = candidates._halve(one, 0, ref_th, ref_c, j)
+        ref_th, ref_c = angle_grid.halve(one, 0, ref_th, ref_c, j)
     assert th.size > g.size                    # the grid was refined
     assert np.array_equal(th, ref_th)
     assert all(np.array_equal(a, b) for a, b in zip(c, ref_c, strict=True))
@@ -166,9 +166,70 @@ def test_the_grid_without_derivatives_has_the_same_values(name):
 
     from hapstab.engine.discs import NO_DERIV
     one = loop_response(dict(LOOPS)[name])
-    th = np.concatenate([candidates._grid(one), [0.0, math.pi]])
-    with_d, d = candidates._coef(one, 0, th)
-    alone, nod = candidates._coef(one, 0, th, False)
+    th = np.concatenate([angle_grid.grid(one), [0.0, math.pi]])
+    with_d, d = angle_grid.coefficients(one, 0, th)
+    alone, nod = angle_grid.coefficients(one, 0, th, False)
     # (a term the loop lacks, one port's c_2, is a plain zero jet either way)
     assert nod[0] is NO_DERIV and nod[1] is NO_DERIV and not any(x is NO_DERIV for x in d)
     assert all(np.array_equal(a, b) for a, b in zip(with_d, alone, strict=True))
+
+
+#: Stable windows of K above K_max whose two crossings lie between two points of the
+#: uniform angle grid (one branch leaves the axis's unstable side and comes back): found
+#: by fresh-seed campaigns (HAPSTAB_CAMPAIGN_SEED=20261207 #149, seed 13 #139; session
+#: 15). Before the grid was halved where a branch may dip across the axis
+#: (angle_grid.dips), the grid proposed neither crossing, the gap around them was
+#: counted unstable at one point, and the window was missing from stable_intervals (K_max
+#: right). The windows are the tests' brute force's (closed-loop eigenvalues, scan and
+#: bisection: references.campaign.check), to its 10 printed digits.
+HIDDEN_WINDOWS = [
+    (campaign.Scenario("peb-unequal#149@20261207", "peb-unequal", 0.3024983921343707,
+                       0.003691640103198544, 0.012512559185636842, 12, 0.011337602038617481,
+                       6.814581755414664, 0.006050875336075015, 12, -0.0010719482752083276,
+                       4.251166275167121, "spring:26.7871", "spring:588.739"),
+     (9.687231883, 10.45215544)),
+    (campaign.Scenario("peb#139@13", "peb", 1.1666235519468833, 0.26008306108463697,
+                       0.008877856969614217, 4, 0.00294132470775847, 2.6519028711336743,
+                       0.05445214732721007, 19, 0.00294132470775847, 1.0, "none",
+                       "spring:567.122"),
+     (98.85764388, 107.6343403)),
+]
+
+
+@pytest.mark.parametrize("s,window", HIDDEN_WINDOWS, ids=[s.name for s, _ in HIDDEN_WINDOWS])
+def test_a_window_between_two_grid_points_is_reported(s, window):
+    resp = loop_response(s.hapstab_loop())
+    ss = candidates.candidate_set(resp, 0, True)
+    # the grid itself proposes both crossings (no fallback to the certified search needed)
+    assert ss is not None and len(ss.intervals) == 2, ss
+    got = h.critical_stiffness(s.hapstab_loop()).stable_intervals
+    assert len(got) == 2, got
+    # 1e-9: the brute force's 10 printed digits; the proved ends lie inside the window
+    # by at most the proof's 2^-40 windows
+    assert math.isclose(got[1][0], window[0], rel_tol=1e-9)
+    assert math.isclose(got[1][1], window[1], rel_tol=1e-9)
+    out = campaign.check(s)             # the whole stable set against the brute force
+    assert out.ok, out.report()
+
+
+def test_dips_flag_a_branch_that_crosses_twice_between_two_points():
+    """angle_grid.dips on one branch u(theta) = -c_0 (c_1 = 1): a parabola in Im u
+    that crosses the axis twice between two points (ends on one side) is flagged; the
+    same parabola shifted away from the axis, and a straight branch, are not."""
+    import numpy as np
+    th = np.linspace(0.1, 0.2, 11)
+    one, zero = np.ones_like(th, complex), np.zeros_like(th, complex)
+
+    def flagged(im, dim):
+        u = 5.0 + 1j * im(th)
+        c, d = [-u, one, zero], [-1j * dim(th), zero, zero]
+        return set(angle_grid.dips(th, c, d, False).tolist())
+
+    # 0.2 - 1e4 (t - 0.155)^2 crosses at 0.155 -+ 0.00447, both inside [0.15, 0.16]
+    # (interval 5), whose ends are both at -0.05; shifted down by 1 it stays below
+    # (further out, where the branch moves by more than STEP of itself, the grid is
+    # halved as well: those intervals are not what this asks)
+    par, slope = (lambda t: 0.2 - 1e4 * (t - 0.155) ** 2), (lambda t: -2e4 * (t - 0.155))
+    assert 5 in flagged(par, slope)
+    assert 5 not in flagged(lambda t: par(t) - 1.0, slope)
+    assert not flagged(lambda t: 1.0 + 0.0 * t, lambda t: 0.0 * t)

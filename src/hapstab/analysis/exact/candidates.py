@@ -3,11 +3,12 @@ proof (:mod:`~hapstab.analysis.exact.proof`), in place of the certified float se
 (:mod:`~hapstab.analysis.exact.crossings`) when a proof follows.
 
 A pole is on the unit circle at (theta, K) where det M(e^{j theta}, K) = c_0 + u c_1
-+ u^2 c_2 = 0 with u = K / scale real. On a grid of angles (uniform with
-:data:`POINTS_PER_RATE` points per unit of the phase rate, i.e. about 2 pi / 16 of a
-turn of the delay's phase between points, :data:`LOW_POINTS` geometric points below
-the first -- the low-frequency crossings of fast-sampled loops -- and halved where a
-coefficient turns fast, at lightly damped resonances) the roots u(theta) of det M = 0
++ u^2 c_2 = 0 with u = K / scale real. On a grid of angles
+(:mod:`~hapstab.analysis.exact.angle_grid`: uniform, about 2 pi / 16 of a turn of the
+delay's phase between points, geometric below the first -- the low-frequency
+crossings of fast-sampled loops -- and halved where a coefficient turns fast, at
+lightly damped resonances, and where a branch may cross the axis unseen) the roots
+u(theta) of det M = 0
 are followed branch by branch: one port, u = -c_0 / c_1; two ports, the two roots of
 the quadratic, matched between neighbours by continuity (the two ports of a
 symmetric teleoperator cross at nearly the same angle on different branches, 1e-8
@@ -19,12 +20,21 @@ Each bracket's crossing is refined by Newton's method on (Re, Im) det M = 0 in
 polynomial at theta = 0 and pi. The direction is the sign of Im(F_u / F_theta), as in
 the certified search.
 
-Nothing here is a proof, and nothing needs to be: the proof polishes each candidate
-in balls, excludes every other (theta, K) box and counts the poles outside in every
-gap it claims. A crossing this grid misses leaves a box the exclusion cannot clear
-(reported uncertain) or a count that disagrees with the candidates' (see
-:func:`consistent`); :func:`~hapstab.analysis.exact.crossings.analyse` then runs the
-certified float search instead, so the answer never depends on the grid.
+Nothing here is a proof: the proof polishes each candidate in balls, excludes every
+other (theta, K) box of each gap it claims stable and counts the poles outside there.
+A crossing this grid misses below K_max, or at the end of a stable interval, leaves a
+box the exclusion cannot clear (reported uncertain) or a count that disagrees with
+the candidates' (see :func:`consistent`); a single crossing missed anywhere shifts
+the counts of every gap above it, which the grid's own argument principle compares
+(:func:`_counts_agree`). :func:`~hapstab.analysis.exact.crossings.analyse` then runs
+the certified float search instead. What no count sees is a *pair* missed inside a
+gap counted unstable (a branch leaving the real axis's far side and coming back
+between two grid points: a stable window of K between them); K_max and every
+reported interval stay proved, but the window would be missing. So the grid is also
+halved where a branch's cubic interpolant (values and slopes) may cross the axis
+twice, dips towards it, or the branch moves by a quarter of its size between two
+points (:func:`dips`): on the fresh-seed campaigns' 3,300 loops that leaves no such
+pair missed (7 before it, 2 of them hidden windows).
 """
 
 from __future__ import annotations
@@ -35,25 +45,24 @@ from typing import Any
 
 import numpy as np
 
+from hapstab.analysis.exact.angle_grid import (
+    MAX_TURN,
+    REFINE_ROUNDS,
+    branches,
+    coefficients,
+    dip_refined,
+    grid,
+    halve,
+    refined,
+)
 from hapstab.analysis.exact.boxes import U_HI, U_LO
 from hapstab.analysis.exact.counts import item_stable_set
 from hapstab.analysis.exact.stable_set import StableSet
 from hapstab.engine.frequency import LoopResponse
 from hapstab.errors import AnalysisError
 
-__all__ = ["candidate_set", "consistent", "POINTS_PER_RATE", "LOW_POINTS", "NEWTON_STEPS"]
+__all__ = ["candidate_set", "consistent", "half_turns", "NEWTON_STEPS"]
 
-#: Uniform grid points over [0, pi] per unit of the loop's phase rate (oscillations of
-#: det M over [0, pi]): 16 put 2 pi / 16 of the phase between points, where the
-#: crossing condition changes sign at most once (the expert method's 32 per turn).
-POINTS_PER_RATE = 16
-#: Fewest uniform points (short delays: the plant's resonances still need a grid).
-MIN_POINTS = 1024
-#: Geometric points from THETA_LOW up to the first uniform point: fast-sampled heavy
-#: loops cross at theta ~ omega T down to ~1e-9 rad.
-LOW_POINTS = 120
-#: the lowest angle of that geometric grid, three decades below the lowest crossing seen
-THETA_LOW = 1e-12
 #: Newton steps on a bracket's crossing: from the grid's linear interpolation the
 #: error is ~1e-3 relative; five steps bring it to rounding, and the ball proof's own
 #: Newton polishes it further (a candidate is a starting point, not an answer).
@@ -62,16 +71,6 @@ NEWTON_STEPS = 5
 #: the next would be ~1e-24 (quadratic convergence), below rounding; at a multiple one
 #: the point is still within ~1e-12, far inside SAME, and the ball proof polishes it.
 CONVERGED = 1e-12
-#: Largest turn of a coefficient's argument between grid neighbours (rad) before the
-#: interval is halved, and the most halvings: pi/8 keeps the crossing condition and
-#: the winding resolved; 20 halvings reach 1e-6 of the uniform spacing (a resonance
-#: narrower than that, damping ratio below ~1e-8, is left to the fallback).
-MAX_TURN = math.pi / 8
-REFINE_ROUNDS = 20
-#: Levels of halves below a halved interval whose midpoints are evaluated with it (a
-#: resonance is halved over several rounds: 2 levels, 7 points, serve 3 rounds with one
-#: evaluation, whose cost is its call's, not its points'); not a tolerance.
-LOOKAHEAD = 2
 #: Candidates this close (relative, in u and theta) are one: Newton's steps from two
 #: brackets of the same crossing end ~1e-12 apart; two true crossings this close are
 #: the proof's to separate (it falls back if it cannot).
@@ -92,104 +91,12 @@ FAR_UNSTABLE = 4
 RESIDUAL = 1e-8
 
 
-def _grid(resp: LoopResponse) -> np.ndarray:
-    """The angles (rad/sample), increasing, inside (0, pi)."""
-    m = max(MIN_POINTS, POINTS_PER_RATE * resp.phase_rate)
-    uniform = np.linspace(0.0, math.pi, m + 1)[1:-1]
-    low = np.geomspace(THETA_LOW, uniform[0], LOW_POINTS, endpoint=False)
-    return np.concatenate([low, uniform])
-
-
-def _refined(resp: LoopResponse, i: int, th: np.ndarray) -> tuple[np.ndarray, list]:
-    """The grid, halved where the argument of c_0 or c_1 turns by more than
-    :data:`MAX_TURN` between neighbours (a lightly damped resonance turns by pi over
-    its width, far below the uniform spacing), and the coefficients on it. Not c_2: a
-    two-port loop's is N_0 N_1 (1 - z^-n) k_0 k_1, with exact zeros on the circle
-    across which its argument jumps by pi however fine the grid."""
-    c, _ = _coef(resp, i, th, False)
-    ahead: dict[float, tuple] = {}
-    for _ in range(REFINE_ROUNDS):
-        with np.errstate(all="ignore"):
-            turn = np.zeros(th.size - 1)
-            for x in c[:2]:
-                if np.any(x != 0):
-                    turn = np.maximum(turn, np.abs(np.angle(x[1:] / x[:-1])))
-        j = np.flatnonzero(turn > MAX_TURN)
-        if not j.size:
-            break
-        th, c = _halve(resp, i, th, c, j, ahead)
-    return th, c
-
-
-def _ahead(resp: LoopResponse, i: int, lo: np.ndarray, hi: np.ndarray, ahead: dict) -> list:
-    """c_0..c_2 at the midpoints of [lo, hi], from ``ahead`` (angle: values) where it
-    has them; the others are evaluated with the midpoints of the :data:`LOOKAHEAD`
-    levels of halves below theirs, kept in ``ahead`` for the rounds that halve those
-    (one evaluation for several rounds; the same angles, formed as the rounds form
-    them, and the same values: the grid is the one the rounds alone make)."""
-    mid = 0.5 * (lo + hi)
-    miss = np.array([t not in ahead for t in mid.tolist()], bool)
-    if miss.any():
-        pts, ivs = [mid[miss]], [(lo[miss], mid[miss]), (mid[miss], hi[miss])]
-        for _ in range(LOOKAHEAD):
-            nxt = []
-            for a, b in ivs:
-                m = 0.5 * (a + b)
-                pts.append(m)
-                nxt += [(a, m), (m, b)]
-            ivs = nxt
-        allp = np.concatenate(pts)
-        got, _ = _coef(resp, i, allp, False)
-        ahead.update(zip(allp.tolist(), zip(*(g.tolist() for g in got), strict=True),
-                         strict=True))
-    vals = [ahead[t] for t in mid.tolist()]
-    return [np.array([v[q] for v in vals], complex) for q in range(3)]
-
-
-def _halve(resp: LoopResponse, i: int, th: np.ndarray, c: list, j: np.ndarray,
-           ahead: dict | None = None) -> tuple[np.ndarray, list]:
-    """The grid with the midpoints of intervals ``j`` inserted, and c_0..c_2 on it
-    (``ahead``: see :func:`_ahead`)."""
-    mid = 0.5 * (th[j] + th[j + 1])
-    cm = _coef(resp, i, mid, False)[0] if ahead is None else _ahead(resp, i, th[j], th[j + 1], ahead)
-    order = np.argsort(np.concatenate([th, mid]), kind="stable")
-    return (np.concatenate([th, mid])[order],
-            [np.concatenate([x, y])[order] for x, y in zip(c, cm, strict=True)])
-
-
-def _coef(resp: LoopResponse, i: int, th: np.ndarray, deriv: bool = True
-          ) -> tuple[list, list]:
-    """c_0..c_2 and their d/dtheta at the angles (complex arrays; the jets' centres
-    alone: a proposer needs no enclosures); ``deriv`` False: the values alone (the
-    derivatives :data:`~hapstab.engine.discs.NO_DERIV`, the values the same)."""
-    F = resp.coefficients(np.full(th.size, i), th, np.zeros(th.size), values_only=True,
-                          deriv=deriv)
-    return [f.vc for f in F], [f.dc for f in F]
-
-
-def _branches(c: list, quad: bool) -> list[np.ndarray]:
-    """The roots u(theta) of det M = 0, one array per branch, followed by continuity
-    (module doc): a crossing is where a branch's imaginary part changes sign."""
-    with np.errstate(all="ignore"):
-        if not quad:
-            return [-c[0] / c[1]]
-        sq = np.sqrt(c[1] * c[1] - 4 * c[0] * c[2])
-        sq = np.where((np.conj(c[1]) * sq).real >= 0, sq, -sq)
-        q = -0.5 * (c[1] + sq)
-        r = [q / c[2], c[0] / q]          # the stable pair of the quadratic formula
-        rel = lambda x, y: np.abs(x - y) / (np.abs(x) + np.abs(y) + 1e-300)  # noqa: E731
-        same = rel(r[0][1:], r[0][:-1]) + rel(r[1][1:], r[1][:-1])
-        cross = rel(r[0][1:], r[1][:-1]) + rel(r[1][1:], r[0][:-1])
-        swap = np.concatenate([[0], np.cumsum(np.nan_to_num(cross) < np.nan_to_num(same)) % 2])
-        return [np.where(swap == 0, r[0], r[1]), np.where(swap == 0, r[1], r[0])]
-
-
 def _newton(resp: LoopResponse, i: int, th: np.ndarray, u: np.ndarray
             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Newton's method on (Re, Im) det M = 0 in (theta, u), vectorised; returns theta,
     u and the direction sign of Im(F_u / F_theta)."""
     for _ in range(NEWTON_STEPS):
-        c, d = _coef(resp, i, th)
+        c, d = coefficients(resp, i, th)
         F = c[0] + u * (c[1] + u * c[2])
         Ft = d[0] + u * (d[1] + u * d[2])
         Fu = c[1] + 2 * u * c[2]
@@ -205,7 +112,7 @@ def _newton(resp: LoopResponse, i: int, th: np.ndarray, u: np.ndarray
         if np.all(~ok | ((np.abs(dth) <= CONVERGED * np.abs(th))
                          & (np.abs(du) <= CONVERGED * np.abs(u)))):
             break
-    c, d = _coef(resp, i, th)
+    c, d = coefficients(resp, i, th)
     Ft = d[0] + u * (d[1] + u * d[2])
     Fu = c[1] + 2 * u * c[2]
     F = c[0] + u * (c[1] + u * c[2])
@@ -220,7 +127,7 @@ def _newton(resp: LoopResponse, i: int, th: np.ndarray, u: np.ndarray
 def _ends(resp: LoopResponse, i: int) -> tuple[list, list]:
     """c_0..c_2 and their d/dtheta at theta = 0 and pi (one evaluation for
     :func:`_real_crossings` and :func:`_anchor`)."""
-    return _coef(resp, i, np.array([0.0, math.pi]))
+    return coefficients(resp, i, np.array([0.0, math.pi]))
 
 
 def _real_crossings(ends: tuple[list, list], quad: bool) -> list[tuple]:
@@ -293,10 +200,11 @@ def candidate_set(resp: LoopResponse, i: int, full: bool) -> StableSet | None:
     -------
     StableSet or None
     """
-    th, c = _refined(resp, i, _grid(resp))
+    th, c = refined(resp, i, grid(resp))
     quad = bool(np.any(c[2] != 0))
+    th, c = dip_refined(resp, i, th, c, quad)
     th0, u0 = [], []
-    for br in _branches(c, quad):
+    for br in branches(c, quad):
         g, u = br.imag, br.real
         ok = np.isfinite(g) & np.isfinite(u)
         s = np.sign(np.where(ok, g, 0.0))
@@ -415,7 +323,8 @@ def _checked_gaps(n_gaps: int, n_angles: int) -> np.ndarray:
 def _recount(resp: LoopResponse, i: int, th: np.ndarray, c: list, u: np.ndarray,
              e: list | None = None) -> np.ndarray:
     """The grid's counts at each u with the grid halved where det M(., u) turns by
-    more than :data:`MAX_TURN` for any of them (at most :data:`REFINE_ROUNDS` times)."""
+    more than :data:`~hapstab.analysis.exact.angle_grid.MAX_TURN` for any of them (at most
+    :data:`~hapstab.analysis.exact.angle_grid.REFINE_ROUNDS` times)."""
     U = u[:, None]
     for _ in range(REFINE_ROUNDS):
         F = c[0] + U * (c[1] + U * c[2])
@@ -423,7 +332,7 @@ def _recount(resp: LoopResponse, i: int, th: np.ndarray, c: list, u: np.ndarray,
             j = np.flatnonzero(np.any(np.abs(np.angle(F[:, 1:] / F[:, :-1])) > MAX_TURN, axis=0))
         if not j.size or th.size + j.size > MAX_CHECK // max(1, u.size):
             break
-        th, c = _halve(resp, i, th, c, j)
+        th, c = halve(resp, i, th, c, j)
     return _grid_counts(resp, i, th, c, u, e)
 
 

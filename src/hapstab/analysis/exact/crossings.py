@@ -285,12 +285,11 @@ def analyse(resp: LoopResponse, full: bool = True, proof: bool = False,
         (:mod:`~hapstab.analysis.exact.proved`; False, the default: the float search's
         answer, whose rounding allowances are not proved).
     fast : bool
-        With ``proof``, one port: let the angle grid of
+        With ``proof``, one or two ports (:data:`FAST_PORTS`): let the angle grid of
         :mod:`~hapstab.analysis.exact.candidates` propose the crossings, and fall back
         to the certified float search for an item whose proof does not settle
-        everything (default True; the answer is proved either way). Two ports keep the
-        certified float search: on the campaign's teleoperators the grid missed
-        crossings above K_max that hid later stable intervals.
+        everything (default True; every reported interval is proved either way; what
+        the grid's proposals decide alone is said in that module's notes).
 
     Returns
     -------
