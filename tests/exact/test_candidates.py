@@ -9,6 +9,7 @@ from __future__ import annotations
 import dataclasses
 import math
 
+import numpy as np
 import pytest
 
 import hapstab as h
@@ -212,24 +213,56 @@ def test_a_window_between_two_grid_points_is_reported(s, window):
     assert out.ok, out.report()
 
 
-def test_dips_flag_a_branch_that_crosses_twice_between_two_points():
-    """angle_grid.dips on one branch u(theta) = -c_0 (c_1 = 1): a parabola in Im u
-    that crosses the axis twice between two points (ends on one side) is flagged; the
-    same parabola shifted away from the axis, and a straight branch, are not."""
-    import numpy as np
+def _flagged(re, im, dim, slope_re=0.0):
+    """angle_grid.dips on one branch u(theta) = re + j im (c_1 = 1, c_0 = -u; re linear,
+    of slope ``slope_re``) on eleven points 0.01 apart from 0.1 (interval 5 is [0.15,
+    0.16])."""
     th = np.linspace(0.1, 0.2, 11)
     one, zero = np.ones_like(th, complex), np.zeros_like(th, complex)
+    u, du = re(th) + 1j * im(th), slope_re + 1j * dim(th)
+    return set(angle_grid.dips(th, [-u, one, zero], [-du, zero, zero], False).tolist())
 
-    def flagged(im, dim):
-        u = 5.0 + 1j * im(th)
-        c, d = [-u, one, zero], [-1j * dim(th), zero, zero]
-        return set(angle_grid.dips(th, c, d, False).tolist())
 
-    # 0.2 - 1e4 (t - 0.155)^2 crosses at 0.155 -+ 0.00447, both inside [0.15, 0.16]
-    # (interval 5), whose ends are both at -0.05; shifted down by 1 it stays below
-    # (further out, where the branch moves by more than STEP of itself, the grid is
-    # halved as well: those intervals are not what this asks)
+def test_dips_flag_a_branch_that_may_cross_the_axis_unseen():
+    """angle_grid.dips's three rules, each alone, and what it leaves: a parabola in Im u
+    crossing the axis twice inside one interval (ends on one side); one that only comes
+    near the axis there (within DIP of the nearer end); a bracket crossed in a stride
+    longer than STEP of the branch; none of these where the branch is far from the axis,
+    moves slowly, lies on the axis within rounding or beyond the search's top."""
+    five = lambda t: 5.0 + 0.0 * t          # noqa: E731
+    # 0.2 - 1e4 (t - 0.155)^2: crossings at 0.155 -+ 0.00447, both in interval 5, whose
+    # ends are at -0.05
     par, slope = (lambda t: 0.2 - 1e4 * (t - 0.155) ** 2), (lambda t: -2e4 * (t - 0.155))
-    assert 5 in flagged(par, slope)
-    assert 5 not in flagged(lambda t: par(t) - 1.0, slope)
-    assert not flagged(lambda t: 1.0 + 0.0 * t, lambda t: 0.0 * t)
+    assert _flagged(five, par, slope) == {5}
+    # shifted down by 1: never nearer the axis than 0.8 (ends 1.05), and by 0.26: -0.06 at
+    # the top, nearer than DIP = 0.5 of the ends' 0.31: flagged without any crossing
+    assert _flagged(five, lambda t: par(t) - 1.0, slope) == set()
+    assert _flagged(five, lambda t: par(t) - 0.26, slope) == {5}
+    # a bracket: from 2 - 0.55j to 5 + 0.45j (stride 3.2 > STEP x 5.02), and the same
+    # crossing at 20 + ...: stride 1.04 < STEP x 20
+    lin = (lambda t: 100.0 * (t - 0.1555)), (lambda t: 100.0 + 0.0 * t)
+    assert _flagged(lambda t: 2.0 + 300.0 * (t - 0.15), *lin, 300.0) == {5}
+    assert _flagged(lambda t: 20.0 + 30.0 * (t - 0.15), *lin, 30.0) == set()
+    # Im u as rounding (1e-15 of |u| = 5, crossing back and forth), and the two-crossing
+    # parabola beyond U_HI: not flagged
+    assert _flagged(five, lambda t: 5e-15 * np.sin(3e3 * t), lambda t: 1.5e-11 * np.cos(3e3 * t)) \
+        == set()
+    assert _flagged(lambda t: 2e10 + 0.0 * t, lambda t: 1e9 * par(t), lambda t: 1e9 * slope(t)) \
+        == set()
+
+
+def test_the_hermite_cubic_departs_from_its_chord_by_at_most_a_quarter_of_the_slopes():
+    """The bound angle_grid.dips screens intervals with (so that only those the full
+    test could flag are evaluated): on [0, 1] the cubic through (f0, s0) and (f1, s1)
+    differs from its chord by at most max(|s0 - df|, |s1 - df|) / 4, df = f1 - f0;
+    seeded random ends and slopes over 12 decades, the cubic on 2001 points."""
+    rng = np.random.default_rng(2615)
+    t = np.linspace(0.0, 1.0, 2001)
+    h00, h10, h01, h11 = 2 * t**3 - 3 * t**2 + 1, t**3 - 2 * t**2 + t, 3 * t**2 - 2 * t**3, t**3 - t**2
+    for _ in range(2000):
+        f0, f1, s0, s1 = rng.normal(size=4) * 10.0 ** rng.uniform(-6, 6, size=4)
+        p = f0 * h00 + s0 * h10 + f1 * h01 + s1 * h11
+        chord = f0 + (f1 - f0) * t
+        bound = 0.25 * max(abs(s0 - (f1 - f0)), abs(s1 - (f1 - f0)))
+        # 1e-12 of the values' size: the float evaluation of the cubic and the chord
+        assert np.max(np.abs(p - chord)) <= bound + 1e-12 * max(abs(f0), abs(f1), abs(s0), abs(s1))

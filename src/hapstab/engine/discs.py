@@ -32,7 +32,7 @@ __all__ = ["Jet", "EPS_OP", "base_jets", "delay_jet", "poly_jet", "geometric_sum
 EPS_OP = 4.0 * np.finfo(float).eps
 #: The radii of a *values-only* jet (:meth:`Jet.values_only`; told by identity): no
 #: enclosure, only the centres' value and derivative, for a proposer that proves
-#: nothing (:mod:`~hapstab.analysis.exact.candidates`). An operation with such an
+#: nothing (:mod:`~hapstab.analysis.exact.angle_grid`). An operation with such an
 #: operand gives such a result, with the centres computed exactly as with radii.
 NO_RADIUS = np.full(0, np.nan)
 #: The derivatives of a values-only jet made without them (:meth:`Jet.values_only`,

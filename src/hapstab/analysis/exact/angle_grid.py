@@ -12,11 +12,12 @@ import math
 
 import numpy as np
 
+from hapstab.analysis.exact.boxes import U_HI
 from hapstab.engine.frequency import LoopResponse
 
 __all__ = ["grid", "refined", "dip_refined", "dips", "halve", "evaluate_ahead", "coefficients",
            "branches", "POINTS_PER_RATE", "MIN_POINTS", "LOW_POINTS", "THETA_LOW", "MAX_TURN",
-           "REFINE_ROUNDS", "DIP_ROUNDS", "DIP", "STEP", "LOOKAHEAD"]
+           "REFINE_ROUNDS", "DIP_ROUNDS", "DIP", "STEP", "NOISE", "LOOKAHEAD"]
 
 #: Uniform grid points over [0, pi] per unit of the loop's phase rate (oscillations of
 #: det M over [0, pi]): 16 put 2 pi / 16 of the phase between points, where the
@@ -43,9 +44,14 @@ DIP_ROUNDS = 12
 #: the axis: two crossings may hide between the points); a choice of where to look
 #: harder, not a tolerance: the proof decides what the grid proposes.
 DIP = 0.5
-#: ... or where a branch moves by more than this share of its modulus between the two
-#: points (the grid does not resolve it there: a resonance the coefficients' turns miss)
+#: ... and a bracket (one sign change) where the branch moves by more than this share of
+#: its modulus between the two points (the grid does not resolve it there: a resonance
+#: the coefficients' turns miss; Newton's start from the bracket is then poor)
 STEP = 0.25
+#: Im u within this share of |u| at both ends of an interval is rounding (c_0..c_2 are
+#: formed to ~1e-15 relative; 1e-13 leaves a hundredfold for their cancellation in the
+#: quadratic's roots): a branch lying on the axis there, whose signs no halving resolves.
+NOISE = 1e-13
 #: Levels of halves below a halved interval whose midpoints are evaluated with it (a
 #: resonance is halved over several rounds: 2 levels, 7 points, serve 3 rounds with one
 #: evaluation, whose cost is its call's, not its points'); not a tolerance.
@@ -60,13 +66,16 @@ def grid(resp: LoopResponse) -> np.ndarray:
     return np.concatenate([low, uniform])
 
 
-def refined(resp: LoopResponse, i: int, th: np.ndarray) -> tuple[np.ndarray, list]:
+def refined(resp: LoopResponse, i: int, th: np.ndarray, deriv: bool = False) -> tuple:
     """The grid, halved where the argument of c_0 or c_1 turns by more than
     :data:`MAX_TURN` between neighbours (a lightly damped resonance turns by pi over
     its width, far below the uniform spacing), and the coefficients on it. Not c_2: a
     two-port loop's is N_0 N_1 (1 - z^-n) k_0 k_1, with exact zeros on the circle
-    across which its argument jumps by pi however fine the grid."""
-    c, _ = coefficients(resp, i, th, False)
+    across which its argument jumps by pi however fine the grid. ``deriv``: their
+    d/dtheta too, ``(th, c, d)`` (the first grid's with its values, the points added
+    in one more evaluation: the values are the same either way)."""
+    th0 = th
+    c, d0 = coefficients(resp, i, th, deriv)
     ahead: dict[float, tuple] = {}
     for _ in range(REFINE_ROUNDS):
         with np.errstate(all="ignore"):
@@ -78,18 +87,29 @@ def refined(resp: LoopResponse, i: int, th: np.ndarray) -> tuple[np.ndarray, lis
         if not j.size:
             break
         th, c = halve(resp, i, th, c, j, ahead)
-    return th, c
+    if not deriv:
+        return th, c
+    new = ~np.isin(th, th0)         # th0's points keep their order among the others
+    d = [np.empty(th.size, complex) for _ in d0]
+    dn = coefficients(resp, i, th[new])[1] if new.any() else [x[:0] for x in d0]
+    for x, a, b in zip(d, d0, dn, strict=True):
+        x[~new], x[new] = a, b
+    return th, c, d
 
 
 def dips(th: np.ndarray, c: list, d: list, quad: bool) -> np.ndarray:
     """The grid intervals where a branch u(theta) of det M = 0 (:func:`branches`) may
     cross the real axis more often than its ends' signs show: the cubic through its
-    imaginary parts and their slopes (u' = -(c_0' + u c_1' + u^2 c_2') / (c_1 + 2 u c_2))
-    changes sign more than once, or, with the ends on one side, dips nearer the axis
-    than :data:`DIP` of the nearer end; or the branch moves by more than :data:`STEP`
-    of its size. Two crossings between two points (a branch touching the axis and
-    leaving it, a stable window of K between two crossings) change no sign the grid
-    sees, nor any count at a gap's middle."""
+    imaginary parts and their slopes (u' = -(c_0' + u c_1' + u^2 c_2') / (c_1 + 2 u c_2)),
+    sampled at t = 1/8 ... 7/8 of the interval, changes sign more than once, or, with the
+    ends on one side, comes nearer the axis than :data:`DIP` of the nearer end; and the
+    brackets (one sign change) whose stride is more than :data:`STEP` of the branch's
+    size. Two crossings between two points (a branch touching the axis and leaving it, a
+    stable window of K between two crossings) change no sign the grid sees, nor any
+    count at a gap's middle. Only where the branch has Re u > 0 at an end, |u| below
+    the search's top U_HI and Im u above :data:`NOISE` of |u|: a heuristic for where to
+    look harder, not a proof (a pair between two samples of the cubic that stays above
+    DIP there is not flagged)."""
     t = np.arange(1, 8) / 8.0
     H = np.stack([2 * t**3 - 3 * t**2 + 1, t**3 - 2 * t**2 + t, 3 * t**2 - 2 * t**3, t**3 - t**2])
     h = np.diff(th)
@@ -105,8 +125,14 @@ def dips(th: np.ndarray, c: list, d: list, quad: bool) -> np.ndarray:
             # reaches (1 - DIP) of it; only those and the brackets are evaluated
             dev = 0.25 * np.maximum(np.abs(h * g[:-1] - df), np.abs(h * g[1:] - df))
             same = f[:-1] * f[1:] > 0
+            size = np.maximum(np.abs(u[:-1]), np.abs(u[1:]))
+            # only where a crossing matters (K > 0, below the search's top U_HI: at an
+            # exact zero of c_2 the branch is at ~1e15 and the cubic overshoots there in
+            # every round) and where Im u is more than rounding (a branch on the axis
+            # within NOISE of its size: no halving resolves a sign there)
             j = np.flatnonzero(((~same) | (dev >= (1 - DIP) * near))
-                               & ((u.real[:-1] > 0) | (u.real[1:] > 0)))
+                               & ((u.real[:-1] > 0) | (u.real[1:] > 0)) & (size < U_HI)
+                               & (np.maximum(np.abs(f[:-1]), np.abs(f[1:])) > NOISE * size))
             p = (f[j, None] * H[0] + (h * g[:-1])[j, None] * H[1] + f[j + 1, None] * H[2]
                  + (h * g[1:])[j, None] * H[3])
             row = np.concatenate([f[j, None], p, f[j + 1, None]], axis=1)
@@ -119,25 +145,25 @@ def dips(th: np.ndarray, c: list, d: list, quad: bool) -> np.ndarray:
             # Re(u_j conj u_j+1) < 0: no halving resolves it)
             uj, uk = u[j], u[j + 1]
             dip |= (turns == 1) & ((uj * np.conj(uk)).real > 0) & \
-                (np.abs(uk - uj) > STEP * np.maximum(np.abs(uj), np.abs(uk)))
+                (np.abs(uk - uj) > STEP * size[j])
             ok = np.all(np.isfinite(row), axis=1)
             flag[j[ok & ((turns > 1) | dip)]] = True
     return np.flatnonzero(flag)
 
 
-def dip_refined(resp: LoopResponse, i: int, th: np.ndarray, c: list, quad: bool
+def dip_refined(resp: LoopResponse, i: int, th: np.ndarray, c: list, d: list, quad: bool
                 ) -> tuple[np.ndarray, list]:
     """The grid halved where :func:`dips` flags an interval (at most
-    :data:`DIP_ROUNDS` times), and c_0..c_2 on it. After the whole grid's first look,
+    :data:`DIP_ROUNDS` times), and c_0..c_2 on it (``c``, ``d``: the coefficients and
+    their d/dtheta on ``th``, :func:`refined` with ``deriv``). After the whole grid's first look,
     each round looks at the flagged intervals' halves alone: they are laid end to end as
     triples (start, middle, end), whose branches :func:`dips` follows within each
     triple; the steps from one triple to the next are no intervals and not looked at."""
-    d = coefficients(resp, i, th)[1]
     lt, lc, ld = th, c, d                   # the grid looked at: the whole one first
     j = dips(lt, lc, ld, quad)
     added: list[tuple[np.ndarray, list]] = []
     for _ in range(DIP_ROUNDS):
-        if not j.size:
+        if not j.size or j.size > th.size:  # (a valve: more than the grid's own size)
             break
         mid = 0.5 * (lt[j] + lt[j + 1])
         cm, dm = coefficients(resp, i, mid)

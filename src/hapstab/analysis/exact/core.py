@@ -349,7 +349,9 @@ def exact_critical_stiffness(loop: HapticLoop | TeleoperationLoop, *,
     Returns
     -------
     CriticalStiffnessResult
-        ``method="exact"``; ``stable_intervals`` lists every stable interval.
+        ``method="exact"``; ``stable_intervals`` lists the stable intervals, each
+        proved (that none is missing above K_max rests on the crossings proposed:
+        :mod:`~hapstab.analysis.exact.candidates`).
 
     Raises
     ------
