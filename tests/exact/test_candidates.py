@@ -266,3 +266,18 @@ def test_the_hermite_cubic_departs_from_its_chord_by_at_most_a_quarter_of_the_sl
         bound = 0.25 * max(abs(s0 - (f1 - f0)), abs(s1 - (f1 - f0)))
         # 1e-12 of the values' size: the float evaluation of the cubic and the chord
         assert np.max(np.abs(p - chord)) <= bound + 1e-12 * max(abs(f0), abs(f1), abs(s0), abs(s1))
+
+
+@pytest.mark.parametrize("name", ["paper-peb-0", "paper-hve-100", "paper-peb-4"])
+def test_the_grid_with_its_derivatives_is_the_grid_without_them(name):
+    """angle_grid.refined(deriv=True) keeps the first grid's derivatives and evaluates
+    only the points it added: the grid and values are those without derivatives and
+    the derivatives those of a fresh evaluation on the final grid, bit for bit."""
+    one = loop_response(dict(LOOPS)[name])
+    th, c, d = angle_grid.refined(one, 0, angle_grid.grid(one), deriv=True)
+    th1, c1 = angle_grid.refined(one, 0, angle_grid.grid(one))
+    c2, d2 = angle_grid.coefficients(one, 0, th)
+    assert th.size > angle_grid.grid(one).size and np.array_equal(th, th1)
+    assert all(np.array_equal(a, b) for a, b in zip(c, c1, strict=True))
+    assert all(np.array_equal(a, b) for a, b in zip(c, c2, strict=True))
+    assert all(np.array_equal(a, b) for a, b in zip(d, d2, strict=True))
