@@ -16,6 +16,7 @@ import hapstab as h
 from hapstab.analysis.exact import angle_grid, candidates, crossings
 from hapstab.analysis.exact.crossings import analyse
 from hapstab.engine.frequency import loop_response
+from lanes import costly
 from references import campaign, certified
 
 #: K_max of the two paths agree to this (relative): each is the lower end of its proved
@@ -281,3 +282,27 @@ def test_the_grid_with_its_derivatives_is_the_grid_without_them(name):
     assert all(np.array_equal(a, b) for a, b in zip(c, c1, strict=True))
     assert all(np.array_equal(a, b) for a, b in zip(c, c2, strict=True))
     assert all(np.array_equal(a, b) for a, b in zip(d, d2, strict=True))
+
+
+#: Grid misses the proof catches (the campaign harness of session 15, seed 12): at #921
+#: the grid proposed (0, 2108.55] where the stable set is (0, 482.12] U (754.77, 2108.55]
+#: (the pair of crossings inside the first interval: the proof's exclusion of that gap
+#: fails, and the certified search proposes); at #117 twin candidates 1.6e-8 apart make
+#: the counts disagree. Either way the answer is the brute force's. #117 (1.5 s of the
+#: brute force) runs -m campaign.
+CAUGHT = [campaign.Scenario("peb#921@12", "peb", 0.03097283591447352, 1.3453534743385338,
+                            0.0012884746336816685, 4, 0.04110643634465261, 0.6126447767588662,
+                            0.1813136062286705, 4, 0.04110643634465261, 1.0, "spring:11.3278",
+                            "spring:59841.4"),
+          costly(campaign.Scenario("peb#117@12", "peb", 1.1768719512609687,
+                                   0.00025705448539987117, 0.00014829607644859172, 16,
+                                   5.993601331307601e-06, 0.012386222084654097,
+                                   0.17703392421148448, 4, 5.993601331307601e-06, 1.0,
+                                   "msd:0.00101418,0.855099,486.552",
+                                   "msd:0.538141,2.98457,405.689"), id="peb#117@12")]
+
+
+@pytest.mark.parametrize("s", CAUGHT, ids=lambda s: getattr(s, "name", str(s)))
+def test_a_grid_miss_the_proof_catches_ends_in_the_brute_forces_answer(s):
+    out = campaign.check(s)
+    assert out.ok, out.report()
