@@ -36,7 +36,7 @@ missing. So the grid is also halved where a branch's cubic interpolant (values a
 slopes) may cross the axis twice or comes near it, and where a crossing's bracket is a
 stride of more than a quarter of the branch's size
 (:func:`~hapstab.analysis.exact.angle_grid.dips`; with every interval only): a
-heuristic, not a proof. On 4,036 campaign loops of five seeds, among them the two that
+heuristic, not a proof. On 5,674 campaign loops of seven seeds, among them the two that
 found hidden windows, it leaves none missed.
 """
 
