@@ -16,7 +16,7 @@ from hapstab.analysis.exact.boxes import U_HI
 from hapstab.engine.frequency import LoopResponse
 
 __all__ = ["grid", "refined", "dip_refined", "dips", "halve", "evaluate_ahead", "coefficients",
-           "branches", "POINTS_PER_RATE", "MIN_POINTS", "LOW_POINTS", "THETA_LOW", "MAX_TURN",
+           "branches", "inserted", "POINTS_PER_RATE", "MIN_POINTS", "LOW_POINTS", "THETA_LOW", "MAX_TURN",
            "REFINE_ROUNDS", "DIP_ROUNDS", "DIP", "STEP", "NOISE", "LOOKAHEAD"]
 
 #: Uniform grid points over [0, pi] per unit of the loop's phase rate (oscillations of
@@ -175,10 +175,8 @@ def dip_refined(resp: LoopResponse, i: int, th: np.ndarray, c: list, d: list, qu
         j = j[j % 3 != 2]                   # a step between two triples
     if not added:
         return th, c
-    allt = np.concatenate([th, *(m for m, _ in added)])
-    order = np.argsort(allt, kind="stable")
-    return allt[order], [np.concatenate([x, *(cm[q] for _, cm in added)])[order]
-                         for q, x in enumerate(c)]
+    return inserted(th, c, np.concatenate([m for m, _ in added]),
+                    [np.concatenate([cm[q] for _, cm in added]) for q in range(len(c))])
 
 
 def _triples(x: np.ndarray, xm: np.ndarray, j: np.ndarray) -> np.ndarray:
@@ -219,9 +217,15 @@ def halve(resp: LoopResponse, i: int, th: np.ndarray, c: list, j: np.ndarray,
     mid = 0.5 * (th[j] + th[j + 1])
     cm = (coefficients(resp, i, mid, False)[0] if ahead is None
           else evaluate_ahead(resp, i, th[j], th[j + 1], ahead))
-    order = np.argsort(np.concatenate([th, mid]), kind="stable")
-    return (np.concatenate([th, mid])[order],
-            [np.concatenate([x, y])[order] for x, y in zip(c, cm, strict=True)])
+    return inserted(th, c, mid, cm)
+
+
+def inserted(th: np.ndarray, c: list, mid: np.ndarray, cm: list) -> tuple[np.ndarray, list]:
+    """The grid ``th`` with the angles ``mid`` inserted in order, and the coefficients
+    ``c`` with ``cm`` (theirs) inserted alike."""
+    allt = np.concatenate([th, mid])
+    order = np.argsort(allt, kind="stable")
+    return allt[order], [np.concatenate([x, y])[order] for x, y in zip(c, cm, strict=True)]
 
 
 def coefficients(resp: LoopResponse, i: int, th: np.ndarray, deriv: bool = True

@@ -203,15 +203,12 @@ def candidate_set(resp: LoopResponse, i: int, full: bool) -> StableSet | None:
     -------
     StableSet or None
     """
+    th, c, *d = refined(resp, i, grid(resp), deriv=full)
+    quad = bool(np.any(c[2] != 0))
     if full:
         # every crossing: also where a branch may cross the axis twice unseen (a pair
         # missed above K_max would drop a stable window; below it, the proof sees it)
-        th, c, d = refined(resp, i, grid(resp), deriv=True)
-        quad = bool(np.any(c[2] != 0))
-        th, c = dip_refined(resp, i, th, c, d, quad)
-    else:
-        th, c = refined(resp, i, grid(resp))
-        quad = bool(np.any(c[2] != 0))
+        th, c = dip_refined(resp, i, th, c, d[0], quad)
     th0, u0 = [], []
     for br in branches(c, quad):
         g, u = br.imag, br.real
