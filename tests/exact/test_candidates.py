@@ -7,6 +7,7 @@ a different one."""
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import math
 
 import numpy as np
@@ -306,3 +307,24 @@ CAUGHT = [campaign.Scenario("peb#921@12", "peb", 0.03097283591447352, 1.34535347
 def test_a_grid_miss_the_proof_catches_ends_in_the_brute_forces_answer(s):
     out = campaign.check(s)
     assert out.ok, out.report()
+
+
+#: examples/teleoperation.py's teleoperator, whose K-B region's rows B = 1.5-6.8 N*s/m
+#: (session 16) each had a crossing found twice, 2e-9 apart in u and theta (Newton's
+#: method converging linearly where the quadratic's two branches nearly meet): kept
+#: apart they put the counts two off the grid's above it, and every such row fell back
+#: to the certified search (0.5 s each)
+TELEOPERATOR = dict(master=h.Device(0.3, 2.0), slave=h.Device(1.0, 5.0),
+                    operator=h.mass_spring_damper(0.5, 5.0, 500.0),
+                    environment=h.spring(20000.0), period=1e-3, delay_samples=5)
+
+
+@pytest.mark.parametrize("B", [1.518987341772152, 2.278481012658228, 6.835443037974684])
+def test_a_crossing_found_twice_is_one_when_the_counts_say_so(B):
+    from hapstab.analysis.design.kb_plane import with_gains
+    resp = loop_response(with_gains(h.TeleoperationLoop(**TELEOPERATOR), 1.0, B))
+    ss = candidates.candidate_set(resp, 0, True)
+    assert ss is not None                 # the grid proposes: no fallback
+    ks = [e[0] for e in ss.events]
+    assert all(b > a * (1 + candidates.NEAR) for a, b in itertools.pairwise(ks)), ks
+    _same(analyse(resp, True, True)[0], analyse(resp, True, True, fast=False)[0])

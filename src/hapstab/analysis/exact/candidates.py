@@ -78,6 +78,13 @@ CONVERGED = 1e-12
 #: brackets of the same crossing end ~1e-12 apart; two true crossings this close are
 #: the proof's to separate (it falls back if it cannot).
 SAME = 1e-9
+#: Candidates this close are taken as one crossing found twice when, kept apart, the
+#: counts disagree with the grid's (:func:`_counts_agree`, which then decides again):
+#: where the quadratic's two branches nearly meet, Newton's method converges linearly
+#: and two brackets of one crossing end ~1e-9 apart (measured: 2e-9 in u and theta in
+#: the teleoperation example's K-B region, rows B = 1.5-6.8); a true pair this close
+#: with one direction merged by it leaves the counts off by two above it: refused too.
+NEAR = 1e-6
 #: Most grid evaluations (gaps x angles) the counts' cross-check takes
 #: (:func:`_counts_agree`: a 10^3-sample delay's thousand gaps on 3e4 angles would
 #: cost seconds); beyond it a subset of the gaps is counted (:func:`_checked_gaps`).
@@ -157,13 +164,13 @@ def _real_crossings(ends: tuple[list, list], quad: bool) -> list[tuple]:
     return out
 
 
-def _merge_close(cross: list[tuple]) -> list[tuple]:
-    """Candidates (u, theta, direction, multiplicity) within :data:`SAME` of the one
-    before them, in u and theta, dropped."""
+def _merge_close(cross: list[tuple], same: float = SAME) -> list[tuple]:
+    """Candidates (u, theta, direction, multiplicity) within ``same`` (relative) of the
+    one before them, in u and theta and with its direction, dropped."""
     out: list[tuple] = []
     for cr in sorted(cross):
-        if out and abs(cr[0] - out[-1][0]) <= SAME * cr[0] and \
-                abs(cr[1] - out[-1][1]) <= SAME * (1.0 + cr[1]) and cr[2] == out[-1][2]:
+        if out and abs(cr[0] - out[-1][0]) <= same * cr[0] and \
+                abs(cr[1] - out[-1][1]) <= same * (1.0 + cr[1]) and cr[2] == out[-1][2]:
             continue
         out.append(cr)
     return out
@@ -225,17 +232,23 @@ def candidate_set(resp: LoopResponse, i: int, full: bool) -> StableSet | None:
     cross = [(float(a), float(b), int(d), 2) for a, b, d in zip(un[keep], tn[keep], dn[keep],
                                                                 strict=True)]
     ends = _ends(resp, i)
-    cross = _merge_close(cross + _real_crossings(ends, quad))
+    cross += _real_crossings(ends, quad)
     anchor = _anchor(resp, ends, c)
     if anchor < 0:
         return None
-    try:
-        ss = item_stable_set(resp, i, anchor, cross, [], full, None, False)
-    except AnalysisError:
-        return None
-    if full and not _counts_agree(resp, i, th, c, ss, ends[0]):
-        return None
-    return ss
+    tried: list = []
+    for same in (SAME, NEAR):
+        merged = _merge_close(cross, same)
+        if merged in tried:
+            break
+        tried.append(merged)
+        try:
+            ss = item_stable_set(resp, i, anchor, merged, [], full, None, False)
+        except AnalysisError:
+            return None
+        if not full or _counts_agree(resp, i, th, c, ss, ends[0]):
+            return ss
+    return None
 
 
 def half_turns(vals: np.ndarray) -> np.ndarray:
