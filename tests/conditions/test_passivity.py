@@ -186,3 +186,28 @@ def test_peb_bounds_never_exceed_exact(mm, ms, bm, bs, Bm, Bs, ratio, T, n, op, 
     exact = kmax(loop, "exact")
     assert kmax(loop, "passivity") <= exact * (1 + 1e-6) + 1e-9
     assert kmax(loop, "circle") <= exact * (1 + 1e-6) + 1e-9
+
+
+def test_the_rows_golden_search_is_each_rows_own_bit_for_bit():
+    # frequency_grid.refine_minimum_rows (the K-B region's overlays, every row at once)
+    # against refine_minimum on each row alone: the same candidates, the same golden
+    # steps, the same pick among ties, the same w -> 0 rule
+    from hapstab.analysis.conditions.frequency_grid import (
+        refine_minimum,
+        refine_minimum_rows,
+        theta_grid,
+    )
+    rng = np.random.default_rng(16)
+    th = theta_grid(6)
+    a, w, c = rng.uniform(0.5, 2, (3, 12)), rng.uniform(1, 9, (3, 12)), rng.uniform(0, 3, (3, 12))
+
+    def f(rows, t):
+        val = np.sum(a[:, rows] * np.cos(w[:, rows] * t + c[:, rows]), axis=0)
+        return np.where(rows == 5, np.nan, np.where(rows == 7, val[0] * 0 + 4.0, val))
+
+    vals = np.array([f(np.full(th.size, r), th) for r in range(12)])
+    vals[3, :40] = vals[3, :40].min() - 1.0          # a flat minimum at the w -> 0 end
+    got_t, got_v = refine_minimum_rows(f, th, vals)
+    for r in range(12):
+        want = refine_minimum(lambda t, r=r: f(np.full(t.size, r), t), th, vals[r])
+        assert (got_t[r], got_v[r]) == want or (np.isnan(got_t[r]) and np.isnan(want[0])), r

@@ -8,6 +8,7 @@ from hapstab.analysis.design.damping import best_damping
 from hapstab.analysis.design.regions import d_decomposition, stability_region, with_gains
 from hapstab.engine.system import build
 from hapstab.errors import AnalysisError
+from lanes import size
 from references import brute
 
 HVE10 = h.paper_hve(delay_samples=10)
@@ -208,3 +209,55 @@ def test_the_boundary_is_drawn_wherever_it_crosses_the_window():
     assert low[0] == pytest.approx(kmax0.critical_stiffness, rel=0.01)
     steps = np.hypot(np.diff(pts[:, 0]) / 8000, np.diff(pts[:, 1]) / 60)
     assert np.median(steps) < 0.004
+
+
+def _overlay_loops():
+    """Seeded loops of every kind the overlays take: HVE with and without an operator and
+    a velocity filter, PEB with unequal devices; masses, dampings and periods over
+    decades, delays 0-11."""
+    rng = np.random.default_rng(2026_12_07)
+    out = []
+    for i in range(9):
+        m, b = 10 ** rng.uniform(-2, 1), 10 ** rng.uniform(-2, 1)
+        T, n = 10 ** rng.uniform(-4, -2), int(rng.integers(0, 12))
+        if i % 3 == 0:
+            out.append(h.HapticLoop(h.Device(m, b), h.SpringDamper(1.0, 0.0),
+                                    h.mass_spring_damper(0.5, 5, 500), T, n))
+        elif i % 3 == 1:
+            out.append(h.TeleoperationLoop(
+                master=h.Device(m, b), slave=h.Device(2 * m, 0.7 * b),
+                operator=h.mass_spring_damper(0.5, 5.0, 500.0), environment=h.spring(2000.0),
+                period=T, delay_samples=n))
+        else:
+            vf = h.VelocityFilter("average", samples=3) if i % 2 else \
+                h.VelocityFilter("lowpass", cutoff_hz=0.1 / T)
+            out.append(h.HapticLoop(h.Device(m, b), h.FilteredSpringDamper(1.0, 0.0, vf),
+                                    None, T, n))
+    return out
+
+
+@pytest.mark.parametrize("loop", _overlay_loops(), ids=lambda lp: f"{lp.kind}-n{lp.delay_samples}")
+def test_overlay_rows_at_once_are_each_rows_own_k_max(loop):
+    # the batched rows (regions._affine_rows: the matrix affine in K and B) against
+    # critical_stiffness(method=...) of each row's own loop, over B from -b to 2b
+    from hapstab.analysis.design.regions import _affine_rows, _overlay
+    from hapstab.analysis.methods import critical_stiffness
+    b = min(p.damping for p in (getattr(loop, "device", None), getattr(loop, "master", None),
+                                getattr(loop, "slave", None)) if p is not None)
+    Bs = np.linspace(-b, 2 * b, size(5, 13))      # the rows' ends and middle, 13 in full
+    for name in ("passivity", "circle"):
+        got = _overlay(loop, name, Bs)
+        # the batched path answers every loop but the circle's filtered ones (refused)
+        assert (_affine_rows(loop, name, Bs) is None) == (name == "circle" and np.isnan(got).all())
+        for B, k in zip(Bs, got, strict=True):
+            try:
+                want = critical_stiffness(with_gains(loop, 1.0, float(B)), method=name)
+            except AnalysisError:
+                assert np.isnan(k)
+                continue
+            K = want.critical_stiffness
+            # the same sums in another order: ~1e-15 relative; where the damping cancels
+            # (B = -b) both are rounding noise about 0: the PSD slack (1e-12 of the
+            # matrix's scale, b) over the K-part's scale (T b) puts them at ~1e-12/T
+            # (measured: up to 3e-11 N/m); 1e-9/T is a thousand times that
+            assert k == pytest.approx(K, rel=1e-9, abs=1e-9 / loop.period), (name, B)

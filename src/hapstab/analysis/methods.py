@@ -15,8 +15,10 @@ import numpy as np
 
 from hapstab import progress
 from hapstab.analysis.conditions.circle import critical_stiffness_circle
+from hapstab.analysis.conditions.circle import kmax_parts as circle_parts
 from hapstab.analysis.conditions.closed_forms import CLOSED_FORMS, TABLE
 from hapstab.analysis.conditions.passivity import critical_stiffness_passivity
+from hapstab.analysis.conditions.passivity import kmax_parts as passivity_parts
 from hapstab.analysis.exact.core import exact_critical_stiffness, exact_kmax_batch
 from hapstab.analysis.teleoperation.twoport import critical_stiffness_llewellyn
 from hapstab.errors import (
@@ -34,7 +36,7 @@ from hapstab.models.parts import friction_note
 from hapstab.results import BoundaryResult, CriticalStiffnessResult
 from hapstab.simulation.search import critical_stiffness_simulation
 
-__all__ = ["critical_stiffness", "boundary", "METHODS", "methods_for"]
+__all__ = ["critical_stiffness", "boundary", "METHODS", "AFFINE_PARTS", "methods_for"]
 
 #: method name -> function
 METHODS: dict[str, Callable[..., CriticalStiffnessResult]] = {
@@ -45,6 +47,12 @@ METHODS: dict[str, Callable[..., CriticalStiffnessResult]] = {
     "llewellyn": critical_stiffness_llewellyn,
     "simulation": critical_stiffness_simulation,
 }
+#: Methods whose K_max is the least PSD limit over frequency of a matrix affine in K:
+#: method -> its ``kmax_parts(loop) -> (parts, oscillations)`` (each module's); a K-B
+#: region's overlay takes every row from them at once
+#: (:func:`~hapstab.analysis.conditions.frequency_grid.affine_kmax_rows`).
+AFFINE_PARTS: dict[str, Callable[..., Any]] = {"circle": circle_parts,
+                                               "passivity": passivity_parts}
 #: Methods for one loop kind only (besides the closed forms derived for one).
 ONLY = {"llewellyn": ("peb", "4ch")}
 

@@ -69,7 +69,7 @@ from hapstab.results import CriticalStiffnessResult
 from hapstab.tolerances import PSD_SLACK
 
 __all__ = ["APPROXIMATIONS", "loop_inverse", "loop_transfer", "port_scaling", "circle_test",
-           "critical_stiffness_circle"]
+           "critical_stiffness_circle", "kmax_parts"]
 
 def port_scaling(loop: HapticLoop | TeleoperationLoop, scaling: str | None = "auto"
                  ) -> tuple[float, ...]:
@@ -300,8 +300,43 @@ def _hermitian_parts(side: DeviceSide, a: str, D: tuple[float, ...], theta: np.n
     w = np.asarray(D)[None, :, None]
     A = w * (np.diag(side.damping)[None] + X * side.controller_matrix(theta, "B"))
     C = w * X * side.controller_matrix(theta, "K")
-    herm = lambda M: M + np.conj(np.swapaxes(M, 1, 2))  # noqa: E731
-    return herm(A), herm(C)
+    return _herm(A), _herm(C)
+
+
+def _herm(M: np.ndarray) -> np.ndarray:
+    return M + np.conj(np.swapaxes(M, 1, 2))
+
+
+def kmax_parts(loop: HapticLoop | TeleoperationLoop, approximation: str = "forward",
+               scaling: str | None = "auto") -> Any:
+    """What :func:`critical_stiffness_circle` (no sector) minimises over, for batched
+    callers (the K-B region's rows): ``(parts, oscillations)``, ``parts(theta) ->
+    (fixed, controller, per_K)``, the Hermitian part of D G^-1 being ``fixed +
+    controller + K per_K`` (the controller's part at K = 0 is linear in its virtual
+    damping), and the grid's oscillations.
+
+    Raises
+    ------
+    AnalysisError
+        Where :func:`critical_stiffness_circle` refuses the loop, and for unequal
+        unscaled PEB controllers (whose K_max is 0 by the residue, not this minimum).
+    """
+    side = stiffness_side(loop)
+    a = approximation_name(approximation)
+    whole_delay(loop, "the circle criterion")
+    D = side.port_weights(scaling)
+    if len(set(side.ratios or ())) > 1 and set(D) == {1.0}:
+        raise AnalysisError("circle: the residue at z = 1 is not Hermitian (K_m != K_s, "
+                            "no port scaling)")
+    w = np.asarray(D)[None, :, None]
+
+    def parts(theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        X = integrator_response(a, theta, side.period_s)[:, None, None]
+        fixed = np.broadcast_to(_herm(w * np.diag(side.damping)[None]),
+                                (theta.size, side.ports, side.ports))
+        return (fixed, _herm(w * X * side.controller_matrix(theta, "B")),
+                _herm(w * X * side.controller_matrix(theta, "K")))
+    return parts, side.oscillations
 
 
 def _affine_kmax(parts: Any, oscillations: int) -> tuple[float, float]:

@@ -16,7 +16,8 @@ import numpy as np
 
 from hapstab.tolerances import DIVISOR_FLOOR
 
-__all__ = ["theta_grid", "refine_minimum", "psd_limit", "min_eig"]
+__all__ = ["theta_grid", "refine_minimum", "refine_minimum_rows", "affine_kmax_rows",
+           "psd_limit", "min_eig"]
 
 _GOLD = (3.0 - np.sqrt(5.0)) / 2.0  # 0.381966...: golden-section step
 
@@ -90,41 +91,108 @@ def refine_minimum(f: Callable[[np.ndarray], np.ndarray], theta: np.ndarray,
         ``theta_min = 0`` when the minimum is the limit at the grid's first
         point (see :func:`theta_grid`).
     """
+    t, v = refine_minimum_rows(lambda rows, t: f(t), theta, np.asarray(values)[None, :],
+                               n_best, iters, zero_rtol)
+    return float(t[0]), float(v[0])
+
+
+def refine_minimum_rows(f: Callable[[np.ndarray, np.ndarray], np.ndarray], theta: np.ndarray,
+                        values: np.ndarray, n_best: int = 8, iters: int = 48,
+                        zero_rtol: float = 1e-10,     # refine_minimum's (its reason there)
+                        ) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`refine_minimum` of many functions on one grid at once: ``values[r]`` is
+    row r's grid, ``f(rows, t)`` row ``rows[i]``'s value at ``t[i]``; every row's
+    golden sections run in one vectorised search (each row's steps are the ones
+    :func:`refine_minimum` takes for it alone).
+
+    Returns
+    -------
+    (theta_min, f_min) : tuple of arrays, one entry per row
+    """
     v = np.where(np.isnan(values), np.inf, values)
-    N = v.size
+    R, N = v.shape
+    best_t, best_v = np.full(R, np.nan), np.full(R, np.inf)
     if N == 0:
-        return float("nan"), float("inf")
-    left = np.concatenate([[np.inf], v[:-1]])
-    right = np.concatenate([v[1:], [np.inf]])
-    cand = np.flatnonzero((v <= left) & (v <= right) & np.isfinite(v))
-    ib = int(np.argmin(v))
-    best_t, best_v = float(theta[ib]), float(v[ib])
-    if cand.size == 0:
         return best_t, best_v
-    cand = cand[np.argsort(v[cand])[:n_best]]
-    a = theta[np.maximum(cand - 1, 0)].astype(float)
-    b = theta[np.minimum(cand + 1, N - 1)].astype(float)
-    c, d = a + _GOLD * (b - a), b - _GOLD * (b - a)
-    fc, fd = _clean(f(c)), _clean(f(d))
-    for _ in range(iters):
-        m = fc < fd  # the minimum lies in [a, d]
-        c_old, d_old, fc_old, fd_old = c, d, fc, fd
-        b = np.where(m, d_old, b)
-        a = np.where(m, a, c_old)
-        c = np.where(m, a + _GOLD * (b - a), d_old)
-        d = np.where(m, c_old, b - _GOLD * (b - a))
-        fn = _clean(f(np.where(m, c, d)))
-        fc = np.where(m, fn, fd_old)
-        fd = np.where(m, fc_old, fn)
-    for t, val in ((c, fc), (d, fd)):
-        j = int(np.argmin(val))
-        if val[j] < best_v:
-            best_t, best_v = float(t[j]), float(val[j])
-    if np.isfinite(v[0]) and v[0] <= best_v + zero_rtol * abs(best_v):
-        # the first grid point stands for the limit w -> 0 (see theta_grid); when it is
-        # as low as the refined minimum (to rounding), the worst case is that limit
-        best_t, best_v = 0.0, min(best_v, float(v[0]))
+    inf = np.full((R, 1), np.inf)
+    left, right = np.hstack([inf, v[:, :-1]]), np.hstack([v[:, 1:], inf])
+    is_min = (v <= left) & (v <= right) & np.isfinite(v)
+    ib = np.argmin(v, axis=1)
+    best_t, best_v = theta[ib].astype(float), v[np.arange(R), ib].astype(float)
+    picks = []
+    for r in range(R):           # each row's n_best lowest local minima, in its own order
+        cand = np.flatnonzero(is_min[r])
+        picks.append(cand[np.argsort(v[r, cand])[:n_best]])
+    rows = np.repeat(np.arange(R), [p.size for p in picks])
+    if rows.size:
+        cand = np.concatenate(picks)
+        a = theta[np.maximum(cand - 1, 0)].astype(float)
+        b = theta[np.minimum(cand + 1, N - 1)].astype(float)
+        c, d = a + _GOLD * (b - a), b - _GOLD * (b - a)
+        fc, fd = _clean(f(rows, c)), _clean(f(rows, d))
+        for _ in range(iters):
+            m = fc < fd  # the minimum lies in [a, d]
+            c_old, d_old, fc_old, fd_old = c, d, fc, fd
+            b = np.where(m, d_old, b)
+            a = np.where(m, a, c_old)
+            c = np.where(m, a + _GOLD * (b - a), d_old)
+            d = np.where(m, c_old, b - _GOLD * (b - a))
+            fn = _clean(f(rows, np.where(m, c, d)))
+            fc = np.where(m, fn, fd_old)
+            fd = np.where(m, fc_old, fn)
+        for t, val in ((c, fc), (d, fd)):
+            # per row its first lowest candidate (np.argmin's pick within the row)
+            order = np.lexsort((np.arange(rows.size), val, rows))
+            first = order[np.r_[True, rows[order][1:] != rows[order][:-1]]]
+            at = rows[first]
+            better = val[first] < best_v[at]
+            best_t[at[better]], best_v[at[better]] = t[first][better], val[first][better]
+    # the first grid point stands for the limit w -> 0 (see theta_grid); when it is as
+    # low as the refined minimum (to rounding), the worst case is that limit
+    zero = np.isfinite(v[:, 0]) & (v[:, 0] <= best_v + zero_rtol * np.abs(best_v))
+    best_t = np.where(zero, 0.0, best_t)
+    best_v = np.where(zero, np.minimum(best_v, v[:, 0]), best_v)
     return best_t, best_v
+
+
+def affine_kmax_rows(parts: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray]],
+                     dampings: np.ndarray, oscillations: int, tol_scale: float
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """Per virtual damping B, min over w of the PSD limit of ``A0 + B A1 + K C``
+    (:func:`psd_limit`): the K_max of a test whose matrix is affine in K and B (the
+    K-B plane's rows, h = K + B g), every row on one grid and one golden search.
+
+    Parameters
+    ----------
+    parts : callable
+        ``parts(theta) -> (A0, A1, C)``, each ``(N,)`` or ``(N, p, p)``.
+    dampings : array
+        The rows' B.
+    oscillations : int
+        For :func:`theta_grid`.
+    tol_scale : float
+        The PSD slack per angle relative to A's largest entry (the single test's).
+
+    Returns
+    -------
+    (K_max, theta) : arrays, one entry per row
+    """
+    Bs = np.asarray(dampings, float)
+
+    def limit(A0: np.ndarray, A1: np.ndarray, C: np.ndarray, B: np.ndarray) -> np.ndarray:
+        """psd_limit of A0 + B A1 + K C (``B``: one value per angle)."""
+        A = A0 + B.reshape(-1, *([1] * (A0.ndim - 1))) * A1
+        tol = tol_scale * np.abs(A).reshape(A.shape[0], -1).max(axis=1)
+        return psd_limit(A, C, tol)
+
+    def k_of(rows: np.ndarray, t: np.ndarray) -> np.ndarray:
+        return limit(*parts(t), Bs[rows])
+
+    th = theta_grid(oscillations)
+    grid = parts(th)              # once; each row's grid is the same matrices with its B
+    vals = np.array([limit(*grid, np.full(th.size, B)) for B in Bs]).reshape(Bs.size, th.size)
+    t_min, K = refine_minimum_rows(k_of, th, vals)
+    return K, t_min
 
 
 def _clean(x: np.ndarray) -> np.ndarray:

@@ -51,7 +51,7 @@ from hapstab.models.loops import HapticLoop, TeleoperationLoop, require_loop, wh
 from hapstab.results import CriticalStiffnessResult, Result, jsonable
 from hapstab.tolerances import DIVISOR_FLOOR, PSD_SLACK, ROOT_ON_CIRCLE
 
-__all__ = ["PassivityResult", "sampled_passivity", "critical_stiffness_passivity"]
+__all__ = ["kmax_parts", "PassivityResult", "sampled_passivity", "critical_stiffness_passivity"]
 
 
 @dataclass(frozen=True)
@@ -245,18 +245,12 @@ def critical_stiffness_passivity(loop: HapticLoop | TeleoperationLoop,
     if approximation is not None:
         raise AnalysisError(f"approximation = {approximation!r}: applies to method 'circle' only; "
                             "'passivity' is exact")
-    side = _side(loop)
-    if not all(has_stiffness(ch.controller) for ch in side.channels):
-        raise AnalysisError("critical stiffness: needs SpringDamper controller(s) (or "
-                            "FilteredSpringDamper / AffineController: a stiffness to vary)")
-    if side.ratios is None:
-        raise AnalysisError("controllers: the master's stiffness is 0 and the slave's is not, so "
-                            "K_s/K_m is undefined; give the master a stiffness > 0 to vary K")
+    side = _stiffness_side(loop)
     T, D = side.period_s, side.port_weights(scaling)
+    parts = _affine_parts(side, D)
 
     def k_of(t: np.ndarray) -> np.ndarray:
-        Db, WB = _parts(side, t, D, "B")
-        _, WK = _parts(side, t, D, "K")
+        Db, WB, WK = parts(t)
         A = Db + WB
         tol = PSD_SLACK * np.abs(A).reshape(t.size, -1).max(axis=1)  # rounding slack on A >= 0
         return psd_limit(A, WK, tol)
@@ -282,3 +276,40 @@ def critical_stiffness_passivity(loop: HapticLoop | TeleoperationLoop,
         t_min / (2 * math.pi * T) if fin else float("nan"),
         {"worst_frequency_rad_s": t_min / T if fin else float("nan"),
          "port_scaling": list(D)})
+
+
+def _stiffness_side(loop: Any) -> DeviceSide:
+    """:func:`_side`, refusing also controllers without a stiffness to vary."""
+    side = _side(loop)
+    if not all(has_stiffness(ch.controller) for ch in side.channels):
+        raise AnalysisError("critical stiffness: needs SpringDamper controller(s) (or "
+                            "FilteredSpringDamper / AffineController: a stiffness to vary)")
+    if side.ratios is None:
+        raise AnalysisError("controllers: the master's stiffness is 0 and the slave's is not, so "
+                            "K_s/K_m is undefined; give the master a stiffness > 0 to vary K")
+    return side
+
+
+def _affine_parts(side: DeviceSide, D: tuple[float, ...]) -> Any:
+    """theta -> (D diag(b), the sampled part at K = 0, the sampled part per unit K): the
+    passivity matrix at K is the first two plus K times the third."""
+    def parts(t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        Db, WB = _parts(side, t, D, "B")
+        return Db, WB, _parts(side, t, D, "K")[1]
+    return parts
+
+
+def kmax_parts(loop: HapticLoop | TeleoperationLoop, scaling: str | None = "auto") -> Any:
+    """What :func:`critical_stiffness_passivity` minimises over, for batched callers
+    (the K-B region's rows): ``(parts, oscillations)``, ``parts(theta) -> (fixed,
+    controller, per_K)`` with the passivity matrix ``fixed + controller + K per_K``
+    (the controller's part at K = 0 is linear in its virtual damping), and the grid's
+    oscillations (:func:`~hapstab.analysis.conditions.frequency_grid.theta_grid`).
+
+    Raises
+    ------
+    AnalysisError
+        Where :func:`critical_stiffness_passivity` refuses the loop.
+    """
+    side = _stiffness_side(loop)
+    return _affine_parts(side, side.port_weights(scaling)), side.oscillations
