@@ -43,3 +43,11 @@ def test_the_simulation_summary_states_the_swing_at_the_start_and_the_end():
                      8.0, force="step:2")
     s = run.summary()
     assert s["swing_end_m_device"] > 20 * s["swing_start_m_device"] > 0   # visibly grows
+
+
+def test_unequal_delays_show_both_in_samples_too():
+    # `hapstab kmax peb --delay-forward 2 --delay-backward 5` said "t_d = 2 ms / 5 ms
+    # (2 samples)": the samples named the forward delay only
+    loop = h.paper_peb(delay_samples=2).with_delays_s(2e-3, 5e-3)
+    assert "t_d = 2 ms / 5 ms (2 / 5 samples)" in headline(loop)
+    assert "t_d = 2 ms (2 samples)" in headline(h.paper_peb(delay_samples=2))

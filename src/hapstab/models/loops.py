@@ -425,8 +425,11 @@ def headline(loop: HapticLoop | TeleoperationLoop) -> str:
                if (vf := getattr(c, "velocity_filter", None)) is not None}
     if filters:
         parts.append("damper on " + " / ".join(sorted(filters)) + " velocity")
-    n = loop.delay_in_samples
-    return "; ".join([*parts, f"T = {loop.period * 1e3:.4g} ms, {delay} ({n:.4g} samples)"])
+    n = f"{loop.delay_in_samples:.4g}"
+    back = getattr(loop, "backward_delay_in_samples", loop.delay_in_samples)
+    if back != loop.delay_in_samples:          # unequal delays: both, as t_d shows them
+        n += f" / {back:.4g}"
+    return "; ".join([*parts, f"T = {loop.period * 1e3:.4g} ms, {delay} ({n} samples)"])
 
 
 #: Lawrence's names of the 4-channel loop's force gains (for headlines).
