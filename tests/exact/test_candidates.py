@@ -205,8 +205,10 @@ def test_a_window_between_two_grid_points_is_reported(s, window):
     ss = candidates.candidate_set(resp, 0, True)
     # the grid itself proposes both crossings (no fallback to the certified search needed)
     assert ss is not None and len(ss.intervals) == 2, ss
-    got = h.critical_stiffness(s.hapstab_loop()).stable_intervals
+    res = h.critical_stiffness(s.hapstab_loop())
+    got = res.stable_intervals
     assert len(got) == 2, got
+    assert "the other stable interval, above K_max, proved in ball arithmetic" in res.reason
     # 1e-9: the brute force's 10 printed digits; the proved ends lie inside the window
     # by at most the proof's 2^-40 windows
     assert math.isclose(got[1][0], window[0], rel_tol=1e-9)

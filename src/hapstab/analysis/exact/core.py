@@ -449,6 +449,7 @@ def critical_stiffness_result(res: StableSet, T: float, n: int | float
         if kmax > 0:
             reason += (f"; proved stable for K in [K_0, K_max] = [{pr.k0:.6g}, {kmax:.10g}] N/m in "
                        "ball arithmetic, K_0 standing for K -> 0+ ((0, K_0) is not proved)")
+        reason += _others_proved(len(res.intervals) - (1 if kmax > 0 else 0), kmax > 0)
     else:
         details["proof"] = "float enclosures (not re-proved in ball arithmetic)"
     cert = None
@@ -459,3 +460,14 @@ def critical_stiffness_result(res: StableSet, T: float, n: int | float
         cert = certificate(pr)
     return CriticalStiffnessResult(kmax, "exact", res.intervals, reason, T, n, freq, details,
                                    certificate=cert)
+
+
+def _others_proved(more: int, after_kmax: bool) -> str:
+    """The reason's words for the stable intervals besides [K_0, K_max]: each is proved
+    as that one is (:mod:`~hapstab.analysis.exact.proof`, step 4)."""
+    if more <= 0:
+        return ""
+    what = (("the other stable interval" if more == 1 else f"the other {more} stable intervals")
+            if after_kmax else ("the stable interval" if more == 1
+                                else f"the {more} stable intervals"))
+    return f"; {what}, above {'K_max' if after_kmax else 'K = 0'}, proved in ball arithmetic too"
