@@ -202,3 +202,15 @@ def test_unequal_whole_delays_are_the_round_trip(nf, nb):
     assert h.critical_stiffness(asym, "llewellyn").critical_stiffness == ref_llewellyn
     assert h.critical_stiffness(asym).critical_stiffness == pytest.approx(ref_exact, rel=1e-12)
     assert h.llewellyn_test(asym.with_stiffness(500.0)).absolutely_stable
+
+
+@pytest.mark.parametrize("n", [0, 4, 30])
+def test_eight_stiffnesses_a_round_end_where_bisection_ends(monkeypatch, n):
+    # twoport._last_passing tries SECTIONS stiffnesses a round (one golden search for all);
+    # with one a round it is the bisection it replaced: both end within their 1e-9
+    import hapstab.analysis.teleoperation.twoport as tp
+    loop = h.paper_peb(delay_samples=n)
+    many = tp.critical_stiffness_llewellyn(loop).critical_stiffness
+    monkeypatch.setattr(tp, "SECTIONS", 1)
+    one = tp.critical_stiffness_llewellyn(loop).critical_stiffness
+    assert many == pytest.approx(one, rel=2e-9) and many != one

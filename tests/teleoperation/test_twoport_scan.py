@@ -1,6 +1,6 @@
-"""Llewellyn's K scan (twoport._first_failure): the screen that skips the K every angle
+"""Llewellyn's K scan (llewellyn_scan.first_failure): the screen that skips the K every angle
 surely passes never changes the K found. References: the plain scan (every K of the grid,
-margins by ``_margin_of`` in large chunks, as before the screen) written here, and the
+margins by ``margin_of`` in large chunks, as before the screen) written here, and the
 margin itself on random two-ports (the screen's claim, pair by pair)."""
 
 import math
@@ -12,15 +12,16 @@ from hypothesis import strategies as st
 
 import hapstab as h
 import lanes
+from hapstab.analysis.teleoperation import llewellyn_scan as scan
 from hapstab.analysis.teleoperation import twoport as tp
 
 
 def _plain_first_failure(A, C, tol):
     """Every K of the scan, in order, the margin at every angle (no screen)."""
-    Ks = np.exp(np.arange(math.log(tp.SCAN_START), math.log(1e12), math.log(tp.SCAN_STEP)))
+    Ks = np.exp(np.arange(math.log(scan.SCAN_START), math.log(1e12), math.log(scan.SCAN_STEP)))
     # chunks of ~65,536 pairs (fast in cache; the chunking does not change the K found)
     for chunk in np.array_split(Ks, max(1, Ks.size * A.shape[0] // 65_536)):
-        m = tp._margin_of(A[None] + chunk[:, None, None, None] * C[None]).min(axis=1)
+        m = scan.margin_of(A[None] + chunk[:, None, None, None] * C[None]).min(axis=1)
         bad = np.flatnonzero(m < -tol)
         if bad.size:
             return float(chunk[bad[0]])
@@ -60,7 +61,7 @@ def test_the_screened_scan_finds_the_plain_scans_k(approximation, bounds, rest):
             continue
         side, a = tp._side(loop, approximation, bounds)
         A, C = tp._parts(side, a, tp.theta_grid(side.oscillations))
-        got, want = tp._first_failure(A, C, 0.0), _plain_first_failure(A, C, 0.0)
+        got, want = scan.first_failure(A, C, 0.0), _plain_first_failure(A, C, 0.0)
         assert got == want, (loop, approximation, bounds)
         found.append(got is not None)
     assert any(found)          # the draw has failures to find
@@ -93,8 +94,8 @@ def test_a_pair_the_screen_passes_has_a_positive_margin(seed):
     rng = np.random.default_rng(seed)
     P = _near_the_edge(rng, 256)
     K = np.array([0.0])                        # P = A + 0 C: the pairs themselves
-    sure = tp._Screen(P, np.zeros_like(P)).sure(K)[0]
-    margin = tp._margin_of(P)
+    sure = scan.Screen(P, np.zeros_like(P)).sure(K)[0]
+    margin = scan.margin_of(P)
     assert np.all(margin[sure] > 0), seed
     assert sure.sum() >= 40      # ~1/3 are clear of the band (measured 85 of 256 at seed 0)
 

@@ -425,10 +425,9 @@ def headline(loop: HapticLoop | TeleoperationLoop) -> str:
                if (vf := getattr(c, "velocity_filter", None)) is not None}
     if filters:
         parts.append("damper on " + " / ".join(sorted(filters)) + " velocity")
-    n = f"{loop.delay_in_samples:.4g}"
     back = getattr(loop, "backward_delay_in_samples", loop.delay_in_samples)
-    if back != loop.delay_in_samples:          # unequal delays: both, as t_d shows them
-        n += f" / {back:.4g}"
+    n = f"{loop.delay_in_samples:.4g}" + (f" / {back:.4g}" if back != loop.delay_in_samples
+                                          else "")      # unequal delays: both, as t_d
     return "; ".join([*parts, f"T = {loop.period * 1e3:.4g} ms, {delay} ({n} samples)"])
 
 

@@ -10,6 +10,7 @@ rad/sample (theta = w T).
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 
 import numpy as np
@@ -185,14 +186,25 @@ def affine_kmax_rows(parts: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray,
         tol = tol_scale * np.abs(A).reshape(A.shape[0], -1).max(axis=1)
         return psd_limit(A, C, tol)
 
-    def k_of(rows: np.ndarray, t: np.ndarray) -> np.ndarray:
-        return limit(*parts(t), Bs[rows])
+    def k_of(rows: np.ndarray, t: np.ndarray, first: int = 0) -> np.ndarray:
+        return limit(*parts(t), Bs[rows + first])
 
     th = theta_grid(oscillations)
     grid = parts(th)              # once; each row's grid is the same matrices with its B
-    vals = np.array([limit(*grid, np.full(th.size, B)) for B in Bs]).reshape(Bs.size, th.size)
-    t_min, K = refine_minimum_rows(k_of, th, vals)
+    # rows in chunks of ~ROW_VALUES grid values (the search holds ~5 such arrays): a
+    # long delay's 1e5 angles times 200 rows would hold 1e8 (each row's answer is its own)
+    per = max(1, ROW_VALUES // th.size)
+    K, t_min = np.empty(Bs.size), np.empty(Bs.size)
+    for r0 in range(0, Bs.size, per):
+        sl = slice(r0, r0 + per)
+        vals = np.array([limit(*grid, np.full(th.size, B)) for B in Bs[sl]]).reshape(-1, th.size)
+        t_min[sl], K[sl] = refine_minimum_rows(functools.partial(k_of, first=r0), th, vals)
     return K, t_min
+
+
+#: Grid values (rows x angles) :func:`affine_kmax_rows` holds at once: 2e6 doubles, ~16 MB
+#: per array.
+ROW_VALUES = 2_000_000
 
 
 def _clean(x: np.ndarray) -> np.ndarray:
