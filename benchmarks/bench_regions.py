@@ -60,5 +60,37 @@ def main() -> None:
           f"{margin:g} N/m from the exact boundary")
 
 
+def overlays() -> None:
+    """The region's passivity and circle overlays: every row at once (hapstab since
+    session 16) against row by row, critical_stiffness(method=...) of each row's loop
+    (what hapstab did before, and what a user of the single-loop API writes)."""
+    import contextlib
+
+    from hapstab.analysis.design.regions import _overlay
+    from hapstab.analysis.methods import critical_stiffness
+    loop = h.HapticLoop(h.Device(0.3, 0.5), operator=h.mass_spring_damper(0.5, 5, 500),
+                        period=1e-3).with_delay_s(0.02)      # the README's region command
+    Bs = np.linspace(0.0, 20.0, RES)
+    print(f"overlays of the README's region (0.3 kg, 20 ms), {RES} rows of B:")
+    for name in ("passivity", "circle"):
+        ts = []
+        for _ in range(3):
+            t0 = time.perf_counter()
+            got = _overlay(loop, name, Bs)
+            ts.append(time.perf_counter() - t0)
+        t0 = time.perf_counter()
+        ref = np.full(Bs.size, np.nan)
+        for i, b in enumerate(Bs):
+            with contextlib.suppress(h.HapstabError):
+                ref[i] = critical_stiffness(with_gains(loop, 1.0, float(b)),
+                                            method=name).critical_stiffness
+        t_rows = time.perf_counter() - t0
+        rel = float(np.nanmax(np.abs(got - ref) / np.maximum(np.abs(ref), 1e-300)))
+        print(f"  {name:9s} all rows at once (median of 3) {statistics.median(ts):7.3f} s; "
+              f"row by row {t_rows:7.3f} s; ratio {t_rows / statistics.median(ts):5.1f}x; "
+              f"largest relative difference {rel:.1e}")
+
+
 if __name__ == "__main__":
     main()
+    overlays()
