@@ -396,9 +396,10 @@ def _overlay(loop: Loop, name: str, Bs: np.ndarray) -> np.ndarray:
 
 def _affine_rows(loop: Loop, name: str, Bs: np.ndarray) -> np.ndarray | None:
     """Every row's K_max by ``name`` at once, where its matrix is affine in K
-    (:data:`~hapstab.analysis.methods.AFFINE_PARTS`) and so, on the K-B plane, in B:
-    the loop at B = 0 gives the fixed part, at B = 1 the controller's per unit B. None
-    where the method is not such, or refuses the loop (then row by row)."""
+    (:data:`~hapstab.analysis.methods.AFFINE_PARTS`) and so, on the K-B plane, in B: the
+    loop at B = 1 gives the fixed part, the controller's per unit B and the part per unit
+    K (neither the first nor the last depends on B). None where the method is not such,
+    or refuses the loop (then row by row)."""
     from hapstab.analysis.conditions.frequency_grid import affine_kmax_rows
     from hapstab.analysis.methods import AFFINE_PARTS
     from hapstab.tolerances import PSD_SLACK
@@ -407,11 +408,7 @@ def _affine_rows(loop: Loop, name: str, Bs: np.ndarray) -> np.ndarray | None:
     if of is None:
         return None
     try:
-        (at0, osc0), (at1, osc1) = of(with_gains(loop, 1.0, 0.0)), of(with_gains(loop, 1.0, 1.0))
+        parts, oscillations = of(with_gains(loop, 1.0, 1.0))
     except AnalysisError:
         return None
-
-    def parts(t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        fixed, _, per_K = at0(t)
-        return fixed, at1(t)[1], per_K
-    return affine_kmax_rows(parts, Bs, max(osc0, osc1), PSD_SLACK)[0]
+    return affine_kmax_rows(parts, Bs, oscillations, PSD_SLACK)[0]
