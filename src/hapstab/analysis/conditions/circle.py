@@ -53,7 +53,7 @@ from hapstab.analysis.conditions.device_terms import (
     stiffness_side,
     whole_delay_side,
 )
-from hapstab.analysis.conditions.frequency_grid import psd_limit, refine_minimum, theta_grid
+from hapstab.analysis.conditions.frequency_grid import affine_kmax_rows
 from hapstab.analysis.conditions.positive_real import (
     PositiveRealResult,
     RationalMatrix,
@@ -293,18 +293,28 @@ def circle_test(loop: HapticLoop | TeleoperationLoop, approximation: str = "forw
 
 
 # ----------------------------------------------------------------- K_max, fast path
-def _hermitian_parts(side: DeviceSide, a: str, D: tuple[float, ...], theta: np.ndarray
-                     ) -> tuple[np.ndarray, np.ndarray]:
-    """Hermitian parts of D G^{-1} = A + K C at K = 0 (A) and per unit K (C)."""
-    X = integrator_response(a, theta, side.period_s)[:, None, None]
+def _circle_parts(side: DeviceSide, a: str, D: tuple[float, ...]) -> Any:
+    """theta -> the Hermitian part of D G^-1 as (fixed, the controllers' part at K = 0,
+    the part per unit K): D G^-1's at K is their sum with K times the last."""
     w = np.asarray(D)[None, :, None]
-    A = w * (np.diag(side.damping)[None] + X * side.controller_matrix(theta, "B"))
-    C = w * X * side.controller_matrix(theta, "K")
-    return _herm(A), _herm(C)
+    fixed = _herm(w * np.diag(side.damping)[None])
+
+    def parts(theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        X = integrator_response(a, theta, side.period_s)[:, None, None]
+        return (np.broadcast_to(fixed, (theta.size, side.ports, side.ports)),
+                _herm(w * X * side.controller_matrix(theta, "B")),
+                _herm(w * X * side.controller_matrix(theta, "K")))
+    return parts
 
 
 def _herm(M: np.ndarray) -> np.ndarray:
     return M + np.conj(np.swapaxes(M, 1, 2))
+
+
+def _unhermitian_residue(side: DeviceSide, D: tuple[float, ...]) -> bool:
+    """PEB with K_m != K_s and no port scaling: the residue (25) at z = 1 is not
+    Hermitian, and K_max is 0 by it."""
+    return len(set(side.ratios or ())) > 1 and set(D) == {1.0}
 
 
 def kmax_parts(loop: HapticLoop | TeleoperationLoop, approximation: str = "forward",
@@ -325,29 +335,10 @@ def kmax_parts(loop: HapticLoop | TeleoperationLoop, approximation: str = "forwa
     a = approximation_name(approximation)
     whole_delay(loop, "the circle criterion")
     D = side.port_weights(scaling)
-    if len(set(side.ratios or ())) > 1 and set(D) == {1.0}:
+    if _unhermitian_residue(side, D):
         raise AnalysisError("circle: the residue at z = 1 is not Hermitian (K_m != K_s, "
                             "no port scaling)")
-    w = np.asarray(D)[None, :, None]
-
-    def parts(theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        X = integrator_response(a, theta, side.period_s)[:, None, None]
-        fixed = np.broadcast_to(_herm(w * np.diag(side.damping)[None]),
-                                (theta.size, side.ports, side.ports))
-        return (fixed, _herm(w * X * side.controller_matrix(theta, "B")),
-                _herm(w * X * side.controller_matrix(theta, "K")))
-    return parts, side.oscillations
-
-
-def _affine_kmax(parts: Any, oscillations: int) -> tuple[float, float]:
-    """min over w of the PSD limit of A(w) + K C(w): (K_max, worst angle)."""
-    def k_of(t: np.ndarray) -> np.ndarray:
-        A, C = parts(t)
-        tol = PSD_SLACK * np.abs(A).reshape(t.size, -1).max(axis=1)  # rounding slack on A >= 0
-        return psd_limit(A, C, tol)
-
-    th = theta_grid(oscillations)
-    return refine_minimum(k_of, th, k_of(th))[::-1]
+    return _circle_parts(side, a, D), side.oscillations
 
 
 def critical_stiffness_circle(loop: HapticLoop | TeleoperationLoop, approximation: str = "forward",
@@ -401,11 +392,15 @@ def critical_stiffness_circle(loop: HapticLoop | TeleoperationLoop, approximatio
     D = side.port_weights(scaling)
     if sector is not None:
         return _sector_kmax(loop, a, sector, scaling)
-    if len(set(side.ratios or ())) > 1 and set(D) == {1.0}:
+    if _unhermitian_residue(side, D):
         K, th = 0.0, 0.0
         why = "residue (25) at z = 1 is not Hermitian for K_m != K_s (no port scaling)"
     else:
-        K, th = _affine_kmax(lambda t: _hermitian_parts(side, a, D, t), side.oscillations)
+        # the loop's own K_max: one row of the batched minimum, at its own B (B = 1 times
+        # the controllers' part)
+        Ks, ths = affine_kmax_rows(_circle_parts(side, a, D), np.ones(1), side.oscillations,
+                                   PSD_SLACK)
+        K, th = float(Ks[0]), float(ths[0])
         if K == 0:   # condition (iii) fails at K = 0: the virtual damping (e.g. B < -b) wins
             why = ("G^-1(z) is not PR for any K >= 0: condition (iii) fails already at K = 0 "
                    f"(at w = {th / T:.6g} rad/s; the virtual damping takes more than the device "

@@ -39,8 +39,8 @@ from typing import Any
 import numpy as np
 
 from hapstab.analysis.conditions.frequency_grid import (
+    affine_kmax_rows,
     min_eig,
-    psd_limit,
     refine_minimum,
     theta_grid,
 )
@@ -247,16 +247,10 @@ def critical_stiffness_passivity(loop: HapticLoop | TeleoperationLoop,
                             "'passivity' is exact")
     side = _stiffness_side(loop)
     T, D = side.period_s, side.port_weights(scaling)
-    parts = _affine_parts(side, D)
-
-    def k_of(t: np.ndarray) -> np.ndarray:
-        Db, WB, WK = parts(t)
-        A = Db + WB
-        tol = PSD_SLACK * np.abs(A).reshape(t.size, -1).max(axis=1)  # rounding slack on A >= 0
-        return psd_limit(A, WK, tol)
-
-    th = theta_grid(side.oscillations)
-    t_min, K = refine_minimum(k_of, th, k_of(th))
+    # the loop's own K_max: one row of the batched minimum at its own B (B = 1 times the
+    # controllers' part; PSD_SLACK: the rounding slack on A >= 0, relative to |A|)
+    Ks, ts = affine_kmax_rows(_affine_parts(side, D), np.ones(1), side.oscillations, PSD_SLACK)
+    t_min, K = float(ts[0]), float(Ks[0])
     fin = math.isfinite(K)
     head = ("sampled-data passivity (Colgate-Schenkel 1997"
             + (", multiport" if side.ports > 1 else "") + "): ")
@@ -264,6 +258,7 @@ def critical_stiffness_passivity(loop: HapticLoop | TeleoperationLoop,
         reason = head + "passive for K <= K_max" + (f"; binds at w = {t_min / T:.6g} rad/s" if fin
                                                     else " = inf")
     else:  # already at K = 0 the damping does not cover the virtual damping (e.g. B < -b)
+        th = theta_grid(side.oscillations)
         Db, WB = _parts(side, th, D, "B")
         m0 = min_eig(Db + WB)
         i = int(np.argmin(m0))

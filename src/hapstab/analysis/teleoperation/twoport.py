@@ -61,7 +61,6 @@ from hapstab.analysis.conditions.device_terms import (
     stiffness_side,
 )
 from hapstab.analysis.conditions.frequency_grid import (
-    refine_minimum,
     refine_minimum_rows,
     theta_grid,
 )
@@ -127,16 +126,6 @@ def _margin(A: np.ndarray, C: np.ndarray, K: float) -> np.ndarray:
     return margin_of(A + K * C)
 
 
-def _worst(side: DeviceSide, a: str, th: np.ndarray, margins: np.ndarray,
-           K: float) -> tuple[float, float]:
-    """(angle, margin) of the smallest margin at K: the grid's ``margins`` refined by
-    golden section between grid points."""
-    def f(t: np.ndarray) -> np.ndarray:
-        At, Ct = _parts(side, a, np.atleast_1d(t))
-        return _margin(At, Ct, K)
-    return refine_minimum(f, th, margins)
-
-
 #: Stiffnesses tried at once in each round of the search for K_max: the bracket shrinks
 #: by SECTIONS + 1 per round (one vectorised golden search for all of them) instead of 2
 #: per bisection step: ~10 rounds to 1e-9 relative instead of ~30 golden searches.
@@ -148,14 +137,15 @@ SECTIONS = 8
 SECTION_ANGLES = 80_000
 
 
-def _worst_many(side: DeviceSide, a: str, th: np.ndarray, A: np.ndarray, C: np.ndarray,
-                Ks: np.ndarray) -> np.ndarray:
-    """:func:`_worst`'s margin at each K of ``Ks`` at once (each K's grid and golden
-    section, bit for bit those of :func:`_worst`)."""
+def _worst(side: DeviceSide, a: str, th: np.ndarray, A: np.ndarray, C: np.ndarray,
+           Ks: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(angle, margin) of the smallest margin at each K of ``Ks``: each K's margins on
+    the grid (``A + K C``) refined by golden section between grid points, all K in one
+    vectorised search (:func:`~hapstab.analysis.conditions.frequency_grid.refine_minimum_rows`)."""
     def f(rows: np.ndarray, t: np.ndarray) -> np.ndarray:
         At, Ct = _parts(side, a, t)
         return margin_of(At + Ks[rows][:, None, None] * Ct)
-    return refine_minimum_rows(f, th, np.array([_margin(A, C, K) for K in Ks]))[1]
+    return refine_minimum_rows(f, th, np.array([_margin(A, C, K) for K in Ks]))
 
 
 def _last_passing(side: DeviceSide, a: str, th: np.ndarray, A: np.ndarray, C: np.ndarray,
@@ -167,7 +157,7 @@ def _last_passing(side: DeviceSide, a: str, th: np.ndarray, A: np.ndarray, C: np
     steps = np.arange(1, sections + 1) / (sections + 1)
     while hi - lo > 1e-9 * hi and hi > zero:     # to 1e-9 relative: far below any design use
         Ks = lo + (hi - lo) * steps
-        bad = np.flatnonzero(_worst_many(side, a, th, A, C, Ks) < -tol)
+        bad = np.flatnonzero(_worst(side, a, th, A, C, Ks)[1] < -tol)
         if not bad.size:
             lo = float(Ks[-1])
         else:
@@ -235,7 +225,8 @@ def critical_stiffness_llewellyn(loop: TeleoperationLoop, approximation: str = "
     A, C = _parts(side, a, th)
 
     def worst(K: float) -> tuple[float, float]:
-        return _worst(side, a, th, _margin(A, C, K), K)
+        t, m = _worst(side, a, th, A, C, np.array([K]))
+        return float(t[0]), float(m[0])
 
     tol = 0.0        # (the margin carries its own rounding slack, SLACK)
     if worst(0.0)[1] < -tol:
@@ -420,7 +411,7 @@ def llewellyn_test(loop: TeleoperationLoop, approximation: str = "forward",
     A, C = _parts(side, a, th)
 
     margins = _margin(A, C, K)
-    th_w, m = _worst(side, a, th, margins, K)
+    th_w, m = (float(x[0]) for x in _worst(side, a, th, A, C, np.array([K])))
     P = A + K * C
     w = P[:, 0, 1] * P[:, 1, 0]
     with np.errstate(all="ignore"):
