@@ -56,6 +56,35 @@ def test_dual_input_describing_function_against_a_fourier_integral(quantizer):
         assert abs(np.mean(q * cos)) < 1e-5 * (1 + 2 * A)   # memoryless: no phase
 
 
+def test_the_sum_in_python_is_the_sum_in_numpy(monkeypatch):
+    """Below FEW thresholds the describing function is summed in Python: the same terms,
+    equal to numpy's sums up to libm's arcsin (1 ulp)."""
+    from hapstab.analysis.nonlinear import harmonic
+
+    rng = np.random.default_rng(11)
+    draws = [(10 ** rng.uniform(-1, 0.6), rng.uniform(-3, 3), q)
+             for _ in range(300) for q in ("floor", "nearest")]
+    fast = [quantizer_describing_function(A, x0, 1.0, q) for A, x0, q in draws]
+    few = harmonic.FEW
+    monkeypatch.setattr(harmonic, "FEW", 0)                  # every sum through numpy
+    for (A, x0, q), (n1, mean) in zip(draws, fast, strict=True):
+        m1, m2 = quantizer_describing_function(A, x0, 1.0, q)
+        # a few roundings of terms of size <= 1 (the step), relative to the sums
+        assert abs(n1 - m1) <= 1e-14 * max(1.0, m1) and abs(mean - m2) <= 1e-14 * (1 + abs(m2))
+    assert sum(2 * A < few - 1 for A, _, _ in draws) > 100     # the Python sums ran
+
+
+def test_a_newton_step_to_zero_amplitude_is_stepped_back():
+    """MINPACK's first steps in log A went far enough that exp(log A) was 0, and the
+    describing function divided by it: an internal error (ZeroDivisionError) for this
+    command. Such a step is now outside the model and pushed back."""
+    r = CliRunner().invoke(cli, ["limit-cycle", "hve", "-K", "40", "-n", "10",
+                                 "--resolution", "1e-4", "--json"])
+    assert r.exit_code == 0, r.output
+    d = json.loads(r.stdout)
+    assert d["linear_verdict"] == "unstable" and d["cycles"]
+
+
 def test_textbook_quantiser_and_relay():
     # centred nearest quantiser: 4/pi at A = 1/sqrt 2, (4/(pi A)) sqrt(1 - 1/(4 A^2)) on (1/2, 3/2)
     assert math.isclose(quantizer_describing_function(2 ** -0.5, 0.0, 1.0, "nearest")[0],

@@ -139,7 +139,7 @@ class _Flow:
     def prop(self, z: np.ndarray, g: float, t: float, cache: bool = True) -> np.ndarray:
         """The state t seconds after z."""
         Ad, Bd = self.maps(t, cache)
-        return Ad @ z + Bd * g
+        return Ad.dot(z) + Bd * g
 
     def norms(self, c: np.ndarray) -> tuple[float, float]:
         """``||c~ A~||`` and ``||c~ A~^2||`` for the output row c."""
@@ -178,9 +178,10 @@ def _derivs(flow: _Flow, z: np.ndarray, g: float, c: np.ndarray, d: float
     Overflow
         One of them is not finite.
     """
-    w = flow.A @ z + flow.b * g
-    out = (float(c @ z) + d, float(c @ w), float(c @ (flow.A @ w)),
-           float(np.linalg.norm(w[flow.active] / flow.scale)))
+    w = flow.A.dot(z) + flow.b * g
+    ws = w[flow.active] / flow.scale     # its norm as np.linalg.norm forms it: sqrt(ws . ws)
+    out = (float(c.dot(z)) + d, float(c.dot(w)), float(c.dot(flow.A.dot(w))),
+           math.sqrt(ws.dot(ws)))
     if not all(map(math.isfinite, out)):
         raise Overflow
     return out
@@ -433,7 +434,7 @@ class LoopFriction:
         for j, fp, sl in self.ports:
             gj = float(g[j])
             try:
-                if not (np.all(np.isfinite(s[sl])) and math.isfinite(gj)):
+                if not (np.isfinite(s[sl]).all() and math.isfinite(gj)):
                     raise Overflow
                 with np.errstate(over="ignore", invalid="ignore"):
                     z, diss, segs, phi = fp.advance(s[sl], gj)

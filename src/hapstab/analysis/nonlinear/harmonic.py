@@ -75,12 +75,34 @@ def quantizer_describing_function(amplitude: float, offset: float, delta: float,
         N1 (dimensionless) and the mean output (m).
     """
     A, x0, sig = float(amplitude), float(offset), QUANTIZER_OFFSET[quantizer]
-    j = np.arange(math.ceil((x0 - A) / delta - sig), math.floor((x0 + A) / delta - sig) + 1)
-    s = ((j + sig) * delta - x0) / A
-    s = s[np.abs(s) < 1]
-    n1 = 2 * delta / (math.pi * A) * float(np.sum(np.sqrt(1 - s * s)))
-    low = float(quantize(np.array([x0 - A]), delta, quantizer)[0])
-    return n1, low + delta * float(np.sum(0.5 - np.arcsin(s) / math.pi))
+    first, last = math.ceil((x0 - A) / delta - sig), math.floor((x0 + A) / delta - sig)
+    low = _reading(x0 - A, delta, quantizer)
+    if last - first < FEW:
+        # the same terms summed in the same order as np.sum does below 8 (one by one)
+        s = [v for v in (((j + sig) * delta - x0) / A for j in range(first, last + 1))
+             if abs(v) < 1]
+        roots = asins = 0.0
+        for v in s:
+            roots += math.sqrt(1 - v * v)
+            asins += 0.5 - math.asin(v) / math.pi
+        return 2 * delta / (math.pi * A) * roots, low + delta * asins
+    sa = ((np.arange(first, last + 1) + sig) * delta - x0) / A
+    sa = sa[np.abs(sa) < 1]
+    n1 = 2 * delta / (math.pi * A) * float(np.sum(np.sqrt(1 - sa * sa)))
+    return n1, low + delta * float(np.sum(0.5 - np.arcsin(sa) / math.pi))
+
+
+#: Below this many thresholds in the swing the describing function is summed in Python
+#: (a scalar call is ~10x cheaper than through numpy's small arrays; the brentq of the
+#: cycle's mean calls it ~40 times per amplitude): a choice of speed, not a tolerance.
+FEW = 8
+
+
+def _reading(x: float, delta: float, quantizer: str) -> float:
+    """:func:`~hapstab.models.parts.quantize` of one number, without arrays."""
+    if quantizer == "floor":
+        return delta * math.floor(x / delta)
+    return delta * math.copysign(math.floor(abs(x) / delta + 0.5), x) if x else 0.0
 
 
 @lru_cache(maxsize=16)
@@ -126,18 +148,22 @@ def _on_grid(x0: float, X: np.ndarray) -> np.ndarray:
 
 def _crossings(x0: float, X: np.ndarray, levels: np.ndarray) -> np.ndarray:
     """Every angle in [0, 2 pi) where the waveform crosses one of ``levels``: bracketed on
-    the grid, then three Newton steps kept inside their bracket."""
+    the grid, then three Newton steps kept inside their bracket (all levels at once, in
+    chunks of :data:`LEVELS` levels)."""
     phi, k, _ = _basis(len(X))
     x = _on_grid(x0, X)
     h = phi[1]
-    out = []
-    for c in levels:
-        s = x - c
-        i = np.flatnonzero((s > 0) != (np.roll(s, -1) > 0))
-        if i.size == 0:
-            continue
-        s0, s1 = s[i], s[(i + 1) % GRID]
-        t = phi[i] + h * np.where(s0 != s1, s0 / (s0 - s1), 0.5)
+    levels = np.asarray(levels, float)
+    # a level at or above the top, or below the bottom, is never crossed
+    levels = levels[(levels >= x.min()) & (levels < x.max())]
+    out = [np.zeros(0)]
+    for start in range(0, levels.size, LEVELS):
+        c_all = levels[start:start + LEVELS]
+        s = x[None, :] - c_all[:, None]
+        up = s > 0
+        li, i = np.nonzero(up != np.roll(up, -1, axis=1))
+        s0, s1, c = s[li, i], s[li, (i + 1) % GRID], c_all[li]
+        t = phi[i] + h * np.where(s0 != s1, s0 / np.where(s0 != s1, s0 - s1, 1.0), 0.5)
         for _ in range(3):
             e = np.exp(1j * np.outer(t, k))
             f = _dot(e, X).real + x0 - c
@@ -145,7 +171,11 @@ def _crossings(x0: float, X: np.ndarray, levels: np.ndarray) -> np.ndarray:
             t = np.clip(t - np.divide(f, d.real, out=np.zeros_like(f), where=d.real != 0),
                         phi[i], phi[i] + h)
         out.append(t % (2 * math.pi))
-    return np.sort(np.concatenate(out)) if out else np.zeros(0)
+    return np.sort(np.concatenate(out))
+
+
+#: Levels bracketed together in :func:`_crossings` (memory: LEVELS x GRID values).
+LEVELS = 256
 
 
 def staircase_harmonics(x0: float, X: np.ndarray, levels: np.ndarray,

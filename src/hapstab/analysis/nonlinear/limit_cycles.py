@@ -73,6 +73,7 @@ import math
 import numpy as np
 
 from hapstab.analysis.nonlinear.harmonic import (
+    OUTSIDE,
     Balance,
     loeb_stable,
     quantizer_describing_function,
@@ -165,14 +166,15 @@ def _F(bal: Balance, A: float, theta: float) -> complex:
                    + 1j * cf[0] * bal.plant(np.array([theta]))[0])
 
 
-def _scan(bal: Balance, amps: np.ndarray, theta: np.ndarray
+def _scan(bal: Balance, amps: np.ndarray, theta: np.ndarray, gains: tuple[np.ndarray, ...]
           ) -> tuple[list[tuple[float, float]], list[tuple[float, float]]]:
     """Roots of the first-harmonic balance F = 0, and its near misses. On each row of
     amplitudes: where Im F changes sign along theta (Re F interpolated there), and the
     local minima of |F| below :data:`NEAR_MISS`. A root lies between two rows whose matched
     crossings have Re F of opposite signs (refined by Newton in (log A, theta)); a near
-    miss is a row minimum no lower in the neighbouring rows (harmonics may close it)."""
-    N, _, cf = _gains(bal, amps)
+    miss is a row minimum no lower in the neighbouring rows (harmonics may close it).
+    ``gains``: :func:`_gains` on ``amps``."""
+    N, _, cf = gains                  # _gains(bal, amps)
     C, P = bal.controller(theta), bal.plant(theta)
     rows, mins = [], []
     for i in range(amps.size):
@@ -209,7 +211,10 @@ def _root(bal: Balance, A: float, theta: float) -> list[tuple[float, float]]:
     from scipy.optimize import root
 
     def eq(p: np.ndarray) -> list[float]:
-        f = _F(bal, math.exp(p[0]), p[1])
+        A = math.exp(p[0]) if p[0] < 700 else math.inf
+        if not 0 < A < math.inf:
+            return [OUTSIDE, OUTSIDE]      # a step so far that exp(log A) is 0 or inf
+        f = _F(bal, A, p[1])
         return [f.real, f.imag]
 
     sol = root(eq, [math.log(A), theta], method="hybr")
@@ -288,15 +293,14 @@ def _grids(bal: Balance, n: int, max_amplitude_m: float | None) -> tuple[np.ndar
     return amps, theta
 
 
-def _nyquist(bal: Balance, amps: np.ndarray) -> list[tuple[float, float]]:
+def _nyquist(bal: Balance, amps: np.ndarray, N: np.ndarray) -> list[tuple[float, float]]:
     """Roots at theta = pi, where C is real (z = -1) and friction is absent: the scan's sign
-    changes of Im F cannot see them."""
+    changes of Im F cannot see them. ``N``: the quantiser's gain on ``amps``."""
     from scipy.optimize import brentq
 
     if bal.friction_N:
         return []
     c = complex(bal.controller(np.array([math.pi]))[0])
-    N = _gains(bal, amps)[0]
     f = 1 + N * c.real
     out = []
     for i in np.flatnonzero(np.sign(f[:-1]) * np.sign(f[1:]) < 0):
@@ -452,12 +456,13 @@ def limit_cycles(loop: HapticLoop, *, resolution_m: float | None = None,
     linear = stability(loop).verdict
     bal = Balance(C, P, k, K, delta, quantizer, fc, _rest(rest_position_m, delta))
     amps, theta = _grids(bal, loop.delay_samples, max_amplitude_m)
-    roots, near = _scan(bal, amps, theta)
+    gains = _gains(bal, amps)          # the describing functions on the scan's amplitudes
+    N = gains[0]
+    roots, near = _scan(bal, amps, theta, gains)
     H = int(harmonics)
-    cycles = _distinct([_cycle(bal, loop, mass, A, th, H) for A, th in roots + _nyquist(bal, amps)]
+    cycles = _distinct([_cycle(bal, loop, mass, A, th, H) for A, th in roots + _nyquist(bal, amps, N)]
                        + ([_cycle(bal, loop, mass, A, th, H, root=False) for A, th in near]
                           if H > 1 else []))
-    N = _gains(bal, amps)[0]
     return LimitCycleResult.build(loop, delta, quantizer, fc, int(harmonics), cycles, linear,
                                   crossovers(C, theta, loop.period), float(N.max()),
                                   (float(amps[0]), float(amps[-1])), rests(bal),
