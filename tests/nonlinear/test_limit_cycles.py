@@ -85,6 +85,20 @@ def test_a_newton_step_to_zero_amplitude_is_stepped_back():
     assert d["linear_verdict"] == "unstable" and d["cycles"]
 
 
+def test_a_newton_step_far_above_the_scan_is_stepped_back():
+    """A step to A ~ 1e10 encoder steps made the quantiser's describing function ask for
+    arrays of 200 GB ("out of memory", exit 2, for a small loop; found by a seeded fuzz of
+    616 loops). Steps above 4x the scan's top are now pushed back."""
+    loop = h.HapticLoop(h.Device(0.5139198729622363, 0.007872339101800595),
+                        h.SpringDamper(83.52725179285821, 0.09499035328041933),
+                        operator=h.mass_spring_damper(2.75229, 0.00819811, 0.0297012),
+                        period=0.0001235532355303883, delay_samples=25)
+    r = limit_cycles(loop, resolution_m=2.993222390396244e-07, quantizer="nearest",
+                     rest_position_m=7.487021560902917e-07, harmonics=1)
+    assert r.searched_m[1] == pytest.approx(64 * 2.993222390396244e-07)
+    assert all(c.amplitude_m <= 4 * r.searched_m[1] for c in r.cycles)
+
+
 def test_textbook_quantiser_and_relay():
     # centred nearest quantiser: 4/pi at A = 1/sqrt 2, (4/(pi A)) sqrt(1 - 1/(4 A^2)) on (1/2, 3/2)
     assert math.isclose(quantizer_describing_function(2 ** -0.5, 0.0, 1.0, "nearest")[0],

@@ -312,8 +312,8 @@ def solve_balance(bal: Balance, theta: float, x0: float, X: np.ndarray, scale: f
 
     def res(p: np.ndarray) -> np.ndarray:
         th, m, Xc = unpack(p)
-        if not (0 < th <= math.pi and np.all(np.isfinite(p))):
-            return np.full(p.size, OUTSIDE)      # a step out of (0, pi]: pushed back
+        if not (0 < th <= math.pi and np.all(np.isfinite(p)) and _near(p[2:])):
+            return np.full(p.size, OUTSIDE)      # a step out of (0, pi] or far: pushed back
         r = bal.residual(th, m, Xc) / scale
         return np.concatenate([r[:1].real, np.column_stack([r[1:].real, r[1:].imag]).ravel()])
 
@@ -324,6 +324,18 @@ def solve_balance(bal: Balance, theta: float, x0: float, X: np.ndarray, scale: f
     th, m, Xc = unpack(sol.x)
     err = float(np.max(np.abs(res(sol.x))))
     return bool(sol.success) and th > 0 and Xc[0].real > 0, th, m, Xc, err
+
+
+#: A solver's step to harmonics this many times the length they are measured in (the
+#: fundamental it started from) is outside the model: a cycle's refinement moves it by
+#: tens of percent, and a quantised waveform's every encoder line is a term of the
+#: balance (a step to 1e10 steps asked for arrays of 200 GB).
+FAR = 1e3
+
+
+def _near(p: np.ndarray) -> bool:
+    """Harmonics (real and imaginary parts, in units of the start's length) within FAR."""
+    return bool(np.abs(p).max(initial=0.0) <= FAR)
 
 
 def _pack(x0: float, X: np.ndarray, scale: float) -> np.ndarray:
@@ -364,7 +376,7 @@ def fundamental_residual(bal: Balance, A: float, theta: float, x0: float, X: np.
 
     def res(p: np.ndarray) -> np.ndarray:
         m, Xc = unpack(p)
-        if not np.all(np.isfinite(p)):
+        if not (np.all(np.isfinite(p)) and _near(p[1:])):
             return np.full(p.size, OUTSIDE)
         r = bal.residual(theta, m, Xc)[np.r_[0, 2:H + 1]] / A
         return np.concatenate([r[:1].real, np.column_stack([r[1:].real, r[1:].imag]).ravel()])

@@ -112,6 +112,10 @@ NEAR = 0.25
 #: in the documented friction case; a balance that runs off to a 34 % slower motion found
 #: a cycle the simulator does not show).
 NEAR_W = 0.1
+#: Newton's steps from a scan's root stay below this factor times the largest amplitude
+#: scanned (the root lies between two of its rows; small amplitudes cost nothing, and a
+#: step through them may come back to the root).
+WIDEN = 4.0
 #: Two cycles within this fraction in amplitude and frequency are one.
 SAME = 0.01
 
@@ -195,7 +199,8 @@ def _scan(bal: Balance, amps: np.ndarray, theta: np.ndarray, gains: tuple[np.nda
         b = np.minimum(np.searchsorted(j1, j0 - 2), j1.size - 1)
         hit = (np.abs(j1[b] - j0) <= 2) & (r0 * r1[b] < 0)
         for a in np.flatnonzero(hit):
-            found += _root(bal, math.sqrt(amps[i] * amps[i + 1]), float(theta[j0[a]]))
+            found += _root(bal, math.sqrt(amps[i] * amps[i + 1]), float(theta[j0[a]]),
+                           float(amps[-1]))
     roots = _unique(found)
     near = sorted((float(v), float(amps[i]), float(theta[k])) for i in range(amps.size)
                   for k, v in zip(*mins[i], strict=True)
@@ -206,14 +211,21 @@ def _scan(bal: Balance, amps: np.ndarray, theta: np.ndarray, gains: tuple[np.nda
     return roots, [(A, t) for _, A, t in near[:MISSES]]
 
 
-def _root(bal: Balance, A: float, theta: float) -> list[tuple[float, float]]:
-    """Newton (MINPACK's hybrid method) on F(A, theta) = 0 in (log A, theta)."""
+def _root(bal: Balance, A: float, theta: float, top: float) -> list[tuple[float, float]]:
+    """Newton (MINPACK's hybrid method) on F(A, theta) = 0 in (log A, theta), from a root
+    bracketed by the scan: a step above :data:`WIDEN` times the largest amplitude scanned
+    (``top``), or to A = 0, is pushed back."""
     from scipy.optimize import root
+
+    hi = top * WIDEN
 
     def eq(p: np.ndarray) -> list[float]:
         A = math.exp(p[0]) if p[0] < 700 else math.inf
-        if not 0 < A < math.inf:
-            return [OUTSIDE, OUTSIDE]      # a step so far that exp(log A) is 0 or inf
+        if not 0 < A <= hi:
+            # exp(log A) underflowed (the describing function divides by A), or far above
+            # the scan: a root there was not asked for, and the quantiser's describing
+            # function at 1e10 steps would need arrays of 200 GB
+            return [OUTSIDE, OUTSIDE]
         f = _F(bal, A, p[1])
         return [f.real, f.imag]
 
