@@ -438,3 +438,17 @@ def test_simulation_kmax_with_a_long_delay_sizes_its_window_to_the_state():
     exact = exact_critical_stiffness(loop).critical_stiffness
     r = critical_stiffness_simulation(loop)
     assert 0 <= 1 - r.critical_stiffness / exact < 1e-4
+
+
+@pytest.mark.parametrize("kw", [dict(resolution=1e-6), dict(saturation=1.0),
+                                dict(tdpa=h.TDPA())], ids=["encoder", "saturation", "tdpa"])
+def test_a_run_that_overflows_ends_quietly_with_its_verdict(kw):
+    """The nonlinear stepper's overflow check (s . s, 1e320 at |x| = 1e160, the entries
+    finite) warned 'overflow' (warnings are errors here; a helper's seeded fuzz, 45 of 455
+    runs); an overflowed run's summary warned 'invalid value' (inf - inf). Both are quiet:
+    the first run is judged on its finite entries, the second's swings are null."""
+    r = h.simulate(h.paper_hve(), 1.0, initial_position=1e160, **kw)
+    assert np.isfinite(r.position).all() and r.verdict.verdict != "unbounded"
+    grown = h.simulate(h.paper_hve(stiffness=1e10), 5.0, force="step:1")
+    assert grown.verdict.verdict == "unbounded" and np.isinf(grown.position[-1]).all()
+    assert grown.summary()["swing_end_m_device"] is None

@@ -42,6 +42,7 @@ from __future__ import annotations
 
 import contextlib
 import math
+import time
 from dataclasses import dataclass
 from typing import Any
 
@@ -163,6 +164,11 @@ def _scalings(A: np.ndarray) -> list[np.ndarray]:
         sc[1] = math.sqrt(-A[1, 0])
         out.append(sc)
     return [s for s in out if np.all(np.isfinite(s)) and np.all(s > 0)]
+
+
+#: Samples between two looks at the clock (:meth:`LoopFriction._on_time`): at most ~1 ms
+#: each, so a run stops within ~0.1 s of its budget.
+CLOCK_EVERY = 64
 
 
 class Overflow(ArithmeticError):
@@ -404,10 +410,17 @@ class LoopFriction:
         Its sampled model (plant layout, fractional-delay states, held forces).
     samples : int
         The run's length M.
+    seconds : float
+        The time budget (:func:`hapstab.budget.seconds_allowed`): the run's cost was
+        estimated at a typical ~30 us per port and sample, but stick-slip events at every
+        sample cost up to ~1 ms each (each event's time is located on the exact flow), so
+        the stepping itself stops with :class:`~hapstab.budget.BudgetError` once it has
+        run this long (a budgeted stop; ``math.inf``: never).
     """
 
-    def __init__(self, ports: Any, sysm: Any, samples: int) -> None:
+    def __init__(self, ports: Any, sysm: Any, samples: int, seconds: float = math.inf) -> None:
         T = float(sysm.periods[0])
+        self.samples, self.seconds, self.start = samples, seconds, time.monotonic()
         pos_idx = np.argmax(sysm.pos, axis=1)
         p = len(ports)
         self.T, self.ports = T, []
@@ -430,6 +443,8 @@ class LoopFriction:
         under the held net force ``g`` (p,); a measured port's held controller force
         takes the friction force too (the termination's force at kT^- sees the
         acceleration friction leaves)."""
+        if k % CLOCK_EVERY == 0:
+            self._on_time(k)
         self.dissipated[k + 1] = self.dissipated[k]
         for j, fp, sl in self.ports:
             gj = float(g[j])
@@ -450,6 +465,20 @@ class LoopFriction:
             self.modes[k, j] = segs[0].mode
             if len(segs) > 1:
                 self.events[(k, j)] = segs
+
+    def _on_time(self, k: int) -> None:
+        """Stop the run (BudgetError) once it has taken longer than its budget."""
+        took = time.monotonic() - self.start
+        if took <= self.seconds:
+            return
+        from hapstab.budget import BudgetError
+
+        whole = took * self.samples / max(k, 1)
+        raise BudgetError(
+            f"a simulation of {self.samples} samples with Coulomb friction: {k} samples took "
+            f"{took:.0f} s (budget {self.seconds:.0f} s; the stick-slip events of every "
+            f"sample are located one by one), about {whole:.0f} s for the whole run; run it "
+            "anyway with --yes (Python: max_seconds= or hapstab.budget.unlimited())")
 
     def dense(self, X: np.ndarray, V: np.ndarray, S: np.ndarray, G: np.ndarray,
               m: int) -> None:

@@ -111,8 +111,10 @@ class SimulationResult(Result):
             x = self.position[:, j]
             # what a reader sees on the plot: half the peak-to-peak position at the start
             # and at the end of the run
-            out[f"swing_start_m_{lab}"] = float(np.ptp(x[:tenth]) / 2)
-            out[f"swing_end_m_{lab}"] = float(np.ptp(x[-tenth:]) / 2)
+            # (an overflowed run's inf - inf is nan: null in JSON, as its other values)
+            with np.errstate(invalid="ignore"):
+                out[f"swing_start_m_{lab}"] = float(np.ptp(x[:tenth]) / 2)
+                out[f"swing_end_m_{lab}"] = float(np.ptp(x[-tenth:]) / 2)
             out[f"max_abs_position_{lab}"] = float(np.abs(self.position[:, j]).max())
             out[f"max_abs_force_{lab}"] = float(np.abs(self.controller_force[:, j]).max())
             out[f"final_port_energy_{lab}"] = float(self.port_energy[-1, j])

@@ -202,7 +202,8 @@ def simulate(loop: HapticLoop | TeleoperationLoop, duration: float, *,
         with np.errstate(over="ignore", invalid="ignore"):
             U = S @ roles.Fu.T
     else:
-        fr = LoopFriction(ports, sysm, M) if "coulomb_friction_N" in nl else None
+        fr = LoopFriction(ports, sysm, M, budget.seconds_allowed(max_seconds)) \
+            if "coulomb_friction_N" in nl else None
         S, U, contact = step_nonlinear(roles, s0, Fd, M, measure, wall is not None,
                                        nl.get("saturation"), wall_pulls, pc, between=fr,
                                        network=line)

@@ -181,42 +181,45 @@ def step_nonlinear(roles: Roles, s0: np.ndarray, F: np.ndarray, M: int,
     U = np.empty((M + 1, Fu.shape[0]))
     C = np.zeros(M + 1, bool) if has_wall else None
     s = s0.copy()
-    # ndarray.dot, not @: the same BLAS product (bit for bit) at half the call overhead on
-    # these small vectors; np.minimum/np.maximum for np.clip likewise (the same values)
-    for k in range(M + 1):
-        S[k] = s
-        sm = measure(s)
-        if network is not None:
-            network(k, sm)
-        u = Fu.dot(sm)
-        if C is not None:                # has_wall
-            C[k] = c = bool(E0.dot(sm) > 0)   # the wall pushes only on penetration it sees
-            if not c:
-                u[0] = 0.0
-            elif not wall_pulls and u[0] < 0:
-                u[0] = 0.0               # a wall pushes out; its damper must not pull in
-        if sat is not None:
-            u = np.minimum(np.maximum(u, -sat), sat)
-        if adjust is not None:
-            u = adjust(k, u, s, sm)
-        U[k] = u
-        if k == M:
-            break
-        nxt = np.empty_like(s)
-        Fk = F[k]
-        nxt[ph] = Af.dot(s) + Gp.dot(Fk - u)
-        nxt[ct] = Ac.dot(sm)
-        nxt[hu_s] = u[hu_p]                  # the force actually applied
-        nxt[hf_s] = Fk[hf_p]
-        if between is not None:
-            between(k, s, Fk - u, nxt)
-        s = nxt
-        # s . s is finite when every entry is, unless it overflows (|s| > 1e154): then
-        # the entries themselves are looked at
-        if not math.isfinite(s.dot(s)) and not np.isfinite(s).all():
-            S[k + 1:] = np.inf
-            U[k + 1:] = np.nan
-            break
+    # a run that leaves double precision ends as overflowed (below): its products
+    # overflow on the way, as the linear recurrence's do (propagate_linear), silently
+    with np.errstate(over="ignore", invalid="ignore"):
+        # ndarray.dot, not @: the same BLAS product (bit for bit) at half the call overhead on
+        # these small vectors; np.minimum/np.maximum for np.clip likewise (the same values)
+        for k in range(M + 1):
+            S[k] = s
+            sm = measure(s)
+            if network is not None:
+                network(k, sm)
+            u = Fu.dot(sm)
+            if C is not None:                # has_wall
+                C[k] = c = bool(E0.dot(sm) > 0)   # the wall pushes only on penetration it sees
+                if not c:
+                    u[0] = 0.0
+                elif not wall_pulls and u[0] < 0:
+                    u[0] = 0.0               # a wall pushes out; its damper must not pull in
+            if sat is not None:
+                u = np.minimum(np.maximum(u, -sat), sat)
+            if adjust is not None:
+                u = adjust(k, u, s, sm)
+            U[k] = u
+            if k == M:
+                break
+            nxt = np.empty_like(s)
+            Fk = F[k]
+            nxt[ph] = Af.dot(s) + Gp.dot(Fk - u)
+            nxt[ct] = Ac.dot(sm)
+            nxt[hu_s] = u[hu_p]                  # the force actually applied
+            nxt[hf_s] = Fk[hf_p]
+            if between is not None:
+                between(k, s, Fk - u, nxt)
+            s = nxt
+            # s . s is finite when every entry is, unless it overflows (|s| > 1e154): then
+            # the entries themselves are looked at
+            if not math.isfinite(s.dot(s)) and not np.isfinite(s).all():
+                S[k + 1:] = np.inf
+                U[k + 1:] = np.nan
+                break
     return S, U, C
 
 
