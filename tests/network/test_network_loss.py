@@ -207,3 +207,19 @@ def test_the_scan_with_arpack_agrees_with_the_roots(monkeypatch):
     got = loss_critical_stiffness(loop, 0.1, 3.0)
     assert got.search == "scan" and want.search == "roots"
     assert got.critical_stiffness == pytest.approx(want.critical_stiffness, rel=1e-7)
+
+
+def test_a_search_past_its_time_budget_stops_saying_so():
+    """The mean-square search has no cost known in advance (ARPACK's iterations on an
+    operator of M N^2 unknowns): a helper's fuzz ran `kmax peb -n 173 --loss 0.99` past
+    the 1-minute budget, and paper_peb at n = 30 with 30 % loss takes minutes. It now
+    stops with BudgetError once it has run its budget (a budgeted stop)."""
+    import time
+
+    from hapstab import budget, paper_peb
+
+    loop = paper_peb(delay_samples=6)              # ~0.7 s unlimited
+    t0 = time.monotonic()
+    with budget.limits(seconds=0.2), pytest.raises(budget.BudgetError, match="time budget"):
+        loss_critical_stiffness(loop, 0.3)
+    assert time.monotonic() - t0 < 0.6

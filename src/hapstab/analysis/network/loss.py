@@ -76,7 +76,20 @@ def _scale(loop, k0: float) -> float:
     return float(m) / float(loop.period) ** 2
 
 
-def _scan(js: JumpSystem, scale: float) -> tuple:
+def _radius(js: JumpSystem, K: float, deadline: float) -> float:
+    """rho(T) at K, once the search is within its time budget (a budgeted stop: each
+    radius of a large operator costs ARPACK's iteration, O(M N^3) a step, and no count of
+    them is known before the search)."""
+    if time.monotonic() > deadline:
+        from hapstab.budget import BudgetError
+
+        raise BudgetError(f"packet loss: the mean-square search of a {js.order}-state loop "
+                          f"with {js.modes} modes ran past its time budget; run it anyway "
+                          "with --yes (Python: hapstab.budget.unlimited())")
+    return second_moment_radius(js.at(K), js.transition)
+
+
+def _scan(js: JumpSystem, scale: float, deadline: float = math.inf) -> tuple:
     """(K_lo, K_hi, rho(K_lo), rho(K_hi)) bracketing the first computed rho >= 1 on the
     :data:`SCAN` grid (then bisection), and the scan (K, rho). K_lo = 0 when the scan's
     first K is already unstable; K_hi = inf when the scan ends stable. For operators too
@@ -85,7 +98,7 @@ def _scan(js: JumpSystem, scale: float) -> tuple:
     lo, r_lo = 0.0, float("nan")
     for g in SCAN:
         K = float(g * scale)
-        r = second_moment_radius(js.at(K), js.transition)
+        r = _radius(js, K, deadline)
         Ks.append(K)
         rhos.append(r)
         if r >= 1.0:
@@ -96,7 +109,7 @@ def _scan(js: JumpSystem, scale: float) -> tuple:
     hi, r_hi = Ks[-1], rhos[-1]
     while lo > 0.0 and hi - lo > BISECTION_RTOL * hi:
         mid = 0.5 * (lo + hi)
-        r = second_moment_radius(js.at(mid), js.transition)
+        r = _radius(js, mid, deadline)
         if r < 1.0:
             lo, r_lo = mid, r
         else:
@@ -104,7 +117,7 @@ def _scan(js: JumpSystem, scale: float) -> tuple:
     return lo, hi, r_lo, r_hi, np.array(Ks), np.array(rhos), "scan"
 
 
-def _roots(js: JumpSystem, scale: float) -> tuple:
+def _roots(js: JumpSystem, scale: float, deadline: float = math.inf) -> tuple:
     """The same bracket from the first real root of det(I - T(K)) = 0
     (:func:`unit_crossings`): rho is checked below 1 as K -> 0+, at ``CHECKS`` points
     below the root and on both sides of it (``ROOT_STEP``); a check that fails falls
@@ -114,20 +127,19 @@ def _roots(js: JumpSystem, scale: float) -> tuple:
     roots = roots[roots > 1e-12 * scale]
     # a floor against division by zero / rounding, far below the answer's own accuracy
     K0 = min(1e-6 * scale, 0.5 * roots[0]) if roots.size else 1e-6 * scale
-    r0 = second_moment_radius(js.at(K0), js.transition)
+    r0 = _radius(js, K0, deadline)
     if r0 >= 1.0:
         return 0.0, K0, math.nan, r0, np.array([K0]), np.array([r0]), "roots"
     if not roots.size:
-        return _scan(js, scale)
+        return _scan(js, scale, deadline)
     lo, hi = roots[0] * (1.0 - ROOT_STEP), roots[0] * (1.0 + ROOT_STEP)
     # a guard against a real root taken for complex (an ill-conditioned crossing): rho
     # must also be below 1 at CHECKS points below the first root
     below = roots[0] * np.arange(1, CHECKS + 1) / (CHECKS + 1)
-    r_below = [second_moment_radius(js.at(float(K)), js.transition) for K in below]
-    r_lo = second_moment_radius(js.at(lo), js.transition)
-    r_hi = second_moment_radius(js.at(hi), js.transition)
+    r_below = [_radius(js, float(K), deadline) for K in below]
+    r_lo, r_hi = _radius(js, lo, deadline), _radius(js, hi, deadline)
     if not (r_lo < 1.0 and max(r_below) < 1.0):
-        return _scan(js, scale)
+        return _scan(js, scale, deadline)
     return (float(lo), float(hi), r_lo, r_hi, np.array([K0, *below, lo, hi]),
             np.array([r0, *r_below, r_lo, r_hi]), "roots")
 
@@ -155,6 +167,13 @@ def loss_critical_stiffness(loop, loss: float, burst: float | None = None
         mean-square stable (the stable end of the bisection); ``upper_bound``: the
         unstable end. For P = 0 the exact core's certified K_max.
 
+    Raises
+    ------
+    BudgetError
+        The search ran past the time budget (:func:`hapstab.budget.seconds_allowed`;
+        ``--yes`` / :func:`hapstab.budget.unlimited` lift it): its cost is not known in
+        advance.
+
     References
     ----------
     Costa, Fragoso and Marques 2005, Theorem 3.9 (mean-square stability iff the
@@ -174,7 +193,11 @@ def loss_critical_stiffness(loop, loss: float, burst: float | None = None
                                    scan_rho=np.zeros(0), seconds=time.perf_counter() - t0,
                                    **common)
     small = pencil_dimension(js.order, js.modes, js.independent) <= MAX_PENCIL
-    lo, hi, r_lo, r_hi, Ks, rhos, how = (_roots if small else _scan)(js, _scale(loop, k0))
+    from hapstab.budget import seconds_allowed
+
+    deadline = t0 + seconds_allowed()
+    lo, hi, r_lo, r_hi, Ks, rhos, how = (_roots if small else _scan)(js, _scale(loop, k0),
+                                                                     deadline)
     return LossStiffnessResult(critical_stiffness=lo, upper_bound=hi, rho_at=r_lo,
                                rho_above=r_hi, certified=False, scan_K=Ks, scan_rho=rhos,
                                seconds=time.perf_counter() - t0,
