@@ -291,3 +291,16 @@ def test_hapstab_identify_on_a_csv(tmp_path):
     assert (tmp_path / "fit.png").stat().st_size > 10_000
     bad = CliRunner().invoke(cli, ["identify", str(path), "--columns", "a,b"])
     assert bad.exit_code == 2 and "--columns" in bad.stderr
+
+
+def test_a_log_with_a_byte_order_mark_is_read(tmp_path):
+    """A spreadsheet's "CSV UTF-8" starts with a byte-order mark: it was read as part of
+    the first column's name ("no time column (... '\\ufefftime_s' ...)", a helper's fuzz)."""
+    d = _good()
+    text = "time_s,force_N,position_m\n" + "".join(
+        f"{a:.17g},{b:.17g},{c:.17g}\n" for a, b, c in zip(*d.values(), strict=True))
+    plain, marked = tmp_path / "plain.csv", tmp_path / "marked.csv"
+    plain.write_text(text, encoding="utf-8")
+    marked.write_text(text, encoding="utf-8-sig")
+    assert marked.read_bytes()[:3] == b"\xef\xbb\xbf"
+    assert hapstab.identify(str(marked)).mass == hapstab.identify(str(plain)).mass

@@ -193,6 +193,10 @@ def test_trace_times_lengths_and_directions(tmp_path):
         read_trace(timed)
     net = read_trace(_write(tmp_path, GOOD))
     assert net.delay_samples.tolist() == [[1, 2, 1]] and net.arrived.tolist() == [[True, False, True]]
+    # a spreadsheet's "CSV UTF-8" (a byte-order mark first) is the same trace
+    marked = tmp_path / "marked.csv"
+    marked.write_text(GOOD, encoding="utf-8-sig")
+    assert read_trace(str(marked)).delay_samples.tolist() == [[1, 2, 1]]
     with pytest.raises(ModelError, match="the trace has 3 rows"):
         simulate(paper_hve(T), 10 * T, network=net)
     two = {"delay_samples": np.ones((2, 20), int)}

@@ -60,7 +60,7 @@ def read_trace(path: str, period_s: float | None = None) -> Network:
     raw = read_bounded(str(path), "delay trace", MAX_TRACE_BYTES,
                        "a delay trace is a CSV file", NetworkTraceError)
     try:
-        text = raw.decode("utf-8")
+        text = raw.decode("utf-8-sig")      # a byte-order mark is not the header's
     except UnicodeDecodeError as e:
         raise NetworkTraceError(f"delay trace {path!r}: cannot be read ({e})") from None
     lines = [(i + 1, ln) for i, ln in enumerate(text.splitlines(keepends=True))

@@ -89,7 +89,9 @@ def _from_csv(path: str, columns: tuple[str, str, str] | None
     from hapstab.reading import read_bounded
     raw = read_bounded(str(path), "log", MAX_LOG_BYTES, "a log is a CSV file", ModelError)
     try:
-        rows = list(csv.reader(io.StringIO(raw.decode("utf-8"), newline="")))
+        # utf-8-sig: a byte-order mark (a spreadsheet's "CSV UTF-8") is not the first
+        # column's name
+        rows = list(csv.reader(io.StringIO(raw.decode("utf-8-sig"), newline="")))
     except UnicodeDecodeError as e:
         raise ModelError(f"log = {path!r}: not UTF-8 text ({e})") from None
     rows = [r for r in rows if r and not r[0].lstrip().startswith("#")]
