@@ -127,6 +127,12 @@ FORGERIES = {
     "kmax_negative": (lambda t: _set_kmax(t, -1.0), "kmax_N_per_m = -1.0: must be >= 0"),
     "kmax_string": (lambda t: _set_kmax(t, "22"), "not a finite number"),
     "kmax_bool": (lambda t: _set_kmax(t, True), "not a finite number"),
+    # an integer beyond double precision (JSON has them): was "malformed certificate:
+    # OverflowError" (a helper's fuzz)
+    "kmax_huge_int": (lambda t: _set_kmax(t, 10 ** 400), "not a finite number"),
+    # a delay beyond any loop's (10^6 samples replayed for over 11 minutes)
+    "delay_1e6": (lambda t: t["loop"]["channels"][0]["terms"][0].__setitem__(2, 10 ** 6),
+                  "delay_samples"),
     "end_inf": (lambda t: _set_end(t, math.inf), "stable_intervals_N_per_m[0] = inf"),
     "end_negative": (lambda t: _set_end(t, -5.0), "must be > 0"),
     "upper_nan": (lambda t: t["claim"].update(kmax_upper_N_per_m=math.nan), "not a finite"),

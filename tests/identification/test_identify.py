@@ -304,3 +304,24 @@ def test_a_log_with_a_byte_order_mark_is_read(tmp_path):
     marked.write_text(text, encoding="utf-8-sig")
     assert marked.read_bytes()[:3] == b"\xef\xbb\xbf"
     assert hapstab.identify(str(marked)).mass == hapstab.identify(str(plain)).mass
+
+
+@pytest.mark.parametrize("scale, words", [
+    ({"force_N": 1e300}, "force up to"), ({"position_m": 1e-300}, "position up to"),
+    ({"time_s": 1e-310}, "period"), ({"time_s": 1e305}, "period"),
+])
+def test_a_log_outside_the_models_range_is_refused_by_name(scale, words):
+    """Values scaled by 1e+-300 and subnormal or huge time steps were internal errors
+    (scipy's least_squares refused its scale, LAPACK's SVD did not converge) or a hang
+    (a subnormal period: inf columns), in a helper's fuzz; now a ModelError naming them."""
+    d = _good()
+    with pytest.raises(ModelError, match=words):
+        hapstab.identify({k: v * scale.get(k, 1.0) for k, v in d.items()})
+
+
+def test_a_log_too_long_for_the_time_budget_is_refused_before_the_fit():
+    from hapstab import budget
+
+    d = _good()
+    with budget.limits(seconds=0.1), pytest.raises(budget.BudgetError, match="600 samples"):
+        hapstab.identify(d)

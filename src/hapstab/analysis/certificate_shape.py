@@ -8,6 +8,7 @@ import math
 from typing import Any
 
 from hapstab.engine.arb_loop import base_point
+from hapstab.errors import MAX_DELAY_SAMPLES
 
 #: The certificate's ``format`` and the ``version`` numbers this checker reads.
 FORMAT = "hapstab-certificate"
@@ -29,9 +30,11 @@ MAX_START_PIECES = 4096
 #: one cannot forge anything (wider balls only fail more checks); a huge one is a
 #: valve on time.
 PREC_RANGE = (53, 8192)
-#: Largest whole delay (samples) a certificate's loop may have: beyond any loop the
-#: analysis takes (the phase w = z^-n is exact whatever n is; a valve on nonsense).
-MAX_DELAY = 10 ** 6
+#: Largest whole delay (samples) a certificate's loop may have: the largest any loop
+#: may have (:data:`hapstab.errors.MAX_DELAY_SAMPLES`). The phase w = z^-n is exact
+#: whatever n is, but the replay's count of poles resolves its n turns: a certificate
+#: edited to 10^6 samples ran for over 11 minutes (a helper's fuzz).
+MAX_DELAY = MAX_DELAY_SAMPLES
 
 
 class Invalid(Exception):
@@ -46,8 +49,12 @@ def _is_num(x: Any) -> bool:
 
 def _num(x: Any, what: str, lo: float | None = None, positive: bool = False) -> float:
     """A finite number (not a bool), at least ``lo``, > 0 if ``positive``."""
-    if not _is_num(x) or not math.isfinite(x):
-        raise Invalid(f"{what} = {x!r}: not a finite number")
+    try:
+        finite = _is_num(x) and math.isfinite(x)
+    except OverflowError:            # an integer beyond double precision (JSON allows it)
+        finite = False
+    if not finite:
+        raise Invalid(f"{what} = {x!r:.40}: not a finite number")
     if positive and not x > 0:
         raise Invalid(f"{what} = {x!r}: must be > 0")
     if lo is not None and x < lo:

@@ -61,6 +61,10 @@ FRICTION_CHOICES = ("auto", "yes", "no")
 _CONDITION = 1e10
 
 
+#: The identification's time per sample of its log (s), for the time budget.
+SECONDS_PER_SAMPLE = 1e-3
+
+
 def identify(log: Any, *, resolution_m: float | None = None, quantizer: str = "floor",
              friction: str | bool = "auto", confidence: float = 0.95,
              columns: tuple[str, str, str] | None = None) -> IdentificationResult:
@@ -91,7 +95,11 @@ def identify(log: Any, *, resolution_m: float | None = None, quantizer: str = "f
     Raises
     ------
     ModelError
-        A malformed log (NaN, non-uniform time, too short) or option.
+        A malformed log (NaN, non-uniform time, too short, a period or values outside the
+        models' range) or option.
+    BudgetError
+        A log whose fit would take longer than the time budget (about
+        :data:`SECONDS_PER_SAMPLE` a sample; ``--yes`` / :func:`hapstab.budget.unlimited`).
     AnalysisError
         Data that cannot identify the parameters (no excitation; parameters the run
         cannot tell apart), with the reason.
@@ -105,6 +113,11 @@ def identify(log: Any, *, resolution_m: float | None = None, quantizer: str = "f
         raise ModelError(f"confidence = {confidence!r}: allowed 0.5 ... 0.9999")
     fr = _friction_choice(friction)
     t, F, y, T, source = read_log(log, columns)
+    from hapstab import budget
+    # the fit's simulations of the log: ~0.7-0.8 ms a sample (measured, 20,000 and
+    # 100,000 samples on this 2-core machine: 13 and 83 s), rounded up
+    budget.check(budget.Cost(f"identification from a log of {t.size} samples",
+                             0.0, SECONDS_PER_SAMPLE * t.size))
     res = None if resolution_m is None else check_real("resolution_m", resolution_m,
                                                        positive=True)
     if quantizer not in ("floor", "nearest"):

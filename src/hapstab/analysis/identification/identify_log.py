@@ -73,7 +73,24 @@ def read_log(log: Any, columns: tuple[str, str, str] | None = None
         _finite(name, v)
     if not t.size == F.size == y.size:
         raise ModelError(f"log: columns of {t.size}, {F.size} and {y.size} values; need equal")
-    return t, F, y, _period(t), source
+    T = _period(t)
+    from hapstab.errors import PERIOD_RANGE
+    if not PERIOD_RANGE[0] <= T <= PERIOD_RANGE[1]:
+        raise ModelError(f"log: period {T:g} s: must be between {PERIOD_RANGE[0]:g} s and "
+                         f"{PERIOD_RANGE[1]:g} s (the models' range)")
+    for name, v, unit in (("force", F, "N"), ("position", y, "m")):
+        top = float(np.abs(v).max())
+        if top and not SCALE[0] <= top <= SCALE[1]:
+            raise ModelError(f"log: {name} up to {top:g} {unit}: the largest must be between "
+                             f"{SCALE[0]:g} and {SCALE[1]:g} {unit} (the fit's products and "
+                             "squares must stay inside double precision); give it in SI units")
+    return t, F, y, T, source
+
+
+#: The largest |force| (N) and |position| (m) a log may have (when not all 0): the fit
+#: squares and multiplies them with the period's powers; 1e-300 or 1e300 overflowed it
+#: (scipy's least_squares refused its scale, LAPACK's SVD failed: a helper's fuzz).
+SCALE = (1e-100, 1e100)
 
 
 #: Largest log file read (bytes): ~1 million rows of ~60 bytes (time, force, position),
