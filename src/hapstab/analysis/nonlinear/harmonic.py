@@ -76,7 +76,7 @@ def quantizer_describing_function(amplitude: float, offset: float, delta: float,
     """
     A, x0, sig = float(amplitude), float(offset), QUANTIZER_OFFSET[quantizer]
     first, last = math.ceil((x0 - A) / delta - sig), math.floor((x0 + A) / delta - sig)
-    low = _reading(x0 - A, delta, quantizer)
+    low = float(quantize(np.array(x0 - A), delta, quantizer))    # the encoder's reading
     if last - first < FEW:
         # the same terms summed in the same order as np.sum does below 8 (one by one)
         s = [v for v in (((j + sig) * delta - x0) / A for j in range(first, last + 1))
@@ -96,13 +96,6 @@ def quantizer_describing_function(amplitude: float, offset: float, delta: float,
 #: (a scalar call is ~10x cheaper than through numpy's small arrays; the brentq of the
 #: cycle's mean calls it ~40 times per amplitude): a choice of speed, not a tolerance.
 FEW = 8
-
-
-def _reading(x: float, delta: float, quantizer: str) -> float:
-    """:func:`~hapstab.models.parts.quantize` of one number, without arrays."""
-    if quantizer == "floor":
-        return delta * math.floor(x / delta)
-    return delta * math.copysign(math.floor(abs(x) / delta + 0.5), x) if x else 0.0
 
 
 @lru_cache(maxsize=16)
