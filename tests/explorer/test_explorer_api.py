@@ -221,7 +221,10 @@ def test_two_computations_at_once_and_the_queue_is_superseded(monkeypatch):
         transport = httpx.ASGITransport(app=app)
         async with httpx.AsyncClient(transport=transport, base_url="http://127.0.0.1") as c:
             async def one(seq):
-                return await c.post("/api/v1/kmax", json={"kind": "hve", "options": {}},
+                # a different question each (the same one again is answered from the
+                # answers already given: test_an_answer_is_given_again_not_computed_again)
+                body = {"kind": "hve", "options": {"delay": seq}}
+                return await c.post("/api/v1/kmax", json=body,
                                     headers={"X-Hapstab-Channel": "c", "X-Hapstab-Seq": str(seq)})
             results = [None] * 6
 
@@ -238,6 +241,51 @@ def test_two_computations_at_once_and_the_queue_is_superseded(monkeypatch):
     assert peak[0] <= 2
     assert codes[-1] == 200                       # the latest is always computed
     assert 409 in codes and len(ran) == codes.count(200) < 6
+
+
+def test_an_answer_is_given_again_not_computed_again(monkeypatch):
+    """The same command line again is answered with the same bytes without computing; a
+    refusal is computed again; the least recently used answer goes first past the bound."""
+    import warnings
+
+    from hapstab.explorer import app as app_module
+    from hapstab.explorer.api import ApiError
+
+    ran = []
+
+    def fake(argv):
+        ran.append(argv)
+        if "--delay=99" in argv:
+            raise ApiError(422, "refused", "delay")
+        return json.dumps({"argv": argv, "run": len(ran)})
+
+    monkeypatch.setattr(app_module, "run_command", fake)
+    monkeypatch.setattr(app_module, "IN_PROCESSES", False)
+    monkeypatch.setattr(app_module, "ANSWERS", 2)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        from starlette.testclient import TestClient
+
+        with TestClient(create_app(), base_url="http://127.0.0.1") as c:
+            def ask(delay):
+                return c.post("/api/v1/kmax", json={"kind": "hve", "options": {"delay": delay}})
+
+            first = ask(1)
+            assert first.status_code == 200 and len(ran) == 1
+            again = ask(1)
+            assert again.content == first.content and len(ran) == 1     # not computed again
+            assert ask(2).json()["run"] == 2 and len(ran) == 2          # another question
+            assert [ask(99).status_code, ask(99).status_code] == [422, 422] and len(ran) == 4
+            ask(3)                                                       # 1 is the oldest kept
+            assert len(ran) == 5 and ask(2).json()["run"] == 2           # 2 is kept
+            assert ask(1).json()["run"] == 6                             # 1 was dropped
+            # a request of a channel superseded before its turn is still refused (409)
+            h = {"X-Hapstab-Channel": "c", "X-Hapstab-Seq": "5"}
+            assert c.post("/api/v1/kmax", json={"kind": "hve", "options": {"delay": 2}},
+                          headers=h).status_code == 200
+            r = c.post("/api/v1/kmax", json={"kind": "hve", "options": {"delay": 2}},
+                       headers={**h, "X-Hapstab-Seq": "4"})
+            assert r.status_code == 409
 
 
 # ------------------------------------------------------------ malformed requests

@@ -4,6 +4,7 @@ engine's builder, no registry is built from strings, and modules and functions s
 short enough to hold in the head."""
 
 import ast
+import functools
 import importlib
 import pathlib
 import re
@@ -42,6 +43,18 @@ EXCEPTIONS = {
 }
 
 
+@functools.cache
+def _tree(path: pathlib.Path) -> ast.Module:
+    """The module's syntax tree, parsed once per process (the tests here only read it:
+    parsed afresh by each, the ~170 modules cost ~1,300 parses, ~4 s of the lane)."""
+    return ast.parse(path.read_text())
+
+
+@functools.cache
+def _imports_of(path: pathlib.Path) -> tuple[str, ...]:
+    return tuple(_imports(_tree(path)))
+
+
 def _layer(path: pathlib.Path) -> str:
     rel = path.relative_to(SRC).with_suffix("")
     return rel.parts[0]
@@ -63,7 +76,7 @@ def test_layers_import_only_downwards(path):
     if layer not in MAY_IMPORT:
         return                      # the package's __init__ and the leaf modules
     allowed = MAY_IMPORT[layer] | LEAVES | {layer}
-    for mod in _imports(ast.parse(path.read_text())):
+    for mod in _imports_of(path):
         parts = mod.split(".")
         if (str(path.relative_to(SRC)), mod) in EXCEPTIONS:
             continue
@@ -78,7 +91,7 @@ def test_leaf_modules_import_only_leaves():
             sorted((SRC / name).rglob("*.py"))
         assert files, name
         for path in files:
-            for mod in _imports(ast.parse(path.read_text())):
+            for mod in _imports_of(path):
                 parts = mod.split(".")
                 assert parts[0] != "hapstab" or parts[1] in LEAVES, f"{path.name} imports {mod}"
 
@@ -88,7 +101,7 @@ def test_the_library_never_imports_the_cli():
         if _layer(path) in ("cli", "__main__", "explorer"):  # `python -m hapstab` is the CLI;
             # the explorer answers with the CLI's commands
             continue
-        assert not any(m.startswith("hapstab.cli") for m in _imports(ast.parse(path.read_text()))), \
+        assert not any(m.startswith("hapstab.cli") for m in _imports_of(path)), \
             path
 
 
@@ -126,7 +139,7 @@ def test_loop_kinds_are_told_apart_only_in_models_and_the_builder():
         rel = str(path.relative_to(SRC))
         if rel.startswith("models/") or rel == "engine/structure.py":
             continue
-        for line, names in _class_checks(ast.parse(path.read_text())):
+        for line, names in _class_checks(_tree(path)):
             assert not names & LOOP_CLASSES, f"{rel}:{line} isinstance on a loop kind"
             assert not names & CONTROLLER_CLASSES, (
                 f"{rel}:{line} a class check on a controller: ask it instead "
@@ -141,7 +154,7 @@ def test_the_library_asks_a_loop_rather_than_comparing_its_kind():
         rel = str(path.relative_to(SRC))
         if rel.startswith(("models/", "cli/", "explorer/")):
             continue
-        for node in ast.walk(ast.parse(path.read_text())):
+        for node in ast.walk(_tree(path)):
             if isinstance(node, ast.Compare) and isinstance(node.left, ast.Attribute) \
                     and node.left.attr == "kind" and getattr(node.left.value, "id", "") == "loop":
                 literal = [c for c in node.comparators if isinstance(c, (ast.Constant, ast.Tuple))]
@@ -162,7 +175,7 @@ def test_the_class_check_finder_sees_a_check(tmp_path):
 def test_modules_and_functions_are_short(path):
     text = path.read_text()
     assert len(text.splitlines()) <= 510, f"{path.name}: {len(text.splitlines())} lines"  # ~500
-    for node in ast.walk(ast.parse(text)):
+    for node in ast.walk(_tree(path)):
         if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
             body = node.body
             doc = (isinstance(body[0], ast.Expr) and isinstance(body[0].value, ast.Constant)
@@ -201,7 +214,7 @@ def test_the_explorer_asks_the_cli_through_public_names_only():
     (``cli.study.option_spellings``, the click group's table of commands), never a private
     name of cli (one starting with ``_``): a private name may change without notice."""
     for path in sorted((SRC / "explorer").rglob("*.py")):
-        for line, name in _cli_names_used(ast.parse(path.read_text())):
+        for line, name in _cli_names_used(_tree(path)):
             assert not _private(name), f"explorer/{path.name}:{line} uses {name}"
 
 
@@ -210,7 +223,7 @@ def test_the_cli_imports_the_explorer_only_inside_a_command():
     commands), and the CLI reaches the explorer only inside ``hapstab explore``'s body,
     so importing any CLI module never imports the explorer."""
     for path in sorted((SRC / "cli").rglob("*.py")):
-        tree = ast.parse(path.read_text())
+        tree = _tree(path)
         inner = {id(n) for f in ast.walk(tree)
                  if isinstance(f, (ast.FunctionDef, ast.AsyncFunctionDef))
                  for n in ast.walk(f)}
@@ -253,7 +266,7 @@ def test_no_private_name_crosses_a_module_seam(path):
     name (``_x``) may change without notice, so no module imports one from another, nor
     reads one of another object."""
     rel = path.relative_to(SRC)
-    for line, name in _private_seams(ast.parse(path.read_text())):
+    for line, name in _private_seams(_tree(path)):
         raise AssertionError(f"{rel}:{line} uses the private {name}: make it a public seam")
 
 
@@ -305,11 +318,12 @@ def _target(dotted: str) -> object | None:
     return None
 
 
-def _missing_names(source: str) -> list[tuple[int, str]]:
+def _missing_names(source: str, tree: ast.Module | None = None) -> list[tuple[int, str]]:
     """(line of the docstring's owner, path) of each ``hapstab.x.y`` a docstring names
-    that does not exist, or that a :mod: role names and is not a module."""
+    that does not exist, or that a :mod: role names and is not a module (``tree``: the
+    source's, parsed already)."""
     out = []
-    for line, text in _docstrings(ast.parse(source)):
+    for line, text in _docstrings(tree or ast.parse(source)):
         for role, dotted in _DOTTED.findall(text):
             obj = _target(dotted)
             if obj is None or (role == "mod" and not isinstance(obj, types.ModuleType)):
@@ -323,7 +337,7 @@ def test_docstrings_name_only_what_exists(path):
     class or one of its attributes) points at something that exists under that name:
     renames and moves take the prose along."""
     rel = path.relative_to(SRC)
-    missing = _missing_names(path.read_text())
+    missing = _missing_names(path.read_text(), _tree(path))
     assert not missing, f"{rel}: " + "; ".join(f"line {ln}: {n}" for ln, n in missing)
 
 

@@ -163,6 +163,50 @@ class _Sequencer:
         return mark is not None and mark[1] < self.latest.get(mark[0], mark[1])
 
 
+class _Answers:
+    """The answers already given, by command line (least recently used dropped first).
+
+    A command's JSON is a function of its command line (the CLI is deterministic: the
+    same options give the same bytes), so the same question asked again -- a page
+    reloaded, a field changed and changed back, K moved while the K_max-against-T plot
+    and the best damping, which do not depend on it, are asked again -- is answered at
+    once instead of computed again. Only answers are kept, never a refusal (a budget
+    refusal depends on the machine's load). Bounded by :data:`ANSWERS` entries and
+    :data:`ANSWER_BYTES` in all; one per application.
+    """
+
+    def __init__(self) -> None:
+        from collections import OrderedDict
+        self.kept: OrderedDict[str, str] = OrderedDict()
+        self.size = 0
+
+    @staticmethod
+    def key(arg: Any) -> str:
+        return json.dumps(arg)
+
+    def get(self, arg: Any) -> str | None:
+        k = self.key(arg)
+        text = self.kept.get(k)
+        if text is not None:
+            self.kept.move_to_end(k)
+        return text
+
+    def put(self, arg: Any, text: str) -> None:
+        k = self.key(arg)
+        if k in self.kept or len(text) > ANSWER_BYTES:
+            return
+        self.kept[k] = text
+        self.size += len(text)
+        while len(self.kept) > ANSWERS or self.size > ANSWER_BYTES:
+            self.size -= len(self.kept.popitem(last=False)[1])
+
+
+#: Answers kept per application (:class:`_Answers`): a page asks ~8 per change.
+ANSWERS = 512
+#: Their size in all (characters of JSON): a page's answers are ~0.1-0.3 MB.
+ANSWER_BYTES = 32 * 2 ** 20
+
+
 #: Computations run in worker processes that are ended when superseded or abandoned
 #: (:mod:`hapstab.explorer.workers`); False: in threads, which run to their end.
 IN_PROCESSES = True
@@ -204,7 +248,7 @@ async def _in_process(request: Request, kind: str, arg: Any, superseded: Callabl
 
 
 async def _compute(request: Request, kind: str, arg: Any, seq: _Sequencer,
-                   limiter: Any) -> Response:
+                   limiter: Any, answers: _Answers) -> Response:
     """One computation of a request (at most :data:`WORKERS` at once): 409 if superseded
     before it starts or, in a worker process, while it runs."""
     import anyio
@@ -218,6 +262,9 @@ async def _compute(request: Request, kind: str, arg: Any, seq: _Sequencer,
 
         answer = await anyio.to_thread.run_sync(lambda: json.dumps(code_for(arg)))
         return Response(answer.encode("utf-8", "replace"), media_type="application/json")
+    text = None if seq.superseded(mark) else answers.get(arg)
+    if text is not None:        # asked before: the same bytes (see _Answers)
+        return Response(text.encode("utf-8", "replace"), media_type="application/json")
     if not IN_PROCESSES:
         from hapstab.explorer.code import code_for
 
@@ -232,6 +279,7 @@ async def _compute(request: Request, kind: str, arg: Any, seq: _Sequencer,
         text = await _in_process(request, kind, arg, lambda: seq.superseded(mark), limiter)
     if text is None:
         raise ApiError(409, "superseded: a later request of this channel arrived first")
+    answers.put(arg, text)
     return Response(text.encode("utf-8", "replace"), media_type="application/json")
 
 
@@ -262,12 +310,13 @@ def create_app(study_path: str | None = None, host: str | None = None) -> Starle
 
     study = _study(study_path) if study_path is not None else None
     seq = _Sequencer()
+    answers = _Answers()
     limiter: list[anyio.CapacityLimiter] = []
 
     async def compute(request: Request, kind: str, arg: Any) -> Response:
         if not limiter:
             limiter.append(anyio.CapacityLimiter(WORKERS))
-        return await _compute(request, kind, arg, seq, limiter[0])
+        return await _compute(request, kind, arg, seq, limiter[0], answers)
 
     async def index(request: Request) -> Response:
         page = os.path.join(STATIC, "index.html")
