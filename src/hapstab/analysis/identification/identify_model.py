@@ -149,6 +149,68 @@ def predict(m: float, b: float, fc: float, x0: float, v0: float, F: np.ndarray,
     out = np.empty(F.size)
     x, v = x0, v0
     out[0] = x
+    k, n, size = 0, F.size - 1, RUN
+    while k < n:
+        if v != 0:
+            r, x, v = _run(F[k:min(n, k + size)], m, fc, e, p1, p2, x, v, out[k + 1:])
+            k += r
+            if r == size:               # slid through the whole batch: a longer one next
+                size = min(2 * size, MAX_RUN)
+                continue
+            size = RUN
+            if k >= n:
+                break
+        elif abs(F[k]) <= fc:           # stuck while the held force stays in the band
+            stay = np.abs(F[k:n]) <= fc
+            r = int(np.argmin(stay)) if not stay.all() else n - k
+            out[k + 1:k + 1 + r] = x
+            k += r
+            continue
+        x, v = _one_sample(m, b, fc, float(F[k]), x, v, T)   # an event
+        out[k + 1] = x
+        k += 1
+    return out
+
+
+#: Samples a sliding run is first stepped at once (:func:`_run`), and the most: a run
+#: that reaches its end is stepped on twice as far; an event starts again at RUN (a choice
+#: of batch size, not a tolerance: every sample's step is the same either way).
+RUN = 32
+MAX_RUN = 4096
+
+
+def _run(F: np.ndarray, m: float, fc: float, e: float, p1: float, p2: float, x: float,
+         v: float, out: np.ndarray) -> tuple[int, float, float]:
+    """The samples of ``F`` (held forces) over which the device slides on one way from
+    ``(x, v)``, v != 0, stepped at once: their positions into ``out``; returns (how many,
+    x and v after them). A sample whose step would end at or past v = 0 ends the run
+    (:func:`_one_sample` locates its event). Bit for bit the one-sample steps of
+    :func:`_predict_stepwise`: v+ = e v + p1 g is ``lfilter``'s recurrence (the same two
+    products, summed once), and x+ = (x + p1 v) + p2 g a running sum of the products
+    interleaved (``cumsum`` adds in order)."""
+    from scipy.signal import lfilter
+    g = (F - fc) / m if v > 0 else (F + fc) / m
+    vn = lfilter([p1], [1.0, -e], g, zi=[e * v])[0]
+    slides = (vn > 0) if v > 0 else (vn < 0)
+    r = int(np.argmin(slides)) if not slides.all() else F.size
+    if r == 0:
+        return 0, x, v
+    terms = np.empty(2 * r + 1)
+    terms[0], terms[1], terms[3::2] = x, v * p1, vn[:r - 1] * p1
+    terms[2::2] = g[:r] * p2
+    xs = np.cumsum(terms)[2::2]
+    out[:r] = xs
+    return r, float(xs[-1]), float(vn[r - 1])
+
+
+def _predict_stepwise(m: float, b: float, fc: float, x0: float, v0: float, F: np.ndarray,
+                      T: float) -> np.ndarray:
+    """:func:`predict` with friction one sample at a time (the reference its runs are
+    tested against)."""
+    e, p1, p2 = phis(b / m, T)
+    out = np.empty(F.size)
+    x, v = x0, v0
+    out[0] = x
     for k, f in enumerate(F[:-1].tolist()):
         if v != 0:
             g = (f - fc) / m if v > 0 else (f + fc) / m
