@@ -186,9 +186,14 @@ def check_poly(name: str, coeffs: Any) -> np.ndarray:
     import numpy as np
 
     try:
-        a = np.atleast_1d(np.asarray(coeffs, dtype=float)).ravel()
-    except (TypeError, ValueError):
-        raise ModelError(f"{name} = {coeffs!r}: must be a sequence of real coefficients") from None
+        if isinstance(coeffs, (str, bytes)) or np.iscomplexobj(coeffs):
+            raise TypeError             # (a complex array would be cast, its imaginary parts lost)
+        with warnings.catch_warnings():   # numpy's overflow casts warn: the check below refuses
+            warnings.simplefilter("ignore")
+            a = np.atleast_1d(np.asarray(coeffs, dtype=float)).ravel()
+    except (TypeError, ValueError, OverflowError):
+        raise ModelError(f"{name} = {coeffs!r:.80}: must be a sequence of real coefficients"
+                         ) from None
     if a.size == 0 or not np.all(np.isfinite(a)):
         raise ModelError(f"{name} = {coeffs!r}: must be finite real coefficients, highest power first")
     nz = np.flatnonzero(a)

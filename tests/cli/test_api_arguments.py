@@ -95,3 +95,47 @@ def test_array_choices_and_a_tolerance_below_rounding_are_refused_not_crashed(ca
 
 def test_a_budget_beyond_double_precision_means_no_limit():
     assert h.stability(LOOP, max_memory=10**400, max_seconds=10**400).verdict == "stable"
+
+
+HVE2 = h.paper_hve(delay_samples=2)
+
+
+# a helper's fuzz of the API with unusual numeric types (seed 20261207): each was a bare
+# exception (TypeError, ValueError, OverflowError) or a numpy warning
+@pytest.mark.parametrize("call,needle", [
+    (lambda: h.jitter(h.paper_hve(stiffness=50.0), delay_samples=(2, 4), max_length=4,
+                      budget=float("inf")), "budget = inf"),
+    (lambda: h.jitter(h.paper_hve(stiffness=50.0), delay_samples=(2, 4), max_length=4,
+                      budget=300 + 0j), "budget = (300+0j)"),
+    (lambda: h.jitter(h.paper_hve(stiffness=50.0), delay_s=[0.002, 0.004, 0.006]),
+     "delay_s = [0.002, 0.004, 0.006]"),
+    (lambda: h.margins(HVE2, step_samples=np.array([0.5])), "step_samples = [0.5]"),
+    (lambda: h.frequency_view(HVE2, frequencies_hz={0.5, 5.0}), "frequencies_hz = {"),
+    (lambda: h.frequency_view(HVE2, frequencies_hz=[0.5, np.nan]), "frequencies_hz = [0.5, nan]"),
+    (lambda: h.Impedance(np.array([5.0, 500.0], dtype=complex), (1.0, 0.0)),
+     "impedance numerator = array("),
+    (lambda: h.critical_stiffness(h.HapticLoop(h.Device(0.15, 0.1), h.SpringDamper(9.0, 1e308),
+                                               period=1e-3)), "device virtual damping = 1e+308"),
+])
+def test_unusual_values_are_refused_naming_the_argument(call, needle):
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(HapstabError) as e:
+            call()
+    assert str(e.value).startswith(needle), str(e.value)
+
+
+def test_numpy_widths_do_not_reach_the_arithmetic():
+    """An int8 window overflowed (2 * 100), a float32 ratio made the search's bracket in
+    single precision (K_max 39.99168743 against 39.99168479 with 4.0), a uint64 dense
+    overflowed the budget's sums: each now gives the Python number's answer."""
+    ref = h.critical_stiffness_simulation(HVE2, n_samples=400, window=100, rtol=1e-3)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for kw in ({"window": np.int8(100)}, {"ratio": np.float32(4.0)},
+                   {"n_samples": np.int16(400)}):
+            got = h.critical_stiffness_simulation(HVE2, **{"n_samples": 400, "window": 100,
+                                                           "rtol": 1e-3, **kw})
+            assert got.critical_stiffness == ref.critical_stiffness, kw
+        with pytest.raises(HapstabError):       # refused by the budget, not an overflow
+            h.simulate(LOOP, 0.02, force=1.0, dense=np.uint64(2 ** 64 - 1))

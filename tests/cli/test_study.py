@@ -110,6 +110,9 @@ def test_a_failing_analysis_leaves_the_previous_results(study, tmp_path):
     (("title =", "titel ="), "dev.toml line 2: unknown key 'titel'"),
     (("mass = 0.3", "mass = [0.3]"), "line 5: mass = [0.3]: must be a number or a string"),
     (("[loop]", "[loop\n"), "not a valid TOML file"),
+    # a helper's fuzz: a switch given a number, an integer beyond doubles (were internal errors)
+    (("[run.kmax]", "[run.kmax]\ncertify = 1"), "line 16: certify = 1: must be true or false"),
+    (("rate = \"1kHz\"", "rate = 1" + "0" * 400), "line 8: rate = 1000"),
 ])
 def test_study_mistakes_are_one_line_naming_the_file_line_and_key(study, edit, needle):
     study.write_text(STUDY.replace(*edit))

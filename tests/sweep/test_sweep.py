@@ -89,6 +89,8 @@ def test_random_points_are_the_rows_of_default_rng_and_reproducible():
     ("0:3:10", {"integer": True}, "repeat"), ("0:1:3", {"random": True}, "a range is"),
     ([1, 2], {"random": True}, "not a list"), (5, {}, "must be a list"),
     ("a:b:3", {}, "value 'a'"), ([1.5], {"integer": True}, "whole number"),
+    ([10 ** 20], {"integer": True}, "at most 9007199254740992"),    # was an OverflowError
+    ([10 ** 400], {"integer": True}, "beyond double precision"), ([10 ** 400], {}, "beyond"),
 ])
 def test_bad_axes_are_refused_naming_the_key(spec, kw, words):
     with pytest.raises(SweepError, match=r"^mass") as e:

@@ -68,6 +68,7 @@ from hapstab.errors import (
     HapstabError,
     ModelError,
     check_real,
+    check_reals,
 )
 from hapstab.models.loops import require_loop
 from hapstab.models.variations import extra_damping, extra_delay, virtual_damping
@@ -199,7 +200,7 @@ def frequency_view(loop: Any, frequencies_hz: Any = None) -> FrequencyView:
     # a floor against division by zero / rounding, far below the answer's own accuracy
     f = (np.unique(np.concatenate([np.geomspace(1e-4 * fN, fN, 400),
                                    np.linspace(fN / 400, fN, 400)]))
-         if frequencies_hz is None else np.asarray(frequencies_hz, float))
+         if frequencies_hz is None else _frequencies(frequencies_hz))
     A0, B1, C1 = sysm.A0[0], sysm.B1[0], sysm.C1[0]
     keep = np.flatnonzero(np.any(B1 != 0, axis=0))           # ports with a K-part
     B1, C1 = B1[:, keep], C1[keep, :]
@@ -213,6 +214,15 @@ def frequency_view(loop: Any, frequencies_hz: Any = None) -> FrequencyView:
     lam = np.abs(np.linalg.eigvals(A0))
     return FrequencyView(f, L, int(keep.size), K, T, int(np.sum(lam > 1 + OUTSIDE)),
                          int(np.sum(np.abs(lam - 1) <= OUTSIDE)))
+
+
+def _frequencies(value: Any) -> np.ndarray:
+    """The frequencies asked for: finite real numbers (Hz), else ModelError naming them."""
+    f = check_reals("frequencies_hz", value)
+    if f.size == 0 or not np.all(np.isfinite(f)):
+        raise ModelError(f"frequencies_hz = {value!r:.60}: must be finite frequencies in Hz "
+                         "(at least one)")
+    return f
 
 
 def margins(loop: Any, *, step_samples: float = 0.25, max_extra_samples: float = 100.0,
@@ -248,6 +258,9 @@ def margins(loop: Any, *, step_samples: float = 0.25, max_extra_samples: float =
     from hapstab.models.parts import friction_note
 
     require_loop(loop)
+    # Python numbers from here (an array or a numpy scalar would reach the wording)
+    step_samples = check_real("step_samples", step_samples, positive=True)
+    max_extra_samples = check_real("max_extra_samples", max_extra_samples, positive=True)
     base = stability(loop)
     K = float(getattr(loop.controllers[0], "stiffness", float("nan")))
     B = virtual_damping(loop)

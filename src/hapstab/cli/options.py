@@ -74,8 +74,9 @@ def parse_quantity(text: Any, unit: str) -> float:
     ValueError
         Not a number with one of the units of :data:`UNITS`; the message says which.
     """
-    if isinstance(text, (int, float)):
-        return float(text)
+    if isinstance(text, (int, float)):      # an int beyond doubles (10**400): inf, as 1e400
+        return float(text) if isinstance(text, float) or abs(text) < 2 ** 1023 else \
+            (math.inf if text > 0 else -math.inf)
     try:
         return ascii_float(text)        # a plain number (also nan and inf, refused later)
     except ValueError:

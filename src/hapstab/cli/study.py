@@ -390,6 +390,9 @@ def _convert(study: Study, table: str, key: str, value: Any, param: click.Option
     if isinstance(value, (dict, list)) or (isinstance(value, bool) and not param.is_flag):
         raise StudyError(f"{study.where(key, table)}{key.replace('_', '-')} = {value!r}: must be "
                          "a number or a string, as on the command line")
+    if param.is_flag and not isinstance(value, bool):
+        raise StudyError(f"{study.where(key, table)}{key.replace('_', '-')} = {value!r}: must be "
+                         "true or false (a switch)")
     try:
         return param.type.convert(value, param, None)
     except click.BadParameter as e:

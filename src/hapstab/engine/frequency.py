@@ -384,12 +384,12 @@ def _numbers(pl: ResponsePlan) -> tuple:
         raise AnalysisError(f"{names}: a mass ratio above {MASS_RATIO:g} is outside the exact "
                             "analysis's range (the heavy port's response is below the light "
                             "one's by more than its certified enclosures resolve)")
-    beta = np.array([[getattr(c, "damping", 0.0) if ch.measures == "position" else 0.0
-                      for ch, c in ((ch, ch.controller) for ch in st.channels)]]) / T[:, None]
     gain = np.array([[ch.controller.num[0] if ch.measures == "force" else 0.0
                       for ch in st.channels]]) * np.ones((T.size, 1))
-    # |B| T / m beyond 1e8: the damper's pole pair is beyond double precision's reach
-    ratio_B = np.abs(beta).max(axis=1) * T ** 2 / min(masses) if beta.size else np.zeros(T.size)
+    with np.errstate(over="ignore", invalid="ignore"):  # |B| T/m > 1e8 (B/T > doubles): refused
+        beta = np.array([[getattr(c, "damping", 0.0) if ch.measures == "position" else 0.0
+                          for ch, c in ((ch, ch.controller) for ch in st.channels)]]) / T[:, None]
+        ratio_B = np.abs(beta).max(axis=1) * T ** 2 / min(masses) if beta.size else np.zeros(T.size)
     if not (np.all(np.isfinite(scale)) and np.all(scale > 0)):
         names = ", ".join(f"{pt.name} mass = {pt.device.mass:g} kg" for pt in st.ports)
         raise AnalysisError(f"{names}: cannot analyse at T = {T.min():g}..{T.max():g} s, the "

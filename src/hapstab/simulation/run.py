@@ -170,7 +170,7 @@ def simulate(loop: HapticLoop | TeleoperationLoop, duration: float, *,
     """
     require_loop(loop)
     T = loop.period
-    M = _samples(duration, T, dense)
+    M, dense = _samples(duration, T, dense)
     haptic = len(loop.port_names) == 1           # one device, one delay
     nl = _nonlinear_options(haptic, environment_force, wall, wall_pulls, saturation, resolution,
                             quantizer)
@@ -284,8 +284,9 @@ def _admit(sysm: Any, ports: Sequence[Any], nl: dict[str, Any], M: int, dense: i
     budget.check(cost, max_memory, max_seconds)
 
 
-def _samples(duration: float, T: float, dense: Any) -> int:
-    """Number of samples of the run; checks ``duration`` and ``dense``."""
+def _samples(duration: float, T: float, dense: Any) -> tuple[int, int]:
+    """Number of samples of the run, and ``dense`` as a Python int (a numpy uint8 would
+    overflow the budget's sums); checks ``duration`` and ``dense``."""
     dur = check_real("duration", duration, positive=True)
     if not dur / T <= 50_000_000:
         raise ModelError(f"duration = {duration}: {dur / T:.3g} samples is too many (limit 5e7)")
@@ -298,7 +299,7 @@ def _samples(duration: float, T: float, dense: Any) -> int:
     if not isinstance(dense, (int, np.integer)) or isinstance(dense, bool) or dense < 0 or dense == 1:
         raise ModelError(f"dense = {dense!r}: must be 0 (off) or a whole number >= 2 "
                          "(points per sample)")
-    return M
+    return M, int(dense)
 
 
 def _nonlinear_options(haptic: bool, environment_force: Any, wall: Any, wall_pulls: Any,

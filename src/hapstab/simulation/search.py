@@ -121,7 +121,7 @@ def critical_stiffness_simulation(loop: HapticLoop | TeleoperationLoop, *,
     The paper, Section 5 and the stars of Fig. 5 / Fig. 6.
     """
     sysm = build(loop)
-    _check_options(sysm, n_samples, window, rtol, ratio)
+    n_samples, window, rtol, ratio = _check_options(sysm, n_samples, window, rtol, ratio)
     budget.check(search_cost(loop, 1, n_samples))
     # a fit needs several snapshots per state entry (growth.SNAPSHOTS_PER_RANK): long
     # delays get a longer window and run
@@ -161,19 +161,23 @@ def critical_stiffness_simulation(loop: HapticLoop | TeleoperationLoop, *,
 
 
 def _check_options(sysm: SampledSystem, n_samples: Any, window: Any, rtol: float,
-                   ratio: float) -> None:
-    """The options of :func:`critical_stiffness_simulation`, checked."""
+                   ratio: float) -> tuple[int, int, float, float]:
+    """The options of :func:`critical_stiffness_simulation`, checked, as Python numbers
+    (a numpy int8 window or float32 ratio would carry its own width into the search)."""
     if not sysm.varies_with_K:
         raise AnalysisError("method = 'simulation': needs SpringDamper controller(s) to vary K")
-    if not (isinstance(n_samples, (int, np.integer)) and n_samples >= 64):
+    if isinstance(n_samples, bool) or not (isinstance(n_samples, (int, np.integer))
+                                           and n_samples >= 64):
         raise AnalysisError(f"n_samples = {n_samples!r}: must be a whole number >= 64")
-    if not (isinstance(window, (int, np.integer)) and 16 <= window <= n_samples):
+    if isinstance(window, bool) or not (isinstance(window, (int, np.integer))
+                                        and 16 <= window <= n_samples):
         raise AnalysisError(f"window = {window!r}: must be a whole number in [16, n_samples]")
     rtol, ratio = check_real("rtol", rtol), check_real("ratio", ratio)
     if not 1e-12 <= rtol < 0.1:   # below ~1e-12 the bracket's ends are neighbouring doubles
         raise AnalysisError(f"rtol = {rtol}: must be in [1e-12, 0.1)")
     if not ratio > 1:
         raise AnalysisError(f"ratio = {ratio}: must be > 1")
+    return int(n_samples), int(window), rtol, ratio
 
 
 class _Runs:

@@ -267,6 +267,11 @@ def _count(key: str, spec: str, text: str) -> int:
     return int(f)
 
 
+#: The largest whole number an integer axis takes: whole numbers are exact in doubles up
+#: to 2^53 (its values are read as numbers first; its column is int64).
+INT_MAX = 2 ** 53
+
+
 def _one(key: str, value: Any, convert: Callable[[Any], Any], integer: bool, text: bool) -> Any:
     """One value of an axis, converted; whole numbers for an integer axis."""
     if isinstance(value, (list, dict, tuple, bool)):
@@ -281,11 +286,17 @@ def _one(key: str, value: Any, convert: Callable[[Any], Any], integer: bool, tex
         return value
     try:
         v = convert(value.strip() if isinstance(value, str) else value)
-    except (ValueError, TypeError, OverflowError, HapstabError) as e:
-        raise SweepError(f"{key}: value {value!r}: {e}") from None
+    except OverflowError:
+        raise SweepError(f"{key}: value {_short(value)}: beyond double precision "
+                         "(at most ~1.8e308)") from None
+    except (ValueError, TypeError, HapstabError) as e:
+        raise SweepError(f"{key}: value {_short(value)}: {e}") from None
     if integer:
-        if not float(v).is_integer():
+        if not (math.isfinite(float(v)) and float(v).is_integer()):
             raise SweepError(f"{key}: value {value!r}: must be a whole number")
+        if abs(int(v)) > INT_MAX:
+            raise SweepError(f"{key}: value {_short(value)}: must be a whole number of at most "
+                             f"{INT_MAX} in size (2^53, whole in double precision)")
         return int(v)
     if not math.isfinite(float(v)):
         raise SweepError(f"{key}: value {value!r}: must be finite")

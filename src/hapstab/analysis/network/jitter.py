@@ -72,7 +72,10 @@ def _range(loop: Any, delay_samples: Any, delay_s: Any) -> tuple[int, int, tuple
         raise ModelError("jitter: give delay_samples=(lo, hi) (whole samples) or "
                          "delay_s=(lo, hi) (seconds), one of them")
     if delay_s is not None:
-        lo_s, hi_s = delay_s
+        try:
+            lo_s, hi_s = delay_s
+        except (TypeError, ValueError):
+            raise ModelError(f"delay_s = {delay_s!r:.60}: allowed: (lo, hi), seconds") from None
         lo, hi = whole_delays(lo_s, hi_s, loop.period)
         return lo, hi, (float(lo_s), float(hi_s))
     try:
@@ -86,6 +89,18 @@ def _range(loop: Any, delay_samples: Any, delay_s: Any) -> tuple[int, int, tuple
         raise ModelError(f"delay_samples = {delay_samples!r}: whole samples with "
                          f"0 <= lo <= hi <= {MAX_DELAY_SAMPLES}")
     return int(lo), int(hi), None
+
+
+def _patterns_budget(budget: Any) -> int:
+    """``budget`` as a whole number of patterns >= 1 (a whole float too), else ModelError."""
+    try:
+        ok = not isinstance(budget, (bool, complex, str)) and float(budget) >= 1 \
+            and float(budget).is_integer()
+    except (TypeError, ValueError, OverflowError):
+        ok = False
+    if not ok:
+        raise ModelError(f"budget = {budget!r:.40}: a whole number of patterns >= 1")
+    return int(budget)
 
 
 def jitter_cost(loop: Any, lo: int, hi: int, max_length: int, budget: int) -> Cost:
@@ -257,6 +272,7 @@ def jitter(loop: Any, delay_samples: Any = None, *, delay_s: Any = None, max_len
     require_loop(loop)
     if not (isinstance(max_length, int) and 1 <= max_length <= 12):
         raise ModelError(f"max_length = {max_length!r}: a whole number of samples, 1 to 12")
+    budget = _patterns_budget(budget)
     t0 = time.perf_counter()
     lo, hi, range_s = _range(loop, delay_samples, delay_s)
     check(jitter_cost(loop, lo, hi, max_length, budget))
