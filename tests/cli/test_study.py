@@ -274,3 +274,24 @@ def test_a_study_asks_for_loss_and_jitter_answers_and_they_are_the_commands_own(
     for v in ("base", "late"):
         assert got[(v, "jitter")]["stable_up_to_N_per_m"] == direct["stable_up_to_N_per_m"]
         assert got[(v, "jitter")]["delay_range_samples"] == [2, 4]
+
+
+@pytest.mark.parametrize("edit,needle", [
+    # a helper's fuzz (seed 20261207): each ran (a key silently merged or truncated, a file
+    # written outside --out, escape codes printed) or was an internal error
+    (("damping = 0.5", "damping = 0.5\nvirtual-damping = 1\nvirtual_damping = 2"),
+     "virtual-damping and virtual_damping in [loop]: the same option spelt twice"),
+    (("[run.kmax]", "[run.region]\nK = \"0:100\"\nB = \"0:10\"\nresolution = 2.9\n[run.kmax]"),
+     "resolution = 2.9: must be a whole number"),
+    (("[run.kmax]", "[run.region]\nK = \"0:100\"\nB = \"0:10\"\nresolution = \"\u0663\"\n"
+      "[run.kmax]"), "must be a whole number (ASCII digits)"),
+    (("title = \"My", "title = \"\\u001b[2J My"), "must be a string without control characters"),
+    (("damping = 0.5", "damping = 0.5\ncertificate = \"c.json\""),
+     "certificate: where the answer goes is chosen on the command line"),
+    (("name = \"damped\"", "name = \"damped\\n\""), "variant name = 'damped\\n'"),
+])
+def test_run_refuses_what_the_command_line_refuses(study, tmp_path, edit, needle):
+    study.write_text(STUDY.replace(*edit))
+    r = run("run", str(study), "--out", str(tmp_path / "o"))
+    assert r.exit_code == 2 and needle in r.stderr, r.stderr
+    assert not (tmp_path / "c.json").exists() and not os.path.exists("c.json")

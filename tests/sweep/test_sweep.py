@@ -252,6 +252,12 @@ BAD = [
     (GOOD.replace("mass = 0.2", "method = 'circle'"), "method"),
     (GOOD.replace("delay = [0, 2]", "massa = [1, 2]"), "sweep.axes.massa"),
     (GOOD.replace("delay = [0, 2]", "method = ['exact']"), "sweep.axes.method"),
+    # a helper's fuzz (seed 20261207): kmax's proof options are not loop options of a sweep
+    (GOOD.replace("delay = [0, 2]", "certificate = ['a.json']"), "sweep.axes.certificate"),
+    (GOOD.replace("delay = [0, 2]", "certify = ['true', 'false']"), "sweep.axes.certify"),
+    (GOOD.replace("mass = 0.2", "mass = 0.2\nmass-kg = 1"), "mass-kg"),
+    (GOOD.replace("mass = 0.2", "virtual-damping = 1\nvirtual_damping = 2"),
+     "virtual-damping and virtual_damping"),
     (GOOD.replace("delay = [0, 2]", "delay = []"), "sweep.axes.delay"),
     (GOOD.replace("delay = [0, 2]", 'mass = "1:0.1:5"'), "sweep.axes.mass"),
     (GOOD.replace("delay = [0, 2]", 'mass = "0.1:1:0"'), "sweep.axes.mass"),
@@ -532,3 +538,28 @@ def test_loss_jitter_width_and_delay_range_are_axes_and_quantities(tmp_path):
     r = invoke(["sweep", str(tmp_path / "s.toml"), "--out", str(tmp_path / "p")])
     assert r.exit_code == 2 and "line 5" in r.stderr and \
         "jitter-width = 1.5: allowed: a whole number of samples >= 0" in r.stderr, r.stderr
+
+
+def test_the_sweep_reads_the_loop_not_the_kmax_runs_table(tmp_path):
+    """[run.kmax] is hapstab run's table: its mass = 5 gave the sweep's loop its mass (a
+    helper's fuzz); the sweep's loop is [loop] with the axes."""
+    (tmp_path / "s.toml").write_text(GOOD.replace("delay = [0, 2]", "delay = [2]")
+                                     + "[run.kmax]\nmass = 5\n")
+    r = invoke(["sweep", str(tmp_path / "s.toml"), "--out", str(tmp_path / "o"), "--workers",
+                "1", "--json"])
+    assert r.exit_code == 0, r.stderr
+    got = rows(tmp_path / "o")["critical_stiffness_N_per_m"][0].as_py()
+    loop = h.HapticLoop(h.Device(0.2, 0.1), h.SpringDamper(1.0, 0.0), operator=h.spring(1.0),
+                        period=1e-3, delay_samples=2)
+    assert got == h.critical_stiffness(loop).critical_stiffness
+
+
+def test_random_axes_log_integers_and_a_range_wider_than_doubles():
+    """A random integer axis "1:1000:log" was drawn uniformly (median ~500, the manifest
+    saying log); a range -1e308:1e308 drew every point at its top (hi - lo is inf)."""
+    u = np.random.default_rng(20261207).uniform(size=4000)
+    whole = parse_axis("delay", "1:1000:log", integer=True, random=True).from_uniform(u)
+    assert whole.dtype == np.int64 and whole.min() >= 1 and whole.max() <= 1000
+    assert 20 <= np.median(whole) <= 45           # log-uniform: ~sqrt(1000)
+    wide = parse_axis("b", "-1e308:1e308", random=True).from_uniform(u)
+    assert np.all(np.isfinite(wide)) and wide.min() < -1e307 and wide.max() > 1e307

@@ -51,7 +51,7 @@ class HapstabGroup(click.Group):
             # extreme inputs overflow inside numpy: the library says so once, as an
             # error, not as warnings
             from hapstab import budget
-            from hapstab.cli.study import take_study
+            from hapstab.cli.study_line import take_study
 
             if argv[:1] not in (["run"], ["explore"]):   # --study FILE [--variant V], anywhere
                 argv, default_map = take_study(argv, self)

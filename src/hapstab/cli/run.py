@@ -22,15 +22,8 @@ from typing import Any
 import click
 
 from hapstab.cli.options import ARGV, console, progress, provenance
-from hapstab.cli.study import (
-    BASE,
-    Study,
-    StudyError,
-    kind_command,
-    load_study,
-    loop_commands,
-    study_defaults,
-)
+from hapstab.cli.study import BASE, Study, StudyError, load_study, study_defaults
+from hapstab.cli.study_line import kind_command, loop_commands
 from hapstab.errors import HapstabError
 from hapstab.outputs import OutputError, Outputs, signals_held
 from hapstab.results import dumps

@@ -51,7 +51,8 @@ __all__ = ["Study", "load_study", "study_defaults", "option_spellings", "BASE", 
 #: The variant that is the [loop] table itself.
 BASE = "base"
 #: Options a study cannot set: where the answer goes is the command line's (or run's).
-OUTPUT_KEYS = ("json", "csv", "plot", "study", "variant", "yes", "debug", "help")
+OUTPUT_KEYS = ("json", "csv", "plot", "study", "variant", "yes", "debug", "help",
+               "certificate", "cert_path")
 #: Options that give one quantity two ways: a later layer's choice drops the earlier other.
 ALTERNATIVES = (("period", "rate"), ("delay", "delay_s"))
 #: Loop options a command varies itself: a study's value is not used there (not an error:
@@ -61,7 +62,7 @@ VARIED = {"region": ("virtual_damping",), "best-damping": ("virtual_damping",)}
 #: the delay, so the [loop]'s or a variant's one constant delay (``delay``, ``n``,
 #: ``delay-s``) is not used there; [run.jitter] gives the range.
 REPLACED = {"jitter": ("delay", "n", "delay_s")}
-_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$")
+_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]{0,63}")      # fullmatch: no trailing newline
 #: The largest study file read: 4 MiB, room for tens of thousands of variants (one is
 #: about 60 bytes); a larger one is refused before it is read.
 MAX_STUDY_BYTES = 4 * 1024 ** 2
@@ -159,15 +160,16 @@ def load_study(path: Any, name: str = "--study") -> Study:
         raise StudyError(f"{p}{_at(text, 'kind')}: kind = {kind!r}: allowed: "
                          + ", ".join(f'"{k}"' for k in LOOP_KINDS))
     title = data.get("title", "")
-    if not isinstance(title, str):
-        raise StudyError(f"{p}{_at(text, 'title')}: title = {title!r:.40}: must be a string")
+    if not isinstance(title, str) or any((c < " " and c != "\t") or c == "\x7f" for c in title):
+        raise StudyError(f"{p}{_at(text, 'title')}: title = {title!r:.40}: must be a string "
+                         "without control characters (it is printed on the terminal)")
     loop = _table(p, text, data, "loop")
     run = _table(p, text, data, "run")
     for name, opts in run.items():
         if not isinstance(opts, dict):
             raise StudyError(f"{p}{_at(text, name, 'run')}: run.{name} must be a table "
                              f"([run.{name}]) of that command's options")
-    return Study(p, kind, str(title), _flat(loop), _variants(p, text, data), run, text)
+    return Study(p, kind, str(title), _flat(loop, (p, text)), _variants(p, text, data), run, text)
 
 
 def _read_bounded(p: str, name: str) -> bytes:
@@ -203,9 +205,21 @@ def _table(p: str, text: str, data: dict[str, Any], name: str) -> dict[str, Any]
     return value
 
 
-def _flat(opts: dict[str, Any]) -> dict[str, Any]:
-    """Option names as the command's parameters spell them (``delay-s`` -> ``delay_s``)."""
-    return {k.replace("-", "_"): v for k, v in opts.items()}
+def _flat(opts: dict[str, Any], where: Any = None, table: str = "loop") -> dict[str, Any]:
+    """Option names as the command's parameters spell them (``delay-s`` -> ``delay_s``);
+    one key given in both spellings is refused (the last would silently win). ``where``:
+    the study (or ``(path, text)``) to name the line."""
+    out: dict[str, Any] = {}
+    first: dict[str, str] = {}
+    for k, v in opts.items():
+        flat = k.replace("-", "_")
+        if flat in out:
+            at = where.where(k, table) if isinstance(where, Study) else \
+                f"{where[0]}{_at(where[1], k, table)}: " if where else ""
+            raise StudyError(f"{at}{first[flat]} and {k} in [{table}]: the same option spelt "
+                             "twice; give it once")
+        out[flat], first[flat] = v, k
+    return out
 
 
 def _variants(p: str, text: str, data: dict[str, Any]) -> dict[str, dict[str, Any]]:
@@ -216,13 +230,13 @@ def _variants(p: str, text: str, data: dict[str, Any]) -> dict[str, dict[str, An
                          "with a name and the loop options it changes")
     for v in items:
         name = v.get("name")
-        if not isinstance(name, str) or not _NAME.match(name) or name in out \
+        if not isinstance(name, str) or not _NAME.fullmatch(name) or name in out \
                 or name in ("manifest.json", "study.toml"):
             raise StudyError(f"{p}{_at(text, 'name', None, str(name))}: variant name = {name!r}: "
                              "each [[variant]] needs a unique name of letters, digits, '.', "
                              f"'_' or '-' (not {BASE!r}, the [loop] table itself, nor the "
                              "run's manifest.json or study.toml)")
-        out[name] = _flat({k: x for k, x in v.items() if k != "name"})
+        out[name] = _flat({k: x for k, x in v.items() if k != "name"}, (p, text), "variant")
     return out
 
 
@@ -255,7 +269,7 @@ def _line_of(text: str, key: str, table: str | None = None, value: str | None = 
 
 
 def study_defaults(study: Study, cmd: click.Command, command: str, variant: str,
-                   argv: list[str]) -> dict[str, Any]:
+                   argv: list[str], run: bool = True) -> dict[str, Any]:
     """The defaults a study gives one command: [loop], then the variant, then
     [run.<command>], each checked against the command's options and converted by their
     own types; an option given on the command line drops the study's alternative to it.
@@ -266,7 +280,8 @@ def study_defaults(study: Study, cmd: click.Command, command: str, variant: str,
     cmd : click.Command
         The loop-kind subcommand (e.g. ``kmax hve``).
     command : str
-        Its group's name (``kmax``): the [run.<command>] table applies.
+        Its group's name (``kmax``): the [run.<command>] table applies (with ``run``;
+        False: [loop] and the variant only, as ``hapstab sweep`` reads the loop).
     variant : str
         A name of ``study.variants``.
     argv : list of str
@@ -290,7 +305,8 @@ def study_defaults(study: Study, cmd: click.Command, command: str, variant: str,
     out: dict[str, Any] = {}
     by_variant: set[str] = set()
     layers = [("loop", study.loop), ("variant", study.variants[variant]),
-              (f"run.{command}", _flat(study.run.get(command, {})))]
+              (f"run.{command}", _flat(study.run.get(command, {}) if run else {},
+                                       study, f"run.{command}"))]
     for table, opts in layers:
         seen: dict[str, str] = {}
         for key, value in opts.items():
@@ -390,6 +406,9 @@ def _convert(study: Study, table: str, key: str, value: Any, param: click.Option
     if isinstance(value, (dict, list)) or (isinstance(value, bool) and not param.is_flag):
         raise StudyError(f"{study.where(key, table)}{key.replace('_', '-')} = {value!r}: must be "
                          "a number or a string, as on the command line")
+    if isinstance(param.type, click.types.IntParamType) and not _whole_text(value):
+        raise StudyError(f"{study.where(key, table)}{key.replace('_', '-')} = {value!r:.40}: "
+                         "must be a whole number (ASCII digits), as on the command line")
     if param.is_flag and not isinstance(value, bool):
         raise StudyError(f"{study.where(key, table)}{key.replace('_', '-')} = {value!r}: must be "
                          "true or false (a switch)")
@@ -398,6 +417,17 @@ def _convert(study: Study, table: str, key: str, value: Any, param: click.Option
     except click.BadParameter as e:
         raise StudyError(f"{study.where(key, table)}{key.replace('_', '-')} = {value!r}: "
                          f"{e.message}") from None
+
+
+def _whole_text(value: Any) -> bool:
+    """A whole number as TOML gives it (an integer, a whole float) or ASCII digits: what
+    click's int type would read without truncating (2.9 -> 2) or reading other scripts'
+    digits."""
+    if isinstance(value, str):
+        return re.fullmatch(r"\s*[-+]?[0-9]+\s*", value, re.ASCII) is not None
+    if isinstance(value, float):
+        return value.is_integer()
+    return isinstance(value, int)
 
 
 def _drop_alternative(out: dict[str, Any], name: str) -> None:
@@ -415,81 +445,3 @@ def _given(params: dict[str, click.Option], argv: list[str]) -> dict[str, str]:
                                                         not a.startswith("--")) for a in argv):
                 out[o] = name
     return out
-
-
-def take_study(argv: list[str], group: click.Group) -> tuple[list[str], dict[str, Any] | None]:
-    """Take ``--study FILE`` and ``--variant NAME`` out of the command line (they may be
-    given anywhere) and turn the study into click's ``default_map`` for the command run.
-    Without a loop kind on the line (``hapstab kmax --study f.toml``) the study's is used.
-
-    Parameters
-    ----------
-    argv : list of str
-        The command line after ``hapstab``.
-    group : click.Group
-        The ``hapstab`` group.
-
-    Returns
-    -------
-    (list of str, dict or None)
-        The command line left, and the default map (None without ``--study``).
-    """
-    rest, path = _take(argv, "--study")
-    rest, variant = _take(rest, "--variant")
-    if path is None:
-        if variant is not None:
-            raise StudyError("--variant: names a variant of a study; give the file with --study")
-        return argv, None
-    study = load_study(path)
-    command = rest[0] if rest else ""
-    sub = group.commands.get(command)
-    if not isinstance(sub, click.Group):
-        raise StudyError(f"--study: applies to the loop commands ({', '.join(loop_commands(group))})"
-                         f"; use hapstab run {path} to run the study's analyses")
-    if len(rest) < 2 or rest[1] not in sub.commands:
-        rest = [rest[0], study.kind, *rest[1:]]
-    elif rest[1] != study.kind:
-        raise StudyError(f"--study = {path!r}: its kind is {study.kind!r}, not {rest[1]!r}; "
-                         f"hapstab {command} {study.kind} ... (or leave the kind out)")
-    cmd = kind_command(study, sub, command)
-    defaults = study_defaults(study, cmd, command, variant or BASE, rest[2:])
-    return rest, {command: {study.kind: defaults}}
-
-
-def kind_command(study: Study, group: click.Group, command: str, where: str = "") -> click.Command:
-    """The study's loop kind under the loop command ``group`` (``kmax 4ch``), or a
-    StudyError (prefixed by ``where``, else the file) when that command has no such kind
-    (``check`` takes no 4ch loop)."""
-    cmd = group.commands.get(study.kind)
-    if cmd is None:
-        names = list(group.commands)
-        raise StudyError(f"{where or study.path + ': '}{command} takes "
-                         f"{', '.join(names[:-1])}{' or ' if len(names) > 1 else ''}{names[-1]} "
-                         f"loops, not the study's {study.kind}")
-    return cmd
-
-
-def loop_commands(group: click.Group) -> list[str]:
-    """The commands that build a loop (a loop kind under them)."""
-    return [n for n, c in group.commands.items() if isinstance(c, click.Group)]
-
-
-def _take(argv: list[str], opt: str) -> tuple[list[str], str | None]:
-    """Remove ``opt VALUE`` / ``opt=VALUE`` from ``argv``: (the rest, VALUE or None)."""
-    out, values, i = [], [], 0
-    while i < len(argv):
-        a = argv[i]
-        if a == opt:
-            if i + 1 >= len(argv):
-                raise StudyError(f"{opt}: needs a value")
-            values.append(argv[i + 1])
-            i += 2
-            continue
-        if a.startswith(opt + "="):
-            values.append(a[len(opt) + 1:])
-        else:
-            out.append(a)
-        i += 1
-    if len(values) > 1:
-        raise StudyError(f"{opt}: given {len(values)} times; give it once")
-    return out, (values[0] if values else None)

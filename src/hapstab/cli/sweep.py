@@ -77,7 +77,7 @@ SUB = {"random": {"samples", "seed"}, "plot": {"x", "y", "reduce", "at"},
        "best-damping": {"min-damping", "max-damping", "resolution"}}
 #: Options of ``kmax`` that are not the loop's: neither an axis nor a [loop] key here.
 NOT_LOOP = {"method", "approximation", "operator_damping_min", "environment_damping_min",
-            "loss", "burst", "delay_range"}
+            "loss", "burst", "delay_range", "certify", "cert_path"}
 
 
 def column_of(name: str) -> str:
@@ -161,7 +161,7 @@ def plan(study: Study, root: click.Group, yes: bool, reduce: str | None = None,
     params = {p.name: p for p in cmd.params if isinstance(p, click.Option) and p.name
               and p.name not in NOT_LOOP and p.name not in ("as_json",)}
     fixed = {name: p.default for name, p in params.items()}
-    loop = study_defaults(study, cmd, "kmax", BASE, [])
+    loop = study_defaults(study, cmd, "kmax", BASE, [], run=False)    # not [run.kmax]
     for name in loop:
         if name in NOT_LOOP:
             raise StudyError(f"{study.where(name, 'loop')}{name.replace('_', '-')}: not a loop "

@@ -93,12 +93,17 @@ class Axis:
 
     def from_uniform(self, u: np.ndarray) -> np.ndarray:
         """Map uniform draws in [0, 1) onto the axis (random axes)."""
+        if self.integer and self.log:   # log-uniform over [lo, hi + 1), whole numbers
+            a, b = math.log(self.lo), math.log(self.hi + 1)
+            return np.minimum(np.floor(np.exp(a + u * (b - a))).astype(np.int64), int(self.hi))
         if self.integer:
             lo, hi = int(self.lo), int(self.hi)
             return np.minimum(lo + np.floor(u * (hi - lo + 1)).astype(np.int64), hi)
         if self.log:
             a, b = math.log(self.lo), math.log(self.hi)
             return np.minimum(np.exp(a + u * (b - a)), self.hi)
+        if not math.isfinite(self.hi - self.lo):    # -1e308:1e308: the width overflows
+            return self.lo * (1 - u) + self.hi * u
         return np.minimum(self.lo + u * (self.hi - self.lo), self.hi)
 
 
