@@ -563,3 +563,16 @@ def test_random_axes_log_integers_and_a_range_wider_than_doubles():
     assert 20 <= np.median(whole) <= 45           # log-uniform: ~sqrt(1000)
     wide = parse_axis("b", "-1e308:1e308", random=True).from_uniform(u)
     assert np.all(np.isfinite(wide)) and wide.min() < -1e307 and wide.max() > 1e307
+
+
+def test_a_slice_at_a_network_axis_value(tmp_path):
+    """--at loss=0.1 on a sweep with a loss axis was an internal error (KeyError): a
+    network axis has no loop option to read its value."""
+    (tmp_path / "s.toml").write_text('kind = "hve"\n[loop]\nmass = 0.2\n[sweep]\n'
+                                     'quantities = ["kmax"]\n[sweep.axes]\n'
+                                     'damping = [0.1, 0.5]\nmass = [0.1, 0.3]\nloss = [0, 0.1]\n')
+    args = ["sweep", str(tmp_path / "s.toml"), "--out", str(tmp_path / "o"), "--workers", "1"]
+    r = invoke([*args, "--at", "loss=abc"])
+    assert r.exit_code == 2 and "--at loss = 'abc'" in r.stderr, r.stderr
+    r = invoke([*args, "--at", "loss=0.1", "--json"])
+    assert r.exit_code == 0, r.stderr

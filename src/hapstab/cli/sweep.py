@@ -56,6 +56,7 @@ from hapstab.cli.study import (
     option_spellings,
     study_defaults,
 )
+from hapstab.cli.sweep_keys import NETWORK_KEYS, at_value, network_value
 from hapstab.results import dumps
 
 if sys.version_info >= (3, 11):
@@ -69,9 +70,6 @@ __all__ = ["sweep_cmd", "build_loop", "column_of", "plan"]
 KEYS = {"quantities", "chunk", "axes", "random", "plot", "check", "best-damping", "network"}
 #: The network's parameters (sweep.evaluate.NETWORK), as an axis or in [sweep.network]:
 #: study key -> (name, whole samples, the least value, the largest or None).
-NETWORK_KEYS = {"loss": ("loss", False, 0.0, 1.0), "burst": ("burst", False, 1.0, None),
-                "delay-range-width": ("delay_range_width", True, 0, None),
-                "jitter-width": ("jitter_width", True, 0, None)}
 SUB = {"random": {"samples", "seed"}, "plot": {"x", "y", "reduce", "at"},
        "check": {"stiffness"}, "network": set(NETWORK_KEYS),
        "best-damping": {"min-damping", "max-damping", "resolution"}}
@@ -172,7 +170,7 @@ def plan(study: Study, root: click.Group, yes: bool, reduce: str | None = None,
     fixed.update(NETWORK)
     for key, value in table.get("network", {}).items():
         try:
-            fixed[NETWORK_KEYS[key][0]] = _network_value(key, value)
+            fixed[NETWORK_KEYS[key][0]] = network_value(key, value)
         except ValueError as e:
             raise StudyError(f"{study.where(key, 'sweep.network')}sweep.network.{e}") from None
     random = table.get("random")
@@ -232,11 +230,12 @@ def _heat(study: Study, plot: Any, axes: list[Any], params: dict[str, click.Opti
         if a is None:
             raise StudyError(f"{where}: not an axis of the sweep; axes: "
                              f"{', '.join(b.name.replace('_', '-') for b in axes)}")
-        p = params[a.name]
         try:
-            values[key] = value if a.dtype == "string" else p.type.convert(value, p, None)
+            values[key] = at_value(a, value, params)
         except click.BadParameter as e:
             raise StudyError(f"{where} = {value!r:.40}: {e.message}") from None
+        except ValueError as e:                 # a network axis's value (loss, ...)
+            raise StudyError(f"{where} = {value!r:.40}: {e}") from None
     if values:
         from hapstab.sweep.axes import Points, SweepError
         from hapstab.sweep.result import check_at
@@ -273,7 +272,7 @@ def _axes(study: Study, axes: Any, params: dict[str, click.Option], random: bool
             net, integer, _, _ = NETWORK_KEYS[key.replace("_", "-")]
             try:
                 out.append(parse_axis(net, spec, integer=integer, random=random,
-                                      convert=functools.partial(_network_value,
+                                      convert=functools.partial(network_value,
                                                                 key.replace("_", "-")),
                                       column=net + ("_samples" if integer else ""),
                                       where=f"sweep.axes.{key}"))
@@ -301,21 +300,6 @@ def _axes(study: Study, axes: Any, params: dict[str, click.Option], random: bool
         except SweepError as e:
             raise StudyError(f"{where}{e}") from None
     return out
-
-
-def _network_value(key: str, value: Any) -> Any:
-    """A network parameter's value, checked against its range (NETWORK_KEYS); a
-    ValueError naming what is allowed."""
-    _, integer, low, high = NETWORK_KEYS[key]
-    ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
-    if ok and integer:
-        ok = float(value).is_integer()
-    if not ok or value < low or (high is not None and value >= high):
-        allowed = (f"a whole number of samples >= {low}" if integer else
-                   f"a number in [{low:g}, {high:g})" if high is not None else
-                   f"a number >= {low:g}")
-        raise ValueError(f"{key} = {value!r:.40}: allowed: {allowed}")
-    return int(value) if integer else float(value)
 
 
 def _settings(study: Study, table: dict[str, Any], random: Any, axes: list[Any]) -> dict[str, Any]:

@@ -67,6 +67,11 @@ def exact_kmax_batch(loop: HapticLoop | TeleoperationLoop,
 
     # a long delay's cost grows with the phase's power: refused up front, by name
     check(exact_search_cost(resp.phase_rate, len(resp.ports), len(resp.scale)))
+    if not certify:     # the float search cannot resolve a heavy device either: 0 came out
+        from hapstab.analysis.exact.proved import refuse_heavy
+        for params in resp.params or ():
+            if params is not None:
+                refuse_heavy(params)
     try:
         return analyse(resp, full=intervals, proof=certify)
     except AnalysisError as e:       # the core gave up: say for which loop
