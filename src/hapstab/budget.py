@@ -256,9 +256,9 @@ def _limit(name: str, value: Any) -> float:
     try:
         v = float(value)
     except OverflowError:          # an integer beyond double precision: no limit, in effect
-        v = math.inf
+        v = -math.inf if str(value).startswith("-") else math.inf   # (-10**400: refused)
     if not v > 0:
-        raise BudgetError(f"{name} = {value!r}: must be > 0 (math.inf: no limit)")
+        raise BudgetError(f"{name} = {value!r:.40}: must be > 0 (math.inf: no limit)")
     return v
 
 

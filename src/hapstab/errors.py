@@ -80,6 +80,17 @@ def check_real(name: str, value: Any, *, positive: bool = False,
     return v
 
 
+def check_flag(name: str, value: Any) -> bool:
+    """A switch: True or False (numpy's too), else :class:`ArgumentTypeError` naming it --
+    never read by truthiness (``certify=None`` or ``"False"`` would silently switch)."""
+    import numpy as np
+
+    if not isinstance(value, (bool, np.bool_)):
+        raise ArgumentTypeError(f"{name} = {value!r:.40}: must be True or False "
+                                f"(got {type(value).__name__})")
+    return bool(value)
+
+
 def check_reals(name: str, value: Any) -> np.ndarray:
     """Return ``value`` (a number or a sequence of numbers) as a flat float array, or raise
     :class:`ModelTypeError` naming ``name`` for anything that is not real numbers (a string,

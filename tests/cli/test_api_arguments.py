@@ -3,6 +3,7 @@ HapstabError) for a wrong type, never a bare TypeError/ValueError from numpy or 
 and shows no numpy warnings for unusual numeric types."""
 
 import warnings
+from fractions import Fraction
 
 import numpy as np
 import pytest
@@ -100,6 +101,36 @@ def test_a_budget_beyond_double_precision_means_no_limit():
 HVE2 = h.paper_hve(delay_samples=2)
 
 
+G1 = h.RationalMatrix([[[1.0, 0.2]]], [[[1.0, -0.5]]])
+HLK = h.HapticLoop(h.Device(0.15, 0.1), h.SpringDamper(100.0, 0.05), period=1e-3,
+                   delay_samples=2)
+
+
+# the helper's fuzz, second round: each was silently misread (a complex value's imaginary
+# part dropped, a switch read by truthiness, -10**400 s meaning no limit) or a bare exception
+MISREAD = [
+    (lambda: h.stability(HVE2, max_seconds=-10 ** 400), "max_seconds = -1000"),
+    (lambda: h.critical_stiffness(HVE2, certify=None), "certify = None"),
+    (lambda: h.critical_stiffness(HVE2, certify="False"), "certify = 'False'"),
+    (lambda: h.stability(HVE2, certify=2), "certify = 2"),
+    (lambda: h.stability_region(HVE2, K=(0, 20), B=(0, 1), resolution=4, certify=None),
+     "certify = None"),
+    (lambda: h.margins(HVE2, max_seconds=-1.0), "max_seconds = -1.0"),
+    (lambda: h.margins(HVE2, view=None), "view = None"),
+    (lambda: h.simulate(HLK, 0.05, force=np.full(50, 1 + 5j)), "force = array("),
+    (lambda: h.circle_criterion(G1, sector=np.complex128(50 + 7j)), "sector = "),
+    (lambda: h.circle_criterion(G1, sector=Fraction(10 ** 400, 3)), "sector = Fraction"),
+    (lambda: h.simulate(HVE2, 0.1, network=dict(jitter=(1, 3), loss=complex(0.1, 0), seed=3)),
+     "network loss = (0.1+0j)"),
+    (lambda: h.simulate(HVE2, 0.1, network=dict(jitter=(1, 3), loss=10 ** 400, seed=3)),
+     "network loss = 1000"),
+    (lambda: h.gil2004(h.HapticLoop(h.Device(0.15, 1e308), h.SpringDamper(9.0, 0.0),
+                                    period=1e-3)), "method = 'gil2004': b T / m"),
+    (lambda: h.identify({"time_s": [0.0, 1e-3], "force_N": [1 + 3j, 1.0],
+                         "position_m": [0.0, 0.0]}), "log['force_N'] = "),
+]
+
+
 # a helper's fuzz of the API with unusual numeric types (seed 20261207): each was a bare
 # exception (TypeError, ValueError, OverflowError) or a numpy warning
 @pytest.mark.parametrize("call,needle", [
@@ -116,8 +147,12 @@ HVE2 = h.paper_hve(delay_samples=2)
      "impedance numerator = array("),
     (lambda: h.critical_stiffness(h.HapticLoop(h.Device(0.15, 0.1), h.SpringDamper(9.0, 1e308),
                                                period=1e-3)), "device virtual damping = 1e+308"),
+    *MISREAD,
 ])
 def test_unusual_values_are_refused_naming_the_argument(call, needle):
+    """A bare exception or numpy warning before, or silently misread (MISREAD): a
+    complex value's imaginary part dropped, a switch read by truthiness, -10**400 s as
+    no limit."""
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         with pytest.raises(HapstabError) as e:
@@ -139,3 +174,14 @@ def test_numpy_widths_do_not_reach_the_arithmetic():
             assert got.critical_stiffness == ref.critical_stiffness, kw
         with pytest.raises(HapstabError):       # refused by the budget, not an overflow
             h.simulate(LOOP, 0.02, force=1.0, dense=np.uint64(2 ** 64 - 1))
+
+
+def test_numpy_flags_and_widths_are_their_python_values():
+    assert h.critical_stiffness(HVE2, certify=np.bool_(False)).critical_stiffness == \
+        h.critical_stiffness(HVE2, certify=False).critical_stiffness
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert h.positive_real(G1, grid=np.int8(100)).positive_real == \
+            h.positive_real(G1, grid=100).positive_real
+        box = h.operator_box("arm-grasp", stiffness=np.array([67.5, 100.0]))
+    assert box.stiffness == (67.5, 100.0) and "(modified)" in box.label

@@ -67,6 +67,7 @@ from hapstab.errors import (
     AnalysisError,
     HapstabError,
     ModelError,
+    check_flag,
     check_real,
     check_reals,
 )
@@ -261,6 +262,10 @@ def margins(loop: Any, *, step_samples: float = 0.25, max_extra_samples: float =
     # Python numbers from here (an array or a numpy scalar would reach the wording)
     step_samples = check_real("step_samples", step_samples, positive=True)
     max_extra_samples = check_real("max_extra_samples", max_extra_samples, positive=True)
+    view = check_flag("view", view)
+    if max_seconds is not None and not (isinstance(max_seconds, float)    # inf: no limit
+                                        and max_seconds == math.inf):     # (checked
+        check_real("max_seconds", max_seconds, positive=True)   # where no search follows too)
     base = stability(loop)
     K = float(getattr(loop.controllers[0], "stiffness", float("nan")))
     B = virtual_damping(loop)

@@ -181,7 +181,7 @@ def operator_box(name: str | None = None, *, mass: Any = None, damping: Any = No
         m, b, k, src = PRESETS[name]
         return OperatorBox(m if mass is None else mass, b if damping is None else damping,
                            k if stiffness is None else stiffness,
-                           name if (mass, damping, stiffness) == (None, None, None)
+                           name if mass is None and damping is None and stiffness is None
                            else f"{name} (modified)", src)
     missing = [n for n, v in (("mass", mass), ("damping", damping), ("stiffness", stiffness))
                if v is None]

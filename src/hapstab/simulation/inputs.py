@@ -81,9 +81,11 @@ def force_samples(spec: ForceSpec, times: np.ndarray, name: str = "force") -> np
     if callable(spec):
         return _called(spec, times, name)
     try:
+        if np.iscomplexobj(spec):       # (its imaginary part would be dropped silently)
+            raise TypeError
         a = np.asarray(spec, dtype=float).ravel()
-    except (TypeError, ValueError):
-        raise ModelError(f"{name} = {spec!r}: {allowed}") from None
+    except (TypeError, ValueError, OverflowError):
+        raise ModelError(f"{name} = {spec!r:.80}: {allowed}") from None
     if a.size != M or not np.all(np.isfinite(a)):
         raise ModelError(f"{name}: array of {a.size} values; need {M} finite values (one per sample)")
     return a

@@ -188,7 +188,8 @@ def network_options(network: Any) -> Network | None:
     except (TypeError, ValueError):
         raise ModelError(f"network jitter = {jit!r}: must be (lo, hi), whole samples") from None
     net = Network(jitter=(_whole("jitter lo", lo), _whole("jitter hi", hi)),
-                  loss=float(network.get("loss", 0.0)), seed=network.get("seed", 0))
+                  loss=check_real("network loss", network.get("loss", 0.0)),
+                  seed=network.get("seed", 0))
     _checked(net)
     return net
 
@@ -231,7 +232,13 @@ def trace(delay_samples: Any, arrived: Any = None, source: str | None = None) ->
     ModelError
         Delays not whole samples >= 0, arrivals not 0 / 1, or shapes that differ.
     """
-    d = np.atleast_2d(np.asarray(delay_samples, dtype=float))
+    try:
+        if isinstance(delay_samples, (str, bytes)) or np.iscomplexobj(delay_samples):
+            raise TypeError
+        d = np.atleast_2d(np.asarray(delay_samples, dtype=float))
+    except (TypeError, ValueError, OverflowError):
+        raise ModelError(f"network trace: delay_samples = {delay_samples!r:.60}: must be an "
+                         "array of whole samples (a row per direction)") from None
     a = np.ones(d.shape, bool) if arrived is None else np.atleast_2d(np.asarray(arrived))
     if d.ndim != 2 or d.shape[1] < 1 or a.shape != d.shape:
         raise ModelError(f"network trace: delay_samples of shape {d.shape} and arrived of shape "

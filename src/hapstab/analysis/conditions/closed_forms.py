@@ -305,6 +305,9 @@ def gil2004(loop: HapticLoop) -> CriticalStiffnessResult:
     if b == 0:
         return _result(0.0, "gil2004", "b = 0: no stiffness is stable", loop)
     a = b * T / m
+    if not 0 < _gil_s(a) < math.inf:    # b T / m beyond doubles (b = 1e308): no closed form
+        raise AnalysisError(f"method = 'gil2004': b T / m = {a:.3g} is beyond its formula's "
+                            "reach in double precision")
     K = (m / (T * T)) * -math.expm1(-a) / _gil_s(a)
     note = "" if a < 3.72 else f"; bT/m = {a:.3g} > 3.72: outside its range"
     return _result(K, "gil2004", f"Gil et al. 2004 exact K_cr (no operator, n = 0, B = 0){note}", loop)

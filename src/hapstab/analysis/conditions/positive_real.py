@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import functools
 import math
+import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -417,7 +418,7 @@ def _charge(G: RationalMatrix, grid: int | None, max_memory: float | None,
                              or grid < 2):
         raise ArgumentTypeError(f"grid = {grid!r:.40}: must be a whole number >= 2 (or None)")
     deg = G.degree() + 1
-    points = max(grid or 1024, 48 * deg)
+    points = max(int(grid or 1024), 48 * deg)       # (a numpy int8 grid overflowed below)
     work = points * G.m * G.m * deg
     budget.check(budget.Cost(f"positive_real: {points} angles of a {G.m}x{G.m} matrix of "
                              f"degree {deg - 1}", 16.0 * points * (deg + 8 * G.m * G.m),
@@ -454,8 +455,12 @@ def circle_criterion(G: RationalMatrix, sector: Sequence[float] | float | None =
     if sector is None:
         return positive_real(G, period)
     try:
-        ks = np.broadcast_to(np.asarray(sector, dtype=float), (G.m,))
-    except (TypeError, ValueError):
+        if np.iscomplexobj(sector):     # (its imaginary part would be dropped silently)
+            raise TypeError
+        with warnings.catch_warnings():     # an overflowing cast: refused below (not finite)
+            warnings.simplefilter("ignore")
+            ks = np.broadcast_to(np.asarray(sector, dtype=float), (G.m,))
+    except (TypeError, ValueError, OverflowError):
         raise ModelError(f"sector = {sector!r}: one bound k > 0, or one per channel ({G.m})") from None
     for k in ks:
         if not k > 0:

@@ -43,7 +43,7 @@ from hapstab.analysis.exact.crossings import analyse, winding
 from hapstab.analysis.exact.stable_set import StableSet
 from hapstab.engine.frequency import LoopResponse, loop_response, stack_responses
 from hapstab.engine.system import build
-from hapstab.errors import AnalysisError, ArgumentTypeError, check_real
+from hapstab.errors import AnalysisError, ArgumentTypeError, check_flag, check_real
 from hapstab.models.loops import headline
 from hapstab.results import Result, jsonable, write_csv
 
@@ -295,6 +295,7 @@ def stability_region(loop: Loop, K: tuple[float, float], B: tuple[float, float],
     AnalysisError
         Controllers that are not equal spring-dampers, or an empty window.
     """
+    certify = check_flag("certify", certify)
     check_equal_gains(loop)
     K_lo, K_hi = _window("K", K)
     B_lo, B_hi = _window("B", B)

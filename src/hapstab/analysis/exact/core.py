@@ -26,7 +26,7 @@ from hapstab.analysis.exact.stable_set import StableSet
 from hapstab.engine.frequency import LoopResponse, loop_response
 from hapstab.engine.structure import channel_ratios, structure_of
 from hapstab.engine.system import build
-from hapstab.errors import AnalysisError
+from hapstab.errors import AnalysisError, check_flag
 from hapstab.models.loops import HapticLoop, TeleoperationLoop, describe
 from hapstab.models.parts import friction_note
 from hapstab.results import CriticalStiffnessResult, StabilityResult
@@ -62,6 +62,7 @@ def exact_kmax_batch(loop: HapticLoop | TeleoperationLoop,
     list of StableSet
         One per period (see :func:`hapstab.analysis.exact.crossings.analyse`).
     """
+    certify = check_flag("certify", certify)
     resp = loop_response(loop, periods)
     from hapstab.budget import check, exact_search_cost
 
@@ -147,6 +148,7 @@ def stability(loop: HapticLoop | TeleoperationLoop, *, max_memory: float | None 
     ----------
     Exact ZOH model of Fig. 2a / Fig. 3 with H(z) of eq. (23).
     """
+    certify = check_flag("certify", certify)
     certified = _spring_dampers(loop)
     # the loops the certified count covers (whole-sample delays): past LONG_STATES, or
     # where the model or its eigenvalue problem is over the budget (a long delay), the

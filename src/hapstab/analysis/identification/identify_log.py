@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from hapstab.errors import ModelError
+from hapstab.errors import ModelError, check_reals
 
 __all__ = ["read_log", "COLUMN_NAMES", "MIN_SAMPLES", "JITTER"]
 
@@ -60,10 +60,10 @@ def read_log(log: Any, columns: tuple[str, str, str] | None = None
         source = os.path.basename(os.fspath(log))
     elif isinstance(log, Mapping):
         names = _pick(list(log), columns, "log")
-        t, F, y = (np.asarray(log[n], dtype=float).ravel() for n in names)
+        t, F, y = (check_reals(f"log[{n!r}]", log[n]) for n in names)
         source = "dict"
     else:
-        a = np.asarray(log, dtype=float)
+        a = np.asarray(check_reals("log", log)).reshape(np.shape(log))
         if a.ndim != 2 or a.shape[1] != 3:
             raise ModelError(f"log: an array of shape {a.shape}; need (N, 3): time, force, "
                              "position")
