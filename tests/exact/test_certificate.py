@@ -311,3 +311,22 @@ def test_certificate_with_preconditioned_pieces_verifies_and_catches_a_false_one
             assert not chk.valid and "'N'" in chk.reason
             return
     pytest.skip("every piece also holds by N")
+
+
+def test_a_certificate_built_in_python_reads_as_its_json(paper_cert):
+    """numpy integers and a Fraction in a certificate dict stand for the int or float they
+    are (they were called invalid, "not a whole number"); a value JSON cannot hold is
+    invalid, never an exception (a helper's fuzz)."""
+    from fractions import Fraction
+
+    import numpy as np
+
+    loop, _res, cert = paper_cert
+    edited = json.loads(json.dumps(cert))
+    edited["precision_bits"] = np.int64(edited["precision_bits"])
+    edited["loop"]["ports"][0]["mass_kg"] = Fraction(edited["loop"]["ports"][0]["mass_kg"])
+    edited["loop"]["channels"][0]["terms"][0][2] = np.uint8(4)
+    assert h.verify_certificate(edited, loop).valid
+    edited["precision_bits"] = object()
+    chk = h.verify_certificate(edited, loop)
+    assert not chk.valid and "not JSON data" in chk.reason

@@ -426,8 +426,27 @@ def verify_certificate(cert: dict[str, Any], loop: Any = None) -> CertificateChe
         ``valid`` with what was verified, or invalid with the first failed check.
     """
     try:
-        return _check(cert, loop)
+        return _check(_as_json(cert), loop)
     except Invalid as e:
         return CertificateCheck(False, str(e))
     except Exception as e:      # a bad certificate is a verdict, never a crash
         return CertificateCheck(False, f"malformed certificate: {type(e).__name__}: {e}")
+
+
+def _as_json(cert: Any) -> Any:
+    """The certificate as its JSON file holds it: a dict built in Python with numpy
+    numbers (``np.int64(320)``) or a Fraction reads as the int or float it stands for (it
+    was called invalid, "not a whole number"); anything JSON cannot hold is invalid."""
+    import json
+    from numbers import Integral, Real
+
+    def plain(x: Any) -> Any:
+        if isinstance(x, Integral) and not isinstance(x, bool):
+            return int(x)
+        if isinstance(x, Real):
+            return float(x)
+        if hasattr(x, "item") and hasattr(x, "dtype") and x.dtype.kind == "b":
+            return bool(x)
+        raise Invalid(f"a value of type {type(x).__name__} ({x!r:.40}): not JSON data")
+    return json.loads(json.dumps(cert, default=plain))
+
