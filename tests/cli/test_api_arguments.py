@@ -126,6 +126,9 @@ MISREAD = [
      "network loss = 1000"),
     (lambda: h.gil2004(h.HapticLoop(h.Device(0.15, 1e308), h.SpringDamper(9.0, 0.0),
                                     period=1e-3)), "method = 'gil2004': b T / m"),
+    (lambda: h.stability_region(HVE2, K={20.0, 0.0}, B=(0, 1), resolution=4), "K = {"),
+    (lambda: h.jitter(h.paper_hve(stiffness=50.0), delay_samples={2, 4}), "delay_samples = {"),
+    (lambda: h.operator_box("arm-grasp", stiffness={67.5, 100.0}), "operator stiffness = {"),
     (lambda: h.identify({"time_s": [0.0, 1e-3], "force_N": [1 + 3j, 1.0],
                          "position_m": [0.0, 0.0]}), "log['force_N'] = "),
 ]

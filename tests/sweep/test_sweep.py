@@ -258,6 +258,7 @@ BAD = [
     (GOOD.replace("mass = 0.2", "mass = 0.2\nmass-kg = 1"), "mass-kg"),
     (GOOD.replace("mass = 0.2", "virtual-damping = 1\nvirtual_damping = 2"),
      "virtual-damping and virtual_damping"),
+    (GOOD.replace("delay = [0, 2]", 'damping = "0.1:1:20000000"'), "at most 10000000 values"),
     (GOOD.replace("delay = [0, 2]", "delay = []"), "sweep.axes.delay"),
     (GOOD.replace("delay = [0, 2]", 'mass = "1:0.1:5"'), "sweep.axes.mass"),
     (GOOD.replace("delay = [0, 2]", 'mass = "0.1:1:0"'), "sweep.axes.mass"),
@@ -572,6 +573,8 @@ def test_a_slice_at_a_network_axis_value(tmp_path):
                                      'quantities = ["kmax"]\n[sweep.axes]\n'
                                      'damping = [0.1, 0.5]\nmass = [0.1, 0.3]\nloss = [0, 0.1]\n')
     args = ["sweep", str(tmp_path / "s.toml"), "--out", str(tmp_path / "o"), "--workers", "1"]
+    r = invoke([*args, "--at", "loss=0", "--at", "loss=0.1"])
+    assert r.exit_code == 2 and "--at loss: given twice" in r.stderr, r.stderr
     r = invoke([*args, "--at", "loss=abc"])
     assert r.exit_code == 2 and "--at loss = 'abc'" in r.stderr, r.stderr
     r = invoke([*args, "--at", "loss=0.1", "--json"])

@@ -215,6 +215,8 @@ def _heat(study: Study, plot: Any, axes: list[Any], params: dict[str, click.Opti
             key, eq, value = item.partition("=")
             if not eq or not key.strip() or not value.strip():
                 raise StudyError(f"--at {item!r:.40}: give NAME=VALUE, e.g. --at damping=0.5")
+            if key.strip() in given:
+                raise StudyError(f"--at {key.strip()}: given twice; a slice has one value an axis")
             given[key.strip()] = (value.strip(), f"--at {key.strip()}")
     elif "at" in plot:
         if not isinstance(plot["at"], dict) or not plot["at"]:

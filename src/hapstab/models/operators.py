@@ -106,6 +106,8 @@ def _range(name: str, value: Any, unit: str) -> tuple[float, float]:
     if isinstance(value, (int, float)) and not isinstance(value, bool):
         value = (value, value)
     try:
+        if isinstance(value, (set, frozenset, dict, str)):     # no order: which end is lo?
+            raise TypeError
         lo, hi = value
     except (TypeError, ValueError):
         raise ModelError(f"{name} = {value!r:.60}: must be a (lo, hi) pair or one number "

@@ -237,9 +237,11 @@ class RegionResult(Result):
 def _window(name: str, w: Any) -> tuple[float, float]:
     """A (lo, hi) pair of finite numbers, or an error naming the window."""
     try:
+        if isinstance(w, (set, frozenset, dict, str)):     # no order: which end is lo?
+            raise TypeError
         lo, hi = w
     except (TypeError, ValueError):
-        raise AnalysisError(f"{name} = {w!r}: must be a pair (lo, hi) of numbers") from None
+        raise AnalysisError(f"{name} = {w!r:.60}: must be a pair (lo, hi) of numbers") from None
     return check_real(f"{name} range start", lo), check_real(f"{name} range end", hi)
 
 

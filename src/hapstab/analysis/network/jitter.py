@@ -73,12 +73,16 @@ def _range(loop: Any, delay_samples: Any, delay_s: Any) -> tuple[int, int, tuple
                          "delay_s=(lo, hi) (seconds), one of them")
     if delay_s is not None:
         try:
+            if isinstance(delay_s, (set, frozenset, dict, str)):   # no order
+                raise TypeError
             lo_s, hi_s = delay_s
         except (TypeError, ValueError):
             raise ModelError(f"delay_s = {delay_s!r:.60}: allowed: (lo, hi), seconds") from None
         lo, hi = whole_delays(lo_s, hi_s, loop.period)
         return lo, hi, (float(lo_s), float(hi_s))
     try:
+        if isinstance(delay_samples, (set, frozenset, dict, str)):     # no order
+            raise TypeError
         lo, hi = delay_samples
     except (TypeError, ValueError):
         raise ModelError(f"delay_samples = {delay_samples!r}: allowed: (lo, hi), whole samples"
