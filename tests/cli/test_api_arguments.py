@@ -127,6 +127,10 @@ MISREAD = [
     (lambda: h.gil2004(h.HapticLoop(h.Device(0.15, 1e308), h.SpringDamper(9.0, 0.0),
                                     period=1e-3)), "method = 'gil2004': b T / m"),
     (lambda: h.stability_region(HVE2, K={20.0, 0.0}, B=(0, 1), resolution=4), "K = {"),
+    (lambda: h.circle_criterion(G1, sector=2.0, period=5e-324), "period = 4.94066e-324"),
+    (lambda: h.critical_stiffness(h.HapticLoop(h.Device(0.3, 0.5), h.SpringDamper(9.0, 0.0),
+                                               operator=h.mass_spring_damper(1e308, 5.0, 500.0),
+                                               period=1e-3, delay_samples=20)), "device mass"),
     (lambda: h.jitter(h.paper_hve(stiffness=50.0), delay_samples={2, 4}), "delay_samples = {"),
     (lambda: h.operator_box("arm-grasp", stiffness={67.5, 100.0}), "operator stiffness = {"),
     (lambda: h.identify({"time_s": [0.0, 1e-3], "force_N": [1 + 3j, 1.0],
@@ -188,3 +192,9 @@ def test_numpy_flags_and_widths_are_their_python_values():
             h.positive_real(G1, grid=100).positive_real
         box = h.operator_box("arm-grasp", stiffness=np.array([67.5, 100.0]))
     assert box.stiffness == (67.5, 100.0) and "(modified)" in box.label
+    with warnings.catch_warnings():     # a Fraction force is the number it stands for
+        warnings.simplefilter("error")
+        a = h.simulate(HLK, 0.05, force=Fraction(1)).to_dict()
+        light = h.HapticLoop(h.Device(1e-300, 0.1), h.SpringDamper(100.0, 0.05), period=1e-3)
+        h.simulate(light, 0.05, force=1.0)          # a 1e-300 kg device: no warning
+    assert a == h.simulate(HLK, 0.05, force=1.0).to_dict()

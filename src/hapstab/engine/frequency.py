@@ -378,7 +378,6 @@ def _numbers(pl: ResponsePlan) -> tuple:
     st, T, masses = pl.st, pl.T, pl.masses
     rigid = rigid_modes(st, float(T.max()))
     q = sum(A.shape[0] for A, *_ in pl.matrices) - rigid
-    scale = 2.0 ** np.round(np.log2(min(masses) / T ** 2))
     if max(masses) > MASS_RATIO * min(masses):
         names = ", ".join(f"{pt.name} mass = {m:g} kg" for pt, m in zip(st.ports, masses, strict=True))
         raise AnalysisError(f"{names}: a mass ratio above {MASS_RATIO:g} is outside the exact "
@@ -386,7 +385,8 @@ def _numbers(pl: ResponsePlan) -> tuple:
                             "one's by more than its certified enclosures resolve)")
     gain = np.array([[ch.controller.num[0] if ch.measures == "force" else 0.0
                       for ch in st.channels]]) * np.ones((T.size, 1))
-    with np.errstate(over="ignore", invalid="ignore"):  # |B| T/m > 1e8 (B/T > doubles): refused
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):    # beyond doubles:
+        scale = 2.0 ** np.round(np.log2(min(masses) / T ** 2))   # refused below (m/T^2, B/T)
         beta = np.array([[getattr(c, "damping", 0.0) if ch.measures == "position" else 0.0
                           for ch, c in ((ch, ch.controller) for ch in st.channels)]]) / T[:, None]
         ratio_B = np.abs(beta).max(axis=1) * T ** 2 / min(masses) if beta.size else np.zeros(T.size)

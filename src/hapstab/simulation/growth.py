@@ -252,7 +252,9 @@ def assess(states: np.ndarray, forces: np.ndarray | None, period: float,
     first, last = mag[:tenth].max(), mag[-tenth:].max()
     obs = last / first if first > 0 else (math.inf if last > 0 else 1.0)
     s0 = max(np.abs(S[0]).max(), first, DIVISOR_FLOOR)
-    if np.abs(S).max() > EXPLODE * s0:
+    with np.errstate(over="ignore"):        # a state of 1e308 at the start: inf, not exploded
+        explode = EXPLODE * s0
+    if np.abs(S).max() > explode:
         return BoundednessVerdict("unbounded", math.inf, 0.0, "high", "observed", obs, 0.0,
                                   f"the state grew beyond {EXPLODE:.0e} times its initial size")
     # the last half, at most 1024 snapshots, or 4 per state entry when the state is

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 from itertools import pairwise
+from numbers import Real
 from typing import Any
 
 import numpy as np
@@ -59,7 +60,7 @@ def force_samples(spec: ForceSpec, times: np.ndarray, name: str = "force") -> np
     allowed = "allowed: a number, step:F[,t0], pulse:F,width[,t0], sine:F,Hz, a callable or an array"
     if spec is None:
         return np.zeros(M)
-    if isinstance(spec, (int, float, np.floating, np.integer)) and not isinstance(spec, bool):
+    if isinstance(spec, Real) and not isinstance(spec, bool):      # a Fraction, a Decimal too
         return np.full(M, check_real(name, spec))
     if isinstance(spec, str):
         kind, _, args = spec.strip().lower().partition(":")

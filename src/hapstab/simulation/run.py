@@ -391,7 +391,8 @@ def _linear_verdict(roles: Any, s0: np.ndarray, F: np.ndarray, S: np.ndarray, T:
     M = S.shape[0] - 1
     parts = [("free response from the initial state", free(s0, M, True))]
     for j in np.flatnonzero(np.any(F != 0, axis=0)):
-        g = roles.G[:, j] / np.abs(roles.G[:, j]).max()
+        with np.errstate(invalid="ignore", over="ignore"):    # a 1e-300 kg device's
+            g = roles.G[:, j] / np.abs(roles.G[:, j]).max()   # column: judged as it is
         parts.append((f"response to a force impulse on the {labels[int(j)]}", free(g, M, False)))
     return combine(parts)
 

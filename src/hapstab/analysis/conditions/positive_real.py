@@ -30,7 +30,14 @@ from typing import Any
 import numpy as np
 
 from hapstab.analysis.conditions.frequency_grid import min_eig, refine_minimum, theta_grid
-from hapstab.errors import AnalysisError, ArgumentTypeError, ModelError, check_poly, check_real
+from hapstab.errors import (
+    AnalysisError,
+    ArgumentTypeError,
+    ModelError,
+    check_period,
+    check_poly,
+    check_real,
+)
 from hapstab.results import Result, jsonable
 from hapstab.tolerances import COEFF_ZERO, DIVISOR_FLOOR, ROOT_ON_CIRCLE
 
@@ -346,7 +353,7 @@ def positive_real(G: RationalMatrix, period: float | None = None, grid: int | No
     The paper, Definition 1.
     """
     _require_matrix(G)
-    T = 1.0 if period is None else check_real("period", period, positive=True)
+    T = 1.0 if period is None else check_period("period", period)   # (5e-324: overflowed)
     rtol = check_real("rtol", rtol, positive=True)
     _charge(G, grid, max_memory, max_seconds)
     poles = G.poles()
