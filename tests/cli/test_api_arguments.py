@@ -197,4 +197,6 @@ def test_numpy_flags_and_widths_are_their_python_values():
         a = h.simulate(HLK, 0.05, force=Fraction(1)).to_dict()
         light = h.HapticLoop(h.Device(1e-300, 0.1), h.SpringDamper(100.0, 0.05), period=1e-3)
         h.simulate(light, 0.05, force=1.0)          # a 1e-300 kg device: no warning
+        big = h.simulate(HLK, 0.05, initial_velocity=-1e308)      # nor a 1e308 state
+        assert big.verdict.verdict == h.simulate(HLK, 0.05, initial_velocity=-1.0).verdict.verdict
     assert a == h.simulate(HLK, 0.05, force=1.0).to_dict()

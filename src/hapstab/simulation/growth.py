@@ -154,6 +154,11 @@ class BoundednessVerdict(Result):
                          "fit_residual": self.fit_residual, "reason": self.reason})
 
 
+#: Above this the snapshots are divided by their largest entry first: below it their
+#: squares (<= 1e200) and sums over any run (<= 1e8 entries) stay far below 1.8e308.
+SQUARES_SAFE = 1e100
+
+
 def dmd_rate(D: np.ndarray, U: np.ndarray | None = None,
              with_rank: bool = False) -> tuple[float, ...]:
     """Largest |eigenvalue| of the linear map fitted to snapshots, and the fit residual.
@@ -177,6 +182,9 @@ def dmd_rate(D: np.ndarray, U: np.ndarray | None = None,
     rank : int
         Only with ``with_rank``.
     """
+    big = np.abs(D).max() if D.size else 0.0
+    if math.isfinite(big) and big > SQUARES_SAFE:    # (a 1e308 state: D * D overflowed)
+        D = D / big                                  # the rate does not depend on the scale
     X1, X2 = D[:-1].T, D[1:].T
     scale = np.sqrt(np.mean(D * D, axis=0))          # similarity scaling: same eigenvalues
     keep = scale > 0
