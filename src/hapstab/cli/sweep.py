@@ -268,6 +268,7 @@ def _axes(study: Study, axes: Any, params: dict[str, click.Option], random: bool
                          "([sweep.axes] with a loop option = a list or \"lo:hi:count\")")
     names = option_spellings(params)
     out = []
+    seen: dict[str, str] = {}
     for key, spec in axes.items():
         where = study.where(key, "sweep.axes")
         if key.replace("_", "-") in NETWORK_KEYS:
@@ -285,6 +286,10 @@ def _axes(study: Study, axes: Any, params: dict[str, click.Option], random: bool
         if name is None or key in OUTPUT_KEYS:
             raise StudyError(f"{where}sweep.axes.{key}: not a loop option of {study.kind}; "
                              f"allowed: {', '.join(sorted(k.replace('_', '-') for k in names))}")
+        if name in seen:            # m and mass: one option twice (was "axes: ..." unplaced)
+            raise StudyError(f"{where}sweep.axes.{key}: the option of sweep.axes.{seen[name]} "
+                             "again; give it once")
+        seen[name] = key
         p = params[name]
         integer = type(p.type).__name__ == "Delay"
         text = isinstance(p.type, click.types.StringParamType)
@@ -343,6 +348,14 @@ def _settings(study: Study, table: dict[str, Any], random: Any, axes: list[Any])
         if key in bd:
             damping[name] = (_int(study, bd, key, "sweep.best-damping", 2) if low
                              else _number(study, bd, key, "sweep.best-damping", None))
+    # as best-damping's command line (the window was accepted and every row refused)
+    for key, name, bad, allowed in (("max-damping", "B_max", lambda v: not v > 0, "> 0"),
+                                    ("min-damping", "B_min", lambda v: v > 0, "<= 0 (the search "
+                                     "always includes B = 0)"),
+                                    ("resolution", "resolution", lambda v: v > 2000, "<= 2000")):
+        if name in damping and bad(damping[name]):
+            raise StudyError(f"{study.where(key, 'sweep.best-damping')}sweep.best-damping."
+                             f"{key} = {damping[name]!r}: must be {allowed}")
     out["damping"] = damping
     return out
 
