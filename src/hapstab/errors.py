@@ -80,6 +80,16 @@ def check_real(name: str, value: Any, *, positive: bool = False,
     return v
 
 
+def ordered_pair(value: Any) -> tuple[Any, Any]:
+    """``(lo, hi)`` from a sequence of two; a TypeError for a set, a dict or a string (they
+    have no order the user gave: which end would be lo?) and a ValueError for another
+    length, as unpacking gives -- the callers word the message with their parameter."""
+    if isinstance(value, (set, frozenset, dict, str, bytes)):
+        raise TypeError(f"{type(value).__name__}: not an ordered pair")
+    lo, hi = value
+    return lo, hi
+
+
 def check_flag(name: str, value: Any) -> bool:
     """A switch: True or False (numpy's too), else :class:`ArgumentTypeError` naming it --
     never read by truthiness (``certify=None`` or ``"False"`` would silently switch)."""

@@ -58,6 +58,7 @@ from typing import Any
 
 import numpy as np
 
+from hapstab import budget
 from hapstab.analysis.exact.core import stability
 from hapstab.analysis.margin_result import FrequencyView, MarginResult
 from hapstab.analysis.methods import critical_stiffness
@@ -263,9 +264,8 @@ def margins(loop: Any, *, step_samples: float = 0.25, max_extra_samples: float =
     step_samples = check_real("step_samples", step_samples, positive=True)
     max_extra_samples = check_real("max_extra_samples", max_extra_samples, positive=True)
     view = check_flag("view", view)
-    if max_seconds is not None and not (isinstance(max_seconds, float)    # inf: no limit
-                                        and max_seconds == math.inf):     # (checked
-        check_real("max_seconds", max_seconds, positive=True)   # where no search follows too)
+    # the budget's own reading (inf: no limit), also where the loop is not stable
+    limit = None if max_seconds is None else budget.seconds_allowed(max_seconds)
     base = stability(loop)
     K = float(getattr(loop.controllers[0], "stiffness", float("nan")))
     B = virtual_damping(loop)
@@ -289,8 +289,7 @@ def margins(loop: Any, *, step_samples: float = 0.25, max_extra_samples: float =
             max_extra_samples = max(room, step_samples)
             why.append(f"the delay search stops at hapstab's longest delay, "
                        f"{MAX_DELAY_SAMPLES} samples")
-        deadline = math.inf if max_seconds is None else \
-            time.monotonic() + check_real("max_seconds", max_seconds, positive=True)
+        deadline = math.inf if limit is None else time.monotonic() + limit
         dm, du = delay_margin(loop, step_samples, max_extra_samples, bis, deadline)
         # the grid's last point (as delay_margin forms it)
         end = math.floor(max_extra_samples / step_samples + 1e-9) * step_samples

@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from hapstab.errors import ModelError, check_real
+from hapstab.errors import ModelError, check_real, ordered_pair
 from hapstab.models.parts import mass_spring_damper
 
 __all__ = ["OperatorBox", "operator_box", "PRESETS"]
@@ -106,9 +106,7 @@ def _range(name: str, value: Any, unit: str) -> tuple[float, float]:
     if isinstance(value, (int, float)) and not isinstance(value, bool):
         value = (value, value)
     try:
-        if isinstance(value, (set, frozenset, dict, str)):     # no order: which end is lo?
-            raise TypeError
-        lo, hi = value
+        lo, hi = ordered_pair(value)
     except (TypeError, ValueError):
         raise ModelError(f"{name} = {value!r:.60}: must be a (lo, hi) pair or one number "
                          f"in {unit}") from None

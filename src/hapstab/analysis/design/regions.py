@@ -43,7 +43,7 @@ from hapstab.analysis.exact.crossings import analyse, winding
 from hapstab.analysis.exact.stable_set import StableSet
 from hapstab.engine.frequency import LoopResponse, loop_response, stack_responses
 from hapstab.engine.system import build
-from hapstab.errors import AnalysisError, ArgumentTypeError, check_flag, check_real
+from hapstab.errors import AnalysisError, ArgumentTypeError, check_flag, check_real, ordered_pair
 from hapstab.models.loops import headline
 from hapstab.results import Result, jsonable, write_csv
 
@@ -237,9 +237,7 @@ class RegionResult(Result):
 def _window(name: str, w: Any) -> tuple[float, float]:
     """A (lo, hi) pair of finite numbers, or an error naming the window."""
     try:
-        if isinstance(w, (set, frozenset, dict, str)):     # no order: which end is lo?
-            raise TypeError
-        lo, hi = w
+        lo, hi = ordered_pair(w)
     except (TypeError, ValueError):
         raise AnalysisError(f"{name} = {w!r:.60}: must be a pair (lo, hi) of numbers") from None
     return check_real(f"{name} range start", lo), check_real(f"{name} range end", hi)

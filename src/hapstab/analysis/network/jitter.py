@@ -43,7 +43,7 @@ from hapstab.analysis.network.jitter_modes import (
 )
 from hapstab.analysis.network.jitter_result import JitterResult
 from hapstab.budget import EIG_SECONDS_PER_N3, FLOPS, Cost, check, eig_seconds, exact_points_cost
-from hapstab.errors import MAX_DELAY_SAMPLES, AnalysisError, ModelError
+from hapstab.errors import MAX_DELAY_SAMPLES, AnalysisError, ModelError, ordered_pair
 from hapstab.models.loops import require_loop
 
 __all__ = ["jitter", "jitter_cost", "RATE_MARGIN", "K_REL"]
@@ -73,17 +73,13 @@ def _range(loop: Any, delay_samples: Any, delay_s: Any) -> tuple[int, int, tuple
                          "delay_s=(lo, hi) (seconds), one of them")
     if delay_s is not None:
         try:
-            if isinstance(delay_s, (set, frozenset, dict, str)):   # no order
-                raise TypeError
-            lo_s, hi_s = delay_s
+            lo_s, hi_s = ordered_pair(delay_s)
         except (TypeError, ValueError):
             raise ModelError(f"delay_s = {delay_s!r:.60}: allowed: (lo, hi), seconds") from None
         lo, hi = whole_delays(lo_s, hi_s, loop.period)
         return lo, hi, (float(lo_s), float(hi_s))
     try:
-        if isinstance(delay_samples, (set, frozenset, dict, str)):     # no order
-            raise TypeError
-        lo, hi = delay_samples
+        lo, hi = ordered_pair(delay_samples)
     except (TypeError, ValueError):
         raise ModelError(f"delay_samples = {delay_samples!r}: allowed: (lo, hi), whole samples"
                          ) from None
